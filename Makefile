@@ -1,0 +1,48 @@
+# Two commands set everything up and run: `make run` (simulator + wall follower on the default
+# maze) and `make test`. Each creates .venv if missing, installs the pinned dependencies when
+# requirements.lock or pyproject.toml changed, and rebuilds amr_msgs when its sources changed.
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+DEPS_STAMP := $(VENV)/.stamp-deps
+MSGS_STAMP := $(VENV)/.stamp-amr_msgs
+MSGS_SOURCES := $(wildcard amr_msgs/msg/*.msg) amr_msgs/CMakeLists.txt amr_msgs/package.xml \
+	tools/cmake/ros_pypi_wheels.cmake tools/build_amr_msgs.py
+
+ARGS ?=
+PYTEST_ARGS ?=
+
+.PHONY: run test bench setup lock clean
+
+run: $(MSGS_STAMP)
+	$(PY) scripts/run_sim.py $(ARGS)
+
+test: $(MSGS_STAMP)
+	$(PY) -m pytest $(PYTEST_ARGS)
+
+bench: $(MSGS_STAMP)
+	$(PY) scripts/bench.py $(ARGS)
+
+setup: $(MSGS_STAMP)
+
+$(PY):
+	$(PYTHON) -m venv $(VENV)
+
+$(DEPS_STAMP): requirements.lock pyproject.toml | $(PY)
+	$(PY) -m pip install --disable-pip-version-check -q -r requirements.lock
+	$(PY) -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation -e .
+	touch $@
+
+$(MSGS_STAMP): $(DEPS_STAMP) $(MSGS_SOURCES)
+	$(PY) tools/build_amr_msgs.py
+	touch $@
+
+# Re-pin after editing requirements.in (needs network access to PyPI).
+lock: | $(PY)
+	rm -rf build/lock-venv && $(PYTHON) -m venv build/lock-venv
+	build/lock-venv/bin/pip install -q -r requirements.in
+	build/lock-venv/bin/python tools/pin_requirements.py > requirements.lock
+	rm -rf build/lock-venv
+
+clean:
+	rm -rf $(VENV) build

@@ -1,0 +1,73 @@
+"""Isolation of local ROS 2 graphs: a private ROS_DOMAIN_ID and loopback-only discovery.
+
+Tests, CI and local simulations must not talk to the LAN nor to each other. A domain id is
+claimed with an exclusive file lock held for the life of the process, so concurrent test runs,
+xdist workers and simulations on one machine never share a domain. No rclpy import here: this
+must run before rclpy initialises (the RMW reads the environment at init).
+"""
+from __future__ import annotations
+
+import fcntl
+import os
+import tempfile
+from pathlib import Path
+
+# Domain ids usable without port clashes on Linux are 0-101 (0 is everyone's default).
+FIRST_DOMAIN_ID = 1
+LAST_DOMAIN_ID = 101
+_LOCK_DIR = Path(tempfile.gettempdir()) / "amr-ros-domains"
+_held_locks: list = []  # open lock files: closing one releases its domain
+
+
+def claim_free_domain_id(preferred: int | None = None) -> int:
+    """Return a domain id no other process on this machine has claimed, and hold it.
+
+    The claim lasts until the process exits. `preferred` is tried first.
+    """
+    _LOCK_DIR.mkdir(parents=True, exist_ok=True)
+    candidates = list(range(FIRST_DOMAIN_ID, LAST_DOMAIN_ID + 1))
+    if preferred is not None and FIRST_DOMAIN_ID <= preferred <= LAST_DOMAIN_ID:
+        candidates.remove(preferred)
+        candidates.insert(0, preferred)
+    else:
+        # Spread start points so concurrent claimers rarely race for the same lock.
+        offset = os.getpid() % len(candidates)
+        candidates = candidates[offset:] + candidates[:offset]
+    for domain_id in candidates:
+        lock_file = open(_LOCK_DIR / f"domain-{domain_id}.lock", "w")
+        try:
+            fcntl.flock(lock_file, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            lock_file.close()
+            continue
+        _held_locks.append(lock_file)
+        return domain_id
+    raise RuntimeError(f"no free ROS_DOMAIN_ID in {FIRST_DOMAIN_ID}-{LAST_DOMAIN_ID}: "
+                       f"every lock in {_LOCK_DIR} is held by a running process")
+
+
+def isolate_local_graph(domain_id: int | None = None, log_dir: str | None = None) -> int:
+    """Set the environment for a loopback-only ROS graph on a private domain; return its id.
+
+    With `domain_id` None: keep a non-zero ROS_DOMAIN_ID already set by the user, else claim a
+    free one. Discovery is restricted to localhost. Call before rclpy.init().
+    """
+    if domain_id is None:
+        current = os.environ.get("ROS_DOMAIN_ID", "").strip()
+        domain_id = int(current) if current.isdigit() and int(current) != 0 else None
+    if domain_id is None:
+        domain_id = claim_free_domain_id()
+    os.environ["ROS_DOMAIN_ID"] = str(domain_id)
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    os.environ.pop("ROS_LOCALHOST_ONLY", None)  # deprecated in Jazzy; would conflict
+    if log_dir is not None:
+        os.environ["ROS_LOG_DIR"] = log_dir
+    return domain_id
+
+
+def describe_graph_settings() -> str:
+    """One line naming the RMW, domain id and discovery range in effect (for startup logs)."""
+    rmw = os.environ.get("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp (default)")
+    domain = os.environ.get("ROS_DOMAIN_ID", "0 (default)")
+    discovery = os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "SUBNET (default)")
+    return f"RMW={rmw} ROS_DOMAIN_ID={domain} ROS_AUTOMATIC_DISCOVERY_RANGE={discovery}"

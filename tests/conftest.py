@@ -1,0 +1,32 @@
+"""Test harness: every test process gets its own ROS domain on loopback and its own log folder.
+
+Fixtures:
+- `ros`: an initialised rclpy context with an executor; `ros.node(name)` creates a plain node,
+  `ros.add(node)` spins an existing one, `ros.spin_until(cond, timeout)` spins until `cond()` is
+  true or fails the test, `ros.spin_for(seconds)` spins for a while. Everything is destroyed and
+  rclpy is shut down after the test.
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+
+from amr_control.ros_env import isolate_local_graph
+
+# Before any rclpy import in the tests: a private domain (file-locked, so parallel xdist workers
+# and concurrent runs never share one), loopback discovery, logs in a temporary folder.
+os.environ.pop("ROS_DOMAIN_ID", None)  # never the user's domain, even if exported
+isolate_local_graph(log_dir=tempfile.mkdtemp(prefix="amr-test-ros-log-"))
+
+import pytest  # noqa: E402
+
+from tests.ros_harness import RosHarness  # noqa: E402
+
+
+@pytest.fixture
+def ros():
+    harness = RosHarness()
+    try:
+        yield harness
+    finally:
+        harness.close()
