@@ -1,0 +1,73 @@
+"""Load a user's controller class from "MODULE:CLASS" and parse `name:=value` overrides.
+
+The same spec works in the wall_follower node (`controller` parameter), run_sim.py and
+evaluate.py (`--controller`), so users can run their own `compute_commands` class anywhere.
+"""
+from __future__ import annotations
+
+import importlib
+import math
+from typing import Any
+
+DEFAULT_CONTROLLER = "amr_control.wall_follower:WallFollower"
+
+
+class ControllerSpecError(ValueError):
+    """The controller spec cannot be loaded; the message says why."""
+
+
+def load_controller_class(spec: str) -> type:
+    """Import "package.module:ClassName" and check it has compute_commands()."""
+    module_name, sep, class_name = spec.strip().partition(":")
+    if not sep or not module_name or not class_name:
+        raise ControllerSpecError(f"controller '{spec}' must look like MODULE:CLASS, "
+                                  f"e.g. '{DEFAULT_CONTROLLER}'")
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as exc:
+        raise ControllerSpecError(f"controller '{spec}': cannot import module "
+                                  f"'{module_name}': {exc}") from exc
+    cls = getattr(module, class_name, None)
+    if cls is None:
+        raise ControllerSpecError(f"controller '{spec}': module '{module_name}' has no "
+                                  f"'{class_name}'")
+    if not callable(getattr(cls, "compute_commands", None)):
+        raise ControllerSpecError(f"controller '{spec}' has no compute_commands(z_scan, z_v, "
+                                  f"z_w) method")
+    return cls
+
+
+def parse_value(text: str) -> Any:
+    """Type a command-line value like ROS does: bool, int, float, else string."""
+    lowered = text.strip().lower()
+    if lowered in ("true", "false"):
+        return lowered == "true"
+    for cast in (int, float):
+        try:
+            value = cast(text)
+        except ValueError:
+            continue
+        if isinstance(value, float) and not math.isfinite(value):
+            raise ControllerSpecError(f"value '{text}' is not finite")
+        return value
+    return text
+
+
+def parse_overrides(items: list[str] | None) -> dict[str, Any]:
+    """Parse ["kp:=4.0", "follow_side:=left"] into {"kp": 4.0, "follow_side": "left"}."""
+    overrides: dict[str, Any] = {}
+    for item in items or []:
+        name, sep, value = item.partition(":=")
+        if not sep or not name.strip():
+            raise ControllerSpecError(f"override '{item}' must look like name:=value")
+        overrides[name.strip()] = parse_value(value)
+    return overrides
+
+
+def make_controller(spec: str, dt: float, params: dict[str, Any] | None = None):
+    """Instantiate the controller class with dt and keyword parameters."""
+    cls = load_controller_class(spec)
+    try:
+        return cls(dt, **(params or {}))
+    except TypeError as exc:
+        raise ControllerSpecError(f"controller '{spec}' rejected its parameters: {exc}") from exc

@@ -1,0 +1,365 @@
+"""Wall following that explores a maze without touching a wall (no rclpy: plain Python + numpy).
+
+Policy (deterministic, documented): follow ONE side (`follow_side`, right-hand rule by default):
+at every decision point the robot prefers, in order, the followed side, straight ahead, the other
+side, and turning back. In a maze whose walls are all connected this visits every corridor cell;
+in a ring it laps forever. It never switches sides: with no wall within reach on the followed side
+it drives straight until it finds one ("find_wall"), then puts it on the followed side.
+
+States (the `state` attribute):
+- follow_wall: PD control of the distance to the followed wall; the distance and the wall angle
+  come from a line fitted to the scan points beside the robot, so the derivative is the rate
+  the distance changes at cruise speed given the measured wall angle (no finite difference).
+- outer_corner: the followed wall ended (a gap wide enough for the robot): drive straight until
+  the robot is `outer_corner_advance_m` past the wall's end, then
+- turn_outer: turn in place 90 deg toward the followed side, then
+- approach: drive straight until the wall is beside the robot again (a new corridor's wall
+  starts ahead after such a turn); if it never comes, take the next outer corner.
+- turn_inner: wall ahead, followed side blocked, other side open: turn in place 90 deg away.
+- turn_around: dead end (ahead and both sides blocked): turn in place 180 deg.
+- settle: after turn_inner / turn_around, drive straight briefly so the next decisions use scans
+  taken after the turn (the real LDS-01 smears scans taken while turning).
+- find_wall: no wall on the followed side within reach: drive straight.
+- no_data: the newest scan had no valid reading at all: stop until data returns.
+
+Turns are in place: the Burger is round, so turning never reduces its clearance. Rotations are
+measured by integrating the odometry's angular velocity.
+"""
+from __future__ import annotations
+
+import logging
+import math
+from typing import Any
+
+import numpy as np
+
+from amr_control.scan_sectors import LocalPointCloud, ScanGeometry
+
+_LOG = logging.getLogger(__name__)
+
+# name: (default, description). Defaults work in the simulator's "ideal" and "turtlebot3" profiles.
+_PARAMETERS: dict[str, tuple[Any, str]] = {
+    "follow_side": ("right", "Wall kept on this side: 'right' (right-hand rule) or 'left'."),
+    "wall_distance_m": (0.20, "Target distance from the robot centre to the followed wall [m]."),
+    "kp": (10.0, "Proportional gain: angular speed per metre of wall-distance error [rad/s/m]."),
+    "kd": (10.0, "Derivative gain: angular speed per m/s of wall-distance rate, the rate being "
+                 "estimated from the fitted wall angle at cruise speed [rad/s per m/s]."),
+    "max_linear_speed_mps": (0.20, "Cruise (maximum) forward speed [m/s]; at most 0.22."),
+    "max_angular_speed_radps": (2.84, "Hard limit on the commanded angular speed [rad/s]."),
+    "follow_max_angular_speed_radps": (1.5, "Limit on the angular speed while following [rad/s]."),
+    "turn_speed_radps": (1.5, "Angular speed of in-place turns [rad/s]."),
+    "min_turn_speed_radps": (0.3, "Slowest angular speed at the end of an in-place turn [rad/s]."),
+    "front_turn_distance_m": (0.22, "A wall closer than this ahead (from the robot centre) ends "
+                                    "straight driving: turn away, turn around or take the side [m]."),
+    "front_stop_distance_m": (0.15, "Never drive forward with an obstacle closer than this in the "
+                                    "robot's path (from the robot centre) [m]."),
+    "front_slowdown_distance_m": (0.15, "Forward speed ramps from 0 at the stop distance to cruise "
+                                        "at stop distance + this [m]."),
+    "side_window_half_length_m": (0.03, "Points within +-this along x of the robot centre count "
+                                        "as beside it for the side-open tests [m]."),
+    "side_open_distance_m": (0.32, "A side with nothing closer than this is open (no wall) [m]."),
+    "min_gap_width_m": (0.30, "Openings in the followed wall narrower than this are not entered [m]."),
+    "outer_corner_advance_m": (0.20, "How far past the end of the followed wall the robot drives "
+                                     "before turning around the corner [m]."),
+    "settle_time_s": (0.3, "Straight driving after an in-place turn before following again [s]."),
+    "settle_speed_mps": (0.10, "Forward speed while settling or approaching a wall [m/s]."),
+    "sector_half_width_rad": (0.1745, "Half-width of the front/left/right/back sectors [rad]."),
+    "wall_fit_half_length_m": (0.15, "Scan points up to this far ahead/behind the robot centre are "
+                                     "used to fit the followed wall [m]."),
+    "range_min_m": (0.016, "Readings below this are invalid when no scan geometry is given [m]."),
+    "range_max_m": (8.0, "Readings above this are invalid when no scan geometry is given [m]."),
+    "invalid_hold_time_s": (0.6, "A close point whose ray stops returning is kept this long [s]."),
+    "invalid_hold_range_m": (0.30, "Only points closer than this are kept when their ray goes "
+                                   "invalid (LDS-01 reports 0.0 below 0.12 m) [m]."),
+    "robot_radius_m": (0.105, "Radius of the robot footprint [m]."),
+    "path_margin_m": (0.03, "Lateral margin added to the radius for the swept-path check [m]."),
+    "lidar_offset_x_m": (0.0, "Forward position of the LiDAR relative to the robot centre [m] "
+                              "(-0.032 on a real Burger)."),
+    "track_m": (0.16, "Wheel separation [m], to keep both wheels within max_linear_speed."),
+}
+
+_WHEEL_LINEAR_SPEED_MAX_MPS = 0.22   # TurtleBot3 Burger: each wheel's rim speed limit
+
+
+class WallFollower:
+    """Class to safely explore an environment (without crashing) by following walls."""
+
+    def __init__(self, dt: float, **params: Any) -> None:
+        """Args:
+            dt: control period [s].
+            **params: any name of `parameter_descriptions()`; unknown names raise ValueError.
+        """
+        if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0.0):
+            raise ValueError(f"WallFollower: dt must be a positive number of seconds, got {dt!r}")
+        unknown = sorted(set(params) - set(_PARAMETERS))
+        if unknown:
+            raise ValueError(f"WallFollower: unknown parameter(s) {unknown}; "
+                             f"known: {sorted(_PARAMETERS)}")
+        self._dt = float(dt)
+        values = {name: default for name, (default, _) in _PARAMETERS.items()}
+        values.update(params)
+        side = str(values.pop("follow_side")).lower()
+        if side not in ("right", "left"):
+            raise ValueError(f"WallFollower: follow_side must be 'right' or 'left', got {side!r}")
+        self.follow_side = side
+        self._side = -1.0 if side == "right" else 1.0   # sign of the followed side's y
+        for name, value in values.items():
+            try:
+                number = float(value)
+            except (TypeError, ValueError):
+                raise ValueError(f"WallFollower: {name} must be a number, got {value!r}") from None
+            if not math.isfinite(number) or (number < 0.0 and name != "lidar_offset_x_m"):
+                raise ValueError(f"WallFollower: {name} must be finite and >= 0, got {value!r}")
+            setattr(self, name, number)
+        self.max_linear_speed_mps = min(self.max_linear_speed_mps, 0.22)
+        self.max_angular_speed_radps = min(self.max_angular_speed_radps, 2.84)
+        if self.front_stop_distance_m >= self.front_turn_distance_m:
+            raise ValueError("WallFollower: front_stop_distance_m must be below front_turn_distance_m")
+
+        self._geometry: ScanGeometry | None = None
+        self._cloud = LocalPointCloud(self.invalid_hold_time_s, self.invalid_hold_range_m,
+                                      self.lidar_offset_x_m)
+        self.state = "follow_wall"
+        self.wall_distance_error: float | None = None
+        self.distances: dict[str, float] = {}
+        self._last_v = 0.0
+        self._last_w = 0.0
+        self._state_time = 0.0          # s in the current state
+        self._travelled = 0.0           # m driven in the current state (odometry)
+        self._turned = 0.0              # rad turned in the current state (odometry)
+        self._turn_target = 0.0         # signed rad for turn states
+        self._advance_target = 0.0      # m for outer_corner
+        self._scan_had_data = False
+        self._last_turn: str | None = None   # the last in-place turn, until following resumes
+
+    @classmethod
+    def parameter_descriptions(cls) -> dict[str, tuple[Any, str]]:
+        """Every tuning parameter: name -> (default value, description with units)."""
+        return dict(_PARAMETERS)
+
+    def set_scan_geometry(self, angle_min: float, angle_increment: float,
+                          range_min: float, range_max: float) -> None:
+        """Tell where the rays point (angle_i = angle_min + i*angle_increment, rad) and the valid
+        range interval (m). Called per LaserScan by the node, so it may change between scans.
+        Absurd values are ignored with a warning (the course convention is used instead)."""
+        geometry = ScanGeometry(float(angle_min), float(angle_increment),
+                                float(range_min), float(range_max))
+        if not geometry.is_sane():
+            _LOG.warning("WallFollower: ignoring unusable scan geometry %s", geometry)
+            self._geometry = None
+            return
+        self._geometry = geometry
+
+    # ---- main entry ----------------------------------------------------------------------
+    def compute_commands(self, z_scan: Any, z_v: float, z_w: float) -> tuple[float, float]:
+        """One control step.
+
+        Args:
+            z_scan: LiDAR ranges [m] (NaN/inf/0.0/out-of-range readings are "no return").
+            z_v: odometric linear velocity of the robot centre over the last step [m/s].
+            z_w: odometric angular velocity over the last step [rad/s].
+
+        Returns:
+            (v, w): linear [m/s] and angular [rad/s] velocity commands, always finite and within
+            the robot's limits.
+        """
+        z_v = float(z_v) if _is_finite_number(z_v) else self._last_v
+        z_w = float(z_w) if _is_finite_number(z_w) else self._last_w
+        self._observe(z_scan, z_v, z_w)
+        v, w = self._step_state_machine()
+        v, w = self._limit(v, w)
+        self._last_v, self._last_w = v, w
+        return v, w
+
+    # ---- perception ----------------------------------------------------------------------
+    def _observe(self, z_scan: Any, z_v: float, z_w: float) -> None:
+        dt = self._dt
+        self._state_time += dt
+        self._travelled += z_v * dt
+        self._turned += z_w * dt
+        self._cloud.age(dt)
+        self._cloud.move(z_v * dt, z_w * dt)
+        ranges = _as_ranges(z_scan)
+        if ranges is not None and self._cloud.is_new_scan(ranges):
+            geometry = self._geometry or ScanGeometry(0.0, 2.0 * math.pi / ranges.size,
+                                                      self.range_min_m, self.range_max_m)
+            self._scan_had_data = self._cloud.add_scan(ranges, geometry) > 0
+        hw = self.sector_half_width_rad
+        cloud = self._cloud
+        path = cloud.path_distance(self.robot_radius_m + self.path_margin_m)
+        self.distances = {
+            "front": min(cloud.sector_distance(0.0, hw), path),
+            "left": cloud.sector_distance(0.5 * math.pi, hw),
+            "right": cloud.sector_distance(-0.5 * math.pi, hw),
+            "back": cloud.sector_distance(math.pi, hw),
+            "path": path,
+        }
+
+    def _side_distance(self, followed: bool = True) -> float:
+        """Lateral distance to the closest point right beside the robot (|x| within the side
+        window) on the followed or the other side; inf if open. A box, not an angular sector:
+        at a right-angle outer corner the wall leaving sideways lies just behind the robot and
+        would keep a +-90 deg sector "closed" long after the followed wall has ended."""
+        side = self._side if followed else -self._side
+        band = self._cloud.side_band(side, math.inf)
+        beside = band[np.abs(band[:, 0]) <= self.side_window_half_length_m] if band.size else band
+        return float(np.abs(beside[:, 1]).min()) if beside.size else math.inf
+
+    # ---- state machine -------------------------------------------------------------------
+    def _enter(self, state: str) -> None:
+        self.state = state
+        self._state_time = 0.0
+        self._travelled = 0.0
+        self._turned = 0.0
+
+    def _start_turn(self, state: str, angle_rad: float) -> None:
+        self._enter(state)
+        self._turn_target = angle_rad
+        self._last_turn = state
+
+    def _step_state_machine(self) -> tuple[float, float]:
+        self.wall_distance_error = None
+        if not self._scan_had_data:
+            self._enter("no_data") if self.state != "no_data" else None
+            return 0.0, 0.0
+        if self.state == "no_data":
+            self._enter("follow_wall")
+        # A few transitions may chain in one step (e.g. a turn ends and a decision follows).
+        for _ in range(4):
+            command = self._run_state()
+            if command is not None:
+                return command
+        return 0.0, 0.0
+
+    def _run_state(self) -> tuple[float, float] | None:
+        state = self.state
+        front_blocked = self.distances["front"] < self.front_turn_distance_m
+        if state in ("turn_inner", "turn_outer", "turn_around"):
+            return self._run_turn()
+        if state == "outer_corner":
+            timed_out = self._state_time > 3.0 + self._advance_target / max(self.settle_speed_mps, 0.01)
+            if front_blocked or self._travelled >= self._advance_target or timed_out:
+                self._start_turn("turn_outer", self._side * 0.5 * math.pi)
+                return None
+            return self.max_linear_speed_mps, 0.0
+        if state == "approach":
+            if self._side_distance() <= self.side_open_distance_m:
+                self._enter("follow_wall")
+                return None
+            if front_blocked or self._travelled >= self.outer_corner_advance_m + 0.1:
+                self._enter("follow_wall")
+                return self._decide(allow_approach=False)
+            return self.settle_speed_mps, 0.0
+        if state == "settle":
+            if front_blocked or self._state_time >= self.settle_time_s:
+                self._enter("follow_wall")
+                return None
+            return self.settle_speed_mps, 0.0
+        return self._decide(allow_approach=True)
+
+    def _run_turn(self) -> tuple[float, float] | None:
+        target = self._turn_target
+        direction = 1.0 if target > 0 else -1.0
+        remaining = abs(target) - direction * self._turned
+        nominal = abs(target) / max(self.min_turn_speed_radps, 0.05)
+        if remaining <= 0.02 or self._state_time > nominal + 2.0:
+            nxt = "approach" if self.state == "turn_outer" else "settle"
+            self._enter(nxt)
+            return None
+        # Slow down over the last part so that the turn ends on target (force control lags).
+        speed = min(self.turn_speed_radps, max(self.min_turn_speed_radps, 4.0 * remaining))
+        return 0.0, direction * speed
+
+    def _decide(self, allow_approach: bool) -> tuple[float, float] | None:
+        """Right-hand rule (mirrored for the left): followed side > straight > other side > back."""
+        side = self._side
+        front_blocked = self.distances["front"] < self.front_turn_distance_m
+        if self._side_distance() > self.side_open_distance_m:
+            band = self._cloud.side_band(side, self.side_open_distance_m)
+            behind = band[(band[:, 0] <= 0.0) & (band[:, 0] >= -0.6), 0] if band.size else band
+            ahead = band[band[:, 0] > 0.0, 0] if band.size else band
+            wall_end = float(behind.max()) if behind.size else None
+            # Where the followed wall resumes ahead; a wall leaving the corner sideways (the
+            # usual right-angle outer corner) has its points at the corner itself: skip those.
+            resume = ahead[ahead > wall_end + 0.05] if wall_end is not None else ahead
+            wall_resume = float(resume.min()) if resume.size else math.inf
+            if wall_end is not None:
+                if wall_resume - wall_end >= self.min_gap_width_m:
+                    self._enter("outer_corner")
+                    self._advance_target = max(0.0, self.outer_corner_advance_m + wall_end)
+                    return None
+                return self._follow()          # a narrow gap: keep following across it
+            if ahead.size and allow_approach and not front_blocked:
+                self._enter("approach")
+                return None
+            if front_blocked:
+                # Nothing on the followed side: put the wall ahead on the followed side.
+                self._start_turn("turn_inner", -side * 0.5 * math.pi)
+                return None
+            if self.state != "find_wall":
+                self._enter("find_wall")
+            return self.max_linear_speed_mps, 0.0
+        if front_blocked:
+            # Straight after a turn-around and still blocked (e.g. it was misjudged at an angle):
+            # turn by quarter turns instead, so every direction is tried in turn.
+            just_turned_around = self._last_turn == "turn_around"
+            if (self._side_distance(followed=False) > self.side_open_distance_m
+                    or just_turned_around):
+                self._start_turn("turn_inner", -side * 0.5 * math.pi)
+            else:
+                self._start_turn("turn_around", -side * math.pi)
+            return None
+        return self._follow()
+
+    def _follow(self) -> tuple[float, float]:
+        if self.state != "follow_wall":
+            self._enter("follow_wall")
+        self._last_turn = None
+        side = self._side
+        fit = self._cloud.fit_side_wall(side, self.side_open_distance_m, self.wall_fit_half_length_m)
+        if fit is not None:
+            error = fit.distance_m - self.wall_distance_m
+            rate = side * self.max_linear_speed_mps * math.sin(fit.angle_rad)
+            if fit.residual_m < 0.02 and fit.span_m >= 0.15:
+                self.wall_distance_error = error
+        else:
+            distance = self._side_distance()
+            error = (distance if math.isfinite(distance) else self.wall_distance_m) - self.wall_distance_m
+            rate = 0.0
+        w = side * (self.kp * error + self.kd * rate)
+        limit = self.follow_max_angular_speed_radps
+        return self.max_linear_speed_mps, max(-limit, min(limit, w))
+
+    # ---- safety --------------------------------------------------------------------------
+    def _limit(self, v: float, w: float) -> tuple[float, float]:
+        if not (math.isfinite(v) and math.isfinite(w)):
+            return 0.0, 0.0
+        w = max(-self.max_angular_speed_radps, min(self.max_angular_speed_radps, w))
+        if v > 0.0:
+            path = self.distances.get("path", math.inf)
+            ramp = (path - self.front_stop_distance_m) / max(self.front_slowdown_distance_m, 1e-3)
+            v = min(v, self.max_linear_speed_mps * max(0.0, min(1.0, ramp)))
+        # Keep both wheels within the linear speed limit, giving priority to the rotation.
+        v_max = max(0.0, _WHEEL_LINEAR_SPEED_MAX_MPS - abs(w) * 0.5 * self.track_m)
+        v = max(-v_max, min(v_max, v))
+        return float(v), float(w)
+
+
+def _is_finite_number(value: Any) -> bool:
+    try:
+        return math.isfinite(float(value))
+    except (TypeError, ValueError):
+        return False
+
+
+def _as_ranges(z_scan: Any) -> np.ndarray | None:
+    """The scan as a 1-D float array, or None (with a warning) if it is not one."""
+    try:
+        ranges = np.asarray(z_scan, dtype=float).ravel()
+    except (TypeError, ValueError):
+        _LOG.warning("WallFollower: scan is not a sequence of numbers; ignored")
+        return None
+    if ranges.size < 4:
+        _LOG.warning("WallFollower: scan has %d readings; ignored", ranges.size)
+        return None
+    return ranges

@@ -1,0 +1,289 @@
+"""The `wall_follower` lifecycle node: synchronized /odometry + /scan (+ /pose) -> /cmd_vel.
+
+Thin: messages become `compute_commands(z_scan, z_v, z_w)` calls on the controller (by default
+amr_control.wall_follower.WallFollower) and results become commands.
+- Simulation mode (`simulation: true`): computes on each synchronized set and publishes a
+  TwistStamped stamped like the measurement (lockstep with the simulator).
+- Robot mode (`simulation: false`): stores the newest synchronized set and computes on a timer
+  every dt (real time does not wait); /cmd_vel is TwistStamped (Jazzy bringup) or Twist (Humble)
+  by `cmd_vel_stamped`; if the newest data is older than `data_timeout` it commands zero.
+Safety: the TurtleBot3 keeps its last command forever, so the node sends a zero command on
+deactivate, cleanup and shutdown (Ctrl-C included), and never publishes a non-finite value.
+"""
+from __future__ import annotations
+
+import math
+import sys
+from typing import Any
+
+import numpy as np
+from geometry_msgs.msg import Twist, TwistStamped
+from nav_msgs.msg import Odometry
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.publisher import Publisher
+from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy
+from rclpy.time import Time
+from sensor_msgs.msg import LaserScan
+
+from amr_control import message_filters
+from amr_control.controller_loader import DEFAULT_CONTROLLER, ControllerSpecError, \
+    load_controller_class
+from amr_control.node_runner import run_lifecycle_node
+
+# TurtleBot3 Burger limits (turtlebot3.md): anything beyond is clamped before publishing.
+MAX_LINEAR_SPEED = 0.22
+MAX_ANGULAR_SPEED = 2.84
+
+RELIABLE_10 = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                         history=HistoryPolicy.KEEP_LAST)
+BEST_EFFORT_10 = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT,
+                            history=HistoryPolicy.KEEP_LAST)
+
+_NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
+    "simulation": (True, "true: compute on each synchronized set (lockstep with the simulator);"
+                         " false: robot mode, compute on a timer every dt with the newest set"),
+    "dt": (0.05, "Control period in seconds"),
+    "queue_size": (10, "Synchronizer queue size per input"),
+    "slop": (-1.0, "Synchronizer slop in seconds; negative = 10 s in simulation, 0.15 s in "
+                   "robot mode"),
+    "enable_localization": (False, "Also synchronize /pose (amr_msgs/PoseStamped) and stop "
+                                   "commanding once it reports localized"),
+    "cmd_vel_stamped": (True, "Publish geometry_msgs/TwistStamped (Jazzy) instead of Twist "
+                              "(Humble); simulation mode always uses TwistStamped"),
+    "angular_sign": (1, "+1 for REP 103 (counter-clockwise positive), -1 for setups with the "
+                        "opposite convention"),
+    "data_timeout": (0.5, "Robot mode: command zero when the newest synchronized data is older "
+                          "than this (seconds)"),
+    "controller": (DEFAULT_CONTROLLER, "Controller class as MODULE:CLASS with "
+                                       "compute_commands(z_scan, z_v, z_w) -> (v, w)"),
+    "odometry_topic": ("/odometry", "nav_msgs/Odometry input with twist filled"),
+    "scan_topic": ("/scan", "sensor_msgs/LaserScan input (subscribed best effort)"),
+    "pose_topic": ("/pose", "amr_msgs/PoseStamped input when enable_localization is true"),
+    "cmd_vel_topic": ("/cmd_vel", "Velocity command output"),
+}
+
+
+def _load_controller_spec(node: LifecycleNode) -> str:
+    """The `controller` parameter, declared early so its tuning parameters can be declared."""
+    if not node.has_parameter("controller"):
+        default, description = _NODE_PARAMETERS["controller"]
+        node.declare_parameter("controller", default, ParameterDescriptor(description=description))
+    return str(node.get_parameter("controller").value)
+
+
+class WallFollowerNode(LifecycleNode):
+    def __init__(self, node_name: str = "wall_follower", **kwargs) -> None:
+        super().__init__(node_name, **kwargs)
+        for name, (default, description) in _NODE_PARAMETERS.items():
+            if not self.has_parameter(name):
+                self.declare_parameter(name, default, ParameterDescriptor(description=description))
+        # The controller's tuning values become ROS parameters when the class describes them.
+        self._tuning_names: list[str] = []
+        try:
+            controller_class = load_controller_class(_load_controller_spec(self))
+            described = getattr(controller_class, "parameter_descriptions", None)
+            for name, (default, description) in (described() if described else {}).items():
+                if name in _NODE_PARAMETERS or self.has_parameter(name):
+                    continue
+                self.declare_parameter(name, default, ParameterDescriptor(description=description))
+                self._tuning_names.append(name)
+        except ControllerSpecError as exc:
+            self.get_logger().error(f"{exc} (configure will fail)")
+        self._reset_runtime()
+
+    # --- lifecycle -------------------------------------------------------------------------
+    def _reset_runtime(self) -> None:
+        self.controller = None
+        self._cmd_publisher: Publisher | None = None
+        self._subscribers: list = []
+        self._synchronizer = None
+        self._timer = None
+        self._latest: tuple | None = None  # (z_scan, z_v, z_w, arrival Time) in robot mode
+        self._stopped_localized = False
+        self._scan_geometry: tuple | None = None
+        self._active = False
+
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        p = {name: self.get_parameter(name).value for name in _NODE_PARAMETERS}
+        problems = []
+        if not (isinstance(p["dt"], float) and math.isfinite(p["dt"]) and p["dt"] > 0):
+            problems.append(f"dt must be a positive number of seconds (got {p['dt']})")
+        if p["queue_size"] < 1:
+            problems.append(f"queue_size must be >= 1 (got {p['queue_size']})")
+        if not math.isfinite(p["slop"]):
+            problems.append(f"slop must be finite (got {p['slop']})")
+        if p["angular_sign"] not in (1, -1):
+            problems.append(f"angular_sign must be 1 or -1 (got {p['angular_sign']})")
+        if not (math.isfinite(p["data_timeout"]) and p["data_timeout"] > 0):
+            problems.append(f"data_timeout must be > 0 s (got {p['data_timeout']})")
+        if problems:
+            self.get_logger().error("configure failed: " + "; ".join(problems))
+            return TransitionCallbackReturn.FAILURE
+        tuning = {name: self.get_parameter(name).value for name in self._tuning_names}
+        try:
+            controller_class = load_controller_class(p["controller"])
+            self.controller = controller_class(p["dt"], **tuning)
+        except Exception as exc:  # a user's controller may raise anything
+            self.get_logger().error(f"configure failed: controller '{p['controller']}': {exc}")
+            return TransitionCallbackReturn.FAILURE
+        self.simulation = bool(p["simulation"])
+        self.dt = float(p["dt"])
+        self.angular_sign = int(p["angular_sign"])
+        self.data_timeout = float(p["data_timeout"])
+        self.stamped = self.simulation or bool(p["cmd_vel_stamped"])
+        slop = p["slop"] if p["slop"] >= 0 else (10.0 if self.simulation else 0.15)
+
+        self._cmd_publisher = self.create_lifecycle_publisher(
+            TwistStamped if self.stamped else Twist, p["cmd_vel_topic"], RELIABLE_10)
+        self._subscribers = [
+            message_filters.Subscriber(self, Odometry, p["odometry_topic"],
+                                       qos_profile=RELIABLE_10),
+            message_filters.Subscriber(self, LaserScan, p["scan_topic"],
+                                       qos_profile=BEST_EFFORT_10)]
+        if p["enable_localization"]:
+            from amr_msgs.msg import PoseStamped
+            self._subscribers.append(message_filters.Subscriber(
+                self, PoseStamped, p["pose_topic"], qos_profile=RELIABLE_10))
+        self._synchronizer = message_filters.ApproximateTimeSynchronizer(
+            self._subscribers, p["queue_size"], slop)
+        self._synchronizer.registerCallback(self._on_synchronized)
+        mode = "simulation (lockstep)" if self.simulation else f"robot (timer every {self.dt} s)"
+        self.get_logger().info(
+            f"configured: {mode}, controller {p['controller']}, slop {slop} s, /cmd_vel as "
+            f"{'TwistStamped' if self.stamped else 'Twist'}, angular_sign {self.angular_sign}")
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        result = super().on_activate(state)
+        self._active = True
+        self._latest = None
+        if not self.simulation:
+            self._timer = self.create_timer(self.dt, self._on_timer)
+        return result
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._stop_timer()
+        self._publish_zero("deactivating")  # before the publisher goes quiet
+        self._active = False
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._publish_zero("cleaning up", force=True)
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._stop_timer()
+        self._publish_zero("shutting down", force=True)
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def _stop_timer(self) -> None:
+        if self._timer is not None:
+            self.destroy_timer(self._timer)
+            self._timer = None
+
+    def _release(self) -> None:
+        self._stop_timer()
+        for subscriber in self._subscribers:
+            subscriber.close()
+        if self._cmd_publisher is not None:
+            self.destroy_lifecycle_publisher(self._cmd_publisher)
+        self._reset_runtime()
+
+    # --- data path -------------------------------------------------------------------------
+    def _on_synchronized(self, odometry: Odometry, scan: LaserScan, pose=None) -> None:
+        if not self._active or self._stopped_localized:
+            return
+        if pose is not None and pose.localized:
+            self._stopped_localized = True
+            self.get_logger().info("localized: stopping the robot and no longer commanding")
+            self._publish(0.0, 0.0, odometry.header.stamp)
+            return
+        measurement = self._measurement(odometry, scan)
+        if self.simulation:
+            # Lockstep: the simulator waits for this answer, so always answer (zero if bad).
+            v, w = self._compute(*measurement) if measurement else (0.0, 0.0)
+            self._publish(v, w, scan.header.stamp)
+        elif measurement is not None:
+            self._latest = (*measurement, self.get_clock().now())
+
+    def _measurement(self, odometry: Odometry, scan: LaserScan):
+        z_v, z_w = odometry.twist.twist.linear.x, odometry.twist.twist.angular.z
+        if not (math.isfinite(z_v) and math.isfinite(z_w)):
+            self.get_logger().warning("odometry twist is not finite: set ignored",
+                                      throttle_duration_sec=2.0)
+            return None
+        if len(scan.ranges) == 0 or not (math.isfinite(scan.angle_min)
+                                         and math.isfinite(scan.angle_increment)
+                                         and scan.angle_increment != 0.0):
+            self.get_logger().warning("scan has no rays or no usable angles: set ignored",
+                                      throttle_duration_sec=2.0)
+            return None
+        geometry = (scan.angle_min, scan.angle_increment, scan.range_min, scan.range_max)
+        if geometry != self._scan_geometry and hasattr(self.controller, "set_scan_geometry"):
+            self.controller.set_scan_geometry(*geometry)
+            self._scan_geometry = geometry
+        return np.asarray(scan.ranges, dtype=float), float(z_v), float(z_w)
+
+    def _on_timer(self) -> None:
+        if not self._active or self._stopped_localized:
+            return
+        now = self.get_clock().now()
+        if self._latest is None or (now - self._latest[3]).nanoseconds * 1e-9 > self.data_timeout:
+            age = "no data yet" if self._latest is None else \
+                f"newest data {(now - self._latest[3]).nanoseconds * 1e-9:.2f} s old"
+            self.get_logger().warning(f"{age} (data_timeout {self.data_timeout} s): commanding "
+                                      f"zero", throttle_duration_sec=2.0)
+            self._publish(0.0, 0.0, now.to_msg())
+            return
+        v, w = self._compute(*self._latest[:3])
+        self._publish(v, w, now.to_msg())
+
+    def _compute(self, z_scan, z_v: float, z_w: float) -> tuple[float, float]:
+        try:
+            v, w = self.controller.compute_commands(z_scan, z_v, z_w)
+            v, w = float(v), float(w)
+        except Exception as exc:  # a user's controller must not take the node down
+            self.get_logger().error(f"controller raised {exc!r}: commanding zero",
+                                    throttle_duration_sec=2.0)
+            return 0.0, 0.0
+        if not (math.isfinite(v) and math.isfinite(w)):
+            self.get_logger().warning(f"controller returned non-finite ({v}, {w}): commanding "
+                                      f"zero", throttle_duration_sec=2.0)
+            return 0.0, 0.0
+        return (min(max(v, -MAX_LINEAR_SPEED), MAX_LINEAR_SPEED),
+                min(max(w, -MAX_ANGULAR_SPEED), MAX_ANGULAR_SPEED))
+
+    def _publish(self, v: float, w: float, stamp, force: bool = False) -> None:
+        if self._cmd_publisher is None:
+            return
+        twist = Twist()
+        twist.linear.x = v
+        twist.angular.z = self.angular_sign * w
+        if self.stamped:
+            msg = TwistStamped()
+            msg.header.stamp = stamp
+            msg.header.frame_id = "base_footprint"
+            msg.twist = twist
+        else:
+            msg = twist
+        if force:  # a final zero goes out even when the lifecycle publisher is disabled
+            Publisher.publish(self._cmd_publisher, msg)
+        else:
+            self._cmd_publisher.publish(msg)
+
+    def _publish_zero(self, why: str, force: bool = False) -> None:
+        if self._cmd_publisher is None:
+            return
+        self.get_logger().info(f"{why}: commanding zero velocity")
+        self._publish(0.0, 0.0, self.get_clock().now().to_msg(), force=force)
+
+
+def main(args: list[str] | None = None) -> int:
+    return run_lifecycle_node(WallFollowerNode, args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

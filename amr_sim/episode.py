@@ -1,0 +1,182 @@
+"""Headless episodes: a Simulator and a controller in a loop, with the figures a lab report needs.
+
+    result = run_episode("lab02", "outer", profile="ideal", duration=120.0)
+    print(result.collisions, result.laps, result.explored_fraction)
+    json.dump(result.to_dict(), open("run.json", "w"))
+
+The controller is any object with `compute_commands(z_scan, z_v, z_w) -> (v, w)`; by default
+`amr_control.wall_follower.WallFollower(dt)`. If it has `set_scan_geometry(angle_min,
+angle_increment, range_min, range_max)` it is told the profile's scan geometry first.
+
+Timing: with `ideal` the loop is the course's lockstep (measure, compute, step, ...). With
+`turtlebot3` it emulates the real robot: the controller still runs every dt, on the newest scan
+(a new one only every scan_period, 0.2 s) and on the newest odometry twist (refreshed every
+odom_period, 0.05 s).
+
+Metrics:
+- explored_fraction: share of the world's free cells (cell_size grid, centre clearance > robot
+  radius) whose centre the robot passed within cell_size / 2 of.
+- laps: full turns of the robot's position around the centroid of the world's free space, from
+  the accumulated (unwrapped) winding angle: floor(|winding| / 2 pi). Meaningful for ring-shaped
+  routes (lab02 `outer`, corridor_loop); a route that never encircles the centroid gives 0.
+- rms_wall_error_m: RMS of the controller's `wall_distance_error` attribute (read after each
+  compute_commands; a float while it follows a straight wall, else None); None without samples.
+"""
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+from dataclasses import asdict, dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from .profiles import SensorProfile, get_profile
+from .simulator import Simulator
+from .world import WORLDS_DIR, World
+
+
+@dataclass
+class EpisodeResult:
+    world: str  # bundled name, or the file path for other worlds
+    start: str | list[float]  # start name or [x, y, theta]
+    profile: str
+    seed: int
+    steps: int
+    sim_time_s: float
+    wall_time_s: float
+    collisions: int
+    first_collision_time_s: float | None
+    min_clearance_m: float
+    distance_m: float
+    explored_fraction: float
+    laps: int
+    rms_wall_error_m: float | None
+    dt: float = 0.05
+    controller: str = ""
+    start_pose: list[float] = field(default_factory=list)  # [x, y, theta] actually used
+    trajectory: list[list[float]] = field(default_factory=list)  # [[t, x, y, theta], ...]
+    collision_points: list[list[float]] = field(default_factory=list)  # [[x, y], ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON-serialisable dict (floats, ints, strings, lists, None)."""
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> "EpisodeResult":
+        return cls(**data)
+
+    def summary(self) -> str:
+        rms = "n/a" if self.rms_wall_error_m is None else f"{self.rms_wall_error_m:.3f} m"
+        return (f"{self.world} / {self.start} / {self.profile}: {self.sim_time_s:.1f} s simulated in "
+                f"{self.wall_time_s:.2f} s ({self.steps} steps), collisions {self.collisions}, "
+                f"min clearance {self.min_clearance_m:.3f} m, distance {self.distance_m:.2f} m, "
+                f"explored {100 * self.explored_fraction:.0f} %, laps {self.laps}, wall error RMS {rms}")
+
+
+def default_controller(dt: float):
+    """The project's wall follower (imported lazily: it lives in amr_control)."""
+    try:
+        from amr_control.wall_follower import WallFollower
+    except ImportError as exc:
+        raise ImportError("run_episode needs a controller: amr_control.wall_follower.WallFollower "
+                          f"is not importable ({exc}); pass controller= or controller_factory=") from exc
+    return WallFollower(dt)
+
+
+def run_episode(world: World | str, start=None, profile: str | SensorProfile = "ideal", seed: int = 0,
+                duration: float = 600.0, dt: float = 0.05, controller=None,
+                controller_factory: Callable[[float], Any] | None = None,
+                record_trajectory: bool = True) -> EpisodeResult:
+    """Run a controller in the simulator for `duration` s of simulated time and measure it.
+
+    `controller_factory(dt)` builds the controller (a class such as WallFollower works);
+    `controller` passes a ready one. Neither: the default wall follower.
+    """
+    duration = float(duration)
+    if not (math.isfinite(duration) and duration >= 0.0):
+        raise ValueError(f"duration must be a finite number of seconds >= 0, got {duration}")
+    world_obj = world if isinstance(world, World) else World.load(world)
+    prof = get_profile(profile)
+    sim = Simulator(world_obj, start=start, dt=dt, profile=prof, seed=seed)
+    if controller is None:
+        controller = controller_factory(sim.dt) if controller_factory is not None else default_controller(sim.dt)
+    if callable(getattr(controller, "set_scan_geometry", None)):
+        controller.set_scan_geometry(prof.angle_min, prof.angle_increment, prof.range_min, prof.range_max)
+
+    n_steps = int(round(duration / sim.dt))
+    positions = np.empty((n_steps + 1, 2))
+    x, y, th = sim.pose
+    positions[0] = (x, y)
+    trajectory = [[0.0, x, y, th]] if record_trajectory else []
+    cx, cy = world_obj.free_space_centroid()
+    winding = 0.0
+    last_bearing = math.atan2(y - cy, x - cx)
+    first_collision = None
+    wall_err_sq, wall_err_n = 0.0, 0
+    odom_period = prof.odom_period
+    next_odom = 0.0
+
+    z_scan, z_v, z_w = sim.measure()
+    held_v, held_w = z_v, z_w
+    wall_start = time.perf_counter()
+    for k in range(1, n_steps + 1):
+        out = controller.compute_commands(z_scan, held_v, held_w)
+        try:
+            v, w = out
+        except (TypeError, ValueError):
+            raise TypeError(f"compute_commands must return (v, w), got {out!r}") from None
+        err = getattr(controller, "wall_distance_error", None)
+        if isinstance(err, (int, float)) and math.isfinite(err):
+            wall_err_sq += float(err) ** 2
+            wall_err_n += 1
+        z_scan, z_v, z_w = sim.step(v, w)
+        if odom_period is None or sim.time >= next_odom - 1e-9:
+            held_v, held_w = z_v, z_w  # the real robot's twist only changes with each /odom
+            if odom_period is not None:
+                while next_odom <= sim.time + 1e-9:
+                    next_odom += odom_period
+        if first_collision is None and sim.collisions:
+            first_collision = sim.time
+        x, y, th = sim.pose
+        positions[k] = (x, y)
+        bearing = math.atan2(y - cy, x - cx)
+        winding += math.remainder(bearing - last_bearing, 2.0 * math.pi)
+        last_bearing = bearing
+        if record_trajectory:
+            trajectory.append([sim.time, x, y, th])
+    wall_time = time.perf_counter() - wall_start
+
+    start_label = start if isinstance(start, str) else (
+        next(iter(world_obj.starts)) if start is None and world_obj.starts else [float(c) for c in sim.start])
+    bundled_name = world_obj.name if _is_bundled(world_obj) else world_obj.source
+    return EpisodeResult(
+        world=bundled_name, start=start_label, profile=prof.name, seed=int(seed), steps=sim.steps,
+        sim_time_s=sim.time, wall_time_s=wall_time, collisions=sim.collisions,
+        first_collision_time_s=first_collision, min_clearance_m=sim.min_clearance,
+        distance_m=sim.distance, explored_fraction=explored_fraction(world_obj, positions),
+        laps=int(abs(winding) // (2.0 * math.pi)),
+        rms_wall_error_m=math.sqrt(wall_err_sq / wall_err_n) if wall_err_n else None,
+        dt=sim.dt, controller=type(controller).__module__ + ":" + type(controller).__qualname__,
+        start_pose=[float(c) for c in sim.start], trajectory=trajectory,
+        collision_points=[[float(px), float(py)] for px, py in sim.collision_points])
+
+
+def explored_fraction(world: World, positions: np.ndarray) -> float:
+    """Share of the world's free cells whose centre some position passed within cell_size / 2 of."""
+    cells = world.free_cells()
+    if len(cells) == 0 or len(positions) == 0:
+        return 0.0
+    cs = world.cell_size
+    pos = np.asarray(positions, dtype=np.float64).reshape(-1, 2)
+    idx = np.floor(pos / cs)  # a point within cs/2 of a centre lies in that centre's cell
+    near = np.hypot(*((idx + 0.5) * cs - pos).T) <= cs / 2
+    visited = {(int(i), int(j)) for i, j in idx[near]}
+    cell_idx = np.floor(cells / cs).astype(int)
+    hits = sum((int(i), int(j)) in visited for i, j in cell_idx)
+    return hits / len(cells)
+
+
+def _is_bundled(world: World) -> bool:
+    return Path(world.source).resolve().parent == WORLDS_DIR.resolve()

@@ -1,0 +1,468 @@
+"""Batch evaluation of a controller: episode grids, a parallel runner, result files and a table.
+
+scripts/evaluate.py is the command line around this module; bench.py and tests use it directly.
+Each episode is amr_sim.episode.run_episode with the same Simulator and controller classes as the
+ROS path. Episodes run in worker processes (forkserver, else spawn: no fork of a parent that may
+hold threads); each worker imports the simulator and its numba kernels once and then runs many
+episodes.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import math
+import multiprocessing
+import os
+import re
+import signal
+import sys
+import time
+import traceback
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Iterable, Mapping, Sequence, TextIO
+
+from amr_control.controller_loader import (DEFAULT_CONTROLLER, ControllerSpecError,
+                                           load_controller_class, parse_overrides)
+
+__all__ = [
+    "DEFAULT_CONTROLLER", "ControllerSpecError", "EvaluationError", "EpisodeSpec", "EpisodeOutcome",
+    "parse_name_list", "parse_seeds", "parse_overrides", "expand_grid", "load_config",
+    "load_ros_params_file", "check_controller", "run_episodes", "outcome_row", "write_json", "write_csv", "format_table",
+    "verdict", "ProgressBar", "RESULT_COLUMNS",
+]
+
+CONFIG_KEYS = ("worlds", "starts", "profiles", "seeds", "duration", "dt", "controller", "params_file",
+               "params", "jobs")
+MAX_EPISODES = 10_000
+
+
+class EvaluationError(ValueError):
+    """Bad evaluation options or config file; the message says which and why."""
+
+
+@dataclass(frozen=True)
+class EpisodeSpec:
+    """One episode to run: picklable, so it can be sent to a worker process."""
+    world: str
+    start: str | None = None
+    profile: str = "ideal"
+    seed: int = 0
+    duration: float = 600.0
+    dt: float = 0.05
+    controller: str = DEFAULT_CONTROLLER
+    params: tuple[tuple[str, Any], ...] = ()
+
+    def __post_init__(self) -> None:
+        if isinstance(self.params, Mapping):
+            object.__setattr__(self, "params", tuple(sorted(self.params.items())))
+        if not (isinstance(self.duration, (int, float)) and math.isfinite(self.duration) and self.duration > 0):
+            raise EvaluationError(f"episode duration must be a positive number of seconds, got {self.duration!r}")
+        if not (isinstance(self.dt, (int, float)) and math.isfinite(self.dt) and 0 < self.dt <= 1.0):
+            raise EvaluationError(f"dt must be in (0, 1] s, got {self.dt!r}")
+
+    @property
+    def label(self) -> str:
+        return f"{Path(self.world).stem}/{self.start or '-'}/{self.profile}/seed {self.seed}"
+
+
+@dataclass
+class EpisodeOutcome:
+    """What one episode produced: the run_episode result, or the error that stopped it."""
+    spec: EpisodeSpec
+    result: Any = None
+    error: str | None = None
+    wall_time_s: float = 0.0
+
+
+# --- options and grids ---------------------------------------------------------------------
+
+def parse_name_list(value: str | Sequence[str] | None) -> list[str]:
+    """"a,b, c" or ["a", "b,c"] -> ["a", "b", "c"] (order kept, duplicates dropped)."""
+    if value is None:
+        return []
+    items = [value] if isinstance(value, str) else list(value)
+    names: list[str] = []
+    for item in items:
+        for name in str(item).split(","):
+            name = name.strip()
+            if name and name not in names:
+                names.append(name)
+    return names
+
+
+def parse_seeds(value: str | int | Sequence[Any] | None) -> list[int]:
+    """"0,1,2", "0-9" (inclusive), 3, or [0, "4-5"] -> a list of distinct non-negative ints."""
+    if value is None:
+        return [0]
+    items = [value] if isinstance(value, (str, int)) else list(value)
+    seeds: list[int] = []
+    for item in items:
+        if isinstance(item, bool) or not isinstance(item, (int, str)):
+            raise EvaluationError(f"seed {item!r} is not an integer")
+        parts = [str(item)] if isinstance(item, int) else [p.strip() for p in item.split(",") if p.strip()]
+        for part in parts:
+            single = re.fullmatch(r"\d+", part)
+            span = re.fullmatch(r"(\d+)\s*-\s*(\d+)", part)
+            if single:
+                new = [int(part)]
+            elif span and int(span.group(1)) <= int(span.group(2)) <= int(span.group(1)) + MAX_EPISODES:
+                new = list(range(int(span.group(1)), int(span.group(2)) + 1))
+            else:
+                raise EvaluationError(f"seed '{part}' is not a non-negative integer or a range like 0-9")
+            for seed in new:
+                if seed > 2**32 - 1:
+                    raise EvaluationError(f"seed {seed} is out of range 0..2^32-1")
+                if seed not in seeds:
+                    seeds.append(seed)
+    if not seeds:
+        raise EvaluationError("no seeds given")
+    return seeds
+
+
+def expand_grid(worlds: str | Sequence[str], starts: str | Sequence[str] = "all",
+                profiles: str | Sequence[str] = ("ideal",), seeds: Any = (0,),
+                duration: float = 600.0, dt: float = 0.05, controller: str = DEFAULT_CONTROLLER,
+                params: Mapping[str, Any] | None = None) -> list[EpisodeSpec]:
+    """Every combination of world x start x profile x seed, in that nesting order.
+
+    `worlds` "all" means every bundled world; `starts` "all" means every named start of each world.
+    A start name applies to the worlds that have it; a name no chosen world has is an error.
+    """
+    from amr_sim.profiles import get_profile
+    from amr_sim.world import World, WorldError, bundled_worlds
+
+    world_names = parse_name_list(worlds)
+    if world_names == ["all"]:
+        world_names = bundled_worlds()
+    if not world_names:
+        raise EvaluationError("no worlds given")
+    profile_names = parse_name_list(profiles) or ["ideal"]
+    for name in profile_names:
+        try:
+            get_profile(name)
+        except (KeyError, ValueError) as exc:
+            raise EvaluationError(f"profile '{name}': {exc}") from None
+    seed_list = parse_seeds(seeds)
+    start_names = parse_name_list(starts) or ["all"]
+    loaded: dict[str, list[str | None]] = {}
+    for name in world_names:
+        try:
+            world = World.load(name)
+        except WorldError as exc:
+            raise EvaluationError(str(exc)) from None
+        available = list(world.starts)
+        if start_names == ["all"]:
+            chosen: list[str | None] = list(available) or [None]
+        else:
+            chosen = [s for s in start_names if s in available]
+            if not chosen:
+                raise EvaluationError(f"world '{name}' has none of the starts {', '.join(start_names)} "
+                                      f"(its starts: {', '.join(available) or 'none'})")
+        loaded[name] = chosen
+    unused = [s for s in start_names if s != "all" and not any(s in v for v in loaded.values())]
+    if unused:
+        raise EvaluationError(f"start(s) {', '.join(unused)} exist in none of the worlds {', '.join(world_names)}")
+    specs = [EpisodeSpec(world=w, start=s, profile=p, seed=seed, duration=duration, dt=dt,
+                         controller=controller, params=dict(params or {}))
+             for w in world_names for s in loaded[w] for p in profile_names for seed in seed_list]
+    if len(specs) > MAX_EPISODES:
+        raise EvaluationError(f"{len(specs)} episodes requested; the limit is {MAX_EPISODES}")
+    return specs
+
+
+def load_config(path: str | os.PathLike) -> dict[str, Any]:
+    """Read an episode-set YAML file; keys as in CONFIG_KEYS (all optional except worlds)."""
+    import yaml
+
+    path = Path(path)
+    try:
+        raw = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise EvaluationError(f"{path}: cannot read config: {exc}") from None
+    except yaml.YAMLError as exc:
+        raise EvaluationError(f"{path}: not valid YAML: {exc}") from None
+    if not isinstance(raw, dict):
+        raise EvaluationError(f"{path}: expected a mapping with keys {', '.join(CONFIG_KEYS)}")
+    unknown = sorted(set(raw) - set(CONFIG_KEYS))
+    if unknown:
+        raise EvaluationError(f"{path}: unknown key(s) {', '.join(map(str, unknown))}; "
+                              f"allowed: {', '.join(CONFIG_KEYS)}")
+    if "worlds" not in raw:
+        raise EvaluationError(f"{path}: 'worlds' is required (a list of names, or 'all')")
+    config = dict(raw)
+    for key in ("duration", "dt"):
+        if key in config and (isinstance(config[key], bool) or not isinstance(config[key], (int, float))):
+            raise EvaluationError(f"{path}: '{key}' must be a number, got {config[key]!r}")
+    if "jobs" in config and (isinstance(config["jobs"], bool) or not isinstance(config["jobs"], int)
+                             or config["jobs"] < 1):
+        raise EvaluationError(f"{path}: 'jobs' must be a positive integer, got {config['jobs']!r}")
+    params_file = config.get("params_file")
+    if params_file is not None:
+        if not isinstance(params_file, str):
+            raise EvaluationError(f"{path}: 'params_file' must be a path, got {params_file!r}")
+        beside = path.parent / params_file  # relative paths are relative to the config file
+        if params_file.lower() != "none" and not Path(params_file).is_absolute() and beside.exists():
+            config["params_file"] = str(beside)
+    params = config.get("params") or {}
+    if not isinstance(params, dict) or not all(isinstance(k, str) for k in params):
+        raise EvaluationError(f"{path}: 'params' must map parameter names to values")
+    for name, value in params.items():
+        if isinstance(value, float) and not math.isfinite(value):
+            raise EvaluationError(f"{path}: parameter '{name}' is not finite")
+    config["params"] = params
+    return config
+
+
+def load_ros_params_file(path: str | os.PathLike, controller_class: type | None = None) -> dict[str, Any]:
+    """Controller parameters from a ROS 2 params YAML (the file run_sim.py gives the node).
+
+    Every node section's `ros__parameters` is merged in file order. With a controller class that
+    lists its parameters (`parameter_descriptions()`), node-only parameters such as use_sim_time
+    are dropped, so the class gets exactly what the node would pass it.
+    """
+    import yaml
+
+    path = Path(path)
+    try:
+        raw = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise EvaluationError(f"{path}: cannot read params file: {exc}") from None
+    except yaml.YAMLError as exc:
+        raise EvaluationError(f"{path}: not valid YAML: {exc}") from None
+    sections = [v["ros__parameters"] for v in (raw or {}).values()
+                if isinstance(v, dict) and isinstance(v.get("ros__parameters"), dict)] \
+        if isinstance(raw, dict) else []
+    if not sections:
+        raise EvaluationError(f"{path}: no '<node>: ros__parameters:' section")
+    params: dict[str, Any] = {}
+    for section in sections:
+        params.update(section)
+    known = getattr(controller_class, "parameter_descriptions", None)
+    if callable(known):
+        names = set(known())
+        params = {k: v for k, v in params.items() if k in names}
+    return params
+
+
+def check_controller(spec: str, params: Mapping[str, Any] | None, dt: float) -> type:
+    """Load MODULE:CLASS and build it once with `params`, so a bad spec fails before any run."""
+    cls = load_controller_class(spec)
+    try:
+        cls(dt, **dict(params or {}))
+    except Exception as exc:  # a user's class may raise anything on bad parameters
+        raise ControllerSpecError(f"controller '{spec}' rejected its parameters "
+                                  f"{dict(params or {})}: {exc}") from exc
+    return cls
+
+
+# --- running -------------------------------------------------------------------------------
+
+def _init_worker() -> None:
+    # Ctrl-C goes to the whole process group: only the parent handles it (and ends the pool).
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # Import once per worker: the simulator's numba kernels load (or compile) here, not per episode.
+    try:
+        import amr_sim.episode  # noqa: F401
+    except Exception:  # noqa: BLE001 - an initializer that raises makes Pool respawn workers forever;
+        pass           # run_one imports it again and reports the error per episode instead
+
+
+def _run_indexed(item: tuple[int, EpisodeSpec]) -> tuple[int, EpisodeOutcome]:
+    index, spec = item
+    return index, run_one(spec)
+
+
+def run_one(spec: EpisodeSpec) -> EpisodeOutcome:
+    """Run one episode in this process; an exception becomes the outcome's error text."""
+    from amr_sim.episode import run_episode
+
+    start = time.perf_counter()
+    try:
+        controller_class = load_controller_class(spec.controller)
+        params = dict(spec.params)
+        result = run_episode(spec.world, spec.start, profile=spec.profile, seed=spec.seed,
+                             duration=spec.duration, dt=spec.dt,
+                             controller_factory=lambda dt: controller_class(dt, **params))
+        return EpisodeOutcome(spec, result=result, wall_time_s=time.perf_counter() - start)
+    except Exception as exc:  # one broken episode must not lose the others' results
+        detail = traceback.format_exception_only(type(exc), exc)[-1].strip()
+        return EpisodeOutcome(spec, error=detail, wall_time_s=time.perf_counter() - start)
+
+
+def _context() -> multiprocessing.context.BaseContext:
+    methods = multiprocessing.get_all_start_methods()
+    if "forkserver" in methods:
+        ctx = multiprocessing.get_context("forkserver")
+        ctx.set_forkserver_preload(["amr_sim.episode"])
+        return ctx
+    return multiprocessing.get_context("spawn")
+
+
+def run_episodes(specs: Sequence[EpisodeSpec], jobs: int | None = None,
+                 progress: Callable[[int, int, EpisodeOutcome], None] | None = None) -> list[EpisodeOutcome]:
+    """Run all episodes on `jobs` processes (None: all cores; 1: in this process), in spec order."""
+    specs = list(specs)
+    if not specs:
+        return []
+    jobs = (os.cpu_count() or 1) if jobs is None else int(jobs)
+    if jobs < 1:
+        raise EvaluationError(f"jobs must be >= 1, got {jobs}")
+    outcomes: list[EpisodeOutcome | None] = [None] * len(specs)
+    done = 0
+    if jobs == 1 or len(specs) == 1:
+        for index, spec in enumerate(specs):
+            outcomes[index] = run_one(spec)
+            done += 1
+            if progress:
+                progress(done, len(specs), outcomes[index])
+        return outcomes  # type: ignore[return-value]
+    with _context().Pool(processes=min(jobs, len(specs)), initializer=_init_worker) as pool:
+        for index, outcome in pool.imap_unordered(_run_indexed, enumerate(specs), chunksize=1):
+            outcomes[index] = outcome
+            done += 1
+            if progress:
+                progress(done, len(specs), outcome)
+    return outcomes  # type: ignore[return-value]
+
+
+# --- results -------------------------------------------------------------------------------
+
+RESULT_COLUMNS = ("world", "start", "profile", "seed", "sim_time_s", "collisions",
+                  "first_collision_time_s", "min_clearance_m", "distance_m", "laps",
+                  "explored_fraction", "rms_wall_error_m", "wall_time_s", "error")
+
+
+def _finite_or_none(value: Any) -> Any:
+    if value is None or isinstance(value, (bool, str)):
+        return value
+    if hasattr(value, "item"):  # numpy scalar
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def outcome_row(outcome: EpisodeOutcome) -> dict[str, Any]:
+    """The flat per-episode metrics (JSON-safe: non-finite numbers become None)."""
+    spec, result = outcome.spec, outcome.result
+    row: dict[str, Any] = {"world": Path(spec.world).stem if spec.world.endswith((".yaml", ".yml", ".json"))
+                           else spec.world, "start": spec.start, "profile": spec.profile, "seed": spec.seed}
+    metrics = _result_metrics(result) if result is not None else {}
+    for column in RESULT_COLUMNS[4:-2]:
+        row[column] = _finite_or_none(metrics.get(column))
+    row["wall_time_s"] = round(outcome.wall_time_s, 3)
+    row["error"] = outcome.error
+    return row
+
+
+def _result_metrics(result: Any) -> dict[str, Any]:
+    # EpisodeResult fields carry their units in their names, like the columns.
+    return {column: getattr(result, column, None) for column in RESULT_COLUMNS[4:-2]}
+
+
+def write_json(path: str | os.PathLike, outcomes: Sequence[EpisodeOutcome], meta: Mapping[str, Any]) -> Path:
+    """results.json: {"meta": {...}, "episodes": [row, ...]} (strict JSON, no NaN)."""
+    path = Path(path)
+    payload = {"meta": dict(meta), "episodes": [outcome_row(o) for o in outcomes]}
+    path.write_text(json.dumps(payload, indent=1, allow_nan=False) + "\n", encoding="utf-8")
+    return path
+
+
+def write_csv(path: str | os.PathLike, outcomes: Sequence[EpisodeOutcome]) -> Path:
+    """results.csv: one row per episode, RESULT_COLUMNS, empty cells for missing values."""
+    path = Path(path)
+    with path.open("w", newline="", encoding="utf-8") as stream:
+        writer = csv.DictWriter(stream, fieldnames=RESULT_COLUMNS)
+        writer.writeheader()
+        for outcome in outcomes:
+            writer.writerow({k: ("" if v is None else v) for k, v in outcome_row(outcome).items()})
+    return path
+
+
+_TABLE = (  # header, row key, formatter
+    ("world", "world", str), ("start", "start", lambda v: v or "-"), ("profile", "profile", str),
+    ("seed", "seed", str), ("sim s", "sim_time_s", lambda v: f"{v:.0f}"),
+    ("collisions", "collisions", str), ("1st coll. s", "first_collision_time_s", lambda v: f"{v:.1f}"),
+    ("min clear. cm", "min_clearance_m", lambda v: f"{v * 100:.1f}"),
+    ("distance m", "distance_m", lambda v: f"{v:.1f}"), ("laps", "laps", str),
+    ("explored %", "explored_fraction", lambda v: f"{v * 100:.0f}"),
+    ("RMS err. cm", "rms_wall_error_m", lambda v: f"{v * 100:.1f}"),
+    ("wall s", "wall_time_s", lambda v: f"{v:.1f}"),
+)
+_LEFT_ALIGNED = {"world", "start", "profile"}
+
+
+def format_table(rows: Iterable[Mapping[str, Any]]) -> str:
+    """Aligned text table of outcome rows; an episode that failed shows its error instead."""
+    rows = list(rows)
+    cells = [[h for h, _, _ in _TABLE]]
+    errors: list[str] = []
+    for row in rows:
+        line = []
+        for _, key, fmt in _TABLE:
+            value = row.get(key)
+            line.append("-" if value is None else fmt(value))
+        cells.append(line)
+        if row.get("error"):
+            errors.append(f"  {row['world']}/{row['start'] or '-'}/{row['profile']}/seed {row['seed']}: "
+                          f"ERROR {row['error']}")
+    widths = [max(len(r[i]) for r in cells) for i in range(len(_TABLE))]
+    lines = []
+    for r in cells:
+        lines.append("  ".join(c.ljust(w) if _TABLE[i][1] in _LEFT_ALIGNED else c.rjust(w)
+                               for i, (c, w) in enumerate(zip(r, widths))).rstrip())
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return "\n".join(lines + errors)
+
+
+def verdict(outcomes: Sequence[EpisodeOutcome]) -> tuple[str, int]:
+    """One summary line and the exit code: 0 clean, 1 any collision, 3 any episode failed."""
+    rows = [outcome_row(o) for o in outcomes]
+    failed = [r for r in rows if r["error"]]
+    collided = [r for r in rows if not r["error"] and (r["collisions"] or 0) > 0]
+    clear = [r for r in rows if r["min_clearance_m"] is not None]
+    parts = []
+    if collided:
+        names = ", ".join(f"{_short(r)} ({r['collisions']})" for r in collided[:5])
+        more = f" and {len(collided) - 5} more" if len(collided) > 5 else ""
+        parts.append(f"COLLISIONS in {len(collided)}/{len(rows)} episodes: {names}{more}")
+    else:
+        parts.append(f"no collisions in {len(rows) - len(failed)}/{len(rows)} episodes")
+    if clear:
+        worst = min(clear, key=lambda r: r["min_clearance_m"])
+        parts.append(f"worst clearance {worst['min_clearance_m'] * 100:.1f} cm ({_short(worst)})")
+    if failed:
+        parts.append(f"{len(failed)} episode(s) FAILED to run")
+    code = 3 if failed else 1 if collided else 0
+    return "verdict: " + "; ".join(parts), code
+
+
+def _short(row: Mapping[str, Any]) -> str:
+    return f"{row['world']}/{row['start'] or '-'}/{row['profile']}/seed {row['seed']}"
+
+
+class ProgressBar:
+    """A one-line \\r progress bar, drawn only when the stream is a terminal."""
+
+    def __init__(self, total: int, stream: TextIO | None = None, width: int = 30) -> None:
+        self.stream = stream if stream is not None else sys.stderr
+        self.enabled = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.total, self.width = max(int(total), 1), width
+        self.start = time.monotonic()
+
+    def __call__(self, done: int, total: int, outcome: EpisodeOutcome | None = None) -> None:
+        if not self.enabled:
+            return
+        fraction = min(done / max(total, 1), 1.0)
+        filled = int(round(fraction * self.width))
+        elapsed = time.monotonic() - self.start
+        eta = elapsed * (total - done) / done if done else 0.0
+        self.stream.write(f"\r[{'#' * filled}{'-' * (self.width - filled)}] {done}/{total} episodes"
+                          f"  {elapsed:5.0f} s elapsed, ~{eta:4.0f} s left ")
+        self.stream.flush()
+
+    def finish(self) -> None:
+        if self.enabled:
+            self.stream.write("\r" + " " * (self.width + 60) + "\r")
+            self.stream.flush()

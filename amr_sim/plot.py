@@ -1,0 +1,196 @@
+"""Pictures for lab reports: worlds, episode trajectories and sheets of many episodes (PNG).
+
+Uses matplotlib's object API with the Agg canvas, never pyplot, so it works headless and does not
+touch the backend of a notebook or GUI that imports it.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any, Iterable, Sequence
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
+
+from .robot import ROBOT_RADIUS
+from .world import World
+
+_WALL_COLOUR = "#222222"
+
+
+def draw_world(ax, world: World, show_starts: bool = True, show_grid: bool = False) -> None:
+    """Walls (and optionally named starts and the corridor grid) on a matplotlib Axes."""
+    segs = world.segments.reshape(-1, 2, 2)
+    ax.add_collection(LineCollection(segs, colors=_WALL_COLOUR, linewidths=2.0, capstyle="round", zorder=3))
+    for hole in world.holes:
+        ax.fill(hole[:, 0], hole[:, 1], color="#bbbbbb", zorder=2)
+    xmin, ymin, xmax, ymax = world.bounds
+    pad = 0.1
+    ax.set_xlim(xmin - pad, xmax + pad)
+    ax.set_ylim(ymin - pad, ymax + pad)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    if show_grid:
+        cs = world.cell_size
+        ax.set_xticks(np.arange(math.floor(xmin / cs), math.ceil(xmax / cs) + 1) * cs, minor=True)
+        ax.set_yticks(np.arange(math.floor(ymin / cs), math.ceil(ymax / cs) + 1) * cs, minor=True)
+        ax.grid(which="minor", color="#dddddd", linewidth=0.5)
+    if show_starts:
+        for name, (x, y, th) in world.starts.items():
+            _draw_robot(ax, x, y, th, colour="tab:green")
+            ax.annotate(name, (x, y), xytext=(6, 6), textcoords="offset points", fontsize=8,
+                        color="darkgreen", zorder=6)
+    if world.goal is not None:
+        ax.plot(*world.goal, marker="*", markersize=14, color="gold", markeredgecolor="k", zorder=6)
+
+
+def _draw_robot(ax, x: float, y: float, th: float, colour: str, label: str | None = None) -> None:
+    circle = _circle(x, y, ROBOT_RADIUS)
+    ax.fill(circle[:, 0], circle[:, 1], color=colour, alpha=0.35, zorder=4, label=label)
+    ax.plot(circle[:, 0], circle[:, 1], color=colour, linewidth=1.0, zorder=4)
+    ax.plot([x, x + ROBOT_RADIUS * math.cos(th)], [y, y + ROBOT_RADIUS * math.sin(th)],
+            color=colour, linewidth=1.5, zorder=5)
+
+
+def _circle(x: float, y: float, r: float, n: int = 32) -> np.ndarray:
+    a = np.linspace(0.0, 2.0 * math.pi, n + 1)
+    return np.column_stack([x + r * np.cos(a), y + r * np.sin(a)])
+
+
+def plot_world(world: World | str, path: str | Path) -> Path:
+    """Draw a world (walls, obstacles, named starts, goal, corridor grid) to a PNG."""
+    world = world if isinstance(world, World) else World.load(world)
+    fig = Figure(figsize=(7, 6), dpi=120)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot(1, 1, 1)
+    draw_world(ax, world, show_starts=True, show_grid=True)
+    ax.set_title(f"{world.name}: {len(world.segments)} walls, cell {world.cell_size:g} m\n"
+                 f"{world.description}", fontsize=9, wrap=True)
+    return _save(fig, path)
+
+
+def _episode_parts(trajectory: Any, collision_points: Iterable) -> tuple[np.ndarray, list, Any]:
+    """(trajectory array (K, 4), collision points, result or None) from a list or an EpisodeResult."""
+    result = None
+    if hasattr(trajectory, "trajectory"):  # an EpisodeResult
+        result = trajectory
+        collision_points = collision_points or result.collision_points
+        trajectory = result.trajectory
+    elif isinstance(trajectory, dict) and "trajectory" in trajectory:
+        from .episode import EpisodeResult
+
+        result = EpisodeResult.from_dict(trajectory)
+        collision_points = collision_points or result.collision_points
+        trajectory = result.trajectory
+    traj = np.asarray(trajectory, dtype=np.float64).reshape(-1, 4)
+    return traj, [tuple(p) for p in collision_points], result
+
+
+def draw_episode(ax, world: World, trajectory: Any, collision_points: Iterable = (),
+                 colourbar: bool = True, small: bool = False) -> dict[str, float]:
+    """Walls, the trajectory coloured by time, start/end markers and collisions on an Axes.
+
+    Returns the figures shown (collisions, min clearance, distance)."""
+    traj, points, result = _episode_parts(trajectory, collision_points)
+    draw_world(ax, world, show_starts=False)
+    figures = _figures(world, traj, points, result)
+    if len(traj) >= 2:
+        xy = traj[:, 1:3]
+        lines = LineCollection(np.stack([xy[:-1], xy[1:]], axis=1), cmap="viridis",
+                               linewidths=1.2 if small else 1.8, zorder=4)
+        lines.set_array(traj[1:, 0])
+        ax.add_collection(lines)
+        if colourbar:
+            cbar = ax.figure.colorbar(lines, ax=ax, fraction=0.046, pad=0.04)
+            cbar.set_label("time [s]")
+    if len(traj):
+        _draw_robot(ax, traj[0, 1], traj[0, 2], traj[0, 3], colour="tab:green", label="start")
+        _draw_robot(ax, traj[-1, 1], traj[-1, 2], traj[-1, 3], colour="tab:blue", label="end")
+    if points:
+        pts = np.asarray(points, dtype=np.float64)
+        ax.scatter(pts[:, 0], pts[:, 1], marker="x", s=30 if small else 70, linewidths=2, color="red",
+                   zorder=7, label=f"collision ({len(pts)})")
+    if not small:
+        ax.legend(loc="upper right", fontsize=8, framealpha=0.85)
+    return figures
+
+
+def _figures(world: World, traj: np.ndarray, points: list, result) -> dict[str, float]:
+    if result is not None:
+        return {"collisions": result.collisions, "min_clearance": result.min_clearance_m,
+                "distance": result.distance_m, "time": result.sim_time_s}
+    if len(traj) == 0:
+        return {"collisions": len(points), "min_clearance": math.nan, "distance": 0.0, "time": 0.0}
+    clearance = float(world.clearances(traj[:, 1:3]).min() - ROBOT_RADIUS)
+    distance = float(np.hypot(*np.diff(traj[:, 1:3], axis=0).T).sum()) if len(traj) > 1 else 0.0
+    return {"collisions": len(points), "min_clearance": clearance, "distance": distance,
+            "time": float(traj[-1, 0])}
+
+
+def _title(world: World, result, figures: dict[str, float], title: str | None) -> str:
+    if title is None:
+        head = world.name
+        if result is not None:
+            start = result.start if isinstance(result.start, str) else \
+                "(" + ", ".join(f"{c:.2f}" for c in result.start) + ")"
+            head = f"{world.name} / start {start} / profile {result.profile}"
+        title = head
+    return (f"{title}\ncollisions {figures['collisions']}, min clearance {figures['min_clearance']:.3f} m, "
+            f"distance {figures['distance']:.2f} m in {figures['time']:.0f} s")
+
+
+def plot_episode(world: World | str, trajectory: Any, collision_points: Iterable = (),
+                 path: str | Path = "x.png", title: str | None = None) -> Path:
+    """Draw one episode to a PNG: walls, trajectory coloured by time, start, end, collisions.
+
+    `trajectory` is [[t, x, y, theta], ...] or an EpisodeResult (or its to_dict()), whose start,
+    profile and figures then go into the title.
+    """
+    world = world if isinstance(world, World) else World.load(world)
+    fig = Figure(figsize=(8, 6.5), dpi=120)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot(1, 1, 1)
+    traj, points, result = _episode_parts(trajectory, collision_points)
+    figures = draw_episode(ax, world, traj, points)
+    ax.set_title(_title(world, result, figures, title), fontsize=10)
+    return _save(fig, path)
+
+
+def plot_episodes_sheet(results: Sequence[Any], path: str | Path, columns: int | None = None,
+                        title: str | None = None) -> Path:
+    """A grid of episodes (EpisodeResults or their dicts), one small subplot each."""
+    from .episode import EpisodeResult
+
+    items = [r if isinstance(r, EpisodeResult) else EpisodeResult.from_dict(r) for r in results]
+    n = max(1, len(items))
+    columns = columns or min(4, math.ceil(math.sqrt(n)))
+    rows = math.ceil(n / columns)
+    fig = Figure(figsize=(3.6 * columns, 3.3 * rows + 0.6), dpi=110)
+    FigureCanvasAgg(fig)
+    worlds: dict[str, World] = {}
+    for i, res in enumerate(items):
+        ax = fig.add_subplot(rows, columns, i + 1)
+        world = worlds.setdefault(res.world, World.load(res.world))
+        figures = draw_episode(ax, world, res, colourbar=False, small=True)
+        start = res.start if isinstance(res.start, str) else "(" + ", ".join(f"{c:.1f}" for c in res.start) + ")"
+        ax.set_title(f"{res.world}/{start}/{res.profile} s{res.seed}\ncoll {figures['collisions']}, "
+                     f"clr {figures['min_clearance']:.3f} m, {figures['distance']:.1f} m", fontsize=7)
+        ax.tick_params(labelsize=6)
+        ax.set_xlabel("x [m]", fontsize=6)
+        ax.set_ylabel("y [m]", fontsize=6)
+    if title:
+        fig.suptitle(title, fontsize=11)
+    fig.tight_layout()
+    return _save(fig, path, tight=False)
+
+
+def _save(fig: Figure, path: str | Path, tight: bool = True) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if tight:
+        fig.tight_layout()
+    fig.savefig(path)
+    return path

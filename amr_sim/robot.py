@@ -1,0 +1,66 @@
+"""TurtleBot3 Burger: constants and differential-drive kinematics (pure functions, no physics).
+
+Inverse kinematics saturates the wheel speeds like the course robot: if a wheel would exceed
+WHEEL_SPEED_MAX, both wheel speeds are scaled by the same factor, so the turning direction and the
+curvature w / v are kept and only the speed drops.
+"""
+from __future__ import annotations
+
+import math
+
+WHEEL_RADIUS = 0.033  # m
+TRACK = 0.16  # m, wheel separation
+ROBOT_RADIUS = 0.105  # m, footprint
+LINEAR_SPEED_MAX = 0.22  # m/s
+WHEEL_SPEED_MAX = LINEAR_SPEED_MAX / WHEEL_RADIUS  # rad/s
+MASS = 1.0  # kg, Burger (affects only contact impulses; the drive reaches commands within a step)
+
+# Commands beyond this are absurd; clipping first keeps v +- w * TRACK / 2 finite.
+_COMMAND_CLIP = 1.0e6
+
+
+def inverse_kinematics(v: float, w: float) -> tuple[float, float]:
+    """Wheel speeds (wL, wR) in rad/s for a body twist (v m/s, w rad/s), saturated at WHEEL_SPEED_MAX."""
+    v = min(max(v, -_COMMAND_CLIP), _COMMAND_CLIP)
+    w = min(max(w, -_COMMAND_CLIP), _COMMAND_CLIP)
+    w_right = (v + w * TRACK / 2.0) / WHEEL_RADIUS
+    w_left = (v - w * TRACK / 2.0) / WHEEL_RADIUS
+    fastest = max(abs(w_left), abs(w_right))
+    if fastest > WHEEL_SPEED_MAX:
+        scale = WHEEL_SPEED_MAX / fastest
+        w_left *= scale
+        w_right *= scale
+    return w_left, w_right
+
+
+def forward_kinematics(w_left: float, w_right: float) -> tuple[float, float]:
+    """Body twist (v m/s, w rad/s) from the wheel speeds (wL, wR) in rad/s."""
+    v = WHEEL_RADIUS * (w_right + w_left) / 2.0
+    w = WHEEL_RADIUS * (w_right - w_left) / TRACK
+    return v, w
+
+
+def saturate(v: float, w: float) -> tuple[float, float]:
+    """The twist the robot actually executes for a command: inverse then forward kinematics."""
+    return forward_kinematics(*inverse_kinematics(v, w))
+
+
+def sinc_half(angle: float) -> float:
+    """sin(angle/2) / (angle/2): chord length over arc length for a turn of `angle` rad."""
+    half = 0.5 * angle
+    if abs(half) < 1e-6:
+        return 1.0 - half * half / 6.0
+    return math.sin(half) / half
+
+
+def unicycle_step(x: float, y: float, theta: float, v: float, w: float, dt: float) -> tuple[float, float, float]:
+    """Exact integration of the unicycle model over dt with a constant twist (v, w)."""
+    dtheta = w * dt
+    chord = v * dt * sinc_half(dtheta)
+    mid = theta + 0.5 * dtheta
+    return x + chord * math.cos(mid), y + chord * math.sin(mid), theta + dtheta
+
+
+def encoder_increments(ds: float, dtheta: float) -> tuple[float, float]:
+    """Wheel angle increments (dphi_L, dphi_R) in rad for an arc of length ds and turn dtheta."""
+    return ((ds - dtheta * TRACK / 2.0) / WHEEL_RADIUS, (ds + dtheta * TRACK / 2.0) / WHEEL_RADIUS)

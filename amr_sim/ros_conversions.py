@@ -1,0 +1,192 @@
+"""Building and reading the ROS messages the simulator and the controllers exchange.
+
+Pure message helpers: no node, no publisher, no rclpy import (only message classes), so the
+simulator node, the wall follower node and the real-robot estimator share one definition of
+stamps, quaternions, LaserScan fields and Odometry layout.
+"""
+from __future__ import annotations
+
+import array
+import math
+from typing import Sequence
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Quaternion, Twist, TwistStamped
+from nav_msgs.msg import Odometry
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import LaserScan
+from transforms3d.euler import euler2quat, quat2euler
+
+_NS_PER_S = 1_000_000_000
+
+
+# --- time ---------------------------------------------------------------------------------
+
+def seconds_to_time(seconds: float) -> Time:
+    """builtin_interfaces/Time of a time in seconds, rounded to the nanosecond.
+
+    Rounding the total in nanoseconds (not the fraction) keeps consecutive stamps k*dt apart by
+    exactly round(dt * 1e9) ns; a non-finite time raises ValueError.
+    """
+    if not math.isfinite(seconds):
+        raise ValueError(f"cannot convert non-finite time {seconds!r} to a stamp")
+    sec, nanosec = divmod(round(seconds * _NS_PER_S), _NS_PER_S)
+    return Time(sec=int(sec), nanosec=int(nanosec))
+
+
+def time_to_seconds(stamp: Time) -> float:
+    """Seconds of a builtin_interfaces/Time (or any object with sec and nanosec)."""
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def time_to_nanoseconds(stamp: Time) -> int:
+    """Exact integer nanoseconds of a stamp (for comparing stamps without float rounding)."""
+    return stamp.sec * _NS_PER_S + stamp.nanosec
+
+
+def clock_message(seconds: float) -> Clock:
+    """rosgraph_msgs/Clock carrying a simulated time."""
+    return Clock(clock=seconds_to_time(seconds))
+
+
+# --- orientation --------------------------------------------------------------------------
+
+def yaw_to_quaternion(yaw: float) -> Quaternion:
+    """Quaternion of a rotation by `yaw` radians about +z (REP 103: counter-clockwise)."""
+    w, x, y, z = euler2quat(0.0, 0.0, yaw)  # transforms3d orders quaternions (w, x, y, z)
+    return Quaternion(x=float(x), y=float(y), z=float(z), w=float(w))
+
+
+def quaternion_to_yaw(quaternion: Quaternion) -> float:
+    """Yaw (rotation about +z, in (-pi, pi]) of a geometry_msgs/Quaternion.
+
+    A non-normalised quaternion is normalised first; a zero or non-finite one raises ValueError.
+    """
+    q = (quaternion.w, quaternion.x, quaternion.y, quaternion.z)
+    norm = math.sqrt(sum(c * c for c in q))
+    if not math.isfinite(norm) or norm < 1e-12:
+        raise ValueError(f"invalid quaternion {q} (w, x, y, z)")
+    return float(quat2euler([c / norm for c in q])[2])
+
+
+# --- commands -----------------------------------------------------------------------------
+
+def command_from_twist(message: Twist | TwistStamped) -> tuple[float, float]:
+    """(v, w): forward speed (m/s) and yaw rate (rad/s) of a Twist or TwistStamped.
+
+    Values are returned as sent (NaN included): deciding what a bad command means is the
+    receiver's job.
+    """
+    twist = message.twist if isinstance(message, TwistStamped) else message
+    return float(twist.linear.x), float(twist.angular.z)
+
+
+def twist_stamped(v: float, w: float, stamp: Time | None = None,
+                  frame_id: str = "base_footprint") -> TwistStamped:
+    """TwistStamped command with forward speed v (m/s) and yaw rate w (rad/s)."""
+    message = TwistStamped()
+    if stamp is not None:
+        message.header.stamp = stamp
+    message.header.frame_id = frame_id
+    message.twist.linear.x = float(v)
+    message.twist.angular.z = float(w)
+    return message
+
+
+# --- odometry -----------------------------------------------------------------------------
+
+def odometry_message(stamp: Time, frame_id: str, child_frame_id: str,
+                     pose: Sequence[float] | None = None,
+                     velocity: Sequence[float] | None = None) -> Odometry:
+    """nav_msgs/Odometry of a planar robot.
+
+    pose: (x, y, theta) of child_frame_id in frame_id, or None to leave the identity pose.
+    velocity: (v, w) body-frame forward speed and yaw rate, or None to leave the twist zero
+    (as on an /odom that reports only a pose).
+    """
+    message = Odometry()
+    message.header.stamp = stamp
+    message.header.frame_id = frame_id
+    message.child_frame_id = child_frame_id
+    if pose is not None:
+        x, y, theta = pose
+        message.pose.pose.position.x = float(x)
+        message.pose.pose.position.y = float(y)
+        message.pose.pose.orientation = yaw_to_quaternion(theta)
+    if velocity is not None:
+        v, w = velocity
+        message.twist.twist.linear.x = float(v)
+        message.twist.twist.angular.z = float(w)
+    return message
+
+
+def pose_from_message(pose) -> tuple[float, float, float]:
+    """(x, y, theta) of a geometry_msgs/Pose (theta = yaw)."""
+    return float(pose.position.x), float(pose.position.y), quaternion_to_yaw(pose.orientation)
+
+
+# --- laser scans --------------------------------------------------------------------------
+
+def float32_array(values: Sequence[float] | np.ndarray) -> array.array:
+    """array('f') of values: assigning one to a float32[] message field skips the per-element
+    type checks rclpy runs on lists (~100x faster for a 360-ray scan)."""
+    packed = array.array("f")
+    packed.frombytes(np.ascontiguousarray(values, dtype=np.float32).tobytes())
+    return packed
+
+
+def laser_scan(ranges: Sequence[float] | np.ndarray, *, stamp: Time, frame_id: str,
+               angle_min: float, angle_increment: float, range_min: float, range_max: float,
+               scan_time: float) -> LaserScan:
+    """sensor_msgs/LaserScan with every field filled.
+
+    Rays are counter-clockwise from angle_min; angle_max is the angle of the LAST ray
+    (angle_min + (n - 1) * increment), as the LDS drivers report it. time_increment spreads
+    scan_time evenly over the rays. Ranges are copied as given (the sensor's encoding of "no
+    return": NaN or 0.0).
+    """
+    n_rays = len(ranges)
+    if n_rays == 0:
+        raise ValueError("a LaserScan needs at least one ray")
+    message = LaserScan()
+    message.header.stamp = stamp
+    message.header.frame_id = frame_id
+    message.angle_min = float(angle_min)
+    message.angle_max = float(angle_min + (n_rays - 1) * angle_increment)
+    message.angle_increment = float(angle_increment)
+    message.time_increment = float(scan_time / n_rays)
+    message.scan_time = float(scan_time)
+    message.range_min = float(range_min)
+    message.range_max = float(range_max)
+    message.ranges = float32_array(ranges)
+    return message
+
+
+def laser_scan_from_profile(ranges: Sequence[float] | np.ndarray, profile, *, stamp: Time,
+                            frame_id: str, scan_time: float) -> LaserScan:
+    """LaserScan of a simulated sensor described by an amr_sim.profiles.SensorProfile."""
+    if len(ranges) != profile.scan_rays:
+        raise ValueError(f"profile '{profile.name}' has {profile.scan_rays} rays, "
+                         f"got {len(ranges)} ranges")
+    return laser_scan(ranges, stamp=stamp, frame_id=frame_id, angle_min=profile.angle_min,
+                      angle_increment=profile.angle_increment, range_min=profile.range_min,
+                      range_max=profile.range_max, scan_time=scan_time)
+
+
+def scan_ranges(message: LaserScan) -> np.ndarray:
+    """The ranges of a LaserScan as a float64 numpy array (a copy)."""
+    return np.frombuffer(message.ranges, dtype=np.float32).astype(np.float64) \
+        if isinstance(message.ranges, array.array) \
+        else np.asarray(message.ranges, dtype=np.float64)
+
+
+def ray_angles(message: LaserScan) -> np.ndarray:
+    """Angle (rad, in the scan frame) of every ray of a LaserScan, from its own fields."""
+    return message.angle_min + message.angle_increment * np.arange(len(message.ranges))
+
+
+__all__ = ["seconds_to_time", "time_to_seconds", "time_to_nanoseconds", "clock_message",
+           "yaw_to_quaternion", "quaternion_to_yaw", "command_from_twist", "twist_stamped",
+           "odometry_message", "pose_from_message", "float32_array", "laser_scan",
+           "laser_scan_from_profile", "scan_ranges", "ray_angles"]

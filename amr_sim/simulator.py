@@ -1,0 +1,364 @@
+"""The headless simulator core: a TurtleBot3 Burger in a world of walls (no ROS).
+
+    sim = Simulator("lab02", start="outer", dt=0.05, profile="ideal", seed=0)
+    z_scan, z_v, z_w = sim.measure()          # first measurement, without moving
+    z_scan, z_v, z_w = sim.step(v, w)         # advance one dt with the command (v m/s, w rad/s)
+
+Each step: the command is cleaned (NaN/inf -> 0 with a rate-limited warning), quantised and
+clipped as the profile's robot does (turtlebot3 only), and saturated by the wheel-speed limit
+(robot.py: both wheels scaled by one factor, which keeps the curvature). The
+executed twist becomes the velocity of a pymunk dynamic body (the chord of the exact unicycle arc
+along the mid-step heading, so free motion equals the exact unicycle solution with no lag).
+Walls stop the robot through a speculative contact constraint: the velocity component towards
+every wall within reach this step is limited so the robot ends at most 0.5 mm inside it (below
+pymunk's collision_slop of 1 mm, so the contact persists without jitter). Pymunk detects the
+contacts (begin/separate callbacks count collisions) and its solver pushes out any deeper overlap.
+Why not force control as in simulation.md: pymunk integrates positions before velocities, so a
+force-driven body executes each command one step late; setting the velocity blindly instead sinks
+~42 mm into walls. Constraining the velocity against nearby walls avoids both.
+
+Sensors come from the body's actual motion: encoder increments (so z_v/z_w reflect collisions and
+saturation), a dead-reckoned odometry pose, and the LiDAR at the robot centre (lidar.py).
+"""
+from __future__ import annotations
+
+import logging
+import math
+import time as _time
+
+import numpy as np
+import pymunk
+
+from . import robot
+from .lidar import Lidar, nearest_wall
+from .profiles import SensorProfile, get_profile
+from .world import World, WorldError
+
+try:
+    import numba
+
+    @numba.njit(cache=True, error_model="numpy", nogil=True)
+    def _constrain_velocity(segments, px, py, vx, vy, h, radius, allowed_penetration):
+        """Limit (vx, vy) so that after moving h seconds no wall is closer than radius - allowed.
+
+        Distance to a segment along a straight motion is convex in time, so the linear bound
+        d(t) >= d0 - (v . n) t is safe: v . n <= (d0 - radius + allowed) / h.
+        """
+        reach = radius + math.sqrt(vx * vx + vy * vy) * h + 1e-3
+        normals = np.empty((8, 3))
+        count = 0
+        for k in range(segments.shape[0]):
+            x1 = segments[k, 0]
+            y1 = segments[k, 1]
+            ex = segments[k, 2] - x1
+            ey = segments[k, 3] - y1
+            t = ((px - x1) * ex + (py - y1) * ey) / (ex * ex + ey * ey)
+            t = min(max(t, 0.0), 1.0)
+            cx = x1 + t * ex - px
+            cy = y1 + t * ey - py
+            d = math.sqrt(cx * cx + cy * cy)
+            if d < reach and d > 0.0 and count < 8:
+                normals[count, 0] = cx / d
+                normals[count, 1] = cy / d
+                normals[count, 2] = max(d - radius + allowed_penetration, 0.0) / h
+                count += 1
+        if count == 0:
+            return vx, vy
+        for _ in range(16):  # alternating projections; converges fast for 1-3 walls
+            worst = 0.0
+            for j in range(count):
+                excess = vx * normals[j, 0] + vy * normals[j, 1] - normals[j, 2]
+                if excess > 0.0:
+                    vx -= excess * normals[j, 0]
+                    vy -= excess * normals[j, 1]
+                    worst = max(worst, excess)
+            if worst < 1e-12:
+                return vx, vy
+        return 0.0, 0.0  # not converged (a narrow wedge): stopping is always safe
+except ImportError:  # pragma: no cover
+    def _constrain_velocity(segments, px, py, vx, vy, h, radius, allowed_penetration):
+        x1, y1 = segments[:, 0], segments[:, 1]
+        ex, ey = segments[:, 2] - x1, segments[:, 3] - y1
+        t = np.clip(((px - x1) * ex + (py - y1) * ey) / (ex * ex + ey * ey), 0.0, 1.0)
+        cx, cy = x1 + t * ex - px, y1 + t * ey - py
+        d = np.hypot(cx, cy)
+        near = (d < radius + math.hypot(vx, vy) * h + 1e-3) & (d > 0)
+        normals = [(cx[k] / d[k], cy[k] / d[k], max(d[k] - radius + allowed_penetration, 0.0) / h)
+                   for k in np.flatnonzero(near)]
+        for _ in range(16):
+            worst = 0.0
+            for nx, ny, lim in normals:
+                excess = vx * nx + vy * ny - lim
+                if excess > 0.0:
+                    vx, vy = vx - excess * nx, vy - excess * ny
+                    worst = max(worst, excess)
+            if worst < 1e-12:
+                return vx, vy
+        return 0.0, 0.0
+
+log = logging.getLogger("amr_sim.simulator")
+
+_ROBOT_TYPE = 1
+_WALL_TYPE = 2
+ALLOWED_PENETRATION = 0.0005  # m: resting contact depth, below collision_slop so it is stable
+_COMMAND_CLIP = 1.0e6  # |v|, |w| beyond this are absurd
+_WARN_INTERVAL = 5.0  # s of wall time between repeated bad-command warnings
+
+
+def wrap_angle(a: float) -> float:
+    """Angle wrapped to (-pi, pi]."""
+    return math.pi - ((math.pi - a) % (2.0 * math.pi))
+
+
+class Simulator:
+    """A TurtleBot3 Burger in `world`; `step(v, w)` advances dt and returns (z_scan, z_v, z_w)."""
+
+    def __init__(self, world: World | str, start=None, dt: float = 0.05,
+                 profile: str | SensorProfile = "ideal", seed: int = 0) -> None:
+        self._world = world if isinstance(world, World) else World.load(world)
+        x, y, theta = self._world.resolve_start(start)
+        dt = float(dt)
+        if not (math.isfinite(dt) and 0.0 < dt <= 1.0):
+            raise ValueError(f"dt must be in (0, 1] s, got {dt}")
+        self._dt = dt
+        self._profile = get_profile(profile)
+        self._rng = np.random.default_rng(seed)
+        self._start = (x, y, theta)
+        self._segments = self._world.segments
+
+        space = pymunk.Space()
+        space.collision_slop = 1e-3  # the default 0.1 assumes pixels; units here are metres
+        space.damping = 1.0
+        for x1, y1, x2, y2 in self._segments:
+            wall = pymunk.Segment(space.static_body, (x1, y1), (x2, y2), 0.0)
+            wall.collision_type = _WALL_TYPE
+            wall.friction = 0.0
+            space.add(wall)
+        body = pymunk.Body(robot.MASS, pymunk.moment_for_circle(robot.MASS, 0.0, robot.ROBOT_RADIUS))
+        body.position = (x, y)
+        body.angle = theta
+        shape = pymunk.Circle(body, robot.ROBOT_RADIUS)
+        shape.collision_type = _ROBOT_TYPE
+        shape.friction = 0.0
+        shape.elasticity = 0.0
+        space.add(body, shape)
+        space.on_collision(_ROBOT_TYPE, _WALL_TYPE, begin=self._on_begin, separate=self._on_separate)
+        self._space, self._body, self._shape = space, body, shape  # shapes hold weak body refs
+
+        p = self._profile
+        self._lidar = Lidar(self._segments, p.scan_rays, p.angle_min, p.angle_increment,
+                            p.range_min, p.range_max, p.no_return)
+        self._x, self._y, self._theta = x, y, theta  # theta continuous (not wrapped)
+        self._steps = 0
+        self._distance = 0.0
+        self._collisions = 0
+        self._collision_points: list[tuple[float, float]] = []
+        self._active_contacts = 0
+        self._min_clearance = nearest_wall(self._segments, x, y)[0] - robot.ROBOT_RADIUS
+        self._odom = [0.0, 0.0, 0.0]  # odom frame = the start pose, like a robot's /odom at boot
+        self._wheel_angles = [0.0, 0.0]
+        self._z_v = 0.0
+        self._z_w = 0.0
+        self._command = (0.0, 0.0)  # twist executed in the last step (after limits)
+        self._bad_commands = 0
+        self._last_warning = -math.inf
+        self._scan = self._new_scan()
+        self._next_scan_time = p.scan_period if p.scan_period else 0.0
+
+    # ------------------------------------------------------------------ stepping
+    def measure(self) -> tuple[np.ndarray, float, float]:
+        """The current sensor readings (z_scan, z_v, z_w) without advancing time."""
+        return self._scan, self._z_v, self._z_w
+
+    def step(self, v: float, w: float) -> tuple[np.ndarray, float, float]:
+        """Advance one dt with the command (v m/s, w rad/s); return (z_scan, z_v, z_w)."""
+        v, w = self._clean_command(v, w)
+        p = self._profile
+        if p.command_resolution:  # turtlebot3_node sends int(v * 100): truncation toward zero
+            steps_per_unit = round(1.0 / p.command_resolution)
+            v = math.trunc(v * steps_per_unit) / steps_per_unit
+            w = math.trunc(w * steps_per_unit) / steps_per_unit
+        if p.clamp_commands:
+            v = min(max(v, -p.max_linear), p.max_linear)
+            w = min(max(w, -p.max_angular), p.max_angular)
+        v, w = robot.saturate(v, w)
+        self._command = (v, w)
+
+        dt = self._dt
+        x0, y0, th0 = self._x, self._y, self._theta
+        chord_speed = v * robot.sinc_half(w * dt)
+        mid = th0 + 0.5 * w * dt
+        vx, vy = _constrain_velocity(self._segments, x0, y0, chord_speed * math.cos(mid),
+                                     chord_speed * math.sin(mid), dt, robot.ROBOT_RADIUS,
+                                     ALLOWED_PENETRATION)
+        body = self._body
+        body.velocity = (vx, vy)
+        body.angular_velocity = w
+        self._space.step(dt)
+        x1, y1 = body.position
+        th1 = body.angle
+        self._x, self._y, self._theta = x1, y1, th1
+        self._steps += 1
+
+        # Encoders from the actual motion: arc length along the mid heading, then wheel angles.
+        dx, dy, dth = x1 - x0, y1 - y0, th1 - th0
+        mid = th0 + 0.5 * dth
+        ds = (dx * math.cos(mid) + dy * math.sin(mid)) / robot.sinc_half(dth)
+        dphi_l, dphi_r = robot.encoder_increments(ds, dth)
+        self._wheel_angles[0] += dphi_l
+        self._wheel_angles[1] += dphi_r
+        self._z_v, self._z_w = robot.forward_kinematics(dphi_l / dt, dphi_r / dt)
+        self._integrate_odometry(ds, dth)
+        self._distance += math.hypot(dx, dy)
+
+        clearance = nearest_wall(self._segments, x1, y1)[0] - robot.ROBOT_RADIUS
+        if clearance < self._min_clearance:
+            self._min_clearance = clearance
+
+        if p.scan_period is None:
+            self._scan = self._new_scan()
+        elif self.time >= self._next_scan_time - 1e-9:
+            self._scan = self._new_scan()
+            while self._next_scan_time <= self.time + 1e-9:
+                self._next_scan_time += p.scan_period
+        return self._scan, self._z_v, self._z_w
+
+    def _new_scan(self) -> np.ndarray:
+        p = self._profile
+        noise = self._rng.normal(0.0, p.range_noise_sigma, p.scan_rays) if p.range_noise_sigma > 0 else None
+        return self._lidar.scan(self._x, self._y, self._theta, noise)
+
+    def _integrate_odometry(self, ds: float, dth: float) -> None:
+        ox, oy, oth = self._odom
+        chord = ds * robot.sinc_half(dth)
+        mid = oth + 0.5 * dth
+        self._odom = [ox + chord * math.cos(mid), oy + chord * math.sin(mid), oth + dth]
+
+    def _clean_command(self, v, w) -> tuple[float, float]:
+        try:
+            v, w = float(v), float(w)
+        except (TypeError, ValueError):
+            v, w = math.nan, math.nan
+        if math.isfinite(v) and math.isfinite(w):
+            # Absurd magnitudes are saturated later; clipping keeps v * 100 etc. finite.
+            return min(max(v, -_COMMAND_CLIP), _COMMAND_CLIP), min(max(w, -_COMMAND_CLIP), _COMMAND_CLIP)
+        self._bad_commands += 1
+        now = _time.monotonic()
+        if now - self._last_warning >= _WARN_INTERVAL:
+            log.warning("non-finite command (v=%r, w=%r) at t=%.2f s: stopping (treated as zero) "
+                        "(%d bad command(s) so far)", v, w, self.time, self._bad_commands)
+            self._last_warning = now
+        return 0.0, 0.0  # a controller that outputs NaN is broken: stop rather than guess
+
+    # ------------------------------------------------------------------ contacts
+    def _on_begin(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data) -> None:
+        if self._active_contacts == 0:  # a new contact with the walls, not a next wall segment
+            self._collisions += 1
+            points = arbiter.contact_point_set.points
+            if points:
+                cx, cy = points[0].point_b
+                self._collision_points.append((float(cx), float(cy)))
+        self._active_contacts += 1
+
+    def _on_separate(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data) -> None:
+        self._active_contacts = max(0, self._active_contacts - 1)
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def pose(self) -> tuple[float, float, float]:
+        """True pose (x, y, theta) in the world frame, theta wrapped to (-pi, pi]."""
+        return (float(self._x), float(self._y), wrap_angle(self._theta))
+
+    @property
+    def odometry_pose(self) -> tuple[float, float, float]:
+        """Pose dead-reckoned from the wheel encoders in the odom frame (the start pose is (0, 0, 0))."""
+        return (self._odom[0], self._odom[1], wrap_angle(self._odom[2]))
+
+    @property
+    def wheel_angles(self) -> tuple[float, float]:
+        """Accumulated wheel angles (left, right) in rad, as the encoders count them."""
+        return (self._wheel_angles[0], self._wheel_angles[1])
+
+    @property
+    def executed_command(self) -> tuple[float, float]:
+        """The twist (v, w) the robot executed in the last step, after quantisation and limits."""
+        return self._command
+
+    @property
+    def lidar(self) -> Lidar:
+        """The scanner: any object with scan(x, y, theta, noise) -> ranges (replaceable, e.g. by benchmarks)."""
+        return self._lidar
+
+    @lidar.setter
+    def lidar(self, scanner) -> None:
+        self._lidar = scanner
+
+    @property
+    def space(self) -> pymunk.Space:
+        """The pymunk space (walls are static segments; the robot is the only dynamic body)."""
+        return self._space
+
+    @property
+    def robot_shape(self) -> pymunk.Circle:
+        return self._shape
+
+    @property
+    def time(self) -> float:
+        return self._steps * self._dt
+
+    @property
+    def steps(self) -> int:
+        return self._steps
+
+    @property
+    def dt(self) -> float:
+        return self._dt
+
+    @property
+    def profile(self) -> SensorProfile:
+        return self._profile
+
+    @property
+    def world(self) -> World:
+        return self._world
+
+    @property
+    def start(self) -> tuple[float, float, float]:
+        return self._start
+
+    @property
+    def collisions(self) -> int:
+        """Number of contact starts with the walls."""
+        return self._collisions
+
+    @property
+    def collision_points(self) -> list[tuple[float, float]]:
+        """The wall point where each contact started."""
+        return list(self._collision_points)
+
+    @property
+    def in_contact(self) -> bool:
+        return self._active_contacts > 0
+
+    @property
+    def min_clearance(self) -> float:
+        """Smallest distance from the robot's edge to a wall so far (m; <= 0 in contact)."""
+        return float(self._min_clearance)
+
+    @property
+    def clearance(self) -> float:
+        """Current distance from the robot's edge to the nearest wall (m)."""
+        return float(nearest_wall(self._segments, self._x, self._y)[0] - robot.ROBOT_RADIUS)
+
+    @property
+    def distance(self) -> float:
+        """Path length travelled (m)."""
+        return self._distance
+
+    @property
+    def bad_commands(self) -> int:
+        """Number of non-finite commands replaced by zero."""
+        return self._bad_commands
+
+
+__all__ = ["Simulator", "World", "WorldError", "wrap_angle"]

@@ -1,0 +1,460 @@
+"""The `amr_simulator` lifecycle node: the amr_sim core behind the course's ROS interface.
+
+Thin: commands become `Simulator.step(v, w)` calls and results become messages
+(amr_sim.ros_conversions). Two modes:
+- lockstep (default, as CoppeliaSim stepping): each /cmd_vel advances exactly one dt, then
+  /clock, /ground_truth, the odometry topic and /scan are published with the simulated time as
+  stamp; on activation a first measurement is published so the loop starts.
+- realtime: a wall-clock timer at dt advances the simulation with the newest command (older than
+  `command_timeout` = zero) and each sensor is published at its profile's own rate.
+With `enable_localization`, /pose (amr_msgs/PoseStamped) is compared with the true pose and
+reaching the goal while localized finishes the run (`finished`, `summary()`).
+For in-process run scripts: `node.simulator` and `node.on_step` (callables called with the
+simulator after every step) give access without topics; `node.finish(reason)` stops stepping.
+"""
+from __future__ import annotations
+
+import math
+import time
+from typing import Any, Callable
+
+from geometry_msgs.msg import Twist, TwistStamped
+from nav_msgs.msg import Odometry
+from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+from rclpy.clock import Clock, ClockType
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock as ClockMessage
+from sensor_msgs.msg import LaserScan
+
+from amr_control.node_runner import run_lifecycle_node
+from amr_sim.simulator import Simulator
+from amr_sim.world import World
+from amr_sim.ros_conversions import (clock_message, command_from_twist,
+                                     laser_scan_from_profile, odometry_message,
+                                     pose_from_message, seconds_to_time)
+
+RELIABLE_10 = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                         history=HistoryPolicy.KEEP_LAST)
+
+
+def scan_qos(depth: int) -> QoSProfile:
+    """Best effort like a LiDAR driver (SensorDataQoS uses depth 5)."""
+    return QoSProfile(depth=depth, reliability=ReliabilityPolicy.BEST_EFFORT,
+                      history=HistoryPolicy.KEEP_LAST)
+
+
+DEFAULT_START = "outer"  # the course's "outer corridor" start in lab02
+_S, _B, _D, _DA, _I = (ParameterType.PARAMETER_STRING, ParameterType.PARAMETER_BOOL,
+                       ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_DOUBLE_ARRAY,
+                       ParameterType.PARAMETER_INTEGER)
+# name: (default, type, description). Numbers accept ints or doubles (`-p dt:=1` must not kill
+# the process): they are declared with dynamic typing and checked in on_configure.
+PARAMETERS: dict[str, tuple[Any, int, str]] = {
+    "world": ("lab02", _S, "Bundled world name or path to a world .yaml / course map .json"),
+    "start": (DEFAULT_START, _S, "Start pose: a name from the world file or 'x,y,theta' "
+                                 "(m, m, rad); '' or the default 'outer' in a world without "
+                                 "it = the world's first start"),
+    "profile": ("ideal", _S, "Sensor profile: 'ideal' (CoppeliaSim robot) or 'turtlebot3' "
+                             "(the real Burger: LDS-01 at 5 Hz, /odom pose at 20 Hz)"),
+    "dt": (0.05, _D, "Simulation step in seconds (0 < dt <= 1)"),
+    "seed": (0, _I, "Seed of the sensor noise: the same seed gives the same run"),
+    "mode": ("lockstep", _S, "'lockstep': each /cmd_vel advances one dt; 'realtime': a "
+                             "wall-clock timer advances one dt with the newest command"),
+    "cmd_vel_stamped": (True, _B, "Subscribe /cmd_vel as geometry_msgs/TwistStamped (Jazzy); "
+                                  "false = geometry_msgs/Twist as a Humble robot"),
+    "command_timeout": (0.5, _D, "Realtime mode: a command older than this (s) counts as zero; "
+                                 "0 = never (the real turtlebot3_node keeps the last command)"),
+    "goal": ([], _DA, "Goal [x, y] in metres; [] = the world's goal, if it has one"),
+    "goal_tolerance": (0.15, _D, "Distance (m) of the true position to the goal that counts "
+                                 "as reached"),
+    "enable_localization": (False, _B, "Synchronize /pose (amr_msgs/PoseStamped) with /cmd_vel, "
+                                       "log its error and finish at the goal once localized"),
+    "odom_frame": ("odom", _S, "Frame of the odometry pose"),
+    "base_frame": ("base_footprint", _S, "Robot frame (child frame of odometry)"),
+    "scan_frame": ("base_scan", _S, "Frame of the LaserScan"),
+    "world_frame": ("map", _S, "Frame of /ground_truth"),
+    "publish_ground_truth": (True, _B, "Publish the true pose and velocities on /ground_truth"),
+}
+_NUMERIC = {"dt", "seed", "command_timeout", "goal", "goal_tolerance"}
+
+
+def parse_start(text: str) -> str | tuple[float, float, float] | None:
+    """'name' -> name, 'x,y,theta' -> floats, '' -> None (the world's first start)."""
+    text = text.strip()
+    if not text:
+        return None
+    if "," not in text:
+        return text
+    parts = text.split(",")
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        values = ()
+    if len(values) != 3 or not all(math.isfinite(v) for v in values):
+        raise ValueError(f"start '{text}' is neither a start name nor 'x,y,theta' "
+                         "with three finite numbers")
+    return values
+
+
+def true_velocity(before: tuple, after: tuple, dt: float) -> tuple[float, float]:
+    """Body-frame (v, w) that moved the robot from pose `before` to `after` in dt."""
+    d_theta = math.atan2(math.sin(after[2] - before[2]), math.cos(after[2] - before[2]))
+    mid_heading = before[2] + 0.5 * d_theta
+    forward = (after[0] - before[0]) * math.cos(mid_heading) + \
+        (after[1] - before[1]) * math.sin(mid_heading)
+    return forward / dt, d_theta / dt
+
+
+class SimulatorNode(LifecycleNode):
+    def __init__(self, node_name: str = "amr_simulator", **kwargs) -> None:
+        super().__init__(node_name, **kwargs)
+        for name, (default, type_, description) in PARAMETERS.items():
+            if not self.has_parameter(name):
+                self.declare_parameter(name, default, ParameterDescriptor(
+                    description=description, type=type_, dynamic_typing=name in _NUMERIC))
+        # Run scripts append callables here; each is called with the simulator after a step.
+        self.on_step: list[Callable[[Any], None]] = []
+        self._reset()
+
+    # --- configuration ---------------------------------------------------------------------
+    def _reset(self) -> None:
+        self.simulator = None
+        self.finished = False
+        self.finish_reason = ""
+        self.goal: tuple[float, float] | None = None
+        self.localized = False
+        self.localization_error: tuple[float, float] | None = None  # (m, rad)
+        self._outputs: dict[str, Any] = {}
+        self._inputs: list = []
+        self._filters: list = []
+        self._timer = None
+        self._active = False
+        self._wall_start: float | None = None
+        self._wall_time = 0.0
+        self._command = (0.0, 0.0)
+        self._command_received: float | None = None  # monotonic time of the newest command
+        self._next_publish = {"odom": 0.0, "scan": 0.0}
+
+    def _read_parameters(self) -> dict[str, Any]:
+        """Parameter values, checked; raises ValueError naming every bad one."""
+        p = {name: self.get_parameter(name).value for name in PARAMETERS}
+        problems = []
+
+        def number(name: str, low: float, high: float) -> None:
+            value = p[name]
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+                    not (math.isfinite(value) and low <= value <= high):
+                problems.append(f"{name} must be a number in [{low}, {high}] (got {value!r})")
+            else:
+                p[name] = float(value)
+
+        number("dt", 1e-4, 1.0)
+        number("command_timeout", 0.0, 3600.0)
+        number("goal_tolerance", 1e-3, 100.0)
+        if isinstance(p["seed"], bool) or not isinstance(p["seed"], int) or p["seed"] < 0:
+            problems.append(f"seed must be a non-negative integer (got {p['seed']!r})")
+        if p["mode"] not in ("lockstep", "realtime"):
+            problems.append(f"mode must be 'lockstep' or 'realtime' (got '{p['mode']}')")
+        goal = p["goal"]
+        if goal is None or (hasattr(goal, "__len__") and len(goal) == 0):
+            p["goal"] = None
+        elif isinstance(goal, (list, tuple)) and len(goal) == 2 and all(
+                isinstance(g, (int, float)) and not isinstance(g, bool) and math.isfinite(g)
+                for g in goal):
+            p["goal"] = (float(goal[0]), float(goal[1]))
+        else:
+            problems.append(f"goal must be [] or [x, y] with finite numbers (got {goal!r})")
+        try:
+            p["start"] = parse_start(p["start"])
+        except ValueError as exc:
+            problems.append(str(exc))
+        if problems:
+            raise ValueError("; ".join(problems))
+        return p
+
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._reset()
+        try:
+            p = self._read_parameters()
+            world = World.load(p["world"])
+            start = p["start"]
+            if start == DEFAULT_START and start not in world.starts and world.starts:
+                # The default names lab02's start; other worlds name theirs differently.
+                start = next(iter(world.starts))
+                self.get_logger().info(f"world '{world.name}' has no start '{DEFAULT_START}' "
+                                       f"(the default): starting at '{start}'")
+            self.simulator = Simulator(world, start=world.resolve_start(start),
+                                       dt=p["dt"], profile=p["profile"], seed=p["seed"])
+        except Exception as exc:  # WorldError, unknown profile, bad values: all user errors
+            self.get_logger().error(f"configure failed: {exc}")
+            self._reset()
+            return TransitionCallbackReturn.FAILURE
+        self.params = p
+        self.realtime = p["mode"] == "realtime"
+        self.goal = p["goal"] if p["goal"] is not None else world.goal
+        profile = self.simulator.profile
+        self._outputs = {
+            "clock": self.create_lifecycle_publisher(ClockMessage, "/clock", RELIABLE_10),
+            "odom": self.create_lifecycle_publisher(Odometry, profile.odom_topic, RELIABLE_10),
+            "scan": self.create_lifecycle_publisher(
+                LaserScan, "/scan", scan_qos(5 if profile.name == "turtlebot3" else 10)),
+        }
+        if p["publish_ground_truth"]:
+            self._outputs["truth"] = self.create_lifecycle_publisher(
+                Odometry, "/ground_truth", RELIABLE_10)
+        self._create_inputs(p)
+        x, y, theta = self.simulator.pose
+        self.get_logger().info(
+            f"configured: world '{world.name}' ({world.source}), start ({x:.3f}, {y:.3f}, "
+            f"{theta:.3f}), profile {profile.name}, {p['mode']}, dt {p['dt']} s, goal "
+            f"{self.goal}, localization {'on' if p['enable_localization'] else 'off'}")
+        return TransitionCallbackReturn.SUCCESS
+
+    def _create_inputs(self, p: dict[str, Any]) -> None:
+        command_type = TwistStamped if p["cmd_vel_stamped"] else Twist
+        if p["enable_localization"]:
+            from amr_msgs.msg import PoseStamped
+        synchronize = p["enable_localization"] and not self.realtime and p["cmd_vel_stamped"]
+        if synchronize:
+            # As the course template: a step needs a command AND the pose estimate it was
+            # computed with (slop 10 s: in lockstep the stamps are simulated times).
+            from amr_control import message_filters
+            self._filters = [
+                message_filters.Subscriber(self, TwistStamped, "/cmd_vel",
+                                           qos_profile=RELIABLE_10),
+                message_filters.Subscriber(self, PoseStamped, "/pose", qos_profile=RELIABLE_10)]
+            sync = message_filters.ApproximateTimeSynchronizer(self._filters, 10, 10.0)
+            sync.registerCallback(self._on_command_and_pose)
+            return
+        on_command = self._store_command if self.realtime else self._on_command
+        self._inputs.append(self.create_subscription(
+            command_type, "/cmd_vel", on_command, RELIABLE_10))
+        if p["enable_localization"]:  # Twist has no stamp / real time: newest estimate
+            self._inputs.append(self.create_subscription(
+                PoseStamped, "/pose", self._check_estimated_pose, RELIABLE_10))
+
+    def _destroy_all(self) -> None:
+        self._stop_timer()
+        for publisher in self._outputs.values():
+            self.destroy_lifecycle_publisher(publisher)
+        for subscription in self._inputs:
+            self.destroy_subscription(subscription)
+        for message_filter in self._filters:
+            message_filter.close()
+        self._reset()
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        result = super().on_activate(state)  # enables the lifecycle publishers
+        self._active = True
+        if self._wall_start is None:
+            self._wall_start = time.monotonic()
+        if self.finished:
+            return result
+        simulator = self.simulator
+        z_scan, z_v, z_w = simulator.measure()  # first measurement: starts a lockstep loop
+        self._publish(z_scan, z_v, z_w, simulator.pose, (0.0, 0.0), True, True)
+        if self.realtime:
+            profile = simulator.profile
+            self._next_publish = {"odom": simulator.time + (profile.odom_period or 0.0),
+                                  "scan": simulator.time + (profile.scan_period or 0.0)}
+            # Steady clock: with use_sim_time a ROS-time timer would wait for our own /clock.
+            self._timer = self.create_timer(simulator.dt, self._on_timer,
+                                            clock=Clock(clock_type=ClockType.STEADY_TIME))
+        return result
+
+    def _stop_timer(self) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
+            self.destroy_timer(self._timer)
+            self._timer = None
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._active = False
+        self._stop_timer()
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._destroy_all()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._destroy_all()
+        return TransitionCallbackReturn.SUCCESS
+
+    # --- commands --------------------------------------------------------------------------
+    def _finite_command(self, message: Twist | TwistStamped) -> tuple[float, float]:
+        v, w = command_from_twist(message)
+        if math.isfinite(v) and math.isfinite(w):
+            return v, w
+        self.get_logger().warning(f"non-finite /cmd_vel (v={v}, w={w}): treated as zero",
+                                  throttle_duration_sec=2.0)
+        return 0.0, 0.0
+
+    def _on_command(self, message: Twist | TwistStamped) -> None:
+        if self._active and not self.finished:
+            self._advance(*self._finite_command(message))
+
+    def _on_command_and_pose(self, command: TwistStamped, pose) -> None:
+        if self._active and not self.finished:
+            self._check_estimated_pose(pose)
+            self._advance(*self._finite_command(command))
+
+    def _store_command(self, message: Twist | TwistStamped) -> None:
+        self._command = self._finite_command(message)
+        self._command_received = time.monotonic()
+
+    def _on_timer(self) -> None:
+        if not self._active or self.finished:
+            return
+        v, w = self._command
+        timeout = self.params["command_timeout"]
+        if self._command_received is not None and timeout > 0 and \
+                time.monotonic() - self._command_received > timeout and (v, w) != (0.0, 0.0):
+            self.get_logger().warning(
+                f"no /cmd_vel for more than {timeout} s: commanding zero",
+                throttle_duration_sec=5.0)
+            v, w = self._command = (0.0, 0.0)
+        self._advance(v, w)
+
+    # --- stepping and publishing -----------------------------------------------------------
+    def _advance(self, v: float, w: float) -> None:
+        simulator = self.simulator
+        pose_before = simulator.pose
+        try:
+            z_scan, z_v, z_w = simulator.step(v, w)
+        except Exception as exc:  # a core failure must not take the executor down
+            self.get_logger().error(f"simulation step failed: {exc!r}")
+            self.finish(f"simulation error: {exc}")
+            return
+        pose = simulator.pose
+        for hook in list(self.on_step):
+            try:
+                hook(simulator)
+            except Exception as exc:
+                self.get_logger().error(f"on_step hook {hook!r} failed: {exc!r}",
+                                        throttle_duration_sec=5.0)
+        if self.finished:  # a hook ended the run
+            return
+        if self.realtime:
+            publish_odom = self._due("odom", simulator.profile.odom_period)
+            publish_scan = self._due("scan", simulator.profile.scan_period)
+        else:
+            publish_odom = publish_scan = True
+        goal_reached = self._goal_reached(pose)
+        if goal_reached:
+            publish_odom = publish_scan = False  # the loop stops here, as in the template
+        self._publish(z_scan, z_v, z_w, pose, true_velocity(pose_before, pose, simulator.dt),
+                      publish_odom, publish_scan)
+        if goal_reached:
+            self.get_logger().warning("Congratulations, you reached the goal!")
+            self.finish("goal reached")
+
+    def _due(self, sensor: str, period: float | None) -> bool:
+        """Real-time rate of one sensor: due when simulated time reaches its next slot."""
+        now = self.simulator.time
+        if period is None:
+            return True
+        if now + 1e-9 < self._next_publish[sensor]:
+            return False
+        self._next_publish[sensor] += period
+        if self._next_publish[sensor] <= now + 1e-9:  # fell behind: no burst to catch up
+            self._next_publish[sensor] = now + period
+        return True
+
+    def _publish(self, z_scan, z_v: float, z_w: float, pose: tuple, velocity: tuple,
+                 publish_odom: bool, publish_scan: bool) -> None:
+        simulator, p = self.simulator, self.params
+        stamp = seconds_to_time(simulator.time)
+        # /clock first: a use_sim_time subscriber then has the time before the measurements.
+        self._outputs["clock"].publish(clock_message(simulator.time))
+        if "truth" in self._outputs:
+            self._outputs["truth"].publish(odometry_message(
+                stamp, p["world_frame"], p["base_frame"], pose, velocity))
+        profile = simulator.profile
+        if publish_odom:
+            # The real robot's /odom carries a pose only; the ideal /odometry also the twist.
+            twist = (z_v, z_w) if profile.odom_topic == "/odometry" else None
+            self._outputs["odom"].publish(odometry_message(
+                stamp, p["odom_frame"], p["base_frame"], simulator.odometry_pose, twist))
+        if publish_scan:
+            scan_time = profile.scan_period if self.realtime and profile.scan_period else \
+                simulator.dt
+            self._outputs["scan"].publish(laser_scan_from_profile(
+                z_scan, profile, stamp=stamp, frame_id=p["scan_frame"], scan_time=scan_time))
+
+    # --- localization and goal -------------------------------------------------------------
+    def _check_estimated_pose(self, message) -> None:
+        was_localized, self.localized = self.localized, bool(message.localized)
+        if not self.localized or self.simulator is None:
+            return
+        try:
+            x_h, y_h, th_h = pose_from_message(message.pose)
+        except ValueError as exc:
+            self.get_logger().warning(f"/pose ignored: {exc}", throttle_duration_sec=2.0)
+            return
+        x, y, th = self.simulator.pose
+        position_error = math.hypot(x_h - x, y_h - y)
+        heading_error = math.atan2(math.sin(th_h - th), math.cos(th_h - th))
+        self.localization_error = (position_error, heading_error)
+        text = (f"estimated ({x_h:.2f}, {y_h:.2f}, {math.degrees(th_h):.1f} deg) | true "
+                f"({x:.2f}, {y:.2f}, {math.degrees(th):.1f} deg) | error {position_error:.3f} m, "
+                f"{math.degrees(heading_error):+.1f} deg")
+        if not was_localized:
+            self.get_logger().warning(f"Localized: {text}")
+        else:
+            self.get_logger().info(text, throttle_duration_sec=1.0)
+
+    def _goal_reached(self, pose: tuple) -> bool:
+        if self.goal is None or not self.localized:
+            return False
+        return math.hypot(pose[0] - self.goal[0], pose[1] - self.goal[1]) <= \
+            self.params["goal_tolerance"]
+
+    def finish(self, reason: str) -> None:
+        """Stop stepping (commands are ignored from now on) and log the statistics."""
+        if self.finished:
+            return
+        self.finished = True
+        self.finish_reason = reason
+        self._stop_timer()
+        if self._wall_start is not None:
+            self._wall_time = time.monotonic() - self._wall_start
+        s = self.summary()
+        per_step = s["wall_time_s"] / s["steps"] if s["steps"] else 0.0
+        self.get_logger().warning(
+            f"Finished ({reason}). Execution time: {s['wall_time_s']:.3f} s ({per_step:.4f} "
+            f"s/step) | Simulated time: {s['sim_time_s']:.3f} s ({s['steps']} steps) | "
+            f"collisions {s['collisions']}, min clearance {s['min_clearance_m']:.3f} m")
+
+    def summary(self) -> dict[str, Any]:
+        """Statistics of the run so far (JSON-serializable)."""
+        simulator = self.simulator
+        if simulator is None:
+            return {"configured": False, "finished": self.finished}
+        wall = self._wall_time if self.finished or self._wall_start is None else \
+            time.monotonic() - self._wall_start
+        x, y, theta = simulator.pose
+        return {
+            "configured": True, "finished": self.finished, "reason": self.finish_reason,
+            "goal_reached": self.finish_reason == "goal reached",
+            "world": simulator.world.name, "profile": simulator.profile.name,
+            "mode": self.params["mode"], "steps": int(simulator.steps),
+            "sim_time_s": float(simulator.time), "wall_time_s": float(wall),
+            "pose": [float(x), float(y), float(theta)],
+            "goal": list(self.goal) if self.goal is not None else None,
+            "localized": self.localized,
+            "localization_error": list(self.localization_error)
+            if self.localization_error else None,
+            "collisions": int(simulator.collisions),
+            "min_clearance_m": float(simulator.min_clearance),
+            "distance_m": float(simulator.distance),
+        }
+
+
+def main(args=None) -> int:
+    return run_lifecycle_node(SimulatorNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,327 @@
+"""Worlds for the simulator: walls as 2D line segments, named start poses and an optional goal.
+
+Two file formats load with `World.load(name_or_path)`:
+
+1. The project's own YAML world file (bundled ones live in amr_sim/worlds/<name>.yaml and load by
+   name, e.g. `World.load("lab02")`; any other file loads by path)::
+
+       name: lab02                      # optional, defaults to the file stem
+       description: free text           # optional
+       cell_size: 0.4                   # m, > 0: grid used by coverage metrics (corridor pitch)
+       boundary: [[x, y], ...]          # REQUIRED closed polyline: the outer walls (>= 3 points)
+       holes:                           # optional closed polylines: obstacles (>= 3 points each)
+         - [[x, y], ...]
+       walls:                           # optional open polylines: free-standing walls (>= 2 points)
+         - [[x, y], ...]
+       starts:                          # optional named start poses [x, y, theta]
+         outer: [1.0, -1.0, pi/2]       # theta in rad: a number or "pi", "pi/2", "3*pi/2", "-pi/4"
+       goal: [x, y]                     # optional
+
+   Coordinates are metres in the world frame (REP 103: x east, y north, theta CCW from x).
+   A closed polyline may repeat its first point at the end; it is closed either way.
+
+2. The course's map JSON, by path: `{"metric": {"boundary": [[x, y], ...], "holes": [[[x, y],
+   ...], ...]}}` (boundary = outer closed polyline, each hole = a closed obstacle polyline).
+   It has no starts; pass a start pose (x, y, theta) explicitly.
+
+Every problem (missing file, unknown name, bad YAML/JSON, missing keys, non-numeric or non-finite
+coordinates, polylines with too few points, zero-length walls, start poses outside the boundary,
+inside an obstacle or closer to a wall than the robot radius) raises WorldError naming the file.
+"""
+from __future__ import annotations
+
+import json
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .robot import ROBOT_RADIUS
+WORLDS_DIR = Path(__file__).resolve().parent / "worlds"
+
+_PI_EXPR = re.compile(r"^\s*([+-]?)\s*(\d+(?:\.\d*)?)?\s*\*?\s*pi\s*(?:/\s*(\d+(?:\.\d*)?))?\s*$")
+
+
+class WorldError(ValueError):
+    """A world file is missing or malformed, or a start pose is invalid. The message names the file."""
+
+
+def bundled_worlds() -> list[str]:
+    """Names of the worlds shipped with amr_sim (loadable with World.load(name))."""
+    return sorted(p.stem for p in WORLDS_DIR.glob("*.yaml"))
+
+
+@dataclass
+class World:
+    name: str
+    source: str
+    segments: np.ndarray  # (N, 4) float64 rows [x1, y1, x2, y2], metres
+    starts: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+    goal: tuple[float, float] | None = None
+    cell_size: float = 0.4
+    description: str = ""
+    boundary: np.ndarray | None = None  # (K, 2) outer closed polyline
+    holes: list[np.ndarray] = field(default_factory=list)  # closed obstacle polylines
+
+    # ------------------------------------------------------------------ loading
+    @classmethod
+    def load(cls, name_or_path: str | Path) -> "World":
+        """Load a bundled world by name ("lab02") or a .yaml/.yml/.json file by path."""
+        text = str(name_or_path)
+        path = Path(text).expanduser()
+        looks_like_path = path.suffix.lower() in (".yaml", ".yml", ".json") or "/" in text or path.exists()
+        if not looks_like_path:
+            bundled = WORLDS_DIR / f"{text}.yaml"
+            if not bundled.is_file():
+                raise WorldError(
+                    f"unknown world '{text}': not a bundled world (bundled: "
+                    f"{', '.join(bundled_worlds())}) and not a .yaml/.json file path")
+            path = bundled
+        if not path.is_file():
+            raise WorldError(f"{path}: world file not found")
+        try:
+            raw = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise WorldError(f"{path}: cannot read world file: {exc}") from exc
+        if path.suffix.lower() == ".json":
+            return cls._from_course_json(raw, path)
+        return cls._from_yaml(raw, path)
+
+    @classmethod
+    def _from_yaml(cls, raw: str, path: Path) -> "World":
+        import yaml  # local import: only YAML worlds need it
+
+        try:
+            data = yaml.safe_load(raw)
+        except yaml.YAMLError as exc:
+            raise WorldError(f"{path}: invalid YAML: {exc}") from exc
+        if not isinstance(data, dict):
+            raise WorldError(f"{path}: expected a mapping with keys boundary, holes, walls, starts, ...")
+        known = {"name", "description", "cell_size", "boundary", "holes", "walls", "starts", "goal"}
+        unknown = set(data) - known
+        if unknown:
+            raise WorldError(f"{path}: unknown key(s) {sorted(unknown)}; allowed: {sorted(known)}")
+        if "boundary" not in data:
+            raise WorldError(f"{path}: missing key 'boundary' (the outer closed polyline)")
+        boundary = _polyline(data["boundary"], path, "boundary", closed=True)
+        holes = [_polyline(h, path, f"holes[{i}]", closed=True)
+                 for i, h in enumerate(_as_list(data.get("holes", []), path, "holes"))]
+        walls = [_polyline(w, path, f"walls[{i}]", closed=False)
+                 for i, w in enumerate(_as_list(data.get("walls", []), path, "walls"))]
+        cell_size = _positive_number(data.get("cell_size", 0.4), path, "cell_size")
+        starts_raw = data.get("starts", {}) or {}
+        if not isinstance(starts_raw, dict):
+            raise WorldError(f"{path}: 'starts' must be a mapping name: [x, y, theta]")
+        starts = {str(k): _pose(v, path, f"starts.{k}") for k, v in starts_raw.items()}
+        goal = None
+        if data.get("goal") is not None:
+            goal = _point(data["goal"], path, "goal")
+        name = str(data.get("name") or path.stem)
+        world = cls._build(name, path, boundary, holes, walls, starts, goal, cell_size,
+                           str(data.get("description") or ""))
+        return world
+
+    @classmethod
+    def _from_course_json(cls, raw: str, path: Path) -> "World":
+        try:
+            data = json.loads(raw)
+        except json.JSONDecodeError as exc:
+            raise WorldError(f"{path}: invalid JSON: {exc}") from exc
+        if not isinstance(data, dict) or not isinstance(data.get("metric"), dict):
+            raise WorldError(f"{path}: missing key 'metric' (expected {{\"metric\": {{\"boundary\": ..., \"holes\": ...}}}})")
+        metric = data["metric"]
+        if "boundary" not in metric:
+            raise WorldError(f"{path}: missing key 'metric.boundary'")
+        boundary = _polyline(metric["boundary"], path, "metric.boundary", closed=True)
+        holes = [_polyline(h, path, f"metric.holes[{i}]", closed=True)
+                 for i, h in enumerate(_as_list(metric.get("holes", []), path, "metric.holes"))]
+        return cls._build(path.stem, path, boundary, holes, [], {}, None, 0.4, "course map JSON")
+
+    @classmethod
+    def _build(cls, name, path, boundary, holes, walls, starts, goal, cell_size, description) -> "World":
+        segs = [_closed_segments(boundary)] + [_closed_segments(h) for h in holes]
+        segs += [np.hstack([w[:-1], w[1:]]) for w in walls]
+        segments = np.ascontiguousarray(np.vstack(segs), dtype=np.float64)
+        lengths = np.hypot(segments[:, 2] - segments[:, 0], segments[:, 3] - segments[:, 1])
+        bad = np.flatnonzero(lengths < 1e-9)
+        if bad.size:
+            x1, y1 = segments[bad[0], :2]
+            raise WorldError(f"{path}: zero-length wall at ({x1:g}, {y1:g}) (repeated point in a polyline)")
+        world = cls(name=name, source=str(path), segments=segments, starts=starts, goal=goal,
+                    cell_size=cell_size, description=description, boundary=boundary, holes=holes)
+        for start_name, pose in starts.items():
+            world._check_pose(pose, f"start '{start_name}'")
+        if goal is not None and not world.contains(*goal):
+            raise WorldError(f"{path}: goal ({goal[0]:g}, {goal[1]:g}) is outside the free space")
+        return world
+
+    # ------------------------------------------------------------------ geometry
+    @property
+    def bounds(self) -> tuple[float, float, float, float]:
+        s = self.segments
+        return (float(min(s[:, 0].min(), s[:, 2].min())), float(min(s[:, 1].min(), s[:, 3].min())),
+                float(max(s[:, 0].max(), s[:, 2].max())), float(max(s[:, 1].max(), s[:, 3].max())))
+
+    def clearance(self, x: float, y: float) -> float:
+        """Distance (m) from the point (x, y) to the nearest wall segment."""
+        return float(np.sqrt(_squared_distances(self.segments, float(x), float(y)).min()))
+
+    def clearances(self, points: np.ndarray) -> np.ndarray:
+        """Distance from each point of a (K, 2) array to the nearest wall."""
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        out = np.empty(len(pts))
+        for i0 in range(0, len(pts), 2048):  # chunks keep the (K, N) matrix small
+            chunk = pts[i0:i0 + 2048]
+            d2 = _squared_distances(self.segments, chunk[:, :1], chunk[:, 1:])
+            out[i0:i0 + 2048] = np.sqrt(d2.min(axis=1))
+        return out
+
+    def contains(self, x: float, y: float) -> bool:
+        """True if (x, y) is inside the boundary and outside every hole."""
+        if self.boundary is not None and not _point_in_polygon(self.boundary, x, y):
+            return False
+        return not any(_point_in_polygon(h, x, y) for h in self.holes)
+
+    def resolve_start(self, start: str | tuple | list | np.ndarray | None) -> tuple[float, float, float]:
+        """A start pose from a name, an (x, y, theta) triple or None (= the first named start)."""
+        if start is None:
+            if not self.starts:
+                raise WorldError(f"{self.source}: the world names no start pose; pass (x, y, theta)")
+            return next(iter(self.starts.values()))
+        if isinstance(start, str):
+            if start not in self.starts:
+                raise WorldError(f"{self.source}: unknown start '{start}' (named starts: "
+                                 f"{', '.join(self.starts) or 'none'})")
+            return self.starts[start]
+        pose = _pose(list(start) if not isinstance(start, list) else start, self.source, "start")
+        self._check_pose(pose, "start")
+        return pose
+
+    def _check_pose(self, pose: tuple[float, float, float], what: str) -> None:
+        x, y, _ = pose
+        if self.boundary is not None and not _point_in_polygon(self.boundary, x, y):
+            raise WorldError(f"{self.source}: {what} ({x:g}, {y:g}) is outside the boundary")
+        for i, hole in enumerate(self.holes):
+            if _point_in_polygon(hole, x, y):
+                raise WorldError(f"{self.source}: {what} ({x:g}, {y:g}) is inside obstacle holes[{i}]")
+        c = self.clearance(x, y)
+        if c < ROBOT_RADIUS:
+            raise WorldError(f"{self.source}: {what} ({x:g}, {y:g}) touches a wall: clearance "
+                             f"{c:.3f} m < robot radius {ROBOT_RADIUS} m")
+
+    def free_cells(self, margin: float = ROBOT_RADIUS) -> np.ndarray:
+        """Centres (K, 2) of the cell_size grid cells inside the free space with clearance > margin.
+
+        The grid is aligned with multiples of cell_size (cell centres at (k + 0.5) * cell_size), so it
+        matches corridors whose walls lie on grid lines.
+        """
+        xmin, ymin, xmax, ymax = self.bounds
+        cs = self.cell_size
+        xs = (np.arange(math.floor(xmin / cs), math.ceil(xmax / cs)) + 0.5) * cs
+        ys = (np.arange(math.floor(ymin / cs), math.ceil(ymax / cs)) + 0.5) * cs
+        gx, gy = np.meshgrid(xs, ys)
+        pts = np.column_stack([gx.ravel(), gy.ravel()])
+        keep = self.clearances(pts) > margin
+        keep &= np.array([self.contains(x, y) for x, y in pts])
+        return pts[keep]
+
+    def free_space_centroid(self) -> tuple[float, float]:
+        cells = self.free_cells()
+        if len(cells) == 0:
+            xmin, ymin, xmax, ymax = self.bounds
+            return (0.5 * (xmin + xmax), 0.5 * (ymin + ymax))
+        c = cells.mean(axis=0)
+        return (float(c[0]), float(c[1]))
+
+
+# ---------------------------------------------------------------------- helpers
+def _squared_distances(seg: np.ndarray, px, py) -> np.ndarray:
+    """Squared point-segment distances; px, py scalars or (K, 1) columns -> (N,) or (K, N)."""
+    x1, y1, x2, y2 = seg[:, 0], seg[:, 1], seg[:, 2], seg[:, 3]
+    ex, ey = x2 - x1, y2 - y1
+    t = np.clip(((px - x1) * ex + (py - y1) * ey) / (ex * ex + ey * ey), 0.0, 1.0)
+    dx, dy = x1 + t * ex - px, y1 + t * ey - py
+    return dx * dx + dy * dy
+
+
+def _point_in_polygon(poly: np.ndarray, x: float, y: float) -> bool:
+    """Even-odd ray crossing test."""
+    px, py = poly[:, 0], poly[:, 1]
+    qx, qy = np.roll(px, -1), np.roll(py, -1)
+    crosses = (py > y) != (qy > y)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        xint = px + (y - py) * (qx - px) / (qy - py)
+    return bool(np.count_nonzero(crosses & (x < xint)) % 2)
+
+
+def _closed_segments(poly: np.ndarray) -> np.ndarray:
+    return np.hstack([poly, np.roll(poly, -1, axis=0)])
+
+
+def _as_list(value: Any, path, what: str) -> list:
+    if value is None:
+        return []
+    if not isinstance(value, list):
+        raise WorldError(f"{path}: '{what}' must be a list of polylines")
+    return value
+
+
+def _number(value: Any, path, what: str) -> float:
+    if isinstance(value, bool):
+        raise WorldError(f"{path}: {what} must be a number, got {value!r}")
+    if isinstance(value, str):
+        m = _PI_EXPR.match(value)
+        if not m:
+            raise WorldError(f"{path}: {what} must be a number, got {value!r}")
+        sign, num, den = m.groups()
+        out = (float(num) if num else 1.0) * math.pi / (float(den) if den else 1.0)
+        return -out if sign == "-" else out
+    try:
+        out = float(value)
+    except (TypeError, ValueError):
+        raise WorldError(f"{path}: {what} must be a number, got {value!r}") from None
+    if not math.isfinite(out):
+        raise WorldError(f"{path}: {what} is not finite ({value!r})")
+    return out
+
+
+def _coordinate(value: Any, path, what: str) -> float:
+    if isinstance(value, str):  # pi expressions are for angles only
+        raise WorldError(f"{path}: {what} must be a number, got {value!r}")
+    return _number(value, path, what)
+
+
+def _positive_number(value: Any, path, what: str) -> float:
+    out = _coordinate(value, path, what)
+    if out <= 0:
+        raise WorldError(f"{path}: {what} must be > 0, got {value!r}")
+    return out
+
+
+def _point(value: Any, path, what: str) -> tuple[float, float]:
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise WorldError(f"{path}: {what} must be [x, y], got {value!r}")
+    return (_coordinate(value[0], path, f"{what} x"), _coordinate(value[1], path, f"{what} y"))
+
+
+def _pose(value: Any, path, what: str) -> tuple[float, float, float]:
+    if not isinstance(value, (list, tuple)) or len(value) != 3:
+        raise WorldError(f"{path}: {what} must be [x, y, theta], got {value!r}")
+    return (_coordinate(value[0], path, f"{what} x"), _coordinate(value[1], path, f"{what} y"),
+            _number(value[2], path, f"{what} theta"))
+
+
+def _polyline(value: Any, path, what: str, closed: bool) -> np.ndarray:
+    if not isinstance(value, list):
+        raise WorldError(f"{path}: '{what}' must be a list of [x, y] points, got {type(value).__name__}")
+    pts = [_point(p, path, f"{what}[{i}]") for i, p in enumerate(value)]
+    if closed and len(pts) >= 2 and pts[0] == pts[-1]:
+        pts = pts[:-1]  # explicitly closed: the closing segment is implied
+    need = 3 if closed else 2
+    if len(pts) < need:
+        kind = "closed" if closed else "open"
+        raise WorldError(f"{path}: '{what}' has {len(pts)} point(s); a {kind} polyline needs at least {need}")
+    return np.array(pts, dtype=np.float64)

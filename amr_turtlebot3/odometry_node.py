@@ -1,0 +1,151 @@
+"""The `amr_odometry` lifecycle node: the robot's /odom (pose) -> /odometry (pose + velocities).
+
+The TurtleBot3 publishes nav_msgs/Odometry on /odom; the controller reads twist.twist.linear.x and
+twist.twist.angular.z from /odometry. This node republishes each incoming message with those two
+fields estimated from consecutive poses (amr_turtlebot3.velocity_estimator: signed, right across
++-pi, reset on time jumps). Pose, covariances, frames and the header stamp are preserved, so
+/odometry stays synchronizable with /scan.
+
+Nothing is published for a first message (nor the first after a reset, a duplicate stamp or a
+rejected pose): a zero twist would be false for a moving robot. Messages received while inactive
+are ignored, and activation restarts the estimator.
+
+Parameters: max_gap, smoothing_time_constant, input_topic, output_topic (see _PARAMETERS).
+Both topics are reliable, KeepLast(10), like the robot's /odom.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from nav_msgs.msg import Odometry
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from amr_control.node_runner import run_lifecycle_node
+from amr_turtlebot3.velocity_estimator import Status, VelocityEstimator
+
+RELIABLE_10 = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                         history=HistoryPolicy.KEEP_LAST)
+WARNING_PERIOD = 5.0  # seconds between repeated warnings of one kind
+
+_PARAMETERS: dict[str, tuple[Any, str]] = {
+    "max_gap": (0.5, "Seconds between /odom stamps above which the estimator resets instead "
+                     "of differentiating across the gap (> 0)"),
+    "smoothing_time_constant": (0.0, "Time constant in seconds of a first-order low-pass on "
+                                     "(v, w); 0 = off (>= 0)"),
+    "input_topic": ("/odom", "nav_msgs/Odometry input with the pose filled (the robot's /odom)"),
+    "output_topic": ("/odometry", "nav_msgs/Odometry output: the input with twist.twist."
+                                  "linear.x and angular.z estimated"),
+}
+
+
+def _as_float(value: Any) -> float | None:
+    """A real number parameter value (ints accepted), else None."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    return float(value)
+
+
+class OdometryNode(LifecycleNode):
+    def __init__(self, node_name: str = "amr_odometry", **kwargs) -> None:
+        super().__init__(node_name, **kwargs)
+        for name, (default, description) in _PARAMETERS.items():
+            if not self.has_parameter(name):
+                # Numbers are dynamically typed so `-p max_gap:=1` is accepted, and a wrong
+                # value fails configure with a reason instead of raising in the constructor.
+                self.declare_parameter(name, default, ParameterDescriptor(
+                    description=description, dynamic_typing=isinstance(default, float)))
+        self.estimator: VelocityEstimator | None = None
+        self._publisher = None
+        self._subscription = None
+        self._active = False
+
+    # --- lifecycle -------------------------------------------------------------------------
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        p = {name: self.get_parameter(name).value for name in _PARAMETERS}
+        problems = []
+        max_gap = _as_float(p["max_gap"])
+        tau = _as_float(p["smoothing_time_constant"])
+        if max_gap is None or not (math.isfinite(max_gap) and max_gap > 0.0):
+            problems.append(f"max_gap must be a number of seconds > 0 (got {p['max_gap']!r})")
+        if tau is None or not (math.isfinite(tau) and tau >= 0.0):
+            problems.append("smoothing_time_constant must be a number of seconds >= 0 "
+                            f"(got {p['smoothing_time_constant']!r})")
+        for name in ("input_topic", "output_topic"):
+            if not (isinstance(p[name], str) and p[name].strip()):
+                problems.append(f"{name} must be a non-empty topic name (got {p[name]!r})")
+        if not problems and p["input_topic"] == p["output_topic"]:
+            problems.append(f"input_topic and output_topic are both {p['input_topic']!r}")
+        if problems:
+            self.get_logger().error("configure failed: " + "; ".join(problems))
+            return TransitionCallbackReturn.FAILURE
+        self.estimator = VelocityEstimator(max_gap=max_gap, smoothing_time_constant=tau)
+        try:
+            self._publisher = self.create_lifecycle_publisher(
+                Odometry, p["output_topic"], RELIABLE_10)
+            self._subscription = self.create_subscription(
+                Odometry, p["input_topic"], self._on_odom, RELIABLE_10)
+        except Exception as exc:  # e.g. an invalid topic name
+            self.get_logger().error(f"configure failed: {exc}")
+            self._release()
+            return TransitionCallbackReturn.FAILURE
+        self.get_logger().info(
+            f"{p['input_topic']} -> {p['output_topic']}: max_gap {max_gap} s, smoothing "
+            f"{'off' if tau == 0.0 else f'time constant {tau} s'}")
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.estimator.reset()  # poses seen before an inactive period are stale
+        self._active = True
+        return super().on_activate(state)
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._active = False
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._active = False
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def _release(self) -> None:
+        if self._subscription is not None:
+            self.destroy_subscription(self._subscription)
+            self._subscription = None
+        if self._publisher is not None:
+            self.destroy_lifecycle_publisher(self._publisher)
+            self._publisher = None
+        self.estimator = None
+
+    # --- data ------------------------------------------------------------------------------
+    def _on_odom(self, msg: Odometry) -> None:
+        if not self._active or self.estimator is None or self._publisher is None:
+            return
+        position, orientation = msg.pose.pose.position, msg.pose.pose.orientation
+        stamp_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        result = self.estimator.update(position.x, position.y, orientation.x, orientation.y,
+                                       orientation.z, orientation.w, stamp_ns)
+        if result.ok:
+            msg.twist.twist.linear.x = result.v
+            msg.twist.twist.angular.z = result.w
+            self._publisher.publish(msg)
+        elif result.status is Status.REJECTED:
+            self.get_logger().warning(f"{self.get_parameter('input_topic').value}: "
+                                      f"{result.reason}; message dropped",
+                                      throttle_duration_sec=WARNING_PERIOD)
+        elif result.status in (Status.RESET_BACKWARDS, Status.RESET_GAP):
+            self.get_logger().info(result.reason, throttle_duration_sec=WARNING_PERIOD)
+
+
+def main(args: list[str] | None = None) -> int:
+    return run_lifecycle_node(OdometryNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

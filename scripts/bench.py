@@ -1,0 +1,205 @@
+#!/usr/bin/env python3
+"""Speed figures, each with a ratio against a reference measured in the same run.
+
+  simulator core     steps/s of physics + 360-ray scan + encoders (bench_sim.py), vs pymunk
+                     per-ray queries and a numpy scan
+  ROS lockstep loop  simulator node + wall follower node in one process, steps/s, vs a bare
+                     rclpy ping-pong of the same messages (TwistStamped -> Odometry + LaserScan)
+  synchronizer       per-add cost (bench_sync.py), vs the reference's exhaustive search
+  controller         WallFollower.compute_commands cost, vs the control period dt
+  evaluate.py        episode throughput on 1 process vs all cores
+Usage: .venv/bin/python scripts/bench.py [--quick] [--only NAME ...] [--json FILE]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import launch_common  # noqa: E402,F401  (puts the repo on sys.path)
+
+from amr_control.ros_env import isolate_local_graph  # noqa: E402
+
+
+def _rate(count: int, seconds: float) -> float:
+    return count / seconds if seconds > 0 else float("nan")
+
+
+def bench_ros_loop(steps: int) -> dict:
+    """Lockstep simulator + wall follower vs a bare ping-pong, one process, same executor."""
+    import rclpy
+    from geometry_msgs.msg import TwistStamped
+    from nav_msgs.msg import Odometry
+    from rclpy.parameter import Parameter
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import LaserScan
+    from amr_control.node_runner import make_executor
+    from amr_control.wall_follower_node import WallFollowerNode
+    from amr_sim.simulator_node import SimulatorNode
+
+    best_effort = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
+    results = {}
+
+    # Reference: a bare ping-pong of the same messages and QoS.
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    executor = make_executor(context)
+    ping, pong = (rclpy.create_node(n, context=context) for n in ("ping", "pong"))
+    scan = LaserScan()
+    scan.ranges = [1.0] * 240
+    odom = Odometry()
+    cmd_pub = ping.create_publisher(TwistStamped, "/bench_cmd", 10)
+    odom_pub = pong.create_publisher(Odometry, "/bench_odom", 10)
+    scan_pub = pong.create_publisher(LaserScan, "/bench_scan", best_effort)
+    counter = {"odom": 0, "scan": 0, "trips": 0}
+
+    def on_cmd(msg):
+        odom_pub.publish(odom)
+        scan_pub.publish(scan)
+
+    def on_reply(kind):
+        def callback(msg):
+            counter[kind] += 1
+            if counter["odom"] == counter["scan"]:  # both replies in: next round trip
+                counter["trips"] += 1
+                cmd_pub.publish(TwistStamped())
+        return callback
+
+    pong.create_subscription(TwistStamped, "/bench_cmd", on_cmd, 10)
+    ping.create_subscription(Odometry, "/bench_odom", on_reply("odom"), 10)
+    ping.create_subscription(LaserScan, "/bench_scan", on_reply("scan"), best_effort)
+    for node in (ping, pong):
+        executor.add_node(node)
+    deadline = time.monotonic() + 10
+    while pong.count_publishers("/bench_cmd") < 1 or ping.count_publishers("/bench_scan") < 1:
+        executor.spin_once(timeout_sec=0.05)
+        if time.monotonic() > deadline:
+            raise RuntimeError("ping-pong discovery failed")
+    executor.spin_once(timeout_sec=0.2)
+    cmd_pub.publish(TwistStamped())
+    start = time.perf_counter()
+    while counter["trips"] < steps and time.perf_counter() - start < 60:
+        executor.spin_once(timeout_sec=1.0)
+    results["pingpong_round_trips_per_s"] = _rate(counter["trips"], time.perf_counter() - start)
+    executor.shutdown()
+    rclpy.shutdown(context=context)
+
+    # The real loop: simulator (lockstep, ideal) + wall follower (simulation mode).
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    executor = make_executor(context)
+    simulator = SimulatorNode(context=context, parameter_overrides=[
+        Parameter("world", value="lab02"), Parameter("start", value="outer")])
+    follower = WallFollowerNode(context=context, parameter_overrides=[
+        Parameter("use_sim_time", value=True)])
+    for node in (follower, simulator):
+        executor.add_node(node)
+    follower.trigger_configure()
+    simulator.trigger_configure()
+    follower.trigger_activate()
+    deadline = time.monotonic() + 10
+    while simulator.count_subscribers("/scan") < 1 or follower.count_publishers("/scan") < 1 \
+            or simulator.count_publishers("/cmd_vel") < 1:
+        executor.spin_once(timeout_sec=0.05)
+        if time.monotonic() > deadline:
+            raise RuntimeError("lockstep discovery failed")
+    executor.spin_once(timeout_sec=0.2)
+    simulator.trigger_activate()
+    sim = simulator.simulator
+    start = time.perf_counter()
+    while sim.steps < steps and time.perf_counter() - start < 60:
+        executor.spin_once(timeout_sec=1.0)
+    results["lockstep_steps_per_s"] = _rate(sim.steps, time.perf_counter() - start)
+    results["lockstep_real_time_factor"] = results["lockstep_steps_per_s"] * sim.dt
+    results["lockstep_vs_pingpong"] = (results["lockstep_steps_per_s"]
+                                       / results["pingpong_round_trips_per_s"])
+    for node in (follower, simulator):
+        executor.remove_node(node)
+        node.destroy_node()
+    executor.shutdown()
+    rclpy.shutdown(context=context)
+    return results
+
+
+def bench_controller(calls: int) -> dict:
+    import numpy as np
+    from amr_control.wall_follower import WallFollower
+    from amr_sim.simulator import Simulator
+    sim = Simulator("lab02", start="outer", profile="turtlebot3", seed=0)
+    controller = WallFollower(sim.dt)
+    p = sim.profile
+    if hasattr(controller, "set_scan_geometry"):
+        controller.set_scan_geometry(p.angle_min, p.angle_increment, p.range_min, p.range_max)
+    scans = []
+    z_scan, z_v, z_w = sim.measure()
+    for _ in range(200):
+        v, w = controller.compute_commands(z_scan, z_v, z_w)
+        z_scan, z_v, z_w = sim.step(v, w)
+        scans.append((np.array(z_scan), z_v, z_w))
+    start = time.perf_counter()
+    for k in range(calls):
+        controller.compute_commands(*scans[k % len(scans)])
+    per_call = (time.perf_counter() - start) / calls
+    return {"compute_commands_us": per_call * 1e6,
+            "compute_commands_share_of_dt": per_call / sim.dt}
+
+
+def bench_evaluate(episodes: int, duration: float) -> dict:
+    from amr_sim.evaluation import EpisodeSpec, run_episodes
+    specs = [EpisodeSpec(world="lab02", start="outer", profile="ideal", seed=seed,
+                         duration=duration) for seed in range(episodes)]
+    results = {}
+    cores = os.cpu_count() or 1
+    for jobs in sorted({1, cores}):
+        start = time.perf_counter()
+        run_episodes(specs, jobs=jobs)
+        results[f"episodes_per_s_{jobs}_jobs"] = _rate(episodes, time.perf_counter() - start)
+    results["parallel_speedup"] = (results[f"episodes_per_s_{cores}_jobs"]
+                                   / results["episodes_per_s_1_jobs"])
+    return results
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="fewer repetitions")
+    parser.add_argument("--only", nargs="*", default=None,
+                        choices=["sim", "ros", "sync", "controller", "evaluate"])
+    parser.add_argument("--json", default=None, help="also write the figures to this file")
+    args = parser.parse_args(argv)
+    isolate_local_graph()
+    chosen = args.only or ["sim", "ros", "sync", "controller", "evaluate"]
+    figures: dict[str, dict] = {}
+    if "sim" in chosen:
+        import bench_sim
+        figures["sim"] = bench_sim.main()
+    if "ros" in chosen:
+        figures["ros"] = bench_ros_loop(1000 if args.quick else 4000)
+        r = figures["ros"]
+        print(f"ROS lockstep loop: {r['lockstep_steps_per_s']:.0f} steps/s "
+              f"({r['lockstep_real_time_factor']:.0f}x real time) vs bare ping-pong "
+              f"{r['pingpong_round_trips_per_s']:.0f} round trips/s: ratio "
+              f"{r['lockstep_vs_pingpong']:.2f} (target >= 0.5)")
+    if "sync" in chosen:
+        import bench_sync
+        figures["sync"] = bench_sync.main()
+    if "controller" in chosen:
+        figures["controller"] = bench_controller(2000 if args.quick else 20000)
+        c = figures["controller"]
+        print(f"controller: compute_commands {c['compute_commands_us']:.1f} us per call = "
+              f"{c['compute_commands_share_of_dt'] * 100:.3f}% of dt")
+    if "evaluate" in chosen:
+        figures["evaluate"] = bench_evaluate(4 if args.quick else 8, 30.0 if args.quick else 60.0)
+        e = figures["evaluate"]
+        print("evaluate.py: " + ", ".join(f"{k} {v:.2f}" for k, v in e.items()))
+    if args.json:
+        Path(args.json).write_text(json.dumps(figures, indent=1, default=float))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

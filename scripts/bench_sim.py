@@ -1,0 +1,161 @@
+#!/usr/bin/env python3
+"""Benchmark of the headless simulator core: steps per second on lab02.
+
+A core step = physics + a 360-ray LiDAR scan + encoders (turtlebot3 geometry, scanning every step
+so that each step pays for a full scan). Measured in the same run, with the same commands:
+- the same step with the scan done by pymunk's per-ray space.segment_query_first (the slow
+  reference: ~100x slower according to simulation.md),
+- the same step with the scan as a numpy rays x segments matrix,
+- the turtlebot3 profile as configured (a new scan only every 0.2 s, i.e. every 4th step).
+Target: >= 10,000 core steps/s. `main()` returns the figures as a dict (scripts/bench.py uses it).
+
+Usage: .venv/bin/python scripts/bench_sim.py [--steps N] [--repeats R]
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import pymunk  # noqa: E402
+
+from amr_sim.lidar import Lidar  # noqa: E402
+from amr_sim.profiles import TURTLEBOT3  # noqa: E402
+from amr_sim.simulator import Simulator  # noqa: E402
+
+TARGET_STEPS_PER_S = 10_000
+WORLD, START = "lab02", "outer"
+
+
+class PymunkLidar:
+    """The reference scanner: one space.segment_query_first per ray (as a naive pymunk user would)."""
+
+    def __init__(self, sim: Simulator) -> None:
+        p = sim.profile
+        self.space = sim.space
+        self.angles = p.angle_min + p.angle_increment * np.arange(p.scan_rays)
+        self.range_min, self.range_max, self.no_return = p.range_min, p.range_max, p.no_return
+        robot_category = 0b10
+        sim.robot_shape.filter = pymunk.ShapeFilter(categories=robot_category)
+        self.filter = pymunk.ShapeFilter(mask=pymunk.ShapeFilter.ALL_MASKS() ^ robot_category)
+        self.reach = 2.0 * self.range_max  # beyond range_max is "no return" anyway
+
+    def scan(self, x: float, y: float, theta: float, noise=None) -> np.ndarray:
+        out = np.empty(len(self.angles))
+        for i, a in enumerate(self.angles):
+            end = (x + self.reach * math.cos(theta + a), y + self.reach * math.sin(theta + a))
+            hit = self.space.segment_query_first((x, y), end, 0.0, self.filter)
+            out[i] = hit.alpha * self.reach if hit is not None else math.inf
+        if noise is not None:
+            out += noise
+        return np.where((out >= self.range_min) & (out <= self.range_max), out, self.no_return)
+
+
+def commands(n: int) -> list[tuple[float, float]]:
+    """A fixed, wall-bumping command sequence (straight runs and turns) shared by all variants."""
+    rng = np.random.default_rng(0)
+    out: list[tuple[float, float]] = []
+    while len(out) < n:
+        v, w = rng.uniform(0.0, 0.22), rng.uniform(-1.5, 1.5)
+        out.extend([(v, w)] * int(rng.integers(5, 40)))
+    return out[:n]
+
+
+def time_steps(profile, steps: int, repeats: int, scanner: str = "numba") -> float:
+    """Best (highest) steps/s over `repeats` runs of `steps` steps from a fresh simulator."""
+    cmds = commands(steps)
+    best = 0.0
+    for _ in range(repeats):
+        sim = Simulator(WORLD, start=START, profile=profile, seed=0)
+        if scanner == "numpy":
+            p = sim.profile
+            sim.lidar = Lidar(sim.world.segments, p.scan_rays, p.angle_min, p.angle_increment,
+                              p.range_min, p.range_max, p.no_return, use_numba=False)
+        elif scanner == "pymunk":
+            sim.lidar = PymunkLidar(sim)
+        step = sim.step
+        t0 = time.perf_counter()
+        for v, w in cmds:
+            step(v, w)
+        best = max(best, steps / (time.perf_counter() - t0))
+    return best
+
+
+def scan_us(scanner, repeats: int = 200) -> float:
+    t0 = time.perf_counter()
+    for k in range(repeats):
+        scanner.scan(1.0, -1.0, 0.01 * k)
+    return (time.perf_counter() - t0) / repeats * 1e6
+
+
+def main(steps: int = 20_000, repeats: int = 3) -> dict:
+    every_step = dataclasses.replace(TURTLEBOT3, scan_period=None)  # a full scan in every step
+    time_steps(every_step, 200, 1)  # warm-up: numba compile / cache load
+    dt = 0.05
+    core = time_steps(every_step, steps, repeats)
+    configured = time_steps(TURTLEBOT3, steps, repeats)
+    numpy_ref = time_steps(every_step, max(200, steps // 20), repeats, scanner="numpy")
+    pymunk_ref = time_steps(every_step, max(100, steps // 100), repeats, scanner="pymunk")
+
+    sim = Simulator(WORLD, start=START, profile=every_step)
+    p = sim.profile
+    numba_lidar = sim.lidar
+    numpy_lidar = Lidar(sim.world.segments, p.scan_rays, p.angle_min, p.angle_increment,
+                        p.range_min, p.range_max, p.no_return, use_numba=False)
+    pymunk_lidar = PymunkLidar(sim)
+    agree = float(np.nanmax(np.abs(pymunk_lidar.scan(1.0, -1.0, 0.3) - numba_lidar.scan(1.0, -1.0, 0.3))))
+
+    result = {
+        "world": WORLD,
+        "segments": int(len(sim.world.segments)),
+        "rays": p.scan_rays,
+        "dt": dt,
+        "core_steps_per_s": core,
+        "core_us_per_step": 1e6 / core,
+        "core_real_time_factor": core * dt,
+        "turtlebot3_profile_steps_per_s": configured,
+        "turtlebot3_profile_real_time_factor": configured * dt,
+        "numpy_scan_steps_per_s": numpy_ref,
+        "pymunk_scan_steps_per_s": pymunk_ref,
+        "speedup_vs_numpy": core / numpy_ref,
+        "speedup_vs_pymunk": core / pymunk_ref,
+        "scan_us": {"numba": scan_us(numba_lidar, 2000), "numpy": scan_us(numpy_lidar),
+                    "pymunk": scan_us(pymunk_lidar, 50)},
+        "scan_max_abs_difference_pymunk_vs_numba_m": agree,
+        "target_steps_per_s": TARGET_STEPS_PER_S,
+        "meets_target": core >= TARGET_STEPS_PER_S,
+    }
+    return result
+
+
+def _print(r: dict) -> None:
+    print(f"amr_sim core step on {r['world']} ({r['segments']} wall segments, {r['rays']}-ray scan "
+          f"every step, dt {r['dt']} s):")
+    print(f"  numba scan (amr_sim)      {r['core_steps_per_s']:>10,.0f} steps/s  "
+          f"{r['core_us_per_step']:6.1f} us/step  {r['core_real_time_factor']:7,.0f}x real time")
+    print(f"  numpy matrix scan         {r['numpy_scan_steps_per_s']:>10,.0f} steps/s  "
+          f"-> amr_sim is {r['speedup_vs_numpy']:.1f}x faster")
+    print(f"  pymunk per-ray queries    {r['pymunk_scan_steps_per_s']:>10,.0f} steps/s  "
+          f"-> amr_sim is {r['speedup_vs_pymunk']:.1f}x faster")
+    print(f"  turtlebot3 profile as configured (scan at 5 Hz): {r['turtlebot3_profile_steps_per_s']:,.0f} "
+          f"steps/s = {r['turtlebot3_profile_real_time_factor']:,.0f}x real time")
+    s = r["scan_us"]
+    print(f"  one scan: numba {s['numba']:.1f} us, numpy {s['numpy']:.0f} us, pymunk {s['pymunk']:.0f} us; "
+          f"pymunk and numba agree to {r['scan_max_abs_difference_pymunk_vs_numba_m']:.1e} m")
+    verdict = "meets" if r["meets_target"] else "MISSES"
+    print(f"  target {r['target_steps_per_s']:,} steps/s: {verdict}")
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=20_000)
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+    _print(main(args.steps, args.repeats))

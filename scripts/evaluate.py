@@ -1,0 +1,151 @@
+#!/usr/bin/env python3
+"""Score a controller on many episodes at once: worlds x starts x profiles x seeds, in parallel.
+
+Each episode runs headless with the same Simulator and controller class as the ROS path
+(amr_sim.episode.run_episode). Writes results.json, results.csv and sheet.png (every episode's
+trajectory) to --out, prints a table and a one-line verdict.
+Exit code: 0 no collision, 1 some episode collided, 2 bad options, 3 some episode failed to run.
+
+Examples:
+  .venv/bin/python scripts/evaluate.py --worlds lab02 --seeds 0,1,2 --duration 120
+  .venv/bin/python scripts/evaluate.py --worlds all --starts all --profiles ideal,turtlebot3
+  .venv/bin/python scripts/evaluate.py --config evaluations/example.yaml -p kp:=4.0
+  .venv/bin/python scripts/evaluate.py --worlds lab02 --controller my_pkg.ctrl:MyController
+Options given on the command line override the same keys of --config.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime as dt_module
+import os
+import platform
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+if str(REPO) not in sys.path:  # run from a checkout without installing
+    sys.path.insert(0, str(REPO))
+
+from amr_sim.evaluation import (DEFAULT_CONTROLLER, ControllerSpecError, EvaluationError,  # noqa: E402
+                                ProgressBar, check_controller, expand_grid, format_table,
+                                load_config, load_ros_params_file, outcome_row, parse_overrides,
+                                run_episodes, verdict, write_csv, write_json)
+from amr_control.controller_loader import load_controller_class  # noqa: E402
+
+# run_sim.py gives the wall follower node this file: the same gains here keep both paths equal.
+SIM_PARAMS = REPO / "amr_control" / "params" / "sim.yaml"
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter,
+                                     epilog=__doc__.split("\n", 1)[1])
+    parser.add_argument("--config", default=None, help="episode-set YAML (keys: worlds, starts, "
+                        "profiles, seeds, duration, dt, controller, params_file, params, jobs)")
+    parser.add_argument("--worlds", default=None, help="comma-separated world names or paths, "
+                        "or 'all' (default lab02)")
+    parser.add_argument("--starts", default=None, help="'all' or comma-separated start names "
+                        "(default all)")
+    parser.add_argument("--profiles", default=None, help="comma-separated sensor profiles: ideal, "
+                        "turtlebot3 (default ideal)")
+    parser.add_argument("--seeds", default=None, help="comma-separated seeds or ranges, e.g. "
+                        "0,1,2 or 0-9 (default 0)")
+    parser.add_argument("--duration", type=float, default=None,
+                        help="simulated seconds per episode (default 600)")
+    parser.add_argument("--dt", type=float, default=None, help="control period in s (default 0.05)")
+    parser.add_argument("--controller", default=None, metavar="MODULE:CLASS",
+                        help=f"controller class (default {DEFAULT_CONTROLLER})")
+    parser.add_argument("--params-file", default=None,
+                        help="ROS 2 params YAML for the controller (default, like run_sim.py: "
+                        "amr_control/params/sim.yaml when it exists; 'none' for class defaults)")
+    parser.add_argument("-p", "--param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="controller constructor parameter override (repeatable; typed "
+                        "bool/int/float/str like ROS)")
+    parser.add_argument("--jobs", "-j", type=int, default=None,
+                        help="worker processes (default: all cores)")
+    parser.add_argument("--out", default=None, help="output folder (default out/evaluate-<UTC time>)")
+    parser.add_argument("--no-sheet", action="store_true", help="skip sheet.png")
+    return parser.parse_args(argv)
+
+
+def resolve_settings(args: argparse.Namespace) -> dict:
+    """Config-file values, overridden by the command-line options that were given."""
+    settings: dict = {"worlds": "lab02", "starts": "all", "profiles": "ideal", "seeds": "0",
+                      "duration": 600.0, "dt": 0.05, "controller": DEFAULT_CONTROLLER,
+                      "params": {}, "jobs": None}
+    if args.config:
+        settings.update(load_config(args.config))
+    for key in ("worlds", "starts", "profiles", "seeds", "duration", "dt", "controller", "params_file",
+                "jobs"):
+        value = getattr(args, key)
+        if value is not None:
+            settings[key] = value
+    params_file = settings.get("params_file")
+    if params_file is None and SIM_PARAMS.is_file() and settings["controller"] == DEFAULT_CONTROLLER:
+        params_file = SIM_PARAMS
+    from_file = {}
+    if params_file and str(params_file).lower() != "none":
+        from_file = load_ros_params_file(params_file, load_controller_class(settings["controller"]))
+        settings["params_file"] = str(params_file)
+    else:
+        settings["params_file"] = None
+    # Lowest to highest priority: params file, config `params`, -p overrides.
+    settings["params"] = {**from_file, **(settings.get("params") or {}), **parse_overrides(args.param)}
+    if settings["jobs"] is not None and settings["jobs"] < 1:
+        raise EvaluationError(f"--jobs must be >= 1, got {settings['jobs']}")
+    return settings
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    try:
+        settings = resolve_settings(args)
+        specs = expand_grid(settings["worlds"], settings["starts"], settings["profiles"],
+                            settings["seeds"], duration=settings["duration"], dt=settings["dt"],
+                            controller=settings["controller"], params=settings["params"])
+        check_controller(settings["controller"], settings["params"], settings["dt"])
+    except (EvaluationError, ControllerSpecError) as exc:
+        print(f"evaluate: {exc}", file=sys.stderr)
+        return 2
+    jobs = settings["jobs"] or os.cpu_count() or 1
+    started = dt_module.datetime.now(dt_module.timezone.utc)
+    out = Path(args.out) if args.out else Path("out") / f"evaluate-{started:%Y%m%d-%H%M%S}"
+    out.mkdir(parents=True, exist_ok=True)
+    print(f"evaluate: {len(specs)} episodes of {settings['duration']:g} s on {min(jobs, len(specs))} "
+          f"process(es), controller {settings['controller']}"
+          + (f" {settings['params']}" if settings["params"] else ""), flush=True)
+
+    bar = ProgressBar(len(specs))
+    try:
+        outcomes = run_episodes(specs, jobs=jobs, progress=bar)
+    except KeyboardInterrupt:
+        bar.finish()
+        print("evaluate: interrupted", file=sys.stderr)
+        return 130
+    bar.finish()
+    wall = (dt_module.datetime.now(dt_module.timezone.utc) - started).total_seconds()
+
+    meta = {"started_utc": started.isoformat(timespec="seconds"), "wall_time_s": round(wall, 2),
+            "jobs": min(jobs, len(specs)), "controller": settings["controller"],
+            "params": settings["params"], "params_file": settings["params_file"], "duration_s": settings["duration"], "dt_s": settings["dt"],
+            "config": args.config, "command": " ".join(sys.argv), "python": platform.python_version(),
+            "host": platform.node()}
+    write_json(out / "results.json", outcomes, meta)
+    write_csv(out / "results.csv", outcomes)
+    if not args.no_sheet:
+        ran = [o.result for o in outcomes if o.result is not None]
+        if ran:
+            from amr_sim.plot import plot_episodes_sheet
+            params = " ".join(f"{k}={v}" for k, v in settings["params"].items())
+            plot_episodes_sheet(ran, out / "sheet.png",
+                                title=f"{settings['controller']} {params}".strip())
+
+    print(format_table(outcome_row(o) for o in outcomes))
+    line, code = verdict(outcomes)
+    print(line)
+    print(f"evaluate: {len(specs)} episodes in {wall:.1f} s; results in {out}")
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,67 @@
+"""What the run scripts share (they stand in for launch files): the node graphs and parameters.
+
+run_robot.py and the rehearsal of run_sim.py (`--profile turtlebot3 --realtime`) build the
+robot graph with the same function, so the rehearsal runs exactly the nodes and parameters that
+drive the real robot.
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Any
+
+REPO = Path(__file__).resolve().parent.parent
+if str(REPO) not in sys.path:  # run from a checkout without installing
+    sys.path.insert(0, str(REPO))
+
+PARAMS_DIR = REPO / "amr_control" / "params"
+SIM_PARAMS = PARAMS_DIR / "sim.yaml"
+ROBOT_PARAMS = PARAMS_DIR / "turtlebot3.yaml"
+
+
+def overrides_to_parameters(values: dict[str, Any]) -> list:
+    """{"kp": 4.0} -> [rclpy Parameter], for Node(parameter_overrides=...)."""
+    from rclpy.parameter import Parameter
+    return [Parameter(name, value=value) for name, value in values.items()]
+
+
+def node_args(params_file: Path | str | None) -> list[str] | None:
+    """Node cli_args that load a --params-file (ROS 2 YAML keyed by node name)."""
+    if params_file is None:
+        return None
+    path = Path(params_file)
+    if not path.is_file():
+        raise SystemExit(f"params file not found: {path}")
+    return ["--ros-args", "--params-file", str(path)]
+
+
+def make_wall_follower(context, *, params_file, overrides: dict[str, Any],
+                       use_sim_time: bool = False):
+    from amr_control.wall_follower_node import WallFollowerNode
+    values = dict(overrides)
+    values.setdefault("use_sim_time", use_sim_time)
+    return WallFollowerNode(context=context, cli_args=node_args(params_file),
+                            parameter_overrides=overrides_to_parameters(values))
+
+
+def make_robot_graph(context, *, params_file=ROBOT_PARAMS, dt: float | None = None,
+                     cmd_vel_stamped: bool | None = None, controller: str | None = None,
+                     tuning: dict[str, Any] | None = None, use_sim_time: bool = False) -> list:
+    """The real-robot graph: /odom -> amr_odometry -> /odometry, wall follower in robot mode.
+
+    Returns the lifecycle nodes in startup order.
+    """
+    from amr_turtlebot3.odometry_node import OdometryNode
+    overrides: dict[str, Any] = dict(tuning or {})
+    overrides["simulation"] = False
+    if dt is not None:
+        overrides["dt"] = dt
+    if cmd_vel_stamped is not None:
+        overrides["cmd_vel_stamped"] = cmd_vel_stamped
+    if controller is not None:
+        overrides["controller"] = controller
+    odometry = OdometryNode(context=context, parameter_overrides=overrides_to_parameters(
+        {"use_sim_time": use_sim_time}))
+    wall_follower = make_wall_follower(context, params_file=params_file, overrides=overrides,
+                                       use_sim_time=use_sim_time)
+    return [odometry, wall_follower]

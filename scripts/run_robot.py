@@ -1,0 +1,104 @@
+#!/usr/bin/env python3
+"""Drive a real TurtleBot3 Burger: amr_odometry + wall follower (robot mode) + lifecycle manager.
+
+Runs on the laptop; the robot runs its own bringup (`ros2 launch turtlebot3_bringup robot.launch.py`).
+Both sides must use the same ROS_DOMAIN_ID, the same RMW and a discovery range that reaches the
+robot (SUBNET, the default): this script does not change discovery, it prints what it uses.
+
+  .venv/bin/python scripts/run_robot.py --domain-id 30 --cmd-vel stamped   # Jazzy bringup
+  .venv/bin/python scripts/run_robot.py --domain-id 30 --cmd-vel twist     # Humble bringup
+Ctrl-C stops the robot: the wall follower publishes a zero command before exiting.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from launch_common import ROBOT_PARAMS, make_robot_graph  # noqa: E402
+
+from amr_control.controller_loader import ControllerSpecError, parse_overrides  # noqa: E402
+from amr_control.ros_env import describe_graph_settings  # noqa: E402
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter,
+                                     epilog=__doc__.split("\n\n", 1)[1])
+    parser.add_argument("--domain-id", type=int, default=None,
+                        help="ROS_DOMAIN_ID shared with the robot (default: $ROS_DOMAIN_ID)")
+    parser.add_argument("--cmd-vel", choices=["stamped", "twist"], default=None,
+                        help="/cmd_vel type: stamped = TwistStamped (Jazzy bringup), twist = "
+                        "Twist (Humble); default from the params file")
+    parser.add_argument("--params-file", default=str(ROBOT_PARAMS),
+                        help="wall follower ROS params YAML (default params/turtlebot3.yaml)")
+    parser.add_argument("--dt", type=float, default=None, help="control period in seconds")
+    parser.add_argument("--controller", default=None, help="MODULE:CLASS controller")
+    parser.add_argument("-p", "--param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="wall follower parameter override (repeatable)")
+    args = parser.parse_args(argv)
+    if args.domain_id is not None and not 0 <= args.domain_id <= 232:
+        parser.error("--domain-id must be within 0-232")
+    if args.dt is not None and not args.dt > 0:
+        parser.error("--dt must be > 0")
+    try:
+        args.overrides = parse_overrides(args.param)
+    except ControllerSpecError as exc:
+        parser.error(str(exc))
+    return args
+
+
+class _Terminate(Exception):
+    pass
+
+
+def _raise_terminate(signum, frame):
+    raise _Terminate()
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    if args.domain_id is not None:
+        os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
+    import rclpy
+    from rclpy.signals import SignalHandlerOptions
+    from amr_control.lifecycle_manager import LifecycleManager, LifecycleStartupError
+    from amr_control.node_runner import make_executor, shutdown_node
+
+    # Own signal handling: the final zero command must go out before the context shuts down.
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+    signal.signal(signal.SIGTERM, _raise_terminate)
+    stamped = None if args.cmd_vel is None else args.cmd_vel == "stamped"
+    nodes = make_robot_graph(None, params_file=args.params_file, dt=args.dt,
+                             cmd_vel_stamped=stamped, controller=args.controller,
+                             tuning=args.overrides)
+    manager = LifecycleManager([node.get_name() for node in nodes])
+    manager.get_logger().info(f"run_robot: {describe_graph_settings()}")
+    executor = make_executor()
+    for node in [*nodes, manager]:
+        executor.add_node(node)
+    exit_code = 0
+    try:
+        manager.startup(executor)
+        manager.get_logger().info("run_robot: running; Ctrl-C stops the robot")
+        executor.spin()
+    except LifecycleStartupError as exc:
+        manager.get_logger().error(str(exc))
+        exit_code = 1
+    except (KeyboardInterrupt, _Terminate):
+        pass
+    finally:
+        for node in reversed(nodes):  # wall follower first: zero command while DDS is up
+            shutdown_node(node)
+        for node in [*nodes, manager]:
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    return exit_code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,126 @@
+#!/usr/bin/env python3
+"""Run the simulator and the wall follower on a maze (stands in for the course's launch file).
+
+Lockstep (default): the simulator advances one dt per /cmd_vel, as fast as the loop turns.
+`--realtime`: the simulator runs on a wall-clock timer; with `--profile turtlebot3` this is the
+rehearsal of the real robot: /odom (pose only) + 5 Hz /scan, the amr_odometry node and the wall
+follower in robot (timer) mode with params/turtlebot3.yaml - the graph run_robot.py starts.
+
+Examples:
+  .venv/bin/python scripts/run_sim.py                                  # lab02, outer, ideal
+  .venv/bin/python scripts/run_sim.py --world maze_deadends --start all --duration 120
+  .venv/bin/python scripts/run_sim.py --profile turtlebot3 --realtime --duration 60
+  .venv/bin/python scripts/run_sim.py --controller my_pkg.my_ctrl:MyController -p kp:=5.0
+  .venv/bin/python scripts/run_sim.py --report out/run.json --plot out/run.png --record out/run.mcap
+Local runs are isolated: loopback discovery and a free ROS_DOMAIN_ID (printed at startup).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from launch_common import ROBOT_PARAMS, SIM_PARAMS, make_robot_graph, make_wall_follower, \
+    overrides_to_parameters  # noqa: E402
+
+from amr_control.controller_loader import ControllerSpecError, parse_overrides  # noqa: E402
+from amr_control.ros_env import describe_graph_settings, isolate_local_graph  # noqa: E402
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter,
+                                     epilog=__doc__.split("\n\n", 1)[1])
+    parser.add_argument("--world", default="lab02", help="bundled world name or a path to a "
+                        "world YAML / course map JSON (default lab02)")
+    parser.add_argument("--start", default=None, help="named start, X,Y,THETA, or 'all' to run "
+                        "every named start in turn (default: the world's first start)")
+    parser.add_argument("--profile", default="ideal", choices=["ideal", "turtlebot3"])
+    parser.add_argument("--duration", type=float, default=600.0,
+                        help="simulated seconds to run (default 600)")
+    parser.add_argument("--dt", type=float, default=0.05)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--realtime", action="store_true",
+                        help="advance on a wall-clock timer instead of lockstep")
+    parser.add_argument("--controller", default=None, help="MODULE:CLASS of a controller with "
+                        "compute_commands(z_scan, z_v, z_w) (default the project's WallFollower)")
+    parser.add_argument("-p", "--param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="wall follower parameter override (repeatable)")
+    parser.add_argument("--params-file", default=None,
+                        help="wall follower ROS params YAML (default params/sim.yaml, or "
+                        "params/turtlebot3.yaml for the realtime turtlebot3 rehearsal)")
+    parser.add_argument("--goal", default=None, help="X,Y goal (needs a localization node "
+                        "publishing /pose and --enable-localization)")
+    parser.add_argument("--enable-localization", action="store_true")
+    parser.add_argument("--report", default=None, help="write a JSON report here")
+    parser.add_argument("--plot", default=None, help="write a PNG of the trajectory here")
+    parser.add_argument("--record", default=None, help="record topics to this .mcap file")
+    parser.add_argument("--gui", action="store_true", help="live view window (pygame)")
+    parser.add_argument("--domain-id", type=int, default=None,
+                        help="ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID if set, else a free one)")
+    args = parser.parse_args(argv)
+    if not (math.isfinite(args.duration) and args.duration > 0):
+        parser.error("--duration must be > 0")
+    if not (math.isfinite(args.dt) and args.dt > 0):
+        parser.error("--dt must be > 0")
+    try:
+        args.overrides = parse_overrides(args.param)
+    except ControllerSpecError as exc:
+        parser.error(str(exc))
+    return args
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    domain_id = isolate_local_graph(args.domain_id)
+    from amr_sim.world import World, WorldError
+    try:
+        world = World.load(args.world)
+        starts = list(world.starts) if args.start == "all" else [args.start]
+        for start in starts:
+            world.resolve_start(start)  # fail early with the world's own message
+    except WorldError as exc:
+        print(f"run_sim: {exc}", file=sys.stderr)
+        return 2
+    print(f"run_sim: {describe_graph_settings()}")
+    from sim_session import SimSession
+    exit_code = 0
+    reports = []
+    for start in starts:
+        session = SimSession(args, world, start)
+        try:
+            report = session.run()
+        finally:
+            session.close()
+        reports.append(report)
+        print(session.summary_line(report))
+        if report["collisions"] > 0:
+            exit_code = 1
+    _write_outputs(args, world, reports)
+    return exit_code
+
+
+def _write_outputs(args, world, reports) -> None:
+    if args.report:
+        path = Path(args.report)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(reports[0] if len(reports) == 1 else reports, indent=1))
+        print(f"run_sim: report written to {path}")
+    if args.plot:
+        from amr_sim.plot import plot_episode
+        path = Path(args.plot)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        for index, report in enumerate(reports):
+            target = path if len(reports) == 1 else path.with_name(
+                f"{path.stem}-{report['start']}{path.suffix}")
+            plot_episode(world, report["trajectory"], report["collision_points"], path=str(target),
+                         title=f"{report['world']} / {report['start']} / {report['profile']}")
+            print(f"run_sim: plot written to {target}")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

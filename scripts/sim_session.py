@@ -1,0 +1,189 @@
+"""One in-process simulation run for run_sim.py: build the graph, bring it up, run, report.
+
+Lockstep: simulator (lockstep) + wall follower (simulation mode, params/sim.yaml), with the
+amr_odometry node between them when the profile publishes /odom like the real robot.
+Rehearsal (`--realtime --profile turtlebot3`): simulator (real time) + the robot graph of
+run_robot.py (amr_odometry + wall follower in robot mode, params/turtlebot3.yaml).
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import rclpy
+from rclpy.signals import SignalHandlerOptions
+
+from launch_common import ROBOT_PARAMS, SIM_PARAMS, make_robot_graph, make_wall_follower, \
+    overrides_to_parameters
+from amr_control.lifecycle_manager import LifecycleManager, LifecycleStartupError
+from amr_control.node_runner import make_executor, shutdown_node
+
+STALL_TIMEOUT_S = 10.0  # lockstep: no step for this long (wall clock) means the loop broke
+
+
+def _start_label(start) -> str:
+    return start if isinstance(start, str) else ",".join(f"{v:g}" for v in start)
+
+
+class SimSession:
+    def __init__(self, args, world, start) -> None:
+        from amr_sim.simulator_node import SimulatorNode
+        self.args = args
+        self.world = world
+        self.start = start if start is not None else next(iter(world.starts))
+        self.rehearsal = args.realtime and args.profile == "turtlebot3"
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
+        self.executor = make_executor(self.context)
+
+        sim_values = {"world": args.world, "start": _start_label(self.start),
+                      "profile": args.profile, "dt": args.dt, "seed": args.seed,
+                      "mode": "realtime" if args.realtime else "lockstep",
+                      "enable_localization": args.enable_localization}
+        if args.goal:
+            sim_values["goal"] = [float(v) for v in args.goal.split(",")]
+        self.simulator_node = SimulatorNode(
+            context=self.context, parameter_overrides=overrides_to_parameters(sim_values))
+
+        tuning = dict(args.overrides)
+        if args.controller:
+            tuning["controller"] = args.controller
+        if self.rehearsal:
+            self.control_nodes = make_robot_graph(
+                self.context, params_file=args.params_file or ROBOT_PARAMS, dt=args.dt,
+                tuning=tuning)
+        else:
+            tuning.update({"simulation": True, "dt": args.dt,
+                           "enable_localization": args.enable_localization})
+            nodes = []
+            if _publishes_pose_only_odom(args.profile):
+                from amr_turtlebot3.odometry_node import OdometryNode
+                nodes.append(OdometryNode(context=self.context, parameter_overrides=(
+                    overrides_to_parameters({"use_sim_time": True}))))
+            nodes.append(make_wall_follower(self.context, params_file=args.params_file or
+                                            SIM_PARAMS, overrides=tuning, use_sim_time=True))
+            self.control_nodes = nodes
+        self.wall_follower = self.control_nodes[-1]
+        order = [node.get_name() for node in self.control_nodes] + [
+            self.simulator_node.get_name()]
+        self.manager = LifecycleManager(order, context=self.context)
+        for node in [*self.control_nodes, self.simulator_node, self.manager]:
+            self.executor.add_node(node)
+        self.trajectory: list[list[float]] = []
+        self.wall_errors: list[float] = []
+        self.view = None
+        self.recorder = None
+
+    # --- per-step observation (called by the simulator node after each step) ------------
+    def _on_step(self, sim) -> None:
+        x, y, theta = sim.pose
+        self.trajectory.append([round(sim.time, 6), x, y, theta])
+        controller = getattr(self.wall_follower, "controller", None)
+        error = getattr(controller, "wall_distance_error", None)
+        if error is not None and math.isfinite(error):
+            self.wall_errors.append(float(error))
+        if self.view is not None and not self.view.update(sim):
+            self.stop_requested = True
+
+    def run(self) -> dict:
+        args = self.args
+        if args.gui:
+            from amr_sim.live_view import LiveView
+            self.view = LiveView(self.world, title=f"amr_sim: {args.world} / "
+                                                   f"{_start_label(self.start)}")
+        if args.record:
+            from amr_sim.mcap_recorder import McapRecorder
+            self.recorder = McapRecorder(args.record)
+            self._attach_recorder()
+        self.simulator_node.on_step.append(self._on_step)
+        self.stop_requested = False
+        try:
+            self.manager.startup(self.executor)
+        except LifecycleStartupError as exc:
+            raise SystemExit(f"run_sim: {exc}")
+        sim = self.simulator_node.simulator
+        x, y, theta = sim.pose
+        self.trajectory.append([0.0, x, y, theta])
+        wall_start = time.monotonic()
+        last_steps, last_progress = sim.steps, wall_start
+        try:
+            while (sim.time < args.duration - 1e-9 and not self.simulator_node.finished
+                   and not self.stop_requested):
+                self.executor.spin_once(timeout_sec=0.1)
+                if sim.steps != last_steps:
+                    last_steps, last_progress = sim.steps, time.monotonic()
+                elif time.monotonic() - last_progress > STALL_TIMEOUT_S:
+                    raise SystemExit(f"run_sim: the loop stalled: no simulation step for "
+                                     f"{STALL_TIMEOUT_S:.0f} s at t={sim.time:.2f} s")
+        except KeyboardInterrupt:
+            print("run_sim: interrupted")
+        wall_time = time.monotonic() - wall_start
+        return self._report(sim, wall_time)
+
+    def _attach_recorder(self) -> None:
+        from geometry_msgs.msg import Twist, TwistStamped
+        from nav_msgs.msg import Odometry
+        from sensor_msgs.msg import LaserScan
+        topics = {"/scan": LaserScan, "/ground_truth": Odometry}
+        if self.rehearsal or _publishes_pose_only_odom(self.args.profile):
+            topics["/odom"] = Odometry
+        topics["/odometry"] = Odometry
+        stamped = not self.rehearsal or self.wall_follower.get_parameter(
+            "cmd_vel_stamped").value
+        topics["/cmd_vel"] = TwistStamped if stamped else Twist
+        recorder_node = rclpy.create_node("mcap_recorder", context=self.context)
+        self.executor.add_node(recorder_node)
+        self.recorder.attach(recorder_node, topics)
+        self.recorder_node = recorder_node
+
+    def _report(self, sim, wall_time: float) -> dict:
+        from amr_sim.episode import explored_fraction, count_laps
+        rms = (math.sqrt(sum(e * e for e in self.wall_errors) / len(self.wall_errors))
+               if self.wall_errors else None)
+        return {
+            "world": self.world.name, "start": _start_label(self.start),
+            "profile": self.args.profile, "mode": "realtime" if self.args.realtime else "lockstep",
+            "seed": self.args.seed, "dt": self.args.dt,
+            "controller": self.wall_follower.get_parameter("controller").value,
+            "steps": sim.steps, "sim_time_s": round(sim.time, 6),
+            "wall_time_s": round(wall_time, 3),
+            "real_time_factor": round(sim.time / wall_time, 2) if wall_time > 0 else None,
+            "collisions": sim.collisions,
+            "first_collision_time_s": getattr(sim, "first_collision_time", None),
+            "min_clearance_m": sim.min_clearance, "distance_m": sim.distance,
+            "explored_fraction": explored_fraction(self.world, self.trajectory),
+            "laps": count_laps(self.world, self.trajectory),
+            "rms_wall_error_m": rms,
+            "trajectory": self.trajectory,
+            "collision_points": [list(p) for p in sim.collision_points],
+        }
+
+    def summary_line(self, report: dict) -> str:
+        laps = report["laps"]
+        return (f"run_sim: {report['world']} / {report['start']} / {report['profile']} "
+                f"({report['mode']}): {report['sim_time_s']:.1f} s simulated in "
+                f"{report['wall_time_s']:.1f} s ({report['real_time_factor']}x real time), "
+                f"{report['steps']} steps, collisions {report['collisions']}, min clearance "
+                f"{report['min_clearance_m'] * 100:.1f} cm, distance {report['distance_m']:.1f} m,"
+                f" explored {report['explored_fraction'] * 100:.0f}%"
+                + (f", laps {laps}" if laps else ""))
+
+    def close(self) -> None:
+        # Controllers first: they publish their final zero command while the graph still runs.
+        for node in [*self.control_nodes, self.simulator_node]:
+            shutdown_node(node)
+        if self.recorder is not None:
+            self.recorder.close()
+        if self.view is not None:
+            self.view.close()
+        for node in list(self.executor.get_nodes()):
+            self.executor.remove_node(node)
+            node.destroy_node()
+        self.executor.shutdown(timeout_sec=1.0)
+        if self.context.ok():
+            rclpy.shutdown(context=self.context)
+
+
+def _publishes_pose_only_odom(profile_name: str) -> bool:
+    from amr_sim.profiles import get_profile
+    return get_profile(profile_name).odom_topic == "/odom"

@@ -1,0 +1,28 @@
+"""Controllers for node tests: importable as tests.controllers:NAME by the `controller` param."""
+import math
+
+
+class ConstantController:
+    """Always commands the same velocities; records what it was given."""
+
+    def __init__(self, dt, v=0.1, w=0.5):
+        self.dt, self.v, self.w = dt, v, w
+        self.calls = []
+        self.geometry = None
+
+    def set_scan_geometry(self, angle_min, angle_increment, range_min, range_max):
+        self.geometry = (angle_min, angle_increment, range_min, range_max)
+
+    def compute_commands(self, z_scan, z_v, z_w):
+        self.calls.append((len(z_scan), z_v, z_w))
+        return self.v, self.w
+
+
+class NanController(ConstantController):
+    def compute_commands(self, z_scan, z_v, z_w):
+        return math.nan, math.inf
+
+
+class HugeController(ConstantController):
+    def compute_commands(self, z_scan, z_v, z_w):
+        return 50.0, -90.0

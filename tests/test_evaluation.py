@@ -1,0 +1,313 @@
+"""evaluate.py and amr_sim.evaluation: grids, overrides, controller loading, result files, a real run."""
+from __future__ import annotations
+
+import csv
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from amr_sim.evaluation import (ControllerSpecError, EpisodeOutcome, EpisodeSpec, EvaluationError,
+                                ProgressBar, check_controller, expand_grid, format_table,
+                                load_config, outcome_row, parse_overrides, parse_seeds, verdict,
+                                write_csv, write_json)
+
+REPO = Path(__file__).resolve().parent.parent
+EVALUATE = REPO / "scripts" / "evaluate.py"
+
+
+# --- grids and options ---------------------------------------------------------------------
+
+def test_grid_is_worlds_x_starts_x_profiles_x_seeds():
+    specs = expand_grid("lab02,corridor_loop", "all", "ideal,turtlebot3", "0,1", duration=30.0)
+    from amr_sim.world import World
+    starts = {w: list(World.load(w).starts) for w in ("lab02", "corridor_loop")}
+    expected = [(w, s, p, seed) for w in ("lab02", "corridor_loop") for s in starts[w]
+                for p in ("ideal", "turtlebot3") for seed in (0, 1)]
+    assert [(s.world, s.start, s.profile, s.seed) for s in specs] == expected
+    assert all(s.duration == 30.0 for s in specs)
+    assert len({s.label for s in specs}) == len(specs)
+
+
+def test_named_starts_apply_to_the_worlds_that_have_them():
+    specs = expand_grid(["lab02", "corridor_loop"], "outer,south", "ideal", [3])
+    assert [(s.world, s.start) for s in specs] == [("lab02", "outer"), ("corridor_loop", "south")]
+    with pytest.raises(EvaluationError, match="nowhere_start.*exist in none"):
+        expand_grid("lab02,corridor_loop", "outer,south,nowhere_start", "ideal", [0])
+    with pytest.raises(EvaluationError, match="world 'corridor_loop' has none of the starts outer"):
+        expand_grid("lab02,corridor_loop", "outer", "ideal", [0])
+
+
+def test_all_worlds_and_bad_names():
+    from amr_sim.world import bundled_worlds
+    assert {s.world for s in expand_grid("all", "all", "ideal", "0")} == set(bundled_worlds())
+    with pytest.raises(EvaluationError, match="unknown world 'atlantis'"):
+        expand_grid("atlantis")
+    with pytest.raises(EvaluationError, match="profile 'gazebo'"):
+        expand_grid("lab02", profiles="gazebo")
+    with pytest.raises(EvaluationError, match="no worlds"):
+        expand_grid(" , ")
+    for duration in (0.0, -1.0, math.nan, math.inf):
+        with pytest.raises(EvaluationError, match="duration"):
+            expand_grid("lab02", duration=duration)
+    with pytest.raises(EvaluationError, match="dt"):
+        expand_grid("lab02", dt=0.0)
+
+
+def test_seeds_parse_lists_and_ranges():
+    assert parse_seeds("0,1,2") == [0, 1, 2]
+    assert parse_seeds("3-6, 1") == [3, 4, 5, 6, 1]
+    assert parse_seeds([0, "2-3", 2]) == [0, 2, 3]
+    assert parse_seeds(7) == [7]
+    for bad in ("x", "-1", "5-2", "1.5", [True]):
+        with pytest.raises(EvaluationError, match="seed"):
+            parse_seeds(bad)
+
+
+def test_overrides_are_typed_like_ros_parameters():
+    got = parse_overrides(["kp:=4", "kd:=0.25", "follow_left:=true", "side:=right", "big:=1e3",
+                           "off:=False", "neg:=-2"])
+    assert got == {"kp": 4, "kd": 0.25, "follow_left": True, "side": "right", "big": 1000.0,
+                   "off": False, "neg": -2}
+    assert type(got["kp"]) is int and type(got["kd"]) is float and type(got["follow_left"]) is bool
+    with pytest.raises(ControllerSpecError, match="name:=value"):
+        parse_overrides(["kp=4"])
+    with pytest.raises(ControllerSpecError, match="not finite"):
+        parse_overrides(["kp:=nan"])
+
+
+def test_config_file_is_validated(tmp_path):
+    config = load_config(REPO / "evaluations" / "example.yaml")
+    specs = expand_grid(config["worlds"], config["starts"], config["profiles"], config["seeds"],
+                        duration=config["duration"], dt=config["dt"], controller=config["controller"],
+                        params=config["params"])
+    assert len(specs) == 8 and {s.world for s in specs} == {"lab02", "corridor_loop"}
+    bad = tmp_path / "bad.yaml"
+    cases = {"worlds: [lab02]\nspeed: 3\n": "unknown key.*speed",
+             "starts: all\n": "'worlds' is required",
+             "worlds: [lab02]\nduration: long\n": "'duration' must be a number",
+             "worlds: [lab02]\njobs: 0\n": "'jobs' must be a positive integer",
+             "worlds: [lab02]\nparams: [1, 2]\n": "'params' must map",
+             "- just a list\n": "expected a mapping",
+             "worlds: [lab02\n": "not valid YAML"}
+    for text, message in cases.items():
+        bad.write_text(text)
+        with pytest.raises(EvaluationError, match=message):
+            load_config(bad)
+    with pytest.raises(EvaluationError, match="cannot read"):
+        load_config(tmp_path / "missing.yaml")
+
+
+# --- controller loading ---------------------------------------------------------------------
+
+class RecordingController:
+    """A user's controller: constructor takes dt and gains."""
+
+    def __init__(self, dt, gain=1.0):
+        if gain <= 0:
+            raise ValueError("gain must be positive")
+        self.dt, self.gain = dt, gain
+
+    def compute_commands(self, z_scan, z_v, z_w):
+        return 0.0, 0.0
+
+
+def test_controller_loading_errors_are_clear():
+    spec = f"{__name__}:RecordingController"
+    assert check_controller(spec, {"gain": 2.0}, 0.05) is RecordingController
+    cases = {"no_colon_here": "must look like MODULE:CLASS",
+             "amr_sim.no_such_module:X": "cannot import module 'amr_sim.no_such_module'",
+             f"{__name__}:Missing": "has no 'Missing'",
+             "json:JSONDecoder": "has no compute_commands"}
+    for bad, message in cases.items():
+        with pytest.raises(ControllerSpecError, match=message):
+            check_controller(bad, {}, 0.05)
+    with pytest.raises(ControllerSpecError, match="rejected its parameters.*unknown_gain"):
+        check_controller(spec, {"unknown_gain": 1}, 0.05)
+    with pytest.raises(ControllerSpecError, match="gain must be positive"):
+        check_controller(spec, {"gain": -1.0}, 0.05)
+
+
+def test_evaluate_reports_a_bad_controller_and_exits_2(tmp_path):
+    out = subprocess.run([sys.executable, str(EVALUATE), "--worlds", "lab02", "--controller",
+                          "amr_sim.nothing_here:Ctrl", "--out", str(tmp_path / "o")],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2
+    assert "cannot import module 'amr_sim.nothing_here'" in out.stderr
+    assert "Traceback" not in out.stderr
+
+
+# --- result files and summaries --------------------------------------------------------------
+
+def _result(spec, **metrics):
+    from amr_sim.episode import EpisodeResult
+    return EpisodeResult(world=spec.world, start=spec.start, profile=spec.profile, seed=spec.seed,
+                         steps=1200, sim_time_s=60.0, wall_time_s=1.0, **metrics)
+
+
+def _outcomes():
+    a = EpisodeSpec("lab02", "outer", "ideal", 0, duration=60.0)
+    b = EpisodeSpec("lab02", "inner", "turtlebot3", 1, duration=60.0)
+    c = EpisodeSpec("corridor_loop", "south", "ideal", 2, duration=60.0)
+    return [
+        EpisodeOutcome(a, _result(a, collisions=0, first_collision_time_s=None, min_clearance_m=0.0421,
+                                  distance_m=11.5, laps=2, explored_fraction=0.5,
+                                  rms_wall_error_m=0.012), wall_time_s=1.234),
+        EpisodeOutcome(b, _result(b, collisions=3, first_collision_time_s=12.5, min_clearance_m=0.0,
+                                  distance_m=4.0, laps=0, explored_fraction=0.2,
+                                  rms_wall_error_m=math.nan), wall_time_s=2.0),
+        EpisodeOutcome(c, error="RuntimeError: controller exploded", wall_time_s=0.1),
+    ]
+
+
+def test_json_and_csv_hold_every_episode(tmp_path):
+    outcomes = _outcomes()
+    write_json(tmp_path / "r.json", outcomes, {"controller": "x:Y", "params": {"kp": 4.0}})
+    write_csv(tmp_path / "r.csv", outcomes)
+    data = json.loads((tmp_path / "r.json").read_text())  # strict JSON: NaN would not parse back
+    assert data["meta"]["params"] == {"kp": 4.0}
+    first, second, third = data["episodes"]
+    assert first == {"world": "lab02", "start": "outer", "profile": "ideal", "seed": 0,
+                     "sim_time_s": 60.0, "collisions": 0, "first_collision_time_s": None,
+                     "min_clearance_m": 0.0421, "distance_m": 11.5, "laps": 2,
+                     "explored_fraction": 0.5, "rms_wall_error_m": 0.012, "wall_time_s": 1.234,
+                     "error": None}
+    assert second["rms_wall_error_m"] is None and second["first_collision_time_s"] == 12.5
+    assert third["error"] == "RuntimeError: controller exploded" and third["collisions"] is None
+    with open(tmp_path / "r.csv", newline="") as stream:
+        rows = list(csv.DictReader(stream))
+    assert [r["world"] for r in rows] == ["lab02", "lab02", "corridor_loop"]
+    assert rows[1]["collisions"] == "3" and float(rows[1]["first_collision_time_s"]) == 12.5
+    assert rows[0]["first_collision_time_s"] == "" and rows[2]["error"].startswith("RuntimeError")
+
+
+def test_table_is_aligned_and_verdict_counts_collisions():
+    outcomes = _outcomes()
+    table = format_table(outcome_row(o) for o in outcomes).splitlines()
+    header, rule, *body = table
+    assert header.split()[:4] == ["world", "start", "profile", "seed"]
+    assert len({len(line) for line in [rule] + body[:3]}) <= 2  # rows as wide as the rule (rstrip)
+    end = header.index("collisions") + len("collisions")  # numbers right-aligned under headers
+    assert body[1][end - 2:end + 1] == " 3 " and body[0][end - 2:end + 1] == " 0 "
+    assert "4.2" in body[0] and "controller exploded" in table[-1]
+    line, code = verdict(outcomes)
+    assert code == 3  # an episode failed: worse than a collision
+    assert "COLLISIONS in 1/3" in line and "lab02/inner/turtlebot3/seed 1" in line
+    assert "worst clearance 0.0 cm" in line and "1 episode(s) FAILED" in line
+    line, code = verdict(outcomes[:1])
+    assert code == 0 and line.startswith("verdict: no collisions in 1/1") and "4.2 cm" in line
+    assert verdict(outcomes[:2])[1] == 1
+
+
+def test_progress_bar_only_on_a_terminal():
+    import io
+
+    class Tty(io.StringIO):
+        def isatty(self):
+            return True
+
+    plain, tty = io.StringIO(), Tty()
+    for stream in (plain, tty):
+        bar = ProgressBar(4, stream=stream)
+        for done in range(1, 5):
+            bar(done, 4)
+        bar.finish()
+    assert plain.getvalue() == ""
+    assert "\r[" in tty.getvalue() and "4/4 episodes" in tty.getvalue()
+
+
+# --- real runs -------------------------------------------------------------------------------
+
+class DriveStraight:
+    """Drives straight ahead at `speed` whatever it sees: it must hit the wall in front."""
+
+    def __init__(self, dt, speed=0.1):
+        self.speed = speed
+
+    def compute_commands(self, z_scan, z_v, z_w):
+        return self.speed, 0.0
+
+
+class Exploding:
+    def __init__(self, dt):
+        self.calls = 0
+
+    def compute_commands(self, z_scan, z_v, z_w):
+        self.calls += 1
+        if self.calls == 3:
+            raise RuntimeError("controller exploded on call 3")
+        return 0.0, 0.0
+
+
+def _evaluate(tmp_path: Path, *args: str) -> tuple[subprocess.CompletedProcess, Path]:
+    out_dir = tmp_path / "out"
+    proc = subprocess.run([sys.executable, str(EVALUATE), "--out", str(out_dir), *args],
+                          capture_output=True, text=True, timeout=300, cwd=REPO)
+    return proc, out_dir
+
+
+@pytest.mark.slow
+def test_two_episodes_in_two_processes_write_readable_results(tmp_path):
+    proc, out = _evaluate(tmp_path, "--worlds", "lab02", "--starts", "outer,inner",
+                          "--duration", "20", "--jobs", "2")
+    assert proc.returncode in (0, 1), proc.stderr
+    data = json.loads((out / "results.json").read_text())
+    episodes = data["episodes"]
+    assert [(e["start"], e["error"]) for e in episodes] == [("outer", None), ("inner", None)]
+    assert data["meta"]["jobs"] == 2 and data["meta"]["controller"] == "amr_control.wall_follower:WallFollower"
+    for e in episodes:
+        assert e["sim_time_s"] == pytest.approx(20.0)
+        assert 0.5 < e["distance_m"] < 20.0 * 0.22 + 1e-6  # it moved, within the speed limit
+        assert 0.0 < e["explored_fraction"] <= 1.0
+    assert proc.returncode == (1 if any(e["collisions"] for e in episodes) else 0)
+    with open(out / "results.csv", newline="") as stream:
+        rows = list(csv.DictReader(stream))
+    assert [float(r["distance_m"]) for r in rows] == pytest.approx([e["distance_m"] for e in episodes])
+    assert "verdict:" in proc.stdout and "lab02  outer" in proc.stdout
+    assert (out / "sheet.png").stat().st_size > 10_000
+    assert "\r[" not in proc.stderr  # no progress bar when not on a terminal
+
+
+@pytest.mark.slow
+def test_a_collision_gives_exit_code_1_and_its_time(tmp_path):
+    # Straight north from lab02 "outer" (1, -1): the wall at y = 1.2 is 2.2 - 0.105 m ahead.
+    proc, out = _evaluate(tmp_path, "--worlds", "lab02", "--starts", "outer", "--duration", "14",
+                          "--controller", "tests.test_evaluation:DriveStraight", "-p", "speed:=0.2",
+                          "--no-sheet")
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    (episode,) = json.loads((out / "results.json").read_text())["episodes"]
+    assert episode["collisions"] >= 1
+    assert episode["first_collision_time_s"] == pytest.approx((2.2 - 0.105) / 0.2, abs=0.5)
+    assert "COLLISIONS in 1/1 episodes: lab02/outer/ideal/seed 0" in proc.stdout
+
+
+def test_a_failing_controller_is_reported_not_fatal():
+    from amr_sim.evaluation import run_episodes
+    specs = [EpisodeSpec("lab02", "outer", duration=1.0, controller="tests.test_evaluation:Exploding"),
+             EpisodeSpec("lab02", "outer", duration=1.0, controller="tests.test_evaluation:DriveStraight")]
+    seen = []
+    outcomes = run_episodes(specs, jobs=1, progress=lambda done, total, o: seen.append((done, total)))
+    assert seen == [(1, 2), (2, 2)]
+    assert "RuntimeError: controller exploded on call 3" in outcomes[0].error
+    assert outcomes[1].error is None and outcomes[1].result.distance_m == pytest.approx(0.1, abs=0.01)
+    assert verdict(outcomes)[1] == 3
+
+
+def test_ros_params_file_gives_the_controller_what_the_node_gets(tmp_path):
+    from amr_control.wall_follower import WallFollower
+    from amr_sim.evaluation import load_ros_params_file
+    params = tmp_path / "sim.yaml"
+    params.write_text("wall_follower:\n  ros__parameters:\n    kp: 2.5\n    use_sim_time: true\n"
+                      "    controller: amr_control.wall_follower:WallFollower\n"
+                      "/**:\n  ros__parameters:\n    kd: 0.5\n")
+    assert load_ros_params_file(params, WallFollower) == {"kp": 2.5, "kd": 0.5}
+    assert load_ros_params_file(params, RecordingController)["use_sim_time"] is True
+    params.write_text("kp: 2.5\n")
+    with pytest.raises(EvaluationError, match="no '<node>: ros__parameters:' section"):
+        load_ros_params_file(params, WallFollower)
+    config = tmp_path / "set.yaml"  # a config's params_file is relative to the config
+    config.write_text("worlds: [lab02]\nparams_file: sim.yaml\n")
+    assert load_config(config)["params_file"] == str(params)

@@ -1,0 +1,212 @@
+"""McapRecorder writes ROS 2 MCAP files that independent readers (rosbags, mcap_ros2) decode."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+from amr_msgs.msg import PoseStamped as GroundTruthPose
+from geometry_msgs.msg import TwistStamped
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from nav_msgs.msg import Odometry
+from rosbags.highlevel import AnyReader
+from sensor_msgs.msg import LaserScan
+
+from amr_sim.mcap_recorder import McapRecorder, cdr_header_stamp_ns, full_message_definition
+
+DT_NS = 50_000_000  # 0.05 s
+STEPS = 20
+SCAN_EVERY = 4      # 5 Hz scans against 20 Hz odometry and commands, like the turtlebot3 profile
+
+
+def _stamp(msg, ns: int) -> None:
+    msg.header.stamp.sec = ns // 1_000_000_000
+    msg.header.stamp.nanosec = ns % 1_000_000_000
+
+
+def _scan(ns: int, k: int) -> LaserScan:
+    msg = LaserScan()
+    _stamp(msg, ns)
+    msg.header.frame_id = "base_scan"
+    msg.angle_min = 0.0
+    msg.angle_increment = 2 * math.pi / 360
+    msg.angle_max = msg.angle_min + 359 * msg.angle_increment
+    msg.range_min, msg.range_max = 0.12, 3.5
+    msg.ranges = [0.5 + 0.001 * i + k for i in range(360)]
+    msg.ranges[7] = 0.0  # the LDS-01 "no return"
+    return msg
+
+
+def _odometry(ns: int, k: int) -> Odometry:
+    msg = Odometry()
+    _stamp(msg, ns)
+    msg.header.frame_id, msg.child_frame_id = "odom", "base_footprint"
+    msg.pose.pose.position.x = 0.01 * k
+    msg.pose.pose.orientation.w = 1.0
+    msg.twist.twist.linear.x = 0.2
+    msg.twist.twist.angular.z = -0.1 * k
+    return msg
+
+
+def _command(ns: int, k: int) -> TwistStamped:
+    msg = TwistStamped()
+    _stamp(msg, ns)
+    msg.twist.linear.x = 0.15
+    msg.twist.angular.z = 0.05 * k
+    return msg
+
+
+def _truth(ns: int, k: int) -> GroundTruthPose:
+    msg = GroundTruthPose()
+    _stamp(msg, ns)
+    msg.header.frame_id = "map"
+    msg.pose.position.x = 1.0 + 0.01 * k
+    msg.pose.position.y = -2.0
+    msg.pose.orientation.w = 1.0
+    msg.localized = k % 2 == 0
+    return msg
+
+
+@pytest.fixture
+def recording(tmp_path: Path) -> tuple[Path, dict[str, list[int]]]:
+    """A file with /scan (every 4th step), /odometry, /cmd_vel and /ground_truth every step."""
+    path = tmp_path / "run.mcap"
+    stamps: dict[str, list[int]] = {"/scan": [], "/odometry": [], "/cmd_vel": [], "/ground_truth": []}
+    metadata = {"world": "lab02", "start": "west", "profile": "turtlebot3", "seed": 3, "dt": 0.05}
+    with McapRecorder(path, metadata=metadata) as recorder:
+        for k in range(STEPS):
+            ns = 1_000_000_000 + k * DT_NS  # cross a second boundary: sec and nanosec both matter
+            if k % SCAN_EVERY == 0:
+                recorder.write("/scan", _scan(ns, k), ns)
+                stamps["/scan"].append(ns)
+            recorder.write("/odometry", _odometry(ns, k), ns)
+            recorder.write("/cmd_vel", _command(ns, k), ns)
+            recorder.write("/ground_truth", _truth(ns, k), ns)
+            for topic in ("/odometry", "/cmd_vel", "/ground_truth"):
+                stamps[topic].append(ns)
+        assert recorder.message_counts == {t: len(s) for t, s in stamps.items()}
+    return path, stamps
+
+
+def test_rosbags_reads_counts_stamps_and_values(recording):
+    path, stamps = recording
+    with AnyReader([path]) as reader:
+        types = {c.topic: c.msgtype for c in reader.connections}
+        assert types == {"/scan": "sensor_msgs/msg/LaserScan", "/odometry": "nav_msgs/msg/Odometry",
+                         "/cmd_vel": "geometry_msgs/msg/TwistStamped",
+                         "/ground_truth": "amr_msgs/msg/PoseStamped"}
+        got: dict[str, list] = {t: [] for t in stamps}
+        for connection, log_time, raw in reader.messages():
+            got[connection.topic].append((log_time, reader.deserialize(raw, connection.msgtype)))
+    for topic, expected in stamps.items():
+        assert [t for t, _ in got[topic]] == expected, topic
+        header_ns = [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for _, m in got[topic]]
+        assert header_ns == expected, topic
+    scan = got["/scan"][1][1]  # k = 4
+    assert len(scan.ranges) == 360
+    assert scan.ranges[0] == pytest.approx(4.5) and scan.ranges[7] == 0.0
+    assert scan.angle_increment == pytest.approx(2 * math.pi / 360)
+    assert scan.header.frame_id == "base_scan"
+    odom = got["/odometry"][5][1]
+    assert odom.child_frame_id == "base_footprint"
+    assert odom.pose.pose.position.x == pytest.approx(0.05)
+    assert odom.twist.twist.angular.z == pytest.approx(-0.5)
+    assert got["/cmd_vel"][3][1].twist.angular.z == pytest.approx(0.15)
+    truth = got["/ground_truth"][3][1]
+    assert truth.pose.position.x == pytest.approx(1.03) and truth.localized is False
+
+
+def test_mcap_ros2_reader_decodes_with_embedded_definitions_and_metadata(recording):
+    path, stamps = recording
+    counts: dict[str, int] = {}
+    with open(path, "rb") as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        for _schema, channel, message, ros_msg in reader.iter_decoded_messages():
+            counts[channel.topic] = counts.get(channel.topic, 0) + 1
+            if channel.topic == "/cmd_vel":
+                k = (message.log_time - 1_000_000_000) // DT_NS
+                assert ros_msg.twist.angular.z == pytest.approx(0.05 * k)
+                assert ros_msg.header.stamp.nanosec == message.log_time % 10**9
+    assert counts == {t: len(s) for t, s in stamps.items()}
+
+    with open(path, "rb") as stream:
+        reader = make_reader(stream)
+        header = reader.get_header()
+        assert header.profile == "ros2"
+        summary = reader.get_summary()
+        schemas = {s.name: s for s in summary.schemas.values()}
+        assert all(s.encoding == "ros2msg" for s in schemas.values())
+        assert all(c.message_encoding == "cdr" for c in summary.channels.values())
+        scan_definition = schemas["sensor_msgs/msg/LaserScan"].data.decode()
+        assert scan_definition.startswith(full_message_definition("sensor_msgs/msg/LaserScan")[:40])
+        assert "\n" + "=" * 80 + "\nMSG: std_msgs/Header\n" in scan_definition
+        assert "MSG: builtin_interfaces/Time\n" in scan_definition
+        metadata = {m.name: m.metadata for m in reader.iter_metadata()}
+    assert metadata["amr_sim"] == {"world": "lab02", "start": "west", "profile": "turtlebot3",
+                                   "seed": "3", "dt": "0.05"}
+
+
+def test_each_dependency_appears_once_in_the_definition():
+    text = full_message_definition("nav_msgs/msg/Odometry")
+    for dependency in ("std_msgs/Header", "geometry_msgs/Twist", "geometry_msgs/Vector3",
+                       "geometry_msgs/Pose", "builtin_interfaces/Time"):
+        assert text.count(f"MSG: {dependency}\n") == 1, dependency
+
+
+def test_stamp_is_read_from_serialized_bytes():
+    from rclpy.serialization import serialize_message
+    ns = 1_234_567_891_011
+    assert cdr_header_stamp_ns(serialize_message(_scan(ns, 0))) == ns
+    assert cdr_header_stamp_ns(serialize_message(_command(ns, 0))) == ns
+    assert cdr_header_stamp_ns(serialize_message(LaserScan())) is None  # zero stamp
+    assert cdr_header_stamp_ns(b"\x00\x01\x00") is None
+
+
+def test_bad_input_gives_clear_errors(tmp_path):
+    with McapRecorder(tmp_path / "bad.mcap") as recorder:
+        with pytest.raises(ValueError, match="absolute"):
+            recorder.write("scan", LaserScan(), 0)
+        with pytest.raises(ValueError, match=">= 0"):
+            recorder.write("/scan", LaserScan(), -5)
+        with pytest.raises(TypeError, match="not a ROS 2 message"):
+            recorder.write("/scan", {"ranges": []}, 0)
+        recorder.write("/scan", LaserScan(), 0)
+        with pytest.raises(TypeError, match="recorded as sensor_msgs/msg/LaserScan"):
+            recorder.write("/scan", Odometry(), 1)
+    with pytest.raises(RuntimeError, match="closed"):
+        recorder.write("/scan", LaserScan(), 2)
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        McapRecorder(tmp_path / "missing" / "x.mcap")
+    with AnyReader([tmp_path / "bad.mcap"]) as reader:  # the valid message survived
+        assert sum(1 for _ in reader.messages()) == 1
+
+
+def test_attach_records_what_a_node_receives(ros, tmp_path):
+    path = tmp_path / "attached.mcap"
+    talker = ros.node("mcap_talker")
+    listener = ros.node("mcap_listener")
+    scan_pub = talker.create_publisher(LaserScan, "/scan", 10)
+    cmd_pub = talker.create_publisher(TwistStamped, "/cmd_vel", 10)
+    recorder = McapRecorder(path)
+    recorder.attach(listener, {"/scan": LaserScan, "/cmd_vel": TwistStamped})
+    ros.spin_until(lambda: scan_pub.get_subscription_count() > 0
+                   and cmd_pub.get_subscription_count() > 0, 10.0, "recorder subscriptions")
+    sent_ns = [2_000_000_000 + k * DT_NS for k in range(5)]
+    for ns in sent_ns:
+        scan_pub.publish(_scan(ns, 1))
+        command = _command(ns, 2)
+        command.header.stamp.sec = command.header.stamp.nanosec = 0  # unstamped: node clock
+        cmd_pub.publish(command)
+    ros.spin_until(lambda: recorder.message_counts.get("/scan", 0) == 5
+                   and recorder.message_counts.get("/cmd_vel", 0) == 5, 10.0, "5 messages each")
+    recorder.close()
+    with AnyReader([path]) as reader:
+        times: dict[str, list[int]] = {"/scan": [], "/cmd_vel": []}
+        for connection, log_time, raw in reader.messages():
+            times[connection.topic].append(log_time)
+            if connection.topic == "/scan":
+                scan = reader.deserialize(raw, connection.msgtype)
+                assert scan.ranges[0] == pytest.approx(1.5) and scan.ranges[7] == 0.0
+    assert times["/scan"] == sent_ns
+    assert len(times["/cmd_vel"]) == 5 and min(times["/cmd_vel"]) > 10**18  # wall clock, not 0

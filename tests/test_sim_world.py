@@ -1,0 +1,139 @@
+"""World loading: bundled worlds, the course's map JSON, and a clear WorldError for bad input."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from amr_sim.robot import ROBOT_RADIUS
+from amr_sim.world import World, WorldError, bundled_worlds
+
+REQUIRED_WORLDS = {"lab02", "corridor_loop", "maze_deadends", "room_obstacles", "wide_maze"}
+
+
+def test_required_worlds_are_bundled():
+    assert REQUIRED_WORLDS <= set(bundled_worlds())
+
+
+@pytest.mark.parametrize("name", bundled_worlds())
+def test_bundled_world_loads_closed_with_valid_starts(name):
+    world = World.load(name)
+    assert world.name == name
+    assert world.segments.shape[1] == 4 and len(world.segments) >= 4
+    assert world.boundary is not None and len(world.starts) >= 2
+    for start_name, (x, y, theta) in world.starts.items():
+        assert world.contains(x, y), start_name
+        assert world.clearance(x, y) >= ROBOT_RADIUS, start_name
+        assert world.resolve_start(start_name) == (x, y, theta)
+    # Closed: a point just outside the boundary polygon is outside; the boundary polyline has no gap
+    xmin, ymin, xmax, ymax = world.bounds
+    assert not world.contains(xmax + 0.01, 0.5 * (ymin + ymax))
+    # Corridors no narrower than 0.4 m: every free cell centre keeps the robot off the walls.
+    assert len(world.free_cells()) > 0
+
+
+def test_lab02_has_the_course_starts_on_a_0_4_m_grid():
+    world = World.load("lab02")
+    assert world.starts["outer"] == pytest.approx((1.0, -1.0, math.pi / 2))
+    assert world.starts["inner"] == pytest.approx((0.6, -0.6, 3 * math.pi / 2))
+    grid = world.segments / 0.4
+    assert np.allclose(grid, np.round(grid), atol=1e-9), "lab02 walls lie on multiples of 0.4 m"
+    # Start poses sit in the middle of 0.4 m corridors: 0.2 m from the nearest wall.
+    for x, y, _ in world.starts.values():
+        assert world.clearance(x, y) == pytest.approx(0.2)
+
+
+def test_course_map_json_loads(tmp_path):
+    path = tmp_path / "map.json"
+    path.write_text(json.dumps({"metric": {
+        "boundary": [[0, 0], [2, 0], [2, 1], [0, 1]],
+        "holes": [[[0.8, 0.4], [1.2, 0.4], [1.2, 0.6], [0.8, 0.6]]]}}))
+    world = World.load(str(path))
+    assert len(world.segments) == 8
+    assert world.bounds == (0.0, 0.0, 2.0, 1.0)
+    assert world.clearance(0.5, 0.5) == pytest.approx(0.3)
+    assert world.resolve_start((0.3, 0.3, 0.0)) == (0.3, 0.3, 0.0)
+    with pytest.raises(WorldError, match="inside obstacle"):
+        world.resolve_start((1.0, 0.5, 0.0))
+
+
+def test_yaml_world_with_pi_angles_open_walls_and_goal(tmp_path):
+    path = tmp_path / "w.yaml"
+    path.write_text("boundary: [[0, 0], [2, 0], [2, 2], [0, 2], [0, 0]]\n"
+                    "walls: [[[1, 0], [1, 1.2]]]\nstarts: {a: [0.5, 0.5, 3*pi/2], b: [1.5, 0.5, -pi/4]}\n"
+                    "goal: [1.5, 1.5]\n")
+    world = World.load(path)
+    assert world.name == "w" and len(world.segments) == 5  # the repeated closing point is dropped
+    assert world.starts["a"][2] == pytest.approx(3 * math.pi / 2)
+    assert world.starts["b"][2] == pytest.approx(-math.pi / 4)
+    assert world.goal == (1.5, 1.5)
+
+
+GOOD = "boundary: [[0, 0], [2, 0], [2, 2], [0, 2]]\n"
+
+
+@pytest.mark.parametrize("text, problem", [
+    ("boundary: [[0, 0], [2, 0]\n", "invalid YAML"),
+    ("- 1\n- 2\n", "expected a mapping"),
+    ("starts: {a: [1, 1, 0]}\n", "missing key 'boundary'"),
+    ("boundary: [[0, 0], [2, 0], [2, x], [0, 2]]\n", "must be a number"),
+    ("boundary: [[0, 0], [2, 0], [2, .nan], [0, 2]]\n", "not finite"),
+    ("boundary: [[0, 0], [2, 0], [2, .inf], [0, 2]]\n", "not finite"),
+    ("boundary: [[0, 0], [2, 0, 1], [2, 2], [0, 2]]\n", r"must be \[x, y\]"),
+    ("boundary: [[0, 0], [2, 0]]\n", "at least 3"),
+    (GOOD + "walls: [[[1, 1]]]\n", "at least 2"),
+    (GOOD + "walls: [[[1, 1], [1, 1], [1, 1.5]]]\n", "zero-length wall"),
+    (GOOD + "holes: 3\n", "must be a list"),
+    (GOOD + "starts: {a: [5, 5, 0]}\n", "outside the boundary"),
+    (GOOD + "starts: {a: [0.05, 1, 0]}\n", "touches a wall"),
+    (GOOD + "starts: {a: [0.1, 1, 0]}\n", "touches a wall"),
+    (GOOD + "holes: [[[0.5, 0.5], [1.5, 0.5], [1.5, 1.5], [0.5, 1.5]]]\nstarts: {a: [1, 1, 0]}\n",
+     "inside obstacle"),
+    (GOOD + "starts: {a: [1, 1]}\n", r"must be \[x, y, theta\]"),
+    (GOOD + "starts: {a: [1, 1, north]}\n", "theta must be a number"),
+    (GOOD + "cell_size: -1\n", "must be > 0"),
+    (GOOD + "goal: [9, 9]\n", "goal .* outside"),
+    (GOOD + "colour: red\n", "unknown key"),
+])
+def test_malformed_yaml_gives_clear_error(tmp_path, text, problem):
+    path = tmp_path / "bad_world.yaml"
+    path.write_text(text)
+    with pytest.raises(WorldError, match=problem) as info:
+        World.load(str(path))
+    assert "bad_world.yaml" in str(info.value)
+
+
+@pytest.mark.parametrize("text, problem", [
+    ("{not json", "invalid JSON"),
+    ('{"map": {}}', "missing key 'metric'"),
+    ('{"metric": {"holes": []}}', "missing key 'metric.boundary'"),
+    ('{"metric": {"boundary": [[0, 0], [1, 0], [1, "a"]]}}', "must be a number"),
+    ('{"metric": {"boundary": [[0, 0], [1, 0], [1, 1]], "holes": [[[0.2, 0.2]]]}}', "at least 3"),
+])
+def test_malformed_course_json_gives_clear_error(tmp_path, text, problem):
+    path = tmp_path / "bad_map.json"
+    path.write_text(text)
+    with pytest.raises(WorldError, match=problem) as info:
+        World.load(path)
+    assert "bad_map.json" in str(info.value)
+
+
+def test_missing_file_and_unknown_name(tmp_path):
+    with pytest.raises(WorldError, match="not found") as info:
+        World.load(str(tmp_path / "nowhere.yaml"))
+    assert "nowhere.yaml" in str(info.value)
+    with pytest.raises(WorldError, match="unknown world 'lab99'.*lab02"):
+        World.load("lab99")
+
+
+def test_resolve_start_rejects_bad_poses():
+    world = World.load("lab02")
+    with pytest.raises(WorldError, match="unknown start 'middle'.*outer"):
+        world.resolve_start("middle")
+    with pytest.raises(WorldError, match="touches a wall"):
+        world.resolve_start((1.15, -1.0, 0.0))
+    with pytest.raises(WorldError, match="not finite"):
+        world.resolve_start((math.nan, 0.0, 0.0))
+    assert world.resolve_start(None) == world.starts["outer"]

@@ -1,0 +1,368 @@
+"""The amr_simulator lifecycle node over real DDS: lockstep, real time, goal, bad input.
+
+Every test talks to the node through topics from a separate probe node, as the wall follower
+and a localization node would.
+"""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import Twist, TwistStamped
+from nav_msgs.msg import Odometry
+from rclpy.lifecycle import TransitionCallbackReturn
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import LaserScan
+
+from amr_sim.ros_conversions import (laser_scan, odometry_message, pose_from_message,
+                                     quaternion_to_yaw, scan_ranges, seconds_to_time,
+                                     time_to_nanoseconds, twist_stamped, yaw_to_quaternion)
+from amr_sim.simulator_node import SimulatorNode, parse_start
+
+DT_NS = 50_000_000
+RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+BEST_EFFORT = QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT)
+
+
+class Probe:
+    """The rest of the graph: records every output of the simulator and sends commands."""
+
+    def __init__(self, ros, stamped: bool = True) -> None:
+        self.node = ros.node("probe")
+        self.received: dict[str, list] = {name: [] for name in
+                                          ("odometry", "odom", "scan", "clock", "ground_truth")}
+        for topic, msg_type, qos in (("odometry", Odometry, RELIABLE), ("odom", Odometry, RELIABLE),
+                                     ("scan", LaserScan, BEST_EFFORT), ("clock", Clock, RELIABLE),
+                                     ("ground_truth", Odometry, RELIABLE)):
+            self.node.create_subscription(msg_type, "/" + topic, self.received[topic].append, qos)
+        self.stamped = stamped
+        self.cmd = self.node.create_publisher(TwistStamped if stamped else Twist, "/cmd_vel", 10)
+
+    def send(self, v: float, w: float, stamp=None) -> None:
+        if self.stamped:
+            self.cmd.publish(twist_stamped(v, w, stamp))
+        else:
+            message = Twist()
+            message.linear.x, message.angular.z = v, w
+            self.cmd.publish(message)
+
+    def count(self) -> dict[str, int]:
+        return {topic: len(messages) for topic, messages in self.received.items()}
+
+
+def start_simulator(ros, probe: Probe, activate: bool = True, **parameters) -> SimulatorNode:
+    """Configure (and activate) a simulator once the probe is matched, so nothing is lost."""
+    node = ros.add(SimulatorNode(context=ros.context, parameter_overrides=[
+        Parameter(name, value=value) for name, value in parameters.items()]))
+    assert node.trigger_configure() == TransitionCallbackReturn.SUCCESS
+    odom_topic = node.simulator.profile.odom_topic
+    ros.spin_until(lambda: all(p.get_subscription_count() > 0
+                               for p in node._outputs.values())
+                   and probe.cmd.get_subscription_count() > 0
+                   and probe.node.count_publishers(odom_topic) > 0,
+                   timeout=10.0, message="probe and simulator to discover each other")
+    if activate:
+        assert node.trigger_activate() == TransitionCallbackReturn.SUCCESS
+    return node
+
+
+def step_once(ros, probe: Probe, v: float, w: float, odom_topic: str = "odometry") -> None:
+    """Send one command and wait for its whole answer (odometry, scan, clock, ground truth)."""
+    before = probe.count()
+    probe.send(v, w)
+    topics = (odom_topic, "scan", "clock", "ground_truth")
+    ros.spin_until(lambda: all(len(probe.received[t]) > before[t] for t in topics),
+                   timeout=5.0, message="the answer to a command")
+
+
+def odometry_is_finite(message: Odometry) -> bool:
+    values = [message.pose.pose.position.x, message.pose.pose.position.y,
+              message.pose.pose.orientation.z, message.pose.pose.orientation.w,
+              message.twist.twist.linear.x, message.twist.twist.angular.z]
+    return all(math.isfinite(v) for v in values)
+
+
+@pytest.fixture
+def open_room(tmp_path):
+    """A course map JSON: a 20 m square room with one 0.2 m box 0.5 m ahead of the origin."""
+    path = tmp_path / "open_room.json"
+    path.write_text(json.dumps({"metric": {
+        "boundary": [[-10, -10], [10, -10], [10, 10], [-10, 10]],
+        "holes": [[[0.5, -0.1], [0.7, -0.1], [0.7, 0.1], [0.5, 0.1]]]}}))
+    return str(path)
+
+
+# --- message helpers ----------------------------------------------------------------------
+
+def test_conversions_round_trip_and_stamp_arithmetic():
+    for yaw in (0.0, 1.0, -2.5, math.pi / 2, 3.0):
+        assert quaternion_to_yaw(yaw_to_quaternion(yaw)) == pytest.approx(yaw, abs=1e-12)
+    # k * dt stamps stay exactly k * 50 ms apart in nanoseconds, even after float accumulation.
+    t, previous = 0.0, 0
+    for _ in range(1000):
+        t += 0.05
+        ns = time_to_nanoseconds(seconds_to_time(t))
+        assert ns - previous == DT_NS
+        previous = ns
+    message = odometry_message(seconds_to_time(1.5), "odom", "base_footprint", (1.0, -2.0, 0.5),
+                               (0.1, -0.2))
+    assert pose_from_message(message.pose.pose) == pytest.approx((1.0, -2.0, 0.5))
+    scan = laser_scan([1.0, float("nan"), 0.0], stamp=seconds_to_time(0.0), frame_id="s",
+                      angle_min=0.0, angle_increment=0.5, range_min=0.1, range_max=4.0,
+                      scan_time=0.3)
+    assert scan.angle_max == pytest.approx(1.0) and scan.time_increment == pytest.approx(0.1)
+    assert np.isnan(scan_ranges(scan)[1]) and scan_ranges(scan)[2] == 0.0
+    with pytest.raises(ValueError):
+        seconds_to_time(float("nan"))
+    assert parse_start("1, -2.5, 3.1") == (1.0, -2.5, 3.1)
+    assert parse_start("outer") == "outer" and parse_start("") is None
+    for bad in ("1,2", "1,x,3", "1,2,nan"):
+        with pytest.raises(ValueError):
+            parse_start(bad)
+
+
+# --- lockstep -----------------------------------------------------------------------------
+
+def test_lockstep_answers_each_command_once_with_stamps_advancing_by_dt(ros):
+    probe = Probe(ros)
+    node = start_simulator(ros, probe)
+    # The first measurement (stamp 0, no step) arrives on activation, before any command.
+    ros.spin_until(lambda: probe.received["odometry"] and probe.received["scan"],
+                   message="the first measurement")
+    assert node.simulator.steps == 0
+    for k in range(1, 21):
+        step_once(ros, probe, 0.2, 0.5)
+        assert node.simulator.steps == k
+    ros.spin_for(0.2)  # nothing more may come without commands
+    counts = probe.count()
+    assert counts["odometry"] == counts["scan"] == counts["clock"] == 21
+    assert counts["ground_truth"] == 21 and counts["odom"] == 0
+    for topic in ("odometry", "scan", "ground_truth"):
+        stamps = [time_to_nanoseconds(m.header.stamp) for m in probe.received[topic]]
+        assert stamps == [k * DT_NS for k in range(21)], topic
+    assert [time_to_nanoseconds(m.clock) for m in probe.received["clock"]] == \
+        [k * DT_NS for k in range(21)]
+    odometry = probe.received["odometry"][-1]
+    assert (odometry.header.frame_id, odometry.child_frame_id) == ("odom", "base_footprint")
+    # Twist = encoder speeds: the robot turns left while driving at the commanded speeds.
+    assert odometry.twist.twist.linear.x == pytest.approx(0.2, abs=0.02)
+    assert odometry.twist.twist.angular.z == pytest.approx(0.5, abs=0.05)
+    assert pose_from_message(odometry.pose.pose) == pytest.approx(
+        node.simulator.odometry_pose, abs=1e-6)
+    truth = probe.received["ground_truth"][-1]
+    assert truth.header.frame_id == "map"
+    assert pose_from_message(truth.pose.pose) == pytest.approx(node.simulator.pose, abs=1e-9)
+    assert truth.twist.twist.linear.x == pytest.approx(0.2, abs=0.02)
+    start = pose_from_message(probe.received["ground_truth"][0].pose.pose)
+    assert math.dist(start[:2], (1.0, -1.0)) < 1e-9  # lab02 'outer', the default start
+    assert math.dist(start[:2], node.simulator.pose[:2]) > 0.1  # it did move
+
+
+@pytest.mark.parametrize("profile, rays, no_return, range_limits, odom_topic", [
+    ("ideal", 240, "nan", (0.016, 8.0), "odometry"),
+    ("turtlebot3", 360, "zero", (0.12, 3.5), "odom"),
+])
+def test_laser_scan_fields_follow_the_profile(ros, open_room, profile, rays, no_return,
+                                              range_limits, odom_topic):
+    probe = Probe(ros)
+    node = start_simulator(ros, probe, world=open_room, start="0,0,0", profile=profile)
+    ros.spin_until(lambda: probe.received["scan"] and probe.received[odom_topic],
+                   message="the first measurement")
+    step_once(ros, probe, 0.0, 0.0, odom_topic)
+    scan = probe.received["scan"][-1]
+    assert len(scan.ranges) == rays
+    assert scan.header.frame_id == "base_scan"
+    assert scan.angle_min == 0.0
+    assert scan.angle_increment == pytest.approx(2 * math.pi / rays, rel=1e-6)
+    assert scan.angle_max == pytest.approx(2 * math.pi * (rays - 1) / rays, rel=1e-6)
+    assert (scan.range_min, scan.range_max) == pytest.approx(range_limits, rel=1e-6)
+    assert scan.scan_time == pytest.approx(0.05) and \
+        scan.time_increment == pytest.approx(0.05 / rays, rel=1e-5)
+    ranges = scan_ranges(scan)
+    # Straight ahead: the box face 0.5 m away. Left, right, back: walls 10 m away = no return.
+    assert ranges[0] == pytest.approx(0.5, abs=0.05)
+    for index in (rays // 4, rays // 2, 3 * rays // 4):
+        assert (math.isnan(ranges[index]) if no_return == "nan" else ranges[index] == 0.0)
+    valid = ranges[np.isfinite(ranges) & (ranges != 0.0)]
+    assert valid.size > 0 and np.all((valid >= range_limits[0]) & (valid <= range_limits[1]))
+    if profile == "turtlebot3":  # /odom: pose only, as the robot's; no /odometry
+        odom = probe.received["odom"][-1]
+        assert (odom.header.frame_id, odom.child_frame_id) == ("odom", "base_footprint")
+        assert odom.twist.twist.linear.x == 0.0 and probe.count()["odometry"] == 0
+        assert node.simulator.profile.odom_topic == "/odom"
+
+
+def test_bad_commands_are_zero_or_saturated_and_nothing_non_finite_is_published(ros):
+    probe = Probe(ros)
+    node = start_simulator(ros, probe)
+    start = node.simulator.pose
+    for v, w in ((float("nan"), 0.3), (0.1, float("inf")), (float("-inf"), float("nan"))):
+        step_once(ros, probe, v, w)
+    assert node.simulator.pose == pytest.approx(start, abs=1e-9)
+    for _ in range(10):
+        step_once(ros, probe, 1e9, 0.0)  # saturated at the wheel-speed limit
+    speeds = [m.twist.twist.linear.x for m in probe.received["ground_truth"]]
+    assert max(speeds) <= 0.22 + 1e-6 and max(speeds) > 0.15
+    assert all(odometry_is_finite(m) for topic in ("odometry", "ground_truth")
+               for m in probe.received[topic])
+
+
+def test_inactive_node_publishes_nothing_and_does_not_step(ros):
+    probe = Probe(ros)
+    node = start_simulator(ros, probe, activate=False)
+    for _ in range(3):
+        probe.send(0.1, 0.0)
+    ros.spin_for(0.3)
+    assert sum(probe.count().values()) == 0 and node.simulator.steps == 0
+    assert node.trigger_activate() == TransitionCallbackReturn.SUCCESS
+    ros.spin_until(lambda: len(probe.received["ground_truth"]) == 1, message="first measurement")
+    step_once(ros, probe, 0.1, 0.0)
+    assert node.trigger_deactivate() == TransitionCallbackReturn.SUCCESS
+    counts, steps = probe.count(), node.simulator.steps
+    for _ in range(3):
+        probe.send(0.1, 0.0)
+    ros.spin_for(0.3)
+    assert probe.count() == counts and node.simulator.steps == steps == 1
+    assert node.trigger_cleanup() == TransitionCallbackReturn.SUCCESS
+    assert node.simulator is None
+
+
+@pytest.mark.parametrize("parameters, reason", [
+    ({"world": "no_such_world"}, "no_such_world"),
+    ({"start": "1,2"}, "x,y,theta"),
+    ({"start": "nowhere"}, "nowhere"),
+    ({"start": "0,0,0"}, "start"),  # lab02's origin lies in a wall or outside: rejected
+    ({"profile": "gazebo"}, "gazebo"),
+    ({"mode": "fast"}, "mode"),
+    ({"dt": -0.05}, "dt"),
+    ({"goal": [1.0]}, "goal"),
+])
+def test_bad_parameters_fail_configure_with_the_reason_logged(ros, parameters, reason,
+                                                              monkeypatch):
+    node = ros.add(SimulatorNode(context=ros.context, parameter_overrides=[
+        Parameter(name, value=value) for name, value in parameters.items()]))
+    logged = []
+    logger = node.get_logger()
+    monkeypatch.setattr(type(logger), "error",
+                        lambda self, text, **kwargs: logged.append(text) or True)
+    assert node.trigger_configure() == TransitionCallbackReturn.FAILURE
+    assert node.simulator is None
+    assert logged and reason in logged[-1]
+
+
+def test_twist_commands_when_cmd_vel_is_not_stamped(ros):
+    probe = Probe(ros, stamped=False)
+    node = start_simulator(ros, probe, cmd_vel_stamped=False)
+    info = node.get_subscriptions_info_by_topic("/cmd_vel")
+    assert [i.topic_type for i in info] == ["geometry_msgs/msg/Twist"]
+    for _ in range(5):
+        step_once(ros, probe, 0.2, 0.0)
+    assert node.simulator.steps == 5 and node.simulator.distance > 0.01
+
+
+def test_on_step_hooks_see_every_step_and_can_finish_the_run(ros):
+    probe = Probe(ros)
+    node = start_simulator(ros, probe)
+    seen = []
+
+    def stop_after_three(simulator) -> None:
+        seen.append(simulator.steps)
+        if simulator.steps == 3:
+            node.finish("duration reached")
+
+    node.on_step.append(stop_after_three)
+    for _ in range(2):
+        step_once(ros, probe, 0.1, 0.0)
+    probe.send(0.1, 0.0)
+    ros.spin_until(lambda: node.finished, message="the hook to finish the run")
+    probe.send(0.1, 0.0)
+    ros.spin_for(0.2)
+    assert seen == [1, 2, 3] and node.simulator.steps == 3
+    summary = node.summary()
+    assert summary["finished"] and summary["reason"] == "duration reached"
+    assert not summary["goal_reached"] and summary["steps"] == 3
+
+
+# --- real time ----------------------------------------------------------------------------
+
+def test_realtime_turtlebot3_rates_and_stale_commands(ros):
+    probe = Probe(ros, stamped=False)
+    node = start_simulator(ros, probe, mode="realtime", profile="turtlebot3",
+                           cmd_vel_stamped=False, command_timeout=0.3)
+    probe.send(0.1, 0.0)  # sent once: the robot drives for command_timeout, then stops
+    ros.spin_for(1.5)
+    assert node.trigger_deactivate() == TransitionCallbackReturn.SUCCESS
+    ros.spin_for(0.1)
+    steps = node.simulator.steps
+    odom = [time_to_nanoseconds(m.header.stamp) for m in probe.received["odom"]]
+    scans = [time_to_nanoseconds(m.header.stamp) for m in probe.received["scan"]]
+    # Steps follow a wall-clock timer (loaded machine: only a loose lower bound), never faster.
+    assert 8 <= steps <= 31
+    # Per simulated time, exact: /odom every 50 ms (20 Hz), /scan every 200 ms (5 Hz).
+    assert np.all(np.diff(odom) == DT_NS) and abs(len(odom) - steps) <= 1
+    assert np.all(np.diff(scans) == 4 * DT_NS) and abs(len(scans) - steps / 4) <= 1
+    assert probe.received["scan"][-1].scan_time == pytest.approx(0.2)
+    assert probe.count()["odometry"] == 0
+    # Stale command: the robot moved, then stood still once the command was older than 0.3 s.
+    truth = probe.received["ground_truth"]
+    speeds = [m.twist.twist.linear.x for m in truth]
+    assert max(speeds) > 0.05
+    assert all(abs(s) < 1e-3 for s in speeds[-3:])
+    assert node.simulator.distance < 0.1 * (0.3 + 0.2)  # at most ~timeout + a step of driving
+
+
+# --- goal and localization ----------------------------------------------------------------
+
+def test_goal_reached_while_localized_finishes_the_run_with_a_summary(ros):
+    from amr_msgs.msg import PoseStamped
+    probe = Probe(ros)
+    pose_publisher = probe.node.create_publisher(PoseStamped, "/pose", 10)
+    localized = {"value": False}
+    offset = 0.05  # the estimate is 5 cm off in x
+
+    def answer(odometry: Odometry) -> None:
+        """A localization node + controller: pose estimate and command, stamped alike."""
+        truth = probe.received["ground_truth"][answered].pose.pose
+        estimate = PoseStamped()
+        estimate.header.stamp = odometry.header.stamp
+        estimate.pose = truth
+        estimate.pose.position.x += offset
+        estimate.localized = localized["value"]
+        pose_publisher.publish(estimate)
+        probe.send(0.2, 0.0, odometry.header.stamp)
+
+    node = start_simulator(ros, probe, activate=False, enable_localization=True,
+                           goal=[1.0, -0.7], goal_tolerance=0.15)
+    ros.spin_until(lambda: pose_publisher.get_subscription_count() > 0,
+                   message="/pose subscription")
+    answered = 0
+    assert node.trigger_activate() == TransitionCallbackReturn.SUCCESS
+    for _ in range(200):
+        ros.spin_until(lambda: (len(probe.received["odometry"]) > answered and
+                                len(probe.received["ground_truth"]) > answered) or node.finished,
+                       message="a measurement or the end of the run")
+        if node.finished:
+            break
+        # Unlocalized, the robot passes within tolerance of the goal without finishing.
+        y = node.simulator.pose[1]
+        localized["value"] = y > -0.7
+        answer(probe.received["odometry"][answered])
+        answered += 1
+    assert node.finished
+    x, y, _ = node.simulator.pose
+    assert math.hypot(x - 1.0, y + 0.7) <= 0.15 and y > -0.7
+    summary = node.summary()
+    assert summary["goal_reached"] and summary["localized"]
+    assert summary["steps"] == node.simulator.steps > 3
+    assert summary["sim_time_s"] == pytest.approx(0.05 * summary["steps"])
+    assert summary["wall_time_s"] > 0
+    assert summary["localization_error"][0] == pytest.approx(offset, abs=0.02)
+    # Finished: further commands are not answered.
+    steps, count = node.simulator.steps, probe.count()["odometry"]
+    probe.send(0.2, 0.0, seconds_to_time(node.simulator.time))
+    ros.spin_for(0.2)
+    assert node.simulator.steps == steps and probe.count()["odometry"] == count

@@ -1,0 +1,179 @@
+"""The wall_follower node: lockstep answers, robot-mode timer, and every path that must stop."""
+import math
+
+import pytest
+from geometry_msgs.msg import Twist, TwistStamped
+from nav_msgs.msg import Odometry
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import LaserScan
+
+from amr_control.wall_follower_node import WallFollowerNode
+
+BEST_EFFORT = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
+
+
+def make_node(ros, node_name="wall_follower", **params):
+    overrides = [Parameter(name, value=value) for name, value in params.items()]
+    return ros.add(WallFollowerNode(node_name, context=ros.context,
+                                    parameter_overrides=overrides))
+
+
+def scan_msg(stamp_ns, rays=360, value=1.0):
+    msg = LaserScan()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
+    msg.header.frame_id = "base_scan"
+    msg.angle_min = 0.0
+    msg.angle_increment = 2 * math.pi / rays
+    msg.angle_max = msg.angle_increment * (rays - 1)
+    msg.range_min, msg.range_max = 0.12, 3.5
+    msg.ranges = [value] * rays
+    return msg
+
+
+def odom_msg(stamp_ns, v=0.0, w=0.0):
+    msg = Odometry()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
+    msg.twist.twist.linear.x, msg.twist.twist.angular.z = v, w
+    return msg
+
+
+class Robot:
+    """The test's side of the graph: publishes /odometry and /scan, records /cmd_vel."""
+
+    def __init__(self, ros, stamped=True):
+        self.node = ros.node("fake_robot")
+        self.odometry = self.node.create_publisher(Odometry, "/odometry", 10)
+        self.scan = self.node.create_publisher(LaserScan, "/scan", BEST_EFFORT)
+        self.commands = []
+        self.node.create_subscription(TwistStamped if stamped else Twist, "/cmd_vel",
+                                      self.commands.append, 10)
+
+    def send(self, stamp_ns, **kwargs):
+        self.odometry.publish(odom_msg(stamp_ns, **kwargs))
+        self.scan.publish(scan_msg(stamp_ns))
+
+
+def twist_of(msg):
+    return msg.twist if isinstance(msg, TwistStamped) else msg
+
+
+def bring_up(ros, node, robot):
+    assert node.trigger_configure().name == "SUCCESS"
+    assert node.trigger_activate().name == "SUCCESS"
+    # Wait for discovery both ways before measuring anything.
+    ros.spin_until(lambda: node.count_publishers("/scan") >= 1 and
+                   robot.node.count_subscribers("/cmd_vel") >= 1 and
+                   node.count_subscribers("/scan") >= 1, 10.0, "discovery")
+    ros.spin_for(0.2)
+
+
+def test_simulation_mode_answers_each_synchronized_set_once_with_its_stamp(ros):
+    node = make_node(ros, controller="tests.controllers:ConstantController")
+    robot = Robot(ros)
+    bring_up(ros, node, robot)
+    for k in range(1, 6):
+        robot.send(k * 50_000_000, v=0.1, w=0.2)
+        ros.spin_until(lambda: len(robot.commands) == k, 5.0, f"command {k}")
+    stamps = [c.header.stamp.sec * 10**9 + c.header.stamp.nanosec for c in robot.commands]
+    assert stamps == [k * 50_000_000 for k in range(1, 6)]
+    assert all(twist_of(c).linear.x == pytest.approx(0.1) and
+               twist_of(c).angular.z == pytest.approx(0.5) for c in robot.commands)
+    assert node.controller.calls[-1] == (360, pytest.approx(0.1), pytest.approx(0.2))
+    assert node.controller.geometry[2:] == (pytest.approx(0.12), pytest.approx(3.5))
+
+
+def test_non_finite_and_absurd_controller_outputs_never_reach_the_robot(ros):
+    node = make_node(ros, controller="tests.controllers:NanController")
+    robot = Robot(ros)
+    bring_up(ros, node, robot)
+    robot.send(50_000_000)
+    ros.spin_until(lambda: len(robot.commands) == 1, 5.0, "a command")
+    assert (twist_of(robot.commands[0]).linear.x, twist_of(robot.commands[0]).angular.z) == (0, 0)
+
+    huge = make_node(ros, "wall_follower_huge", controller="tests.controllers:HugeController",
+                     cmd_vel_topic="/cmd_vel_huge")
+    received = []
+    robot.node.create_subscription(TwistStamped, "/cmd_vel_huge", received.append, 10)
+    bring_up(ros, huge, robot)
+    robot.send(100_000_000)
+    ros.spin_until(lambda: len(received) == 1, 5.0, "a clamped command")
+    assert twist_of(received[0]).linear.x == pytest.approx(0.22)
+    assert twist_of(received[0]).angular.z == pytest.approx(-2.84)
+
+
+def test_deactivation_publishes_zero(ros):
+    node = make_node(ros, controller="tests.controllers:ConstantController")
+    robot = Robot(ros)
+    bring_up(ros, node, robot)
+    robot.send(50_000_000)
+    ros.spin_until(lambda: len(robot.commands) == 1, 5.0, "a command")
+    node.trigger_deactivate()
+    ros.spin_until(lambda: len(robot.commands) == 2, 5.0, "the zero command")
+    assert twist_of(robot.commands[-1]).linear.x == 0.0
+    assert twist_of(robot.commands[-1]).angular.z == 0.0
+    robot.send(100_000_000)  # inactive: no more commands
+    ros.spin_for(0.5)
+    assert len(robot.commands) == 2
+
+
+def test_robot_mode_commands_on_a_timer_and_stops_when_scan_stops(ros):
+    node = make_node(ros, controller="tests.controllers:ConstantController", simulation=False,
+                     cmd_vel_stamped=False, angular_sign=-1, data_timeout=0.5, dt=0.05)
+    robot = Robot(ros, stamped=False)
+    bring_up(ros, node, robot)
+    stamp = [0]
+
+    def feed(seconds, with_scan=True):
+        end = node.get_clock().now().nanoseconds + int(seconds * 1e9)
+        while node.get_clock().now().nanoseconds < end:
+            stamp[0] += 50_000_000
+            robot.odometry.publish(odom_msg(stamp[0]))
+            if with_scan:
+                robot.scan.publish(scan_msg(stamp[0]))
+            ros.spin_for(0.05)
+
+    feed(1.0)
+    moving = [c for c in robot.commands if c.linear.x != 0.0]
+    assert len(moving) >= 10, "the timer computes about every dt while data flows"
+    assert moving[-1].angular.z == pytest.approx(-0.5), "angular_sign flips the turn"
+    count_before_stop = len(robot.commands)
+    feed(1.2, with_scan=False)  # /odometry alone cannot form a synchronized set
+    after = robot.commands[count_before_stop:]
+    first_zero = next(i for i, c in enumerate(after) if c.linear.x == 0.0 and c.angular.z == 0.0)
+    assert first_zero * 0.05 <= 0.5 + 0.3, "zero within data_timeout (+ timer slack)"
+    assert all(c.linear.x == 0.0 and c.angular.z == 0.0 for c in after[first_zero:]), \
+        "keeps commanding zero while data is stale"
+
+
+def test_localized_pose_stops_commanding(ros):
+    from amr_msgs.msg import PoseStamped
+    node = make_node(ros, controller="tests.controllers:ConstantController",
+                     enable_localization=True)
+    robot = Robot(ros)
+    pose_pub = robot.node.create_publisher(PoseStamped, "/pose", 10)
+    bring_up(ros, node, robot)
+
+    def send_with_pose(stamp_ns, localized):
+        pose = PoseStamped()
+        pose.header.stamp.sec, pose.header.stamp.nanosec = divmod(stamp_ns, 10**9)
+        pose.localized = localized
+        pose_pub.publish(pose)
+        robot.send(stamp_ns)
+
+    send_with_pose(50_000_000, False)
+    ros.spin_until(lambda: len(robot.commands) == 1, 5.0, "a command before localization")
+    assert twist_of(robot.commands[0]).linear.x == pytest.approx(0.1)
+    send_with_pose(100_000_000, True)
+    ros.spin_until(lambda: len(robot.commands) == 2, 5.0, "the stop command")
+    assert twist_of(robot.commands[1]).linear.x == 0.0
+    send_with_pose(150_000_000, True)
+    ros.spin_for(0.5)
+    assert len(robot.commands) == 2, "no commanding once localized"
+
+
+def test_bad_parameters_fail_configure_with_a_reason(ros):
+    node = make_node(ros, controller="tests.controllers:ConstantController", dt=-1.0)
+    assert node.trigger_configure().name == "FAILURE"
+    broken = make_node(ros, "broken", controller="no_such_module:Nothing")
+    assert broken.trigger_configure().name == "FAILURE"
