@@ -22,8 +22,9 @@ from lifecycle_msgs.srv import ChangeState, GetState
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import Executor
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 
-from amr_control.node_runner import make_executor
+from amr_control.node_runner import StopFlag, make_executor, spin_until_stopped
 
 _TRANSITION_LABELS = {Transition.TRANSITION_CONFIGURE: "configure",
                       Transition.TRANSITION_ACTIVATE: "activate",
@@ -125,14 +126,16 @@ class LifecycleManager(Node):
 
 
 def main(args: Sequence[str] | None = None) -> int:
-    rclpy.init(args=list(sys.argv if args is None else args))
+    rclpy.init(args=list(sys.argv if args is None else args),
+               signal_handler_options=SignalHandlerOptions.NO)
+    stop = StopFlag().install()
     manager = LifecycleManager()
     executor = make_executor()
     executor.add_node(manager)
     exit_code = 0
     try:
         manager.startup(executor)
-        executor.spin()  # stay up, as a launch file's manager would
+        spin_until_stopped(executor, stop)  # stay up, as a launch file's manager would
     except LifecycleStartupError as exc:
         manager.get_logger().error(str(exc))
         exit_code = 1

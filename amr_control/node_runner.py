@@ -57,12 +57,25 @@ def shutdown_node(node: LifecycleNode) -> None:
         node.get_logger().warning(f"shutdown transition failed: {exc}")
 
 
-class _Terminate(Exception):
-    pass
+class StopFlag:
+    """Set by SIGINT/SIGTERM; spin loops poll it (a blocking spin() would never see a signal)."""
+
+    def __init__(self) -> None:
+        self.requested = False
+
+    def install(self) -> "StopFlag":
+        signal.signal(signal.SIGINT, self._handle)
+        signal.signal(signal.SIGTERM, self._handle)
+        return self
+
+    def _handle(self, signum, frame) -> None:
+        self.requested = True
 
 
-def _raise_terminate(signum, frame):
-    raise _Terminate()
+def spin_until_stopped(executor: Executor, stop: StopFlag, context=None) -> None:
+    """Spin in short slices so signal handlers run and the idle CPU stays near zero."""
+    while not stop.requested and rclpy.ok(context=context):
+        executor.spin_once(timeout_sec=0.1)
 
 
 def run_lifecycle_node(node_factory: Callable[..., LifecycleNode],
@@ -72,7 +85,7 @@ def run_lifecycle_node(node_factory: Callable[..., LifecycleNode],
     # Our own signal handling: rclpy's would shut the context down before the node could
     # publish its final zero command.
     rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
-    signal.signal(signal.SIGTERM, _raise_terminate)
+    stop = StopFlag().install()
     node = None
     exit_code = 0
     try:
@@ -82,8 +95,8 @@ def run_lifecycle_node(node_factory: Callable[..., LifecycleNode],
         if declare_autostart(node) and not autostart(node):
             exit_code = 1
         else:
-            executor.spin()
-    except (KeyboardInterrupt, _Terminate):
+            spin_until_stopped(executor, stop)
+    except KeyboardInterrupt:
         pass
     except Exception as exc:
         exit_code = 1
@@ -98,4 +111,4 @@ def run_lifecycle_node(node_factory: Callable[..., LifecycleNode],
 
 
 __all__ = ["make_executor", "declare_autostart", "autostart", "shutdown_node",
-           "run_lifecycle_node"]
+           "StopFlag", "spin_until_stopped", "run_lifecycle_node"]

@@ -144,12 +144,17 @@ class LocalPointCloud:
         self.angles = np.arctan2(self.points[:, 1], self.points[:, 0])
 
     # ---- queries -------------------------------------------------------------------------
-    def sector_distance(self, centre_rad: float, half_width_rad: float) -> float:
-        """Closest obstacle within +-half_width of a direction; inf (open) if nothing returned."""
+    def sector_distance(self, centre_rad: float, half_width_rad: float,
+                        percentile: float = 0.0) -> float:
+        """Closest obstacle within +-half_width of a direction (or a low percentile of the
+        ranges there, to ignore single noisy readings); inf (open) if nothing returned."""
         if self.ranges.size == 0:
             return math.inf
         inside = np.abs(wrap_angle(self.angles - centre_rad)) <= half_width_rad
-        return float(self.ranges[inside].min()) if np.any(inside) else math.inf
+        if not np.any(inside):
+            return math.inf
+        ranges = self.ranges[inside]
+        return float(ranges.min() if percentile <= 0.0 else np.percentile(ranges, percentile))
 
     def path_distance(self, half_width_m: float) -> float:
         """Distance ahead to the first obstacle inside the straight corridor the robot body would
@@ -178,21 +183,27 @@ class LocalPointCloud:
         None if there are too few points or they span too little of the wall."""
         band = self.side_band(side_sign, max_lateral_m)
         pts = band[np.abs(band[:, 0]) <= half_length_m] if band.size else band
-        fit = _fit_line(pts, min_points, min_span_m)
-        if fit is None:
+        if pts.shape[0] < min_points:
             return None
-        residuals, _ = fit
-        inliers = pts[np.abs(residuals) <= max(0.025, 2.5 * float(np.sqrt(np.mean(residuals ** 2))))]
-        refit = _fit_line(inliers, min_points, min_span_m)
-        if refit is None:
-            return None
-        residuals, (distance, angle, span) = refit
+        # Start from the points near the median lateral distance (the wall alongside, not a wall
+        # leaving sideways at a corner), then refine twice on all points close to the line.
+        lateral = np.abs(pts[:, 1])
+        inliers = pts[np.abs(lateral - np.median(lateral)) <= 0.06]
+        fit = None
+        for _ in range(3):
+            fit = _fit_line(inliers, min_points, min_span_m)
+            if fit is None:
+                return None
+            _, (_, _, _), mean, normal = fit
+            inliers = pts[np.abs((pts - mean) @ normal) <= 0.03]
+        residuals, (distance, angle, span), _, _ = _fit_line(inliers, min_points, min_span_m) or fit
         return WallFit(distance, angle, float(np.sqrt(np.mean(residuals ** 2))), span,
                        int(inliers.shape[0]))
 
 
 def _fit_line(pts: np.ndarray, min_points: int, min_span_m: float
-              ) -> tuple[np.ndarray, tuple[float, float, float]] | None:
+              ) -> tuple[np.ndarray, tuple[float, float, float], np.ndarray, np.ndarray] | None:
+    """Total least squares: (residuals, (distance, angle, span), mean point, unit normal)."""
     if pts.shape[0] < min_points:
         return None
     span = float(pts[:, 0].max() - pts[:, 0].min())
@@ -209,4 +220,4 @@ def _fit_line(pts: np.ndarray, min_points: int, min_span_m: float
     residuals = centred @ normal
     distance = abs(float(normal @ mean))
     angle = math.atan2(float(direction[1]), float(direction[0]))
-    return residuals, (distance, angle, span)
+    return residuals, (distance, angle, span), mean, normal

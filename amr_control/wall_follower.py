@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from amr_control.scan_sectors import LocalPointCloud, ScanGeometry
+from amr_control.scan_sectors import LocalPointCloud, ScanGeometry, WallFit
 
 _LOG = logging.getLogger(__name__)
 
@@ -49,7 +49,7 @@ _PARAMETERS: dict[str, tuple[Any, str]] = {
     "follow_max_angular_speed_radps": (1.5, "Limit on the angular speed while following [rad/s]."),
     "turn_speed_radps": (1.5, "Angular speed of in-place turns [rad/s]."),
     "min_turn_speed_radps": (0.3, "Slowest angular speed at the end of an in-place turn [rad/s]."),
-    "front_turn_distance_m": (0.22, "A wall closer than this ahead (from the robot centre) ends "
+    "front_turn_distance_m": (0.21, "A wall closer than this ahead (from the robot centre) ends "
                                     "straight driving: turn away, turn around or take the side [m]."),
     "front_stop_distance_m": (0.15, "Never drive forward with an obstacle closer than this in the "
                                     "robot's path (from the robot centre) [m]."),
@@ -66,6 +66,12 @@ _PARAMETERS: dict[str, tuple[Any, str]] = {
     "sector_half_width_rad": (0.1745, "Half-width of the front/left/right/back sectors [rad]."),
     "wall_fit_half_length_m": (0.15, "Scan points up to this far ahead/behind the robot centre are "
                                      "used to fit the followed wall [m]."),
+    "heading_gain_per_s": (2.0, "Angular speed per radian of heading error while driving "
+                                "straight between walls (corners, settling) [1/s]."),
+    "heading_memory_m": (0.6, "The direction of the last well-fitted wall (or last turn) "
+                              "is used to align turns for this far of travel [m]."),
+    "escape_islands": (True, "Leave a wall group after one full lap around it with it on the "
+                             "followed side (a free-standing obstacle), to explore elsewhere."),
     "range_min_m": (0.016, "Readings below this are invalid when no scan geometry is given [m]."),
     "range_max_m": (8.0, "Readings above this are invalid when no scan geometry is given [m]."),
     "invalid_hold_time_s": (0.6, "A close point whose ray stops returning is kept this long [s]."),
@@ -103,6 +109,7 @@ class WallFollower:
             raise ValueError(f"WallFollower: follow_side must be 'right' or 'left', got {side!r}")
         self.follow_side = side
         self._side = -1.0 if side == "right" else 1.0   # sign of the followed side's y
+        self.escape_islands = _as_bool(values.pop("escape_islands"))
         for name, value in values.items():
             try:
                 number = float(value)
@@ -126,11 +133,22 @@ class WallFollower:
         self._last_w = 0.0
         self._state_time = 0.0          # s in the current state
         self._travelled = 0.0           # m driven in the current state (odometry)
-        self._turned = 0.0              # rad turned in the current state (odometry)
-        self._turn_target = 0.0         # signed rad for turn states
+        self._heading = 0.0             # rad, integrated odometry (not wrapped)
+        self._x = 0.0                   # m, odometry position (for loop detection)
+        self._y = 0.0
+        self._winding = 0.0             # rad turned toward the followed side in total
+        self._trail: list[tuple[float, float, float, float, float]] = []
+        self._island_lap_done = False
+        self._reference_heading = 0.0   # rad, see _reference()
+        self._reference_odometer = -math.inf
+        self._turn_goal = 0.0           # rad, heading that ends the current turn
+        self._turn_direction = 1.0
         self._advance_target = 0.0      # m for outer_corner
         self._scan_had_data = False
         self._last_turn: str | None = None   # the last in-place turn, until following resumes
+        self._odometer = 0.0            # m driven in total (odometry)
+        self._wall_end_x = 0.0          # m ahead of the robot where the followed wall ended ...
+        self._wall_end_odometer = -math.inf   # ... when the odometer read this
 
     @classmethod
     def parameter_descriptions(cls) -> dict[str, tuple[Any, str]]:
@@ -176,7 +194,12 @@ class WallFollower:
         dt = self._dt
         self._state_time += dt
         self._travelled += z_v * dt
-        self._turned += z_w * dt
+        self._odometer += abs(z_v) * dt
+        mid_heading = self._heading + 0.5 * z_w * dt
+        self._x += z_v * dt * math.cos(mid_heading)
+        self._y += z_v * dt * math.sin(mid_heading)
+        self._heading += z_w * dt
+        self._winding += self._side * z_w * dt
         self._cloud.age(dt)
         self._cloud.move(z_v * dt, z_w * dt)
         ranges = _as_ranges(z_scan)
@@ -188,7 +211,8 @@ class WallFollower:
         cloud = self._cloud
         path = cloud.path_distance(self.robot_radius_m + self.path_margin_m)
         self.distances = {
-            "front": min(cloud.sector_distance(0.0, hw), path),
+            # A low percentile, not the minimum: one noisy ray must not trigger a turn early.
+            "front": cloud.sector_distance(0.0, hw, percentile=25.0),
             "left": cloud.sector_distance(0.5 * math.pi, hw),
             "right": cloud.sector_distance(-0.5 * math.pi, hw),
             "back": cloud.sector_distance(math.pi, hw),
@@ -210,20 +234,51 @@ class WallFollower:
         self.state = state
         self._state_time = 0.0
         self._travelled = 0.0
-        self._turned = 0.0
+
+    def _reference(self) -> float | None:
+        """Heading (odometry frame) the robot should be aligned with: the last well-fitted wall's
+        direction or the goal of the last turn, if recent enough; else None."""
+        if self._odometer - self._reference_odometer <= self.heading_memory_m:
+            return self._reference_heading
+        return None
+
+    def _set_reference(self, heading: float) -> None:
+        self._reference_heading = heading
+        self._reference_odometer = self._odometer
 
     def _start_turn(self, state: str, angle_rad: float) -> None:
+        """Turn in place by angle_rad relative to the reference heading (so that turns snap back
+        to the walls' directions instead of accumulating heading errors)."""
+        reference = self._reference()
+        base = reference if reference is not None else self._heading
         self._enter(state)
-        self._turn_target = angle_rad
+        self._turn_goal = base + angle_rad
+        self._turn_direction = 1.0 if angle_rad > 0 else -1.0
         self._last_turn = state
+
+    def _hold_heading(self, speed: float) -> tuple[float, float]:
+        """Drive straight at `speed`, steering back to the reference heading if there is one."""
+        reference = self._reference()
+        if reference is None:
+            return speed, 0.0
+        w = self.heading_gain_per_s * _wrap(reference - self._heading)
+        limit = self.follow_max_angular_speed_radps
+        return speed, max(-limit, min(limit, w))
 
     def _step_state_machine(self) -> tuple[float, float]:
         self.wall_distance_error = None
         if not self._scan_had_data:
-            self._enter("no_data") if self.state != "no_data" else None
+            if self.state != "no_data":
+                self._enter("no_data")
             return 0.0, 0.0
         if self.state == "no_data":
             self._enter("follow_wall")
+        if self.state == "follow_wall" and self._island_lap_done:
+            self._island_lap_done = False
+            # A full lap around something kept on the followed side: an island (a free-standing
+            # obstacle or wall group): leave it to find another wall instead of circling it.
+            self._trail.clear()
+            self._start_turn("turn_escape", -self._side * 0.5 * math.pi)
         # A few transitions may chain in one step (e.g. a turn ends and a decision follows).
         for _ in range(4):
             command = self._run_state()
@@ -231,17 +286,43 @@ class WallFollower:
                 return command
         return 0.0, 0.0
 
+    def _closed_loop_around_island(self) -> bool:
+        """Record the odometry pose every few cm while following; when the robot is back at a
+        recorded pose with the same heading it has been once around the wall it follows. Seen
+        with the wall on the followed side, that loop turned by +2 pi toward that side for an
+        island and by -2 pi for an enclosing boundary (which it keeps lapping)."""
+        if not self.escape_islands:
+            return False
+        trail = self._trail
+        if trail and self._odometer - trail[-1][0] < 0.05:
+            return False
+        pose = (self._odometer, self._x, self._y, self._heading, self._winding)
+        trail.append(pose)
+        if len(trail) > 4000:
+            del trail[:1000]
+        for odometer, x, y, heading, winding in trail:
+            if self._odometer - odometer < 1.0:
+                break
+            if (math.hypot(self._x - x, self._y - y) < 0.08
+                    and abs(_wrap(self._heading - heading)) < 0.5):
+                return self._winding - winding > math.pi
+        return False
+
+    def _front_blocked(self) -> bool:
+        return (self.distances["front"] < self.front_turn_distance_m
+                or self.distances["path"] < self.front_stop_distance_m + 0.02)
+
     def _run_state(self) -> tuple[float, float] | None:
         state = self.state
-        front_blocked = self.distances["front"] < self.front_turn_distance_m
-        if state in ("turn_inner", "turn_outer", "turn_around"):
+        front_blocked = self._front_blocked()
+        if state.startswith("turn_"):
             return self._run_turn()
         if state == "outer_corner":
             timed_out = self._state_time > 3.0 + self._advance_target / max(self.settle_speed_mps, 0.01)
             if front_blocked or self._travelled >= self._advance_target or timed_out:
                 self._start_turn("turn_outer", self._side * 0.5 * math.pi)
                 return None
-            return self.max_linear_speed_mps, 0.0
+            return self._hold_heading(self.max_linear_speed_mps)
         if state == "approach":
             if self._side_distance() <= self.side_open_distance_m:
                 self._enter("follow_wall")
@@ -249,22 +330,31 @@ class WallFollower:
             if front_blocked or self._travelled >= self.outer_corner_advance_m + 0.1:
                 self._enter("follow_wall")
                 return self._decide(allow_approach=False)
-            return self.settle_speed_mps, 0.0
+            return self._hold_heading(self.settle_speed_mps)
         if state == "settle":
             if front_blocked or self._state_time >= self.settle_time_s:
                 self._enter("follow_wall")
                 return None
-            return self.settle_speed_mps, 0.0
+            return self._hold_heading(self.settle_speed_mps)
+        if state == "escape":
+            if front_blocked:
+                self._enter("follow_wall")
+                if self._side_distance(followed=False) > self.side_open_distance_m:
+                    self._start_turn("turn_inner", -self._side * 0.5 * math.pi)
+                else:
+                    self._start_turn("turn_around", -self._side * math.pi)
+                return None
+            return self._hold_heading(self.max_linear_speed_mps)
         return self._decide(allow_approach=True)
 
     def _run_turn(self) -> tuple[float, float] | None:
-        target = self._turn_target
-        direction = 1.0 if target > 0 else -1.0
-        remaining = abs(target) - direction * self._turned
-        nominal = abs(target) / max(self.min_turn_speed_radps, 0.05)
-        if remaining <= 0.02 or self._state_time > nominal + 2.0:
-            nxt = "approach" if self.state == "turn_outer" else "settle"
-            self._enter(nxt)
+        direction = self._turn_direction
+        remaining = (direction * (self._turn_goal - self._heading)) % (2.0 * math.pi)
+        if remaining > 1.5 * math.pi:       # overshot the goal
+            remaining = 0.0
+        if remaining <= 0.02 or self._state_time > 2.0 * math.pi / max(self.min_turn_speed_radps, 0.05):
+            self._set_reference(self._turn_goal)
+            self._enter({"turn_outer": "approach", "turn_escape": "escape"}.get(self.state, "settle"))
             return None
         # Slow down over the last part so that the turn ends on target (force control lags).
         speed = min(self.turn_speed_radps, max(self.min_turn_speed_radps, 4.0 * remaining))
@@ -273,12 +363,18 @@ class WallFollower:
     def _decide(self, allow_approach: bool) -> tuple[float, float] | None:
         """Right-hand rule (mirrored for the left): followed side > straight > other side > back."""
         side = self._side
-        front_blocked = self.distances["front"] < self.front_turn_distance_m
+        front_blocked = self._front_blocked()
         if self._side_distance() > self.side_open_distance_m:
             band = self._cloud.side_band(side, self.side_open_distance_m)
             behind = band[(band[:, 0] <= 0.0) & (band[:, 0] >= -0.6), 0] if band.size else band
             ahead = band[band[:, 0] > 0.0, 0] if band.size else band
             wall_end = float(behind.max()) if behind.size else None
+            # Prefer where the followed wall was last seen to end, carried along by odometry:
+            # a zero-thickness wall seen nearly edge-on returns no points near the robot, so
+            # the current scan alone misplaces (or misses) the end.
+            since_seen = self._odometer - self._wall_end_odometer
+            if since_seen <= 0.3:
+                wall_end = self._wall_end_x - since_seen
             # Where the followed wall resumes ahead; a wall leaving the corner sideways (the
             # usual right-angle outer corner) has its points at the corner itself: skip those.
             resume = ahead[ahead > wall_end + 0.05] if wall_end is not None else ahead
@@ -298,7 +394,7 @@ class WallFollower:
                 return None
             if self.state != "find_wall":
                 self._enter("find_wall")
-            return self.max_linear_speed_mps, 0.0
+            return self._hold_heading(self.max_linear_speed_mps)
         if front_blocked:
             # Straight after a turn-around and still blocked (e.g. it was misjudged at an angle):
             # turn by quarter turns instead, so every direction is tried in turn.
@@ -311,17 +407,43 @@ class WallFollower:
             return None
         return self._follow()
 
+    def _track_wall_end(self, fit: WallFit | None) -> None:
+        """Remember how far ahead the wall beside the robot reaches (robot frame, m)."""
+        beside = self._side_distance()
+        if beside > self.side_open_distance_m:
+            return
+        band = self._cloud.side_band(self._side, self.side_open_distance_m)
+        near = band[np.abs(band[:, 0]) <= self.wall_fit_half_length_m]
+        if fit is not None:
+            on_wall = np.abs(np.abs(near[:, 1]) - (fit.distance_m + near[:, 0] * self._side
+                                                   * math.tan(fit.angle_rad))) <= 0.04
+            if abs(fit.angle_rad) < 1.0:
+                near = near[on_wall]
+        else:
+            near = near[np.abs(np.abs(near[:, 1]) - beside) <= 0.04]
+        # The wall runs from beside the robot forward until the first gap in its points.
+        xs = np.sort(near[near[:, 0] >= -self.side_window_half_length_m, 0])
+        if xs.size == 0:
+            return
+        gaps = np.nonzero(np.diff(xs) > 0.04)[0]
+        self._wall_end_x = float(xs[gaps[0]] if gaps.size else xs[-1])
+        self._wall_end_odometer = self._odometer
+
     def _follow(self) -> tuple[float, float]:
         if self.state != "follow_wall":
             self._enter("follow_wall")
         self._last_turn = None
         side = self._side
         fit = self._cloud.fit_side_wall(side, self.side_open_distance_m, self.wall_fit_half_length_m)
+        self._track_wall_end(fit)
         if fit is not None:
             error = fit.distance_m - self.wall_distance_m
             rate = side * self.max_linear_speed_mps * math.sin(fit.angle_rad)
             if fit.residual_m < 0.02 and fit.span_m >= 0.15:
                 self.wall_distance_error = error
+                self._set_reference(self._heading + fit.angle_rad)
+                # Only poses taken beside a well-fitted wall are on the wall's contour.
+                self._island_lap_done = self._closed_loop_around_island()
         else:
             distance = self._side_distance()
             error = (distance if math.isfinite(distance) else self.wall_distance_m) - self.wall_distance_m
@@ -343,6 +465,20 @@ class WallFollower:
         v_max = max(0.0, _WHEEL_LINEAR_SPEED_MAX_MPS - abs(w) * 0.5 * self.track_m)
         v = max(-v_max, min(v_max, v))
         return float(v), float(w)
+
+
+def _as_bool(value: Any) -> bool:
+    if isinstance(value, str):
+        if value.strip().lower() in ("true", "1", "yes"):
+            return True
+        if value.strip().lower() in ("false", "0", "no"):
+            return False
+        raise ValueError(f"WallFollower: expected a boolean, got {value!r}")
+    return bool(value)
+
+
+def _wrap(angle: float) -> float:
+    return math.atan2(math.sin(angle), math.cos(angle))
 
 
 def _is_finite_number(value: Any) -> bool:

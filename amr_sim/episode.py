@@ -110,9 +110,6 @@ def run_episode(world: World | str, start=None, profile: str | SensorProfile = "
     x, y, th = sim.pose
     positions[0] = (x, y)
     trajectory = [[0.0, x, y, th]] if record_trajectory else []
-    cx, cy = world_obj.free_space_centroid()
-    winding = 0.0
-    last_bearing = math.atan2(y - cy, x - cx)
     first_collision = None
     wall_err_sq, wall_err_n = 0.0, 0
     odom_period = prof.odom_period
@@ -141,9 +138,6 @@ def run_episode(world: World | str, start=None, profile: str | SensorProfile = "
             first_collision = sim.time
         x, y, th = sim.pose
         positions[k] = (x, y)
-        bearing = math.atan2(y - cy, x - cx)
-        winding += math.remainder(bearing - last_bearing, 2.0 * math.pi)
-        last_bearing = bearing
         if record_trajectory:
             trajectory.append([sim.time, x, y, th])
     wall_time = time.perf_counter() - wall_start
@@ -156,7 +150,7 @@ def run_episode(world: World | str, start=None, profile: str | SensorProfile = "
         sim_time_s=sim.time, wall_time_s=wall_time, collisions=sim.collisions,
         first_collision_time_s=first_collision, min_clearance_m=sim.min_clearance,
         distance_m=sim.distance, explored_fraction=explored_fraction(world_obj, positions),
-        laps=int(abs(winding) // (2.0 * math.pi)),
+        laps=count_laps(world_obj, positions),
         rms_wall_error_m=math.sqrt(wall_err_sq / wall_err_n) if wall_err_n else None,
         dt=sim.dt, controller=type(controller).__module__ + ":" + type(controller).__qualname__,
         start_pose=[float(c) for c in sim.start], trajectory=trajectory,
@@ -176,6 +170,17 @@ def explored_fraction(world: World, positions: np.ndarray) -> float:
     cell_idx = np.floor(cells / cs).astype(int)
     hits = sum((int(i), int(j)) in visited for i, j in cell_idx)
     return hits / len(cells)
+
+
+def count_laps(world: World, positions: np.ndarray) -> int:
+    """Full turns of the positions around the centroid of the world's free space."""
+    pos = np.asarray(positions, dtype=np.float64).reshape(-1, 2)
+    if len(pos) < 2:
+        return 0
+    cx, cy = world.free_space_centroid()
+    bearings = np.arctan2(pos[:, 1] - cy, pos[:, 0] - cx)
+    winding = np.remainder(np.diff(bearings) + math.pi, 2.0 * math.pi) - math.pi
+    return int(abs(float(np.sum(winding))) // (2.0 * math.pi))
 
 
 def _is_bundled(world: World) -> bool:

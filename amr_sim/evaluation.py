@@ -28,8 +28,8 @@ from amr_control.controller_loader import (DEFAULT_CONTROLLER, ControllerSpecErr
 __all__ = [
     "DEFAULT_CONTROLLER", "ControllerSpecError", "EvaluationError", "EpisodeSpec", "EpisodeOutcome",
     "parse_name_list", "parse_seeds", "parse_overrides", "expand_grid", "load_config",
-    "load_ros_params_file", "check_controller", "run_episodes", "outcome_row", "write_json", "write_csv", "format_table",
-    "verdict", "ProgressBar", "RESULT_COLUMNS",
+    "load_ros_params_file", "check_controller", "run_episodes", "outcome_row", "write_json",
+    "write_csv", "format_table", "verdict", "ProgressBar", "RESULT_COLUMNS",
 ]
 
 CONFIG_KEYS = ("worlds", "starts", "profiles", "seeds", "duration", "dt", "controller", "params_file",
@@ -56,8 +56,10 @@ class EpisodeSpec:
     def __post_init__(self) -> None:
         if isinstance(self.params, Mapping):
             object.__setattr__(self, "params", tuple(sorted(self.params.items())))
-        if not (isinstance(self.duration, (int, float)) and math.isfinite(self.duration) and self.duration > 0):
-            raise EvaluationError(f"episode duration must be a positive number of seconds, got {self.duration!r}")
+        duration = self.duration
+        if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
+            raise EvaluationError(f"episode duration must be a positive number of seconds, "
+                                  f"got {duration!r}")
         if not (isinstance(self.dt, (int, float)) and math.isfinite(self.dt) and 0 < self.dt <= 1.0):
             raise EvaluationError(f"dt must be in (0, 1] s, got {self.dt!r}")
 
@@ -162,7 +164,8 @@ def expand_grid(worlds: str | Sequence[str], starts: str | Sequence[str] = "all"
         loaded[name] = chosen
     unused = [s for s in start_names if s != "all" and not any(s in v for v in loaded.values())]
     if unused:
-        raise EvaluationError(f"start(s) {', '.join(unused)} exist in none of the worlds {', '.join(world_names)}")
+        raise EvaluationError(f"start(s) {', '.join(unused)} exist in none of the worlds "
+                              f"{', '.join(world_names)}")
     specs = [EpisodeSpec(world=w, start=s, profile=p, seed=seed, duration=duration, dt=dt,
                          controller=controller, params=dict(params or {}))
              for w in world_names for s in loaded[w] for p in profile_names for seed in seed_list]

@@ -114,7 +114,7 @@ def draw_episode(ax, world: World, trajectory: Any, collision_points: Iterable =
         ax.scatter(pts[:, 0], pts[:, 1], marker="x", s=30 if small else 70, linewidths=2, color="red",
                    zorder=7, label=f"collision ({len(pts)})")
     if not small:
-        ax.legend(loc="upper right", fontsize=8, framealpha=0.85)
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=3, fontsize=8, frameon=False)
     return figures
 
 

@@ -34,73 +34,63 @@ from .lidar import Lidar, nearest_wall
 from .profiles import SensorProfile, get_profile
 from .world import World, WorldError
 
+def _constrain_velocity_python(segments, px, py, vx, vy, h, radius, allowed_penetration):
+    """Limit (vx, vy) so that after moving h seconds no wall is closer than radius - allowed.
+
+    The distance to a segment along a straight motion is convex in time, so the linear bound
+    d(t) >= d0 - (v . n) t is safe: v . n <= (d0 - radius + allowed) / h for the unit vector n
+    towards each wall within reach. Several walls (corners): alternating projections.
+    """
+    reach = radius + math.sqrt(vx * vx + vy * vy) * h + 1e-3
+    normals = np.empty((8, 3))
+    count = 0
+    for k in range(segments.shape[0]):
+        x1 = segments[k, 0]
+        y1 = segments[k, 1]
+        ex = segments[k, 2] - x1
+        ey = segments[k, 3] - y1
+        t = ((px - x1) * ex + (py - y1) * ey) / (ex * ex + ey * ey)
+        t = min(max(t, 0.0), 1.0)
+        cx = x1 + t * ex - px
+        cy = y1 + t * ey - py
+        d = math.sqrt(cx * cx + cy * cy)
+        if d < reach and d > 0.0 and count < 8:
+            normals[count, 0] = cx / d
+            normals[count, 1] = cy / d
+            normals[count, 2] = max(d - radius + allowed_penetration, 0.0) / h
+            count += 1
+    if count == 0:
+        return vx, vy
+    for _ in range(16):  # converges in 1-3 passes for 1-3 walls
+        worst = 0.0
+        for j in range(count):
+            excess = vx * normals[j, 0] + vy * normals[j, 1] - normals[j, 2]
+            if excess > 0.0:
+                vx -= excess * normals[j, 0]
+                vy -= excess * normals[j, 1]
+                worst = max(worst, excess)
+        if worst < 1e-12:
+            return vx, vy
+    return 0.0, 0.0  # not converged (a narrow wedge): stopping is always safe
+
+
 try:
     import numba
 
-    @numba.njit(cache=True, error_model="numpy", nogil=True)
-    def _constrain_velocity(segments, px, py, vx, vy, h, radius, allowed_penetration):
-        """Limit (vx, vy) so that after moving h seconds no wall is closer than radius - allowed.
-
-        Distance to a segment along a straight motion is convex in time, so the linear bound
-        d(t) >= d0 - (v . n) t is safe: v . n <= (d0 - radius + allowed) / h.
-        """
-        reach = radius + math.sqrt(vx * vx + vy * vy) * h + 1e-3
-        normals = np.empty((8, 3))
-        count = 0
-        for k in range(segments.shape[0]):
-            x1 = segments[k, 0]
-            y1 = segments[k, 1]
-            ex = segments[k, 2] - x1
-            ey = segments[k, 3] - y1
-            t = ((px - x1) * ex + (py - y1) * ey) / (ex * ex + ey * ey)
-            t = min(max(t, 0.0), 1.0)
-            cx = x1 + t * ex - px
-            cy = y1 + t * ey - py
-            d = math.sqrt(cx * cx + cy * cy)
-            if d < reach and d > 0.0 and count < 8:
-                normals[count, 0] = cx / d
-                normals[count, 1] = cy / d
-                normals[count, 2] = max(d - radius + allowed_penetration, 0.0) / h
-                count += 1
-        if count == 0:
-            return vx, vy
-        for _ in range(16):  # alternating projections; converges fast for 1-3 walls
-            worst = 0.0
-            for j in range(count):
-                excess = vx * normals[j, 0] + vy * normals[j, 1] - normals[j, 2]
-                if excess > 0.0:
-                    vx -= excess * normals[j, 0]
-                    vy -= excess * normals[j, 1]
-                    worst = max(worst, excess)
-            if worst < 1e-12:
-                return vx, vy
-        return 0.0, 0.0  # not converged (a narrow wedge): stopping is always safe
-except ImportError:  # pragma: no cover
-    def _constrain_velocity(segments, px, py, vx, vy, h, radius, allowed_penetration):
-        x1, y1 = segments[:, 0], segments[:, 1]
-        ex, ey = segments[:, 2] - x1, segments[:, 3] - y1
-        t = np.clip(((px - x1) * ex + (py - y1) * ey) / (ex * ex + ey * ey), 0.0, 1.0)
-        cx, cy = x1 + t * ex - px, y1 + t * ey - py
-        d = np.hypot(cx, cy)
-        near = (d < radius + math.hypot(vx, vy) * h + 1e-3) & (d > 0)
-        normals = [(cx[k] / d[k], cy[k] / d[k], max(d[k] - radius + allowed_penetration, 0.0) / h)
-                   for k in np.flatnonzero(near)]
-        for _ in range(16):
-            worst = 0.0
-            for nx, ny, lim in normals:
-                excess = vx * nx + vy * ny - lim
-                if excess > 0.0:
-                    vx, vy = vx - excess * nx, vy - excess * ny
-                    worst = max(worst, excess)
-            if worst < 1e-12:
-                return vx, vy
-        return 0.0, 0.0
+    _constrain_velocity = numba.njit(cache=True, error_model="numpy", nogil=True)(_constrain_velocity_python)
+except ImportError:  # pragma: no cover - numba is a pinned dependency
+    _constrain_velocity = _constrain_velocity_python
 
 log = logging.getLogger("amr_sim.simulator")
 
 _ROBOT_TYPE = 1
 _WALL_TYPE = 2
 ALLOWED_PENETRATION = 0.0005  # m: resting contact depth, below collision_slop so it is stable
+_ROBOT_RADIUS = robot.ROBOT_RADIUS
+_WHEEL_RADIUS = robot.WHEEL_RADIUS
+_TRACK = robot.TRACK
+_HALF_TRACK = robot.TRACK / 2.0
+_WHEEL_SPEED_MAX = robot.WHEEL_SPEED_MAX
 _COMMAND_CLIP = 1.0e6  # |v|, |w| beyond this are absurd
 _WARN_INTERVAL = 5.0  # s of wall time between repeated bad-command warnings
 
@@ -161,8 +151,10 @@ class Simulator:
         self._z_w = 0.0
         self._command = (0.0, 0.0)  # twist executed in the last step (after limits)
         self._bad_commands = 0
+        self._quantum = round(1.0 / p.command_resolution) if p.command_resolution else 0
         self._last_warning = -math.inf
         self._scan = self._new_scan()
+        self._scan_time = 0.0
         self._next_scan_time = p.scan_period if p.scan_period else 0.0
 
     # ------------------------------------------------------------------ stepping
@@ -172,25 +164,33 @@ class Simulator:
 
     def step(self, v: float, w: float) -> tuple[np.ndarray, float, float]:
         """Advance one dt with the command (v m/s, w rad/s); return (z_scan, z_v, z_w)."""
-        v, w = self._clean_command(v, w)
+        # The maths of robot.py is inlined here: this runs 10,000s of times per second.
+        if not (type(v) is float and type(w) is float and -_COMMAND_CLIP < v < _COMMAND_CLIP
+                and -_COMMAND_CLIP < w < _COMMAND_CLIP):  # NaN fails the comparisons
+            v, w = self._clean_command(v, w)
         p = self._profile
-        if p.command_resolution:  # turtlebot3_node sends int(v * 100): truncation toward zero
-            steps_per_unit = round(1.0 / p.command_resolution)
-            v = math.trunc(v * steps_per_unit) / steps_per_unit
-            w = math.trunc(w * steps_per_unit) / steps_per_unit
+        if self._quantum:  # turtlebot3_node sends int(v * 100): truncation toward zero
+            v = math.trunc(v * self._quantum) / self._quantum
+            w = math.trunc(w * self._quantum) / self._quantum
         if p.clamp_commands:
             v = min(max(v, -p.max_linear), p.max_linear)
             w = min(max(w, -p.max_angular), p.max_angular)
-        v, w = robot.saturate(v, w)
+        # Wheel-speed saturation: both wheels scaled by one factor (keeps the curvature).
+        w_right = (v + w * _HALF_TRACK) / _WHEEL_RADIUS
+        w_left = (v - w * _HALF_TRACK) / _WHEEL_RADIUS
+        fastest = max(abs(w_left), abs(w_right))
+        if fastest > _WHEEL_SPEED_MAX:
+            scale = _WHEEL_SPEED_MAX / fastest
+            v = _WHEEL_RADIUS * (w_right + w_left) * scale / 2.0
+            w = _WHEEL_RADIUS * (w_right - w_left) * scale / _TRACK
         self._command = (v, w)
 
         dt = self._dt
         x0, y0, th0 = self._x, self._y, self._theta
-        chord_speed = v * robot.sinc_half(w * dt)
+        chord_speed = v * robot.sinc_half(w * dt)  # exact unicycle arc: its chord, mid heading
         mid = th0 + 0.5 * w * dt
         vx, vy = _constrain_velocity(self._segments, x0, y0, chord_speed * math.cos(mid),
-                                     chord_speed * math.sin(mid), dt, robot.ROBOT_RADIUS,
-                                     ALLOWED_PENETRATION)
+                                     chord_speed * math.sin(mid), dt, _ROBOT_RADIUS, ALLOWED_PENETRATION)
         body = self._body
         body.velocity = (vx, vy)
         body.angular_velocity = w
@@ -199,40 +199,47 @@ class Simulator:
         th1 = body.angle
         self._x, self._y, self._theta = x1, y1, th1
         self._steps += 1
+        now = self._steps * dt
 
-        # Encoders from the actual motion: arc length along the mid heading, then wheel angles.
+        # Encoders from the actual motion: arc length along the mid heading -> wheel angle
+        # increments -> forward kinematics (z_v = ds / dt, z_w = dtheta / dt).
         dx, dy, dth = x1 - x0, y1 - y0, th1 - th0
         mid = th0 + 0.5 * dth
-        ds = (dx * math.cos(mid) + dy * math.sin(mid)) / robot.sinc_half(dth)
-        dphi_l, dphi_r = robot.encoder_increments(ds, dth)
-        self._wheel_angles[0] += dphi_l
-        self._wheel_angles[1] += dphi_r
-        self._z_v, self._z_w = robot.forward_kinematics(dphi_l / dt, dphi_r / dt)
-        self._integrate_odometry(ds, dth)
+        chord = dx * math.cos(mid) + dy * math.sin(mid)
+        ds = chord / robot.sinc_half(dth)
+        dphi_l = (ds - dth * _HALF_TRACK) / _WHEEL_RADIUS
+        dphi_r = (ds + dth * _HALF_TRACK) / _WHEEL_RADIUS
+        wheels = self._wheel_angles
+        wheels[0] += dphi_l
+        wheels[1] += dphi_r
+        self._z_v = _WHEEL_RADIUS * (dphi_r + dphi_l) / (2.0 * dt)
+        self._z_w = _WHEEL_RADIUS * (dphi_r - dphi_l) / (_TRACK * dt)
+        # Dead reckoning (the encoders do not see sideways sliding along a wall).
+        odom = self._odom
+        odom_mid = odom[2] + 0.5 * dth
+        odom[0] += chord * math.cos(odom_mid)
+        odom[1] += chord * math.sin(odom_mid)
+        odom[2] += dth
         self._distance += math.hypot(dx, dy)
 
-        clearance = nearest_wall(self._segments, x1, y1)[0] - robot.ROBOT_RADIUS
+        clearance = nearest_wall(self._segments, x1, y1)[0] - _ROBOT_RADIUS
         if clearance < self._min_clearance:
             self._min_clearance = clearance
 
         if p.scan_period is None:
             self._scan = self._new_scan()
-        elif self.time >= self._next_scan_time - 1e-9:
+            self._scan_time = now
+        elif now >= self._next_scan_time - 1e-9:
             self._scan = self._new_scan()
-            while self._next_scan_time <= self.time + 1e-9:
+            self._scan_time = now
+            while self._next_scan_time <= now + 1e-9:
                 self._next_scan_time += p.scan_period
         return self._scan, self._z_v, self._z_w
 
     def _new_scan(self) -> np.ndarray:
         p = self._profile
-        noise = self._rng.normal(0.0, p.range_noise_sigma, p.scan_rays) if p.range_noise_sigma > 0 else None
+        noise = self._rng.standard_normal(p.scan_rays) * p.range_noise_sigma if p.range_noise_sigma > 0 else None
         return self._lidar.scan(self._x, self._y, self._theta, noise)
-
-    def _integrate_odometry(self, ds: float, dth: float) -> None:
-        ox, oy, oth = self._odom
-        chord = ds * robot.sinc_half(dth)
-        mid = oth + 0.5 * dth
-        self._odom = [ox + chord * math.cos(mid), oy + chord * math.sin(mid), oth + dth]
 
     def _clean_command(self, v, w) -> tuple[float, float]:
         try:
@@ -305,6 +312,11 @@ class Simulator:
     @property
     def time(self) -> float:
         return self._steps * self._dt
+
+    @property
+    def scan_time(self) -> float:
+        """Simulated time (s) at which the newest scan was taken (turtlebot3: every 0.2 s)."""
+        return self._scan_time
 
     @property
     def steps(self) -> int:

@@ -30,7 +30,7 @@ from sensor_msgs.msg import LaserScan
 from amr_control.node_runner import run_lifecycle_node
 from amr_sim.simulator import Simulator
 from amr_sim.world import World
-from amr_sim.ros_conversions import (clock_message, command_from_twist,
+from amr_sim.ros_conversions import (command_from_twist,
                                      laser_scan_from_profile, odometry_message,
                                      pose_from_message, seconds_to_time)
 
@@ -126,8 +126,13 @@ class SimulatorNode(LifecycleNode):
         self.localized = False
         self.localization_error: tuple[float, float] | None = None  # (m, rad)
         self._outputs: dict[str, Any] = {}
+        # One message per output, refilled every step: building Odometry messages dominated
+        # the step time (publish copies the message, so reuse is safe).
+        self._messages = {"clock": ClockMessage(), "truth": Odometry(), "odom": Odometry(),
+                          "scan": LaserScan()}
         self._inputs: list = []
         self._filters: list = []
+        self._synchronizer = None
         self._timer = None
         self._active = False
         self._wall_start: float | None = None
@@ -184,7 +189,8 @@ class SimulatorNode(LifecycleNode):
                 start = next(iter(world.starts))
                 self.get_logger().info(f"world '{world.name}' has no start '{DEFAULT_START}' "
                                        f"(the default): starting at '{start}'")
-            self.simulator = Simulator(world, start=world.resolve_start(start),
+            self._start_pose = world.resolve_start(start)
+            self.simulator = Simulator(world, start=self._start_pose,
                                        dt=p["dt"], profile=p["profile"], seed=p["seed"])
         except Exception as exc:  # WorldError, unknown profile, bad values: all user errors
             self.get_logger().error(f"configure failed: {exc}")
@@ -194,9 +200,14 @@ class SimulatorNode(LifecycleNode):
         self.realtime = p["mode"] == "realtime"
         self.goal = p["goal"] if p["goal"] is not None else world.goal
         profile = self.simulator.profile
+        # Lockstep keeps the course's protocol (/odometry with the encoder twist, every step) in
+        # both profiles: a pose-only /odom would need the estimator, which publishes nothing for
+        # the first message and would stall the loop. Real time publishes what the profile's
+        # robot publishes (/odom pose-only for the Burger).
+        self.odometry_topic = profile.odom_topic if self.realtime else "/odometry"
         self._outputs = {
             "clock": self.create_lifecycle_publisher(ClockMessage, "/clock", RELIABLE_10),
-            "odom": self.create_lifecycle_publisher(Odometry, profile.odom_topic, RELIABLE_10),
+            "odom": self.create_lifecycle_publisher(Odometry, self.odometry_topic, RELIABLE_10),
             "scan": self.create_lifecycle_publisher(
                 LaserScan, "/scan", scan_qos(5 if profile.name == "turtlebot3" else 10)),
         }
@@ -224,8 +235,9 @@ class SimulatorNode(LifecycleNode):
                 message_filters.Subscriber(self, TwistStamped, "/cmd_vel",
                                            qos_profile=RELIABLE_10),
                 message_filters.Subscriber(self, PoseStamped, "/pose", qos_profile=RELIABLE_10)]
-            sync = message_filters.ApproximateTimeSynchronizer(self._filters, 10, 10.0)
-            sync.registerCallback(self._on_command_and_pose)
+            self._synchronizer = message_filters.ApproximateTimeSynchronizer(
+                self._filters, 10, 10.0)
+            self._synchronizer.registerCallback(self._on_command_and_pose)
             return
         on_command = self._store_command if self.realtime else self._on_command
         self._inputs.append(self.create_subscription(
@@ -364,24 +376,27 @@ class SimulatorNode(LifecycleNode):
 
     def _publish(self, z_scan, z_v: float, z_w: float, pose: tuple, velocity: tuple,
                  publish_odom: bool, publish_scan: bool) -> None:
-        simulator, p = self.simulator, self.params
+        simulator, p, messages = self.simulator, self.params, self._messages
         stamp = seconds_to_time(simulator.time)
         # /clock first: a use_sim_time subscriber then has the time before the measurements.
-        self._outputs["clock"].publish(clock_message(simulator.time))
+        messages["clock"].clock = stamp
+        self._outputs["clock"].publish(messages["clock"])
         if "truth" in self._outputs:
             self._outputs["truth"].publish(odometry_message(
-                stamp, p["world_frame"], p["base_frame"], pose, velocity))
+                stamp, p["world_frame"], p["base_frame"], pose, velocity, messages["truth"]))
         profile = simulator.profile
         if publish_odom:
-            # The real robot's /odom carries a pose only; the ideal /odometry also the twist.
-            twist = (z_v, z_w) if profile.odom_topic == "/odometry" else None
+            # The real robot's /odom carries a pose only; /odometry also the twist.
+            twist = (z_v, z_w) if self.odometry_topic == "/odometry" else None
             self._outputs["odom"].publish(odometry_message(
-                stamp, p["odom_frame"], p["base_frame"], simulator.odometry_pose, twist))
+                stamp, p["odom_frame"], p["base_frame"], simulator.odometry_pose, twist,
+                messages["odom"]))
         if publish_scan:
             scan_time = profile.scan_period if self.realtime and profile.scan_period else \
                 simulator.dt
             self._outputs["scan"].publish(laser_scan_from_profile(
-                z_scan, profile, stamp=stamp, frame_id=p["scan_frame"], scan_time=scan_time))
+                z_scan, profile, stamp=stamp, frame_id=p["scan_frame"], scan_time=scan_time,
+                message=messages["scan"]))
 
     # --- localization and goal -------------------------------------------------------------
     def _check_estimated_pose(self, message) -> None:
@@ -438,7 +453,8 @@ class SimulatorNode(LifecycleNode):
         return {
             "configured": True, "finished": self.finished, "reason": self.finish_reason,
             "goal_reached": self.finish_reason == "goal reached",
-            "world": simulator.world.name, "profile": simulator.profile.name,
+            "world": simulator.world.name, "start": list(self._start_pose),
+            "profile": simulator.profile.name,
             "mode": self.params["mode"], "steps": int(simulator.steps),
             "sim_time_s": float(simulator.time), "wall_time_s": float(wall),
             "pose": [float(x), float(y), float(theta)],

@@ -72,7 +72,7 @@ class World:
         """Load a bundled world by name ("lab02") or a .yaml/.yml/.json file by path."""
         text = str(name_or_path)
         path = Path(text).expanduser()
-        looks_like_path = path.suffix.lower() in (".yaml", ".yml", ".json") or "/" in text or path.exists()
+        looks_like_path = path.suffix.lower() in (".yaml", ".yml", ".json") or "/" in text or path.is_file()
         if not looks_like_path:
             bundled = WORLDS_DIR / f"{text}.yaml"
             if not bundled.is_file():

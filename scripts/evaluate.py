@@ -127,7 +127,8 @@ def main(argv: list[str] | None = None) -> int:
 
     meta = {"started_utc": started.isoformat(timespec="seconds"), "wall_time_s": round(wall, 2),
             "jobs": min(jobs, len(specs)), "controller": settings["controller"],
-            "params": settings["params"], "params_file": settings["params_file"], "duration_s": settings["duration"], "dt_s": settings["dt"],
+            "params": settings["params"], "params_file": settings["params_file"],
+            "duration_s": settings["duration"], "dt_s": settings["dt"],
             "config": args.config, "command": " ".join(sys.argv), "python": platform.python_version(),
             "host": platform.node()}
     write_json(out / "results.json", outcomes, meta)

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import signal
 import sys
 from pathlib import Path
 
@@ -51,14 +50,6 @@ def parse_args(argv=None) -> argparse.Namespace:
     return args
 
 
-class _Terminate(Exception):
-    pass
-
-
-def _raise_terminate(signum, frame):
-    raise _Terminate()
-
-
 def main(argv=None) -> int:
     args = parse_args(argv)
     if args.domain_id is not None:
@@ -66,11 +57,12 @@ def main(argv=None) -> int:
     import rclpy
     from rclpy.signals import SignalHandlerOptions
     from amr_control.lifecycle_manager import LifecycleManager, LifecycleStartupError
-    from amr_control.node_runner import make_executor, shutdown_node
+    from amr_control.node_runner import StopFlag, make_executor, shutdown_node, \
+        spin_until_stopped
 
     # Own signal handling: the final zero command must go out before the context shuts down.
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-    signal.signal(signal.SIGTERM, _raise_terminate)
+    stop = StopFlag().install()
     stamped = None if args.cmd_vel is None else args.cmd_vel == "stamped"
     nodes = make_robot_graph(None, params_file=args.params_file, dt=args.dt,
                              cmd_vel_stamped=stamped, controller=args.controller,
@@ -84,11 +76,11 @@ def main(argv=None) -> int:
     try:
         manager.startup(executor)
         manager.get_logger().info("run_robot: running; Ctrl-C stops the robot")
-        executor.spin()
+        spin_until_stopped(executor, stop)
     except LifecycleStartupError as exc:
         manager.get_logger().error(str(exc))
         exit_code = 1
-    except (KeyboardInterrupt, _Terminate):
+    except KeyboardInterrupt:
         pass
     finally:
         for node in reversed(nodes):  # wall follower first: zero command while DDS is up

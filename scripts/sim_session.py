@@ -137,7 +137,9 @@ class SimSession:
         self.recorder_node = recorder_node
 
     def _report(self, sim, wall_time: float) -> dict:
-        from amr_sim.episode import explored_fraction, count_laps
+        import numpy as np
+        from amr_sim.episode import count_laps, explored_fraction
+        positions = np.array([row[1:3] for row in self.trajectory])
         rms = (math.sqrt(sum(e * e for e in self.wall_errors) / len(self.wall_errors))
                if self.wall_errors else None)
         return {
@@ -151,8 +153,8 @@ class SimSession:
             "collisions": sim.collisions,
             "first_collision_time_s": getattr(sim, "first_collision_time", None),
             "min_clearance_m": sim.min_clearance, "distance_m": sim.distance,
-            "explored_fraction": explored_fraction(self.world, self.trajectory),
-            "laps": count_laps(self.world, self.trajectory),
+            "explored_fraction": explored_fraction(self.world, positions),
+            "laps": count_laps(self.world, positions),
             "rms_wall_error_m": rms,
             "trajectory": self.trajectory,
             "collision_points": [list(p) for p in sim.collision_points],

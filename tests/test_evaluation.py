@@ -257,7 +257,8 @@ def test_two_episodes_in_two_processes_write_readable_results(tmp_path):
     data = json.loads((out / "results.json").read_text())
     episodes = data["episodes"]
     assert [(e["start"], e["error"]) for e in episodes] == [("outer", None), ("inner", None)]
-    assert data["meta"]["jobs"] == 2 and data["meta"]["controller"] == "amr_control.wall_follower:WallFollower"
+    assert data["meta"]["jobs"] == 2
+    assert data["meta"]["controller"] == "amr_control.wall_follower:WallFollower"
     for e in episodes:
         assert e["sim_time_s"] == pytest.approx(20.0)
         assert 0.5 < e["distance_m"] < 20.0 * 0.22 + 1e-6  # it moved, within the speed limit

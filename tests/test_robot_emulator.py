@@ -33,7 +33,7 @@ WALL_AHEAD = 1.0
 
 @contextlib.contextmanager
 def running_emulator(tmp_path: Path, *options: str):
-    """Start the emulator in this test's ROS domain; always terminate it. Yields the log path."""
+    """Start the emulator in this test's ROS domain; always terminate it. Yields (process, log)."""
     log = tmp_path / "emulator.jsonl"
     stderr = open(tmp_path / "emulator.stderr", "w")
     process = subprocess.Popen(

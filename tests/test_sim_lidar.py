@@ -112,6 +112,7 @@ def test_turtlebot3_scan_refreshes_at_5_hz(room):
     for k in (4, 5, 6):
         np.testing.assert_array_equal(scans[k], scans[3])
     assert not np.array_equal(scans[7], scans[3])
+    assert sim.scan_time == pytest.approx(0.4)
 
 
 def test_numba_and_numpy_kernels_agree():

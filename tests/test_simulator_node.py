@@ -59,7 +59,7 @@ def start_simulator(ros, probe: Probe, activate: bool = True, **parameters) -> S
     node = ros.add(SimulatorNode(context=ros.context, parameter_overrides=[
         Parameter(name, value=value) for name, value in parameters.items()]))
     assert node.trigger_configure() == TransitionCallbackReturn.SUCCESS
-    odom_topic = node.simulator.profile.odom_topic
+    odom_topic = node.odometry_topic
     ros.spin_until(lambda: all(p.get_subscription_count() > 0
                                for p in node._outputs.values())
                    and probe.cmd.get_subscription_count() > 0
@@ -67,7 +67,15 @@ def start_simulator(ros, probe: Probe, activate: bool = True, **parameters) -> S
                    timeout=10.0, message="probe and simulator to discover each other")
     if activate:
         assert node.trigger_activate() == TransitionCallbackReturn.SUCCESS
+        if parameters.get("mode", "lockstep") == "lockstep":
+            wait_first_measurement(ros, probe, odom_topic.lstrip("/"))
     return node
+
+
+def wait_first_measurement(ros, probe: Probe, odom_topic: str = "odometry") -> None:
+    topics = (odom_topic, "scan", "clock", "ground_truth")
+    ros.spin_until(lambda: all(len(probe.received[t]) == 1 for t in topics),
+                   message="the first measurement, published on activation")
 
 
 def step_once(ros, probe: Probe, v: float, w: float, odom_topic: str = "odometry") -> None:
@@ -130,9 +138,7 @@ def test_conversions_round_trip_and_stamp_arithmetic():
 def test_lockstep_answers_each_command_once_with_stamps_advancing_by_dt(ros):
     probe = Probe(ros)
     node = start_simulator(ros, probe)
-    # The first measurement (stamp 0, no step) arrives on activation, before any command.
-    ros.spin_until(lambda: probe.received["odometry"] and probe.received["scan"],
-                   message="the first measurement")
+    # The first measurement (stamp 0, no step) arrived on activation, before any command.
     assert node.simulator.steps == 0
     for k in range(1, 21):
         step_once(ros, probe, 0.2, 0.5)
@@ -164,14 +170,12 @@ def test_lockstep_answers_each_command_once_with_stamps_advancing_by_dt(ros):
 
 @pytest.mark.parametrize("profile, rays, no_return, range_limits, odom_topic", [
     ("ideal", 240, "nan", (0.016, 8.0), "odometry"),
-    ("turtlebot3", 360, "zero", (0.12, 3.5), "odom"),
+    ("turtlebot3", 360, "zero", (0.12, 3.5), "odometry"),
 ])
 def test_laser_scan_fields_follow_the_profile(ros, open_room, profile, rays, no_return,
                                               range_limits, odom_topic):
     probe = Probe(ros)
     node = start_simulator(ros, probe, world=open_room, start="0,0,0", profile=profile)
-    ros.spin_until(lambda: probe.received["scan"] and probe.received[odom_topic],
-                   message="the first measurement")
     step_once(ros, probe, 0.0, 0.0, odom_topic)
     scan = probe.received["scan"][-1]
     assert len(scan.ranges) == rays
@@ -189,11 +193,10 @@ def test_laser_scan_fields_follow_the_profile(ros, open_room, profile, rays, no_
         assert (math.isnan(ranges[index]) if no_return == "nan" else ranges[index] == 0.0)
     valid = ranges[np.isfinite(ranges) & (ranges != 0.0)]
     assert valid.size > 0 and np.all((valid >= range_limits[0]) & (valid <= range_limits[1]))
-    if profile == "turtlebot3":  # /odom: pose only, as the robot's; no /odometry
-        odom = probe.received["odom"][-1]
-        assert (odom.header.frame_id, odom.child_frame_id) == ("odom", "base_footprint")
-        assert odom.twist.twist.linear.x == 0.0 and probe.count()["odometry"] == 0
-        assert node.simulator.profile.odom_topic == "/odom"
+    # Lockstep keeps the course protocol in both profiles: /odometry with the encoder twist.
+    odometry = probe.received["odometry"][-1]
+    assert (odometry.header.frame_id, odometry.child_frame_id) == ("odom", "base_footprint")
+    assert probe.count()["odom"] == 0 and node.odometry_topic == "/odometry"
 
 
 def test_bad_commands_are_zero_or_saturated_and_nothing_non_finite_is_published(ros):
@@ -219,7 +222,7 @@ def test_inactive_node_publishes_nothing_and_does_not_step(ros):
     ros.spin_for(0.3)
     assert sum(probe.count().values()) == 0 and node.simulator.steps == 0
     assert node.trigger_activate() == TransitionCallbackReturn.SUCCESS
-    ros.spin_until(lambda: len(probe.received["ground_truth"]) == 1, message="first measurement")
+    wait_first_measurement(ros, probe)
     step_once(ros, probe, 0.1, 0.0)
     assert node.trigger_deactivate() == TransitionCallbackReturn.SUCCESS
     counts, steps = probe.count(), node.simulator.steps

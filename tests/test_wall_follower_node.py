@@ -177,3 +177,41 @@ def test_bad_parameters_fail_configure_with_a_reason(ros):
     assert node.trigger_configure().name == "FAILURE"
     broken = make_node(ros, "broken", controller="no_such_module:Nothing")
     assert broken.trigger_configure().name == "FAILURE"
+
+
+def test_ctrl_c_on_the_executable_sends_a_final_zero(ros):
+    """The TurtleBot3 keeps its last command: Ctrl-C must leave a zero behind."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parent.parent
+    robot = Robot(ros, stamped=True)
+    env = dict(os.environ, PYTHONPATH=str(repo))
+    process = subprocess.Popen(
+        [str(Path(sys.executable).parent / "amr_wall_follower"), "--ros-args",
+         "-p", "autostart:=true", "-p", "simulation:=false",
+         "-p", "controller:=tests.controllers:ConstantController"],
+        cwd=repo, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        stamp = [0]
+
+        def moving_commands():
+            stamp[0] += 50_000_000
+            robot.send(stamp[0])
+            return any(twist_of(c).linear.x > 0 for c in robot.commands)
+
+        ros.spin_until(moving_commands, 20.0, "the node to command motion")
+        process.send_signal(signal.SIGINT)
+        ros.spin_until(lambda: process.poll() is not None and
+                       twist_of(robot.commands[-1]).linear.x == 0.0, 10.0,
+                       "the node to exit after a zero command")
+    finally:
+        if process.poll() is None:
+            process.kill()
+        output = process.communicate(timeout=10)[0]
+    assert process.returncode == 0, output
+    last = twist_of(robot.commands[-1])
+    assert (last.linear.x, last.angular.z) == (0.0, 0.0), output

@@ -1,0 +1,98 @@
+"""run_robot.py's nodes drive a robot emulated by another DDS vendor (Eclipse Cyclone DDS).
+
+The emulator (tests/robot_emulator.py) is a separate process that never imports rclpy: it speaks
+to our Fast DDS nodes only over the wire, as the real TurtleBot3 bringup does. run_robot.py runs
+as its own process too, exactly as a user starts it on the laptop.
+"""
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from tests.test_robot_emulator import commands_in, read_log, running_emulator
+
+RUN_ROBOT = Path(__file__).resolve().parent.parent / "scripts" / "run_robot.py"
+pytestmark = pytest.mark.slow
+
+
+def run_robot_process(tmp_path: Path):
+    """Start scripts/run_robot.py in this test's domain (discovery as the environment says)."""
+    output = open(tmp_path / "run_robot.log", "w")
+    process = subprocess.Popen(
+        [sys.executable, str(RUN_ROBOT), "--domain-id", os.environ["ROS_DOMAIN_ID"],
+         "--cmd-vel", "stamped"], stdout=output, stderr=subprocess.STDOUT)
+    return process, output
+
+
+def stop(process, output, tmp_path) -> str:
+    if process.poll() is None:
+        process.terminate()
+        try:
+            process.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+    output.close()
+    return (tmp_path / "run_robot.log").read_text()
+
+
+def wait_for(condition, timeout: float, what: str) -> None:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            pytest.fail(f"timed out after {timeout} s waiting for {what}")
+        time.sleep(0.1)
+
+
+def test_robot_graph_drives_the_emulated_robot_and_stops_when_scans_stop(ros, tmp_path):
+    stop_scan_after = 9.0
+    with running_emulator(tmp_path, "--wall-ahead-at", "0.9", "--corridor-width", "0.8",
+                          "--range-noise", "0.01", "--seed", "1",
+                          "--stop-scan-after", str(stop_scan_after)) as (emulator, log):
+        robot, output = run_robot_process(tmp_path)
+        try:
+            wait_for(lambda: any(e["event"] == "scan_stopped" for e in read_log(log)),
+                     stop_scan_after + 15, "the emulator to stop its scans")
+            time.sleep(2.0)  # commands that follow the loss of /scan
+        finally:
+            robot_log = stop(robot, output, tmp_path)
+    events = read_log(log)
+    commands = commands_in(log)
+    assert "RMW=" in robot_log and "ROS_DOMAIN_ID=" in robot_log, robot_log  # says what it uses
+    assert len(commands) > 20, f"commands must arrive over DDS; run_robot log:\n{robot_log}"
+
+    # Finite and within the Burger's limits.
+    for c in commands:
+        v, w = c["linear"][0], c["angular"][2]
+        assert math.isfinite(v) and math.isfinite(w)
+        assert abs(v) <= 0.22 + 1e-9 and abs(w) <= 2.84 + 1e-9
+
+    # It reacts to the wall ahead: no collision, it turns, and it does not drive on at full speed
+    # when the wall is close ahead.
+    assert not [e for e in events if e["event"] == "collision"]
+    assert any(abs(c["angular"][2]) > 0.3 for c in commands), "it must turn at the wall"
+    wall_x = 0.9
+    far, near = [], []
+    for c in commands:
+        x, y, yaw = c["pose"]
+        if math.cos(yaw) > 0.9:  # facing the wall
+            gap = wall_x - x
+            (far if gap > 0.5 else near if gap < 0.3 else []).append(c["linear"][0])
+            assert gap > 0.2 or c["linear"][0] <= 0.05, \
+                f"drives at {c['linear'][0]} m/s with the wall {gap:.2f} m ahead"
+    assert far and near and max(near) < max(far), "it slows down as the wall gets close"
+
+    # Scans stop: the command drops to zero within 1 s and stays there.
+    t_stop = next(e["t"] for e in events if e["event"] == "scan_stopped")
+    moving_before = [c for c in commands if c["t"] < t_stop and
+                     (c["linear"][0] != 0.0 or c["angular"][2] != 0.0)]
+    assert moving_before, "the robot must have been commanded to move before scans stopped"
+    late = [c for c in commands if c["t"] > t_stop + 1.0]
+    assert late, "run_robot must keep publishing (zero) commands while data is stale"
+    assert all(c["linear"][0] == 0.0 and c["angular"][2] == 0.0 for c in late), late[:3]
