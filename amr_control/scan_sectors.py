@@ -150,11 +150,15 @@ class LocalPointCloud:
         ranges there, to ignore single noisy readings); inf (open) if nothing returned."""
         if self.ranges.size == 0:
             return math.inf
-        inside = np.abs(wrap_angle(self.angles - centre_rad)) <= half_width_rad
-        if not np.any(inside):
-            return math.inf
+        offset = np.abs(self.angles - wrap_angle(centre_rad))   # angles are in [-pi, pi]
+        inside = np.minimum(offset, TWO_PI - offset) <= half_width_rad
         ranges = self.ranges[inside]
-        return float(ranges.min() if percentile <= 0.0 else np.percentile(ranges, percentile))
+        if ranges.size == 0:
+            return math.inf
+        if percentile <= 0.0:
+            return float(ranges.min())
+        k = int(percentile / 100.0 * (ranges.size - 1))
+        return float(np.partition(ranges, k)[k])
 
     def path_distance(self, half_width_m: float) -> float:
         """Distance ahead to the first obstacle inside the straight corridor the robot body would
@@ -175,6 +179,43 @@ class LocalPointCloud:
             return self.points
         lateral = side_sign * self.points[:, 1]
         return self.points[(lateral >= min_lateral_m) & (lateral <= max_lateral_m)]
+
+    def beside_distance(self, side_sign: float, half_length_m: float) -> float:
+        """Lateral distance to the closest point on one side with |x| <= half_length_m (right
+        beside the robot); inf if there is none."""
+        band = self.side_band(side_sign, math.inf)
+        beside = band[np.abs(band[:, 0]) <= half_length_m] if band.size else band
+        return float(np.abs(beside[:, 1]).min()) if beside.size else math.inf
+
+    def side_gap(self, side_sign: float, max_lateral_m: float, lookback_m: float = 0.6
+                 ) -> tuple[float | None, np.ndarray]:
+        """For an opening on one side: x of the last wall point behind the robot (None if
+        there is none within lookback_m) and the x of the side points ahead."""
+        band = self.side_band(side_sign, max_lateral_m)
+        if band.size == 0:
+            return None, np.zeros(0)
+        behind = band[(band[:, 0] <= 0.0) & (band[:, 0] >= -lookback_m), 0]
+        return (float(behind.max()) if behind.size else None), band[band[:, 0] > 0.0, 0]
+
+    def wall_reach(self, side_sign: float, max_lateral_m: float, half_length_m: float,
+                   window_m: float, fit: WallFit | None, beside_m: float) -> float | None:
+        """How far ahead (x, m) the wall beside the robot continues without a gap: its points
+        are those near the fitted line (or near the beside distance without a fit)."""
+        band = self.side_band(side_sign, max_lateral_m)
+        near = band[np.abs(band[:, 0]) <= half_length_m] if band.size else band
+        if near.size == 0:
+            return None
+        lateral = np.abs(near[:, 1])
+        if fit is not None and abs(fit.angle_rad) < 1.0:
+            expected = fit.distance_m + near[:, 0] * side_sign * math.tan(fit.angle_rad)
+            near = near[np.abs(lateral - expected) <= 0.04]
+        elif fit is None:
+            near = near[np.abs(lateral - beside_m) <= 0.04]
+        xs = np.sort(near[near[:, 0] >= -window_m, 0])
+        if xs.size == 0:
+            return None
+        gaps = np.nonzero(np.diff(xs) > 0.04)[0]     # the first gap ends the wall
+        return float(xs[gaps[0]] if gaps.size else xs[-1])
 
     def fit_side_wall(self, side_sign: float, max_lateral_m: float, half_length_m: float,
                       min_points: int = 6, min_span_m: float = 0.06) -> WallFit | None:
@@ -211,9 +252,11 @@ def _fit_line(pts: np.ndarray, min_points: int, min_span_m: float
         return None
     mean = pts.mean(axis=0)
     centred = pts - mean
-    cov = centred.T @ centred
-    eigvals, eigvecs = np.linalg.eigh(cov)
-    direction = eigvecs[:, 1]
+    sxx, sxy, syy = centred[:, 0] @ centred[:, 0], centred[:, 0] @ centred[:, 1], \
+        centred[:, 1] @ centred[:, 1]
+    # Principal axis of the 2x2 scatter matrix in closed form (what eigh gives, 10x cheaper).
+    theta = 0.5 * math.atan2(2.0 * sxy, sxx - syy)
+    direction = np.array([math.cos(theta), math.sin(theta)])
     if direction[0] < 0.0:
         direction = -direction
     normal = np.array([-direction[1], direction[0]])

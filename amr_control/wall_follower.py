@@ -1,10 +1,13 @@
 """Wall following that explores a maze without touching a wall (no rclpy: plain Python + numpy).
 
-Policy (deterministic, documented): follow ONE side (`follow_side`, right-hand rule by default):
-at every decision point the robot prefers, in order, the followed side, straight ahead, the other
-side, and turning back. In a maze whose walls are all connected this visits every corridor cell;
-in a ring it laps forever. It never switches sides: with no wall within reach on the followed side
-it drives straight until it finds one ("find_wall"), then puts it on the followed side.
+Policy (deterministic): follow ONE side (`follow_side`; right-hand rule by default). At every
+decision point the robot prefers, in order: the followed side, straight ahead, the other side,
+turning back. In a maze whose walls all connect to the outer boundary this visits every corridor
+cell; in a ring it laps forever. The only switch: when the robot is back at a pose it passed with
+the same heading after a full lap that turned +2 pi toward the followed side, it has circled an
+island (a free-standing obstacle or wall group, e.g. lab02's inner maze seen from the ring); it
+then turns away from it and drives straight to the next wall ("turn_escape", "escape").
+An enclosing boundary (-2 pi per lap) is lapped forever.
 
 States (the `state` attribute):
 - follow_wall: PD control of the distance to the followed wall; the distance and the wall angle
@@ -22,8 +25,10 @@ States (the `state` attribute):
 - find_wall: no wall on the followed side within reach: drive straight.
 - no_data: the newest scan had no valid reading at all: stop until data returns.
 
-Turns are in place: the Burger is round, so turning never reduces its clearance. Rotations are
-measured by integrating the odometry's angular velocity.
+Turns are in place (the Burger is round: turning never reduces its clearance), measured by
+integrating the odometry's angular velocity, and aimed relative to the direction of the last
+well-fitted wall so heading errors do not accumulate. Between scans (the LDS-01 refreshes at
+5 Hz, the controller runs at 20 Hz) the scan points are carried along with the odometry.
 """
 from __future__ import annotations
 
@@ -202,6 +207,7 @@ class WallFollower:
         self._winding += self._side * z_w * dt
         self._cloud.age(dt)
         self._cloud.move(z_v * dt, z_w * dt)
+        self._beside_cache: dict[float, float] = {}
         ranges = _as_ranges(z_scan)
         if ranges is not None and self._cloud.is_new_scan(ranges):
             geometry = self._geometry or ScanGeometry(0.0, 2.0 * math.pi / ranges.size,
@@ -225,9 +231,11 @@ class WallFollower:
         at a right-angle outer corner the wall leaving sideways lies just behind the robot and
         would keep a +-90 deg sector "closed" long after the followed wall has ended."""
         side = self._side if followed else -self._side
-        band = self._cloud.side_band(side, math.inf)
-        beside = band[np.abs(band[:, 0]) <= self.side_window_half_length_m] if band.size else band
-        return float(np.abs(beside[:, 1]).min()) if beside.size else math.inf
+        cached = self._beside_cache.get(side)
+        if cached is None:
+            cached = self._cloud.beside_distance(side, self.side_window_half_length_m)
+            self._beside_cache[side] = cached
+        return cached
 
     # ---- state machine -------------------------------------------------------------------
     def _enter(self, state: str) -> None:
@@ -365,10 +373,7 @@ class WallFollower:
         side = self._side
         front_blocked = self._front_blocked()
         if self._side_distance() > self.side_open_distance_m:
-            band = self._cloud.side_band(side, self.side_open_distance_m)
-            behind = band[(band[:, 0] <= 0.0) & (band[:, 0] >= -0.6), 0] if band.size else band
-            ahead = band[band[:, 0] > 0.0, 0] if band.size else band
-            wall_end = float(behind.max()) if behind.size else None
+            wall_end, ahead = self._cloud.side_gap(side, self.side_open_distance_m)
             # Prefer where the followed wall was last seen to end, carried along by odometry:
             # a zero-thickness wall seen nearly edge-on returns no points near the robot, so
             # the current scan alone misplaces (or misses) the end.
@@ -412,22 +417,12 @@ class WallFollower:
         beside = self._side_distance()
         if beside > self.side_open_distance_m:
             return
-        band = self._cloud.side_band(self._side, self.side_open_distance_m)
-        near = band[np.abs(band[:, 0]) <= self.wall_fit_half_length_m]
-        if fit is not None:
-            on_wall = np.abs(np.abs(near[:, 1]) - (fit.distance_m + near[:, 0] * self._side
-                                                   * math.tan(fit.angle_rad))) <= 0.04
-            if abs(fit.angle_rad) < 1.0:
-                near = near[on_wall]
-        else:
-            near = near[np.abs(np.abs(near[:, 1]) - beside) <= 0.04]
-        # The wall runs from beside the robot forward until the first gap in its points.
-        xs = np.sort(near[near[:, 0] >= -self.side_window_half_length_m, 0])
-        if xs.size == 0:
-            return
-        gaps = np.nonzero(np.diff(xs) > 0.04)[0]
-        self._wall_end_x = float(xs[gaps[0]] if gaps.size else xs[-1])
-        self._wall_end_odometer = self._odometer
+        reach = self._cloud.wall_reach(self._side, self.side_open_distance_m,
+                                       self.wall_fit_half_length_m,
+                                       self.side_window_half_length_m, fit, beside)
+        if reach is not None:
+            self._wall_end_x = reach
+            self._wall_end_odometer = self._odometer
 
     def _follow(self) -> tuple[float, float]:
         if self.state != "follow_wall":

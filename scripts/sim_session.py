@@ -147,6 +147,9 @@ class SimSession:
             "profile": self.args.profile, "mode": "realtime" if self.args.realtime else "lockstep",
             "seed": self.args.seed, "dt": self.args.dt,
             "controller": self.wall_follower.get_parameter("controller").value,
+            "nodes": self.manager.node_startup_order,
+            "controller_mode": "simulation" if self.wall_follower.get_parameter(
+                "simulation").value else "robot (timer)",
             "steps": sim.steps, "sim_time_s": round(sim.time, 6),
             "wall_time_s": round(wall_time, 3),
             "real_time_factor": round(sim.time / wall_time, 2) if wall_time > 0 else None,

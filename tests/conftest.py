@@ -8,7 +8,9 @@ Fixtures:
 """
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
 import tempfile
 
 from amr_control.ros_env import isolate_local_graph
@@ -16,7 +18,9 @@ from amr_control.ros_env import isolate_local_graph
 # Before any rclpy import in the tests: a private domain (file-locked, so parallel xdist workers
 # and concurrent runs never share one), loopback discovery, logs in a temporary folder.
 os.environ.pop("ROS_DOMAIN_ID", None)  # never the user's domain, even if exported
-isolate_local_graph(log_dir=tempfile.mkdtemp(prefix="amr-test-ros-log-"))
+_log_dir = tempfile.mkdtemp(prefix="amr-test-ros-log-")
+atexit.register(shutil.rmtree, _log_dir, ignore_errors=True)
+isolate_local_graph(log_dir=_log_dir)
 
 import pytest  # noqa: E402
 
