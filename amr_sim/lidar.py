@@ -54,21 +54,32 @@ def _scan_python(segments, ox, oy, theta, base_cos, base_sin, range_min, range_m
         out[i] = r if (r >= range_min) & (r <= range_max) else no_return
 
 
+def _segment_offset_python(segments, k, px, py):
+    """Vector (cx, cy) from (px, py) to the closest point of segment k, and its length."""
+    x1 = segments[k, 0]
+    y1 = segments[k, 1]
+    ex = segments[k, 2] - x1
+    ey = segments[k, 3] - y1
+    t = ((px - x1) * ex + (py - y1) * ey) / (ex * ex + ey * ey)
+    t = min(max(t, 0.0), 1.0)
+    cx = x1 + t * ex - px
+    cy = y1 + t * ey - py
+    return cx, cy, math.sqrt(cx * cx + cy * cy)
+
+
+# Kernels below call `segment_offset`: the jitted version when numba is there (numba resolves
+# the global when it compiles them), the Python one otherwise.
+segment_offset = (numba.njit(cache=True, error_model="numpy", nogil=True)(_segment_offset_python)
+                  if HAVE_NUMBA else _segment_offset_python)
+
+
 def _nearest_wall_python(segments, px, py):
     """Distance from (px, py) to the nearest segment and the unit vector pointing to it."""
     best = np.inf
     nx = 0.0
     ny = 0.0
     for k in range(segments.shape[0]):
-        x1 = segments[k, 0]
-        y1 = segments[k, 1]
-        ex = segments[k, 2] - x1
-        ey = segments[k, 3] - y1
-        t = ((px - x1) * ex + (py - y1) * ey) / (ex * ex + ey * ey)
-        t = min(max(t, 0.0), 1.0)
-        cx = x1 + t * ex - px
-        cy = y1 + t * ey - py
-        d = math.sqrt(cx * cx + cy * cy)
+        cx, cy, d = segment_offset(segments, k, px, py)
         if d < best:
             best = d
             nx = cx

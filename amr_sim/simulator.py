@@ -30,7 +30,7 @@ import numpy as np
 import pymunk
 
 from . import robot
-from .lidar import Lidar, nearest_wall
+from .lidar import Lidar, nearest_wall, segment_offset
 from .profiles import SensorProfile, get_profile
 from .world import World, WorldError
 
@@ -45,15 +45,7 @@ def _constrain_velocity_python(segments, px, py, vx, vy, h, radius, allowed_pene
     normals = np.empty((8, 3))
     count = 0
     for k in range(segments.shape[0]):
-        x1 = segments[k, 0]
-        y1 = segments[k, 1]
-        ex = segments[k, 2] - x1
-        ey = segments[k, 3] - y1
-        t = ((px - x1) * ex + (py - y1) * ey) / (ex * ex + ey * ey)
-        t = min(max(t, 0.0), 1.0)
-        cx = x1 + t * ex - px
-        cy = y1 + t * ey - py
-        d = math.sqrt(cx * cx + cy * cy)
+        cx, cy, d = segment_offset(segments, k, px, py)
         if d < reach and d > 0.0 and count < 8:
             normals[count, 0] = cx / d
             normals[count, 1] = cy / d
@@ -158,6 +150,11 @@ class Simulator:
         self._next_scan_time = p.scan_period if p.scan_period else 0.0
 
     # ------------------------------------------------------------------ stepping
+    @property
+    def last_scan(self) -> np.ndarray:
+        """The newest scan (as step() and measure() returned it), without measuring again."""
+        return self._scan
+
     def measure(self) -> tuple[np.ndarray, float, float]:
         """The current sensor readings (z_scan, z_v, z_w) without advancing time."""
         return self._scan, self._z_v, self._z_w

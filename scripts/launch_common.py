@@ -19,6 +19,27 @@ SIM_PARAMS = PARAMS_DIR / "sim.yaml"
 ROBOT_PARAMS = PARAMS_DIR / "turtlebot3.yaml"
 
 
+def add_controller_options(parser, params_file_default, params_file_help: str) -> None:
+    """--controller, -p NAME:=VALUE and --params-file, shared by the run scripts."""
+    parser.add_argument("--controller", default=None, help="MODULE:CLASS of a controller with "
+                        "compute_commands(z_scan, z_v, z_w) (default the project's WallFollower)")
+    parser.add_argument("-p", "--param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="wall follower parameter override (repeatable)")
+    parser.add_argument("--params-file", default=params_file_default, help=params_file_help)
+
+
+def check_common_options(parser, args) -> None:
+    """Validate dt and parse the -p overrides into args.overrides (argparse errors on failure)."""
+    import math
+    from amr_control.controller_loader import ControllerSpecError, parse_overrides
+    if args.dt is not None and not (math.isfinite(args.dt) and args.dt > 0):
+        parser.error("--dt must be > 0")
+    try:
+        args.overrides = parse_overrides(args.param)
+    except ControllerSpecError as exc:
+        parser.error(str(exc))
+
+
 def overrides_to_parameters(values: dict[str, Any]) -> list:
     """{"kp": 4.0} -> [rclpy Parameter], for Node(parameter_overrides=...)."""
     from rclpy.parameter import Parameter

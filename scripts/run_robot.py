@@ -17,9 +17,8 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from launch_common import ROBOT_PARAMS, make_robot_graph  # noqa: E402
-
-from amr_control.controller_loader import ControllerSpecError, parse_overrides  # noqa: E402
+from launch_common import ROBOT_PARAMS, add_controller_options, check_common_options, \
+    make_robot_graph  # noqa: E402
 from amr_control.ros_env import describe_graph_settings  # noqa: E402
 
 
@@ -32,21 +31,13 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--cmd-vel", choices=["stamped", "twist"], default=None,
                         help="/cmd_vel type: stamped = TwistStamped (Jazzy bringup), twist = "
                         "Twist (Humble); default from the params file")
-    parser.add_argument("--params-file", default=str(ROBOT_PARAMS),
-                        help="wall follower ROS params YAML (default params/turtlebot3.yaml)")
+    add_controller_options(parser, str(ROBOT_PARAMS), "wall follower ROS params YAML "
+                           "(default params/turtlebot3.yaml)")
     parser.add_argument("--dt", type=float, default=None, help="control period in seconds")
-    parser.add_argument("--controller", default=None, help="MODULE:CLASS controller")
-    parser.add_argument("-p", "--param", action="append", default=[], metavar="NAME:=VALUE",
-                        help="wall follower parameter override (repeatable)")
     args = parser.parse_args(argv)
     if args.domain_id is not None and not 0 <= args.domain_id <= 232:
         parser.error("--domain-id must be within 0-232")
-    if args.dt is not None and not args.dt > 0:
-        parser.error("--dt must be > 0")
-    try:
-        args.overrides = parse_overrides(args.param)
-    except ControllerSpecError as exc:
-        parser.error(str(exc))
+    check_common_options(parser, args)
     return args
 
 

@@ -24,10 +24,8 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from launch_common import ROBOT_PARAMS, SIM_PARAMS, make_robot_graph, make_wall_follower, \
-    overrides_to_parameters  # noqa: E402
+from launch_common import add_controller_options, check_common_options  # noqa: E402
 
-from amr_control.controller_loader import ControllerSpecError, parse_overrides  # noqa: E402
 from amr_control.ros_env import describe_graph_settings, isolate_local_graph  # noqa: E402
 
 
@@ -46,13 +44,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--realtime", action="store_true",
                         help="advance on a wall-clock timer instead of lockstep")
-    parser.add_argument("--controller", default=None, help="MODULE:CLASS of a controller with "
-                        "compute_commands(z_scan, z_v, z_w) (default the project's WallFollower)")
-    parser.add_argument("-p", "--param", action="append", default=[], metavar="NAME:=VALUE",
-                        help="wall follower parameter override (repeatable)")
-    parser.add_argument("--params-file", default=None,
-                        help="wall follower ROS params YAML (default params/sim.yaml, or "
-                        "params/turtlebot3.yaml for the realtime turtlebot3 rehearsal)")
+    add_controller_options(parser, None, "wall follower ROS params YAML (default "
+                           "params/sim.yaml, or params/turtlebot3.yaml for the realtime "
+                           "turtlebot3 rehearsal)")
     parser.add_argument("--goal", default=None, help="X,Y goal (needs a localization node "
                         "publishing /pose and --enable-localization)")
     parser.add_argument("--enable-localization", action="store_true")
@@ -65,18 +59,20 @@ def parse_args(argv=None) -> argparse.Namespace:
     args = parser.parse_args(argv)
     if not (math.isfinite(args.duration) and args.duration > 0):
         parser.error("--duration must be > 0")
-    if not (math.isfinite(args.dt) and args.dt > 0):
-        parser.error("--dt must be > 0")
-    try:
-        args.overrides = parse_overrides(args.param)
-    except ControllerSpecError as exc:
-        parser.error(str(exc))
+    check_common_options(parser, args)
+    if args.goal is not None:
+        try:
+            args.goal = [float(v) for v in args.goal.split(",")]
+        except ValueError:
+            args.goal = []
+        if len(args.goal) != 2 or not all(math.isfinite(v) for v in args.goal):
+            parser.error("--goal must be X,Y in metres")
     return args
 
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    domain_id = isolate_local_graph(args.domain_id)
+    isolate_local_graph(args.domain_id)
     from amr_sim.world import World, WorldError
     try:
         world = World.load(args.world)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import time
+from pathlib import Path
 
 import rclpy
 from rclpy.signals import SignalHandlerOptions
@@ -41,7 +42,7 @@ class SimSession:
                       "mode": "realtime" if args.realtime else "lockstep",
                       "enable_localization": args.enable_localization}
         if args.goal:
-            sim_values["goal"] = [float(v) for v in args.goal.split(",")]
+            sim_values["goal"] = list(args.goal)
         self.simulator_node = SimulatorNode(
             context=self.context, parameter_overrides=overrides_to_parameters(sim_values))
 
@@ -82,7 +83,7 @@ class SimSession:
         error = getattr(controller, "wall_distance_error", None)
         if error is not None and math.isfinite(error):
             self.wall_errors.append(float(error))
-        if self.view is not None and not self.view.update(sim):
+        if self.view is not None and not self.view.update(sim, sim.last_scan):
             self.stop_requested = True
 
     def run(self) -> dict:
@@ -93,7 +94,11 @@ class SimSession:
                                                    f"{_start_label(self.start)}")
         if args.record:
             from amr_sim.mcap_recorder import McapRecorder
-            self.recorder = McapRecorder(args.record)
+            Path(args.record).parent.mkdir(parents=True, exist_ok=True)
+            self.recorder = McapRecorder(args.record, metadata={
+                "world": self.world.name, "start": _start_label(self.start),
+                "profile": args.profile, "seed": str(args.seed), "dt": str(args.dt),
+                "mode": "realtime" if args.realtime else "lockstep"})
             self._attach_recorder()
         self.simulator_node.on_step.append(self._on_step)
         self.stop_requested = False
@@ -118,6 +123,13 @@ class SimSession:
         except KeyboardInterrupt:
             print("run_sim: interrupted")
         wall_time = time.monotonic() - wall_start
+        if self.recorder is not None:
+            # Stop stepping, then let the recorder take the last step's messages.
+            if self.simulator_node._state_machine.current_state[1] == "active":
+                self.simulator_node.trigger_deactivate()
+            drain_end = time.monotonic() + 0.3
+            while time.monotonic() < drain_end:
+                self.executor.spin_once(timeout_sec=0.05)
         return self._report(sim, wall_time)
 
     def _attach_recorder(self) -> None:
