@@ -20,6 +20,7 @@ import datetime as dt_module
 import os
 import platform
 import sys
+import textwrap
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
@@ -137,9 +138,11 @@ def main(argv: list[str] | None = None) -> int:
         ran = [o.result for o in outcomes if o.result is not None]
         if ran:
             from amr_sim.plot import plot_episodes_sheet
-            params = " ".join(f"{k}={v}" for k, v in settings["params"].items())
+            # Title: the controller and what differs from its params file (all would not fit).
+            changed = " ".join(f"{k}={v}" for k, v in parse_overrides(args.param).items())
             plot_episodes_sheet(ran, out / "sheet.png",
-                                title=f"{settings['controller']} {params}".strip())
+                                title=textwrap.shorten(f"{settings['controller']} {changed}",
+                                                       width=150, placeholder=" ..."))
 
     print(format_table(outcome_row(o) for o in outcomes))
     line, code = verdict(outcomes)
