@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import sys
 import time
@@ -45,12 +44,9 @@ def bench_ros_loop(steps: int) -> dict:
     import rclpy
     from geometry_msgs.msg import TwistStamped
     from nav_msgs.msg import Odometry
-    from rclpy.parameter import Parameter
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import LaserScan
     from amr_control.node_runner import make_executor
-    from amr_control.wall_follower_node import WallFollowerNode
-    from amr_sim.simulator_node import SimulatorNode
 
     best_effort = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
     results = {}
