@@ -143,6 +143,8 @@ class WallFollower:
         self._y = 0.0
         self._winding = 0.0             # rad turned toward the followed side in total
         self._trail: list[tuple[float, float, float, float, float]] = []
+        self._trail_xy: np.ndarray | None = None   # numpy mirror of the trail's (odometer, x, y)
+        self._trail_n = 0
         self._island_lap_done = False
         self._reference_heading = 0.0   # rad, see _reference()
         self._reference_odometer = -math.inf
@@ -216,14 +218,9 @@ class WallFollower:
         hw = self.sector_half_width_rad
         cloud = self._cloud
         path = cloud.path_distance(self.robot_radius_m + self.path_margin_m)
-        self.distances = {
-            # A low percentile, not the minimum: one noisy ray must not trigger a turn early.
-            "front": cloud.sector_distance(0.0, hw, percentile=25.0),
-            "left": cloud.sector_distance(0.5 * math.pi, hw),
-            "right": cloud.sector_distance(-0.5 * math.pi, hw),
-            "back": cloud.sector_distance(math.pi, hw),
-            "path": path,
-        }
+        # A low percentile ahead, not the minimum: one noisy ray must not trigger a turn early.
+        front, left, right, back = cloud.sector_distances(_SECTOR_CENTRES, hw, (25.0, 0.0, 0.0, 0.0))
+        self.distances = {"front": front, "left": left, "right": right, "back": back, "path": path}
 
     def _side_distance(self, followed: bool = True) -> float:
         """Lateral distance to the closest point right beside the robot (|x| within the side
@@ -305,12 +302,29 @@ class WallFollower:
         if trail and self._odometer - trail[-1][0] < 0.05:
             return False
         pose = (self._odometer, self._x, self._y, self._heading, self._winding)
+        # Numpy mirror of (odometer, x, y) of the trail, to find the candidate poses at once.
+        mirror = self._trail_xy
+        if mirror is None or self._trail_n != len(trail):
+            mirror = np.zeros((4100, 3))
+            if trail:
+                mirror[:len(trail)] = [entry[:3] for entry in trail]
+            self._trail_xy = mirror
         trail.append(pose)
-        if len(trail) > 4000:
+        m = len(trail)
+        mirror[m - 1] = pose[:3]
+        if m > 4000:
             del trail[:1000]
-        for odometer, x, y, heading, winding in trail:
-            if self._odometer - odometer < 1.0:
-                break
+            m -= 1000
+            mirror[:m] = mirror[1000:m + 1000].copy()
+        self._trail_n = m
+        # The poses walked at least 1 m ago (the scan stops at the first more recent one) ...
+        recent = (self._odometer - mirror[:m, 0]) < 1.0
+        stop = int(recent.argmax()) if recent.any() else m
+        # ... and within a box around the pose (a superset of the 0.08 m circle), in order.
+        near = np.nonzero((np.abs(mirror[:stop, 1] - self._x) <= 0.081)
+                          & (np.abs(mirror[:stop, 2] - self._y) <= 0.081))[0]
+        for i in near.tolist():
+            odometer, x, y, heading, winding = trail[i]
             if (math.hypot(self._x - x, self._y - y) < 0.08
                     and abs(_wrap(self._heading - heading)) < 0.5):
                 return self._winding - winding > math.pi
@@ -460,6 +474,9 @@ class WallFollower:
         v_max = max(0.0, _WHEEL_LINEAR_SPEED_MAX_MPS - abs(w) * 0.5 * self.track_m)
         v = max(-v_max, min(v_max, v))
         return float(v), float(w)
+
+
+_SECTOR_CENTRES = (0.0, 0.5 * math.pi, -0.5 * math.pi, math.pi)   # front, left, right, back
 
 
 def _as_bool(value: Any) -> bool:

@@ -133,6 +133,9 @@ class WallFollowerNode(LifecycleNode):
         self.stamped = self.simulation or bool(p["cmd_vel_stamped"])
         slop = p["slop"] if p["slop"] >= 0 else (10.0 if self.simulation else 0.15)
 
+        self._cmd_message = TwistStamped() if self.stamped else Twist()
+        if self.stamped:
+            self._cmd_message.header.frame_id = "base_footprint"
         self._cmd_publisher = self.create_lifecycle_publisher(
             TwistStamped if self.stamped else Twist, p["cmd_vel_topic"], RELIABLE_10)
         self._subscribers = [
@@ -258,16 +261,14 @@ class WallFollowerNode(LifecycleNode):
     def _publish(self, v: float, w: float, stamp, force: bool = False) -> None:
         if self._cmd_publisher is None:
             return
-        twist = Twist()
+        # One message object reused: publish() serializes it at once, and building a
+        # TwistStamped per step is a noticeable share of the lockstep loop.
+        msg = self._cmd_message
+        twist = msg.twist if self.stamped else msg
         twist.linear.x = v
         twist.angular.z = self.angular_sign * w
         if self.stamped:
-            msg = TwistStamped()
             msg.header.stamp = stamp
-            msg.header.frame_id = "base_footprint"
-            msg.twist = twist
-        else:
-            msg = twist
         if force:  # a final zero goes out even when the lifecycle publisher is disabled
             Publisher.publish(self._cmd_publisher, msg)
         else:
