@@ -216,7 +216,7 @@ def main(argv=None) -> int:
         print(f"controller: compute_commands {c['compute_commands_us']:.1f} us per call = "
               f"{c['compute_commands_share_of_dt'] * 100:.3f}% of dt")
     if "evaluate" in chosen:
-        figures["evaluate"] = bench_evaluate(4 if args.quick else 8, 30.0 if args.quick else 60.0)
+        figures["evaluate"] = bench_evaluate(6 if args.quick else 12, 60.0)  # pool start-up included
         e = figures["evaluate"]
         print("evaluate.py: " + ", ".join(f"{k} {v:.2f}" for k, v in e.items()))
     if args.json:
