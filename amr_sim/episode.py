@@ -110,7 +110,6 @@ def run_episode(world: World | str, start=None, profile: str | SensorProfile = "
     x, y, th = sim.pose
     positions[0] = (x, y)
     trajectory = [[0.0, x, y, th]] if record_trajectory else []
-    first_collision = None
     wall_err_sq, wall_err_n = 0.0, 0
     odom_period = prof.odom_period
     next_odom = 0.0
@@ -134,8 +133,6 @@ def run_episode(world: World | str, start=None, profile: str | SensorProfile = "
             if odom_period is not None:
                 while next_odom <= sim.time + 1e-9:
                     next_odom += odom_period
-        if first_collision is None and sim.collisions:
-            first_collision = sim.time
         x, y, th = sim.pose
         positions[k] = (x, y)
         if record_trajectory:
@@ -148,7 +145,7 @@ def run_episode(world: World | str, start=None, profile: str | SensorProfile = "
     return EpisodeResult(
         world=bundled_name, start=start_label, profile=prof.name, seed=int(seed), steps=sim.steps,
         sim_time_s=sim.time, wall_time_s=wall_time, collisions=sim.collisions,
-        first_collision_time_s=first_collision, min_clearance_m=sim.min_clearance,
+        first_collision_time_s=sim.first_collision_time, min_clearance_m=sim.min_clearance,
         distance_m=sim.distance, explored_fraction=explored_fraction(world_obj, positions),
         laps=count_laps(world_obj, positions),
         rms_wall_error_m=math.sqrt(wall_err_sq / wall_err_n) if wall_err_n else None,

@@ -134,6 +134,7 @@ class Simulator:
         self._steps = 0
         self._distance = 0.0
         self._collisions = 0
+        self._first_collision_time: float | None = None
         self._collision_points: list[tuple[float, float]] = []
         self._active_contacts = 0
         self._min_clearance = nearest_wall(self._segments, x, y)[0] - robot.ROBOT_RADIUS
@@ -197,6 +198,8 @@ class Simulator:
         self._x, self._y, self._theta = x1, y1, th1
         self._steps += 1
         now = self._steps * dt
+        if self._first_collision_time is None and self._collisions:
+            self._first_collision_time = now
 
         # Encoders from the actual motion: arc length along the mid heading -> wheel angle
         # increments -> forward kinematics (z_v = ds / dt, z_w = dtheta / dt).
@@ -339,6 +342,11 @@ class Simulator:
     def collisions(self) -> int:
         """Number of contact starts with the walls."""
         return self._collisions
+
+    @property
+    def first_collision_time(self) -> float | None:
+        """Simulated time (s) at the end of the step in which the first contact began."""
+        return self._first_collision_time
 
     @property
     def collision_points(self) -> list[tuple[float, float]]:

@@ -381,7 +381,7 @@ class SimulatorNode(LifecycleNode):
         # /clock first: a use_sim_time subscriber then has the time before the measurements.
         messages["clock"].clock = stamp
         self._outputs["clock"].publish(messages["clock"])
-        # Nobody evaluating: skip building the true-pose message (a third of a step's cost).
+        # Nobody evaluating: skip building and publishing the true-pose Odometry (~40 us).
         if "truth" in self._outputs and self._outputs["truth"].get_subscription_count() > 0:
             self._outputs["truth"].publish(odometry_message(
                 stamp, p["world_frame"], p["base_frame"], pose, velocity, messages["truth"]))

@@ -1,7 +1,7 @@
 """One in-process simulation run for run_sim.py: build the graph, bring it up, run, report.
 
-Lockstep: simulator (lockstep) + wall follower (simulation mode, params/sim.yaml), with the
-amr_odometry node between them when the profile publishes /odom like the real robot.
+Lockstep: simulator (lockstep, /odometry with the encoder twist in both profiles) + wall
+follower (simulation mode, params/sim.yaml).
 Rehearsal (`--realtime --profile turtlebot3`): simulator (real time) + the robot graph of
 run_robot.py (amr_odometry + wall follower in robot mode, params/turtlebot3.yaml).
 """
@@ -56,14 +56,9 @@ class SimSession:
         else:
             tuning.update({"simulation": True, "dt": args.dt,
                            "enable_localization": args.enable_localization})
-            nodes = []
-            if _publishes_pose_only_odom(args.profile):
-                from amr_turtlebot3.odometry_node import OdometryNode
-                nodes.append(OdometryNode(context=self.context, parameter_overrides=(
-                    overrides_to_parameters({"use_sim_time": True}))))
-            nodes.append(make_wall_follower(self.context, params_file=args.params_file or
-                                            SIM_PARAMS, overrides=tuning, use_sim_time=True))
-            self.control_nodes = nodes
+            self.control_nodes = [make_wall_follower(
+                self.context, params_file=args.params_file or SIM_PARAMS, overrides=tuning,
+                use_sim_time=True)]
         self.wall_follower = self.control_nodes[-1]
         order = [node.get_name() for node in self.control_nodes] + [
             self.simulator_node.get_name()]
@@ -136,17 +131,15 @@ class SimSession:
         from geometry_msgs.msg import Twist, TwistStamped
         from nav_msgs.msg import Odometry
         from sensor_msgs.msg import LaserScan
-        topics = {"/scan": LaserScan, "/ground_truth": Odometry}
-        if self.rehearsal or _publishes_pose_only_odom(self.args.profile):
+        topics = {"/scan": LaserScan, "/ground_truth": Odometry, "/odometry": Odometry}
+        if self.rehearsal:  # the simulated robot's pose-only /odom, before amr_odometry
             topics["/odom"] = Odometry
-        topics["/odometry"] = Odometry
         stamped = not self.rehearsal or self.wall_follower.get_parameter(
             "cmd_vel_stamped").value
         topics["/cmd_vel"] = TwistStamped if stamped else Twist
         recorder_node = rclpy.create_node("mcap_recorder", context=self.context)
-        self.executor.add_node(recorder_node)
+        self.executor.add_node(recorder_node)  # destroyed with the others in close()
         self.recorder.attach(recorder_node, topics)
-        self.recorder_node = recorder_node
 
     def _report(self, sim, wall_time: float) -> dict:
         import numpy as np
@@ -166,7 +159,7 @@ class SimSession:
             "wall_time_s": round(wall_time, 3),
             "real_time_factor": round(sim.time / wall_time, 2) if wall_time > 0 else None,
             "collisions": sim.collisions,
-            "first_collision_time_s": getattr(sim, "first_collision_time", None),
+            "first_collision_time_s": sim.first_collision_time,
             "min_clearance_m": sim.min_clearance, "distance_m": sim.distance,
             "explored_fraction": explored_fraction(self.world, positions),
             "laps": count_laps(self.world, positions),
@@ -199,8 +192,3 @@ class SimSession:
         self.executor.shutdown(timeout_sec=1.0)
         if self.context.ok():
             rclpy.shutdown(context=self.context)
-
-
-def _publishes_pose_only_odom(profile_name: str) -> bool:
-    from amr_sim.profiles import get_profile
-    return get_profile(profile_name).odom_topic == "/odom"

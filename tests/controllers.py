@@ -26,3 +26,10 @@ class NanController(ConstantController):
 class HugeController(ConstantController):
     def compute_commands(self, z_scan, z_v, z_w):
         return 50.0, -90.0
+
+
+class StraightController(ConstantController):
+    """Drives straight ahead at 0.2 m/s whatever it sees: it must hit the wall."""
+
+    def __init__(self, dt):
+        super().__init__(dt, v=0.2, w=0.0)

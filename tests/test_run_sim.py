@@ -106,3 +106,15 @@ def test_ros_lockstep_path_and_headless_episode_drive_the_same_trajectory(tmp_pa
     # LaserScan carries float32 ranges: the only difference between the two paths.
     assert np.abs(over_ros[:, 1:3] - headless[:, 1:3]).max() < 1e-5
     assert np.abs(over_ros[-1, 1:3] - over_ros[0, 1:3]).max() > 0.5  # it did drive
+
+
+def test_report_gives_the_time_of_the_first_collision(tmp_path):
+    report_path = tmp_path / "crash.json"
+    # lab02 outer: (1.0, -1.0) heading north, the outer wall at y = 1.2: the robot's edge
+    # (radius 0.105 m) reaches it after 2.095 m, 10.5 s at 0.2 m/s.
+    exit_code = run_sim.main(["--duration", "15", "--controller",
+                              "tests.controllers:StraightController",
+                              "--report", str(report_path)])
+    report = json.loads(report_path.read_text())
+    assert exit_code == 1 and report["collisions"] >= 1
+    assert report["first_collision_time_s"] == pytest.approx(10.5, abs=0.2)
