@@ -21,15 +21,14 @@ from lifecycle_msgs.msg import State, Transition
 from lifecycle_msgs.srv import ChangeState, GetState
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import Executor
+from rclpy.lifecycle import LifecycleNode
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
-from amr_control.node_runner import StopFlag, make_executor, spin_until_stopped
+from amr_control.node_runner import StopFlag, make_executor, shutdown_node, spin_until_stopped
 
 _TRANSITION_LABELS = {Transition.TRANSITION_CONFIGURE: "configure",
-                      Transition.TRANSITION_ACTIVATE: "activate",
-                      Transition.TRANSITION_DEACTIVATE: "deactivate",
-                      Transition.TRANSITION_CLEANUP: "cleanup"}
+                      Transition.TRANSITION_ACTIVATE: "activate"}
 # A transition is skipped when the node is already at or past its goal state.
 _ALREADY_DONE = {Transition.TRANSITION_CONFIGURE: {State.PRIMARY_STATE_INACTIVE,
                                                    State.PRIMARY_STATE_ACTIVE},
@@ -75,8 +74,9 @@ class LifecycleManager(Node):
 
     def _clients_for(self, name: str) -> tuple:
         if name not in self._lifecycle_clients:
-            self._lifecycle_clients[name] = (self.create_client(GetState, f"{name}/get_state"),
-                                   self.create_client(ChangeState, f"{name}/change_state"))
+            self._lifecycle_clients[name] = (
+                self.create_client(GetState, f"{name}/get_state"),
+                self.create_client(ChangeState, f"{name}/change_state"))
         return self._lifecycle_clients[name]
 
     def _wait_for_services(self, name: str, executor: Executor) -> None:
@@ -125,13 +125,18 @@ class LifecycleManager(Node):
         self.get_logger().info(f"'{name}': {label} OK")
 
 
-def main(args: Sequence[str] | None = None) -> int:
-    rclpy.init(args=list(sys.argv if args is None else args),
-               signal_handler_options=SignalHandlerOptions.NO)
-    stop = StopFlag().install()
-    manager = LifecycleManager()
+def run_managed(manager: LifecycleManager, stop: StopFlag,
+                nodes: Sequence[LifecycleNode] = ()) -> int:
+    """Spin `manager` and the in-process `nodes`, bring the graph up, run until Ctrl-C/SIGTERM.
+
+    Then the in-process nodes go through their shutdown transition in reverse startup order
+    (controllers first: their final zero command goes out while DDS is still up), everything is
+    destroyed and rclpy shut down. The caller has run rclpy.init(signal_handler_options=NO) and
+    installed `stop`. Returns the process exit code.
+    """
     executor = make_executor()
-    executor.add_node(manager)
+    for node in [*nodes, manager]:
+        executor.add_node(node)
     exit_code = 0
     try:
         manager.startup(executor)
@@ -139,13 +144,21 @@ def main(args: Sequence[str] | None = None) -> int:
     except LifecycleStartupError as exc:
         manager.get_logger().error(str(exc))
         exit_code = 1
-    except KeyboardInterrupt:
-        pass
     finally:
-        manager.destroy_node()
+        for node in reversed(nodes):
+            shutdown_node(node)
+        for node in [*nodes, manager]:
+            node.destroy_node()
         if rclpy.ok():
             rclpy.shutdown()
     return exit_code
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    rclpy.init(args=list(sys.argv if args is None else args),
+               signal_handler_options=SignalHandlerOptions.NO)
+    stop = StopFlag().install()
+    return run_managed(LifecycleManager(), stop)
 
 
 if __name__ == "__main__":

@@ -96,8 +96,6 @@ def run_lifecycle_node(node_factory: Callable[..., LifecycleNode],
             exit_code = 1
         else:
             spin_until_stopped(executor, stop)
-    except KeyboardInterrupt:
-        pass
     except Exception as exc:
         exit_code = 1
         (node.get_logger().fatal if node else print)(f"fatal: {exc!r}")

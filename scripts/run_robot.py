@@ -47,9 +47,8 @@ def main(argv=None) -> int:
         os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
     import rclpy
     from rclpy.signals import SignalHandlerOptions
-    from amr_control.lifecycle_manager import LifecycleManager, LifecycleStartupError
-    from amr_control.node_runner import StopFlag, make_executor, shutdown_node, \
-        spin_until_stopped
+    from amr_control.lifecycle_manager import LifecycleManager, run_managed
+    from amr_control.node_runner import StopFlag
 
     # Own signal handling: the final zero command must go out before the context shuts down.
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
@@ -59,28 +58,8 @@ def main(argv=None) -> int:
                              cmd_vel_stamped=stamped, controller=args.controller,
                              tuning=args.overrides)
     manager = LifecycleManager([node.get_name() for node in nodes])
-    manager.get_logger().info(f"run_robot: {describe_graph_settings()}")
-    executor = make_executor()
-    for node in [*nodes, manager]:
-        executor.add_node(node)
-    exit_code = 0
-    try:
-        manager.startup(executor)
-        manager.get_logger().info("run_robot: running; Ctrl-C stops the robot")
-        spin_until_stopped(executor, stop)
-    except LifecycleStartupError as exc:
-        manager.get_logger().error(str(exc))
-        exit_code = 1
-    except KeyboardInterrupt:
-        pass
-    finally:
-        for node in reversed(nodes):  # wall follower first: zero command while DDS is up
-            shutdown_node(node)
-        for node in [*nodes, manager]:
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
-    return exit_code
+    manager.get_logger().info(f"run_robot: {describe_graph_settings()}; Ctrl-C stops the robot")
+    return run_managed(manager, stop, nodes)
 
 
 if __name__ == "__main__":
