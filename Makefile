@@ -11,17 +11,20 @@ MSGS_SOURCES := $(wildcard amr_msgs/msg/*.msg) amr_msgs/CMakeLists.txt amr_msgs/
 
 ARGS ?=
 PYTEST_ARGS ?=
+# Local runs, tests and benchmarks stay on loopback (the scripts and tests/conftest.py also
+# claim a free ROS_DOMAIN_ID). Robot runs (scripts/run_robot.py) are not started from here.
+LOCAL_ROS := ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 
 .PHONY: run test bench setup lock clean
 
 run: $(MSGS_STAMP)
-	$(PY) scripts/run_sim.py $(ARGS)
+	$(LOCAL_ROS) $(PY) scripts/run_sim.py $(ARGS)
 
 test: $(MSGS_STAMP)
-	$(PY) -m pytest $(PYTEST_ARGS)
+	$(LOCAL_ROS) $(PY) -m pytest $(PYTEST_ARGS)
 
 bench: $(MSGS_STAMP)
-	$(PY) scripts/bench.py $(ARGS)
+	$(LOCAL_ROS) $(PY) scripts/bench.py $(ARGS)
 
 setup: $(MSGS_STAMP)
 
