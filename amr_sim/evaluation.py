@@ -174,17 +174,22 @@ def expand_grid(worlds: str | Sequence[str], starts: str | Sequence[str] = "all"
     return specs
 
 
-def load_config(path: str | os.PathLike) -> dict[str, Any]:
-    """Read an episode-set YAML file; keys as in CONFIG_KEYS (all optional except worlds)."""
+def _read_yaml(path: Path, what: str) -> Any:
+    """Parsed YAML of a file; EvaluationError naming the file and `what` it is on failure."""
     import yaml
 
-    path = Path(path)
     try:
-        raw = yaml.safe_load(path.read_text(encoding="utf-8"))
+        return yaml.safe_load(path.read_text(encoding="utf-8"))
     except OSError as exc:
-        raise EvaluationError(f"{path}: cannot read config: {exc}") from None
+        raise EvaluationError(f"{path}: cannot read {what}: {exc}") from None
     except yaml.YAMLError as exc:
         raise EvaluationError(f"{path}: not valid YAML: {exc}") from None
+
+
+def load_config(path: str | os.PathLike) -> dict[str, Any]:
+    """Read an episode-set YAML file; keys as in CONFIG_KEYS (all optional except worlds)."""
+    path = Path(path)
+    raw = _read_yaml(path, "config")
     if not isinstance(raw, dict):
         raise EvaluationError(f"{path}: expected a mapping with keys {', '.join(CONFIG_KEYS)}")
     unknown = sorted(set(raw) - set(CONFIG_KEYS))
@@ -224,15 +229,8 @@ def load_ros_params_file(path: str | os.PathLike, controller_class: type | None 
     lists its parameters (`parameter_descriptions()`), node-only parameters such as use_sim_time
     are dropped, so the class gets exactly what the node would pass it.
     """
-    import yaml
-
     path = Path(path)
-    try:
-        raw = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise EvaluationError(f"{path}: cannot read params file: {exc}") from None
-    except yaml.YAMLError as exc:
-        raise EvaluationError(f"{path}: not valid YAML: {exc}") from None
+    raw = _read_yaml(path, "params file")
     sections = [v["ros__parameters"] for v in (raw or {}).values()
                 if isinstance(v, dict) and isinstance(v.get("ros__parameters"), dict)] \
         if isinstance(raw, dict) else []
