@@ -38,7 +38,8 @@ from typing import Any
 
 import numpy as np
 
-from amr_control.scan_sectors import LocalPointCloud, ScanGeometry, WallFit
+from amr_control.pose_trail import PoseTrail
+from amr_control.scan_sectors import LocalPointCloud, Perception, PerceptionSpec, ScanGeometry
 
 _LOG = logging.getLogger(__name__)
 
@@ -129,8 +130,15 @@ class WallFollower:
             raise ValueError("WallFollower: front_stop_distance_m must be below front_turn_distance_m")
 
         self._geometry: ScanGeometry | None = None
+        # A low percentile ahead, not the minimum: one noisy ray must not trigger a turn early.
+        spec = PerceptionSpec(
+            self._side, _SECTOR_CENTRES, self.sector_half_width_rad, {"front": 25.0},
+            path_half_width_m=self.robot_radius_m + self.path_margin_m,
+            side_window_m=self.side_window_half_length_m, side_open_m=self.side_open_distance_m,
+            fit_half_length_m=self.wall_fit_half_length_m)
         self._cloud = LocalPointCloud(self.invalid_hold_time_s, self.invalid_hold_range_m,
-                                      self.lidar_offset_x_m)
+                                      self.lidar_offset_x_m, spec)
+        self._perception: Perception | None = None
         self.state = "follow_wall"
         self.wall_distance_error: float | None = None
         self.distances: dict[str, float] = {}
@@ -142,9 +150,7 @@ class WallFollower:
         self._x = 0.0                   # m, odometry position (for loop detection)
         self._y = 0.0
         self._winding = 0.0             # rad turned toward the followed side in total
-        self._trail: list[tuple[float, float, float, float, float]] = []
-        self._trail_xy: np.ndarray | None = None   # numpy mirror of the trail's (odometer, x, y)
-        self._trail_n = 0
+        self._trail = PoseTrail()
         self._island_lap_done = False
         self._reference_heading = 0.0   # rad, see _reference()
         self._reference_odometer = -math.inf
@@ -207,32 +213,24 @@ class WallFollower:
         self._y += z_v * dt * math.sin(mid_heading)
         self._heading += z_w * dt
         self._winding += self._side * z_w * dt
-        self._cloud.age(dt)
-        self._cloud.move(z_v * dt, z_w * dt)
-        self._beside_cache: dict[float, float] = {}
         ranges = _as_ranges(z_scan)
-        if ranges is not None and self._cloud.is_new_scan(ranges):
+        geometry = None
+        if ranges is not None:
             geometry = self._geometry or ScanGeometry(0.0, 2.0 * math.pi / ranges.size,
                                                       self.range_min_m, self.range_max_m)
-            self._scan_had_data = self._cloud.add_scan(ranges, geometry) > 0
-        hw = self.sector_half_width_rad
-        cloud = self._cloud
-        path = cloud.path_distance(self.robot_radius_m + self.path_margin_m)
-        # A low percentile ahead, not the minimum: one noisy ray must not trigger a turn early.
-        front, left, right, back = cloud.sector_distances(_SECTOR_CENTRES, hw, (25.0, 0.0, 0.0, 0.0))
-        self.distances = {"front": front, "left": left, "right": right, "back": back, "path": path}
+        valid, perception = self._cloud.step(z_v * dt, z_w * dt, dt, ranges, geometry)
+        if valid is not None:
+            self._scan_had_data = valid > 0
+        self._perception = perception
+        self.distances = perception.sectors
+        self.distances["path"] = perception.path_m
 
     def _side_distance(self, followed: bool = True) -> float:
         """Lateral distance to the closest point right beside the robot (|x| within the side
         window) on the followed or the other side; inf if open. A box, not an angular sector:
         at a right-angle outer corner the wall leaving sideways lies just behind the robot and
         would keep a +-90 deg sector "closed" long after the followed wall has ended."""
-        side = self._side if followed else -self._side
-        cached = self._beside_cache.get(side)
-        if cached is None:
-            cached = self._cloud.beside_distance(side, self.side_window_half_length_m)
-            self._beside_cache[side] = cached
-        return cached
+        return self._perception.beside_m if followed else self._perception.beside_other_m
 
     # ---- state machine -------------------------------------------------------------------
     def _enter(self, state: str) -> None:
@@ -298,37 +296,9 @@ class WallFollower:
         island and by -2 pi for an enclosing boundary (which it keeps lapping)."""
         if not self.escape_islands:
             return False
-        trail = self._trail
-        if trail and self._odometer - trail[-1][0] < 0.05:
-            return False
-        pose = (self._odometer, self._x, self._y, self._heading, self._winding)
-        # Numpy mirror of (odometer, x, y) of the trail, to find the candidate poses at once.
-        mirror = self._trail_xy
-        if mirror is None or self._trail_n != len(trail):
-            mirror = np.zeros((4100, 3))
-            if trail:
-                mirror[:len(trail)] = [entry[:3] for entry in trail]
-            self._trail_xy = mirror
-        trail.append(pose)
-        m = len(trail)
-        mirror[m - 1] = pose[:3]
-        if m > 4000:
-            del trail[:1000]
-            m -= 1000
-            mirror[:m] = mirror[1000:m + 1000].copy()
-        self._trail_n = m
-        # The poses walked at least 1 m ago (the scan stops at the first more recent one) ...
-        recent = (self._odometer - mirror[:m, 0]) < 1.0
-        stop = int(recent.argmax()) if recent.any() else m
-        # ... and within a box around the pose (a superset of the 0.08 m circle), in order.
-        near = np.nonzero((np.abs(mirror[:stop, 1] - self._x) <= 0.081)
-                          & (np.abs(mirror[:stop, 2] - self._y) <= 0.081))[0]
-        for i in near.tolist():
-            odometer, x, y, heading, winding = trail[i]
-            if (math.hypot(self._x - x, self._y - y) < 0.08
-                    and abs(_wrap(self._heading - heading)) < 0.5):
-                return self._winding - winding > math.pi
-        return False
+        turned = self._trail.record_and_close(self._odometer, self._x, self._y, self._heading,
+                                              self._winding)
+        return turned is not None and turned > math.pi
 
     def _front_blocked(self) -> bool:
         return (self.distances["front"] < self.front_turn_distance_m
@@ -426,14 +396,12 @@ class WallFollower:
             return None
         return self._follow()
 
-    def _track_wall_end(self, fit: WallFit | None) -> None:
+    def _track_wall_end(self) -> None:
         """Remember how far ahead the wall beside the robot reaches (robot frame, m)."""
         beside = self._side_distance()
         if beside > self.side_open_distance_m:
             return
-        reach = self._cloud.wall_reach(self._side, self.side_open_distance_m,
-                                       self.wall_fit_half_length_m,
-                                       self.side_window_half_length_m, fit, beside)
+        reach = self._perception.wall_reach_m
         if reach is not None:
             self._wall_end_x = reach
             self._wall_end_odometer = self._odometer
@@ -443,8 +411,8 @@ class WallFollower:
             self._enter("follow_wall")
         self._last_turn = None
         side = self._side
-        fit = self._cloud.fit_side_wall(side, self.side_open_distance_m, self.wall_fit_half_length_m)
-        self._track_wall_end(fit)
+        fit = self._perception.fit
+        self._track_wall_end()
         if fit is not None:
             error = fit.distance_m - self.wall_distance_m
             rate = side * self.max_linear_speed_mps * math.sin(fit.angle_rad)
@@ -476,7 +444,7 @@ class WallFollower:
         return float(v), float(w)
 
 
-_SECTOR_CENTRES = (0.0, 0.5 * math.pi, -0.5 * math.pi, math.pi)   # front, left, right, back
+_SECTOR_CENTRES = {"front": 0.0, "left": 0.5 * math.pi, "right": -0.5 * math.pi, "back": math.pi}
 
 
 def _as_bool(value: Any) -> bool:
@@ -503,7 +471,9 @@ def _is_finite_number(value: Any) -> bool:
 def _as_ranges(z_scan: Any) -> np.ndarray | None:
     """The scan as a 1-D float array, or None (with a warning) if it is not one."""
     try:
-        ranges = np.asarray(z_scan, dtype=float).ravel()
+        # A copy as a contiguous float64 array: the one array type the kernels are compiled
+        # for, and the controller may keep it (the caller may reuse its own array).
+        ranges = np.array(z_scan, dtype=np.float64).ravel()
     except (TypeError, ValueError):
         _LOG.warning("WallFollower: scan is not a sequence of numbers; ignored")
         return None

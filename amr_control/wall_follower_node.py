@@ -101,6 +101,7 @@ class WallFollowerNode(LifecycleNode):
         self._latest: tuple | None = None  # (z_scan, z_v, z_w, arrival Time) in robot mode
         self._stopped_localized = False
         self._scan_geometry: tuple | None = None
+        self._last_stamp = None  # newest measurement's stamp (simulated time in lockstep)
         self._active = False
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -206,8 +207,10 @@ class WallFollowerNode(LifecycleNode):
         measurement = self._measurement(odometry, scan)
         if self.simulation:
             # Lockstep: the simulator waits for this answer, so always answer (zero if bad).
+            # The command carries the measurement's (simulated) stamp: no clock needed.
             v, w = self._compute(*measurement) if measurement else (0.0, 0.0)
-            self._publish(v, w, scan.header.stamp)
+            self._last_stamp = scan.header.stamp
+            self._publish(v, w, self._last_stamp)
         elif measurement is not None:
             self._latest = (*measurement, self.get_clock().now())
 
@@ -278,7 +281,9 @@ class WallFollowerNode(LifecycleNode):
         if self._cmd_publisher is None:
             return
         self.get_logger().info(f"{why}: commanding zero velocity")
-        self._publish(0.0, 0.0, self.get_clock().now().to_msg(), force=force)
+        stamp = self._last_stamp if self.simulation and self._last_stamp is not None else \
+            self.get_clock().now().to_msg()
+        self._publish(0.0, 0.0, stamp, force=force)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -1,26 +1,20 @@
-"""Batch evaluation of a controller: episode grids, a parallel runner, result files and a table.
+"""Batch evaluation of a controller, the running side: episode specs, grids, config files, a pool.
 
-scripts/evaluate.py is the command line around this module; bench.py and tests use it directly.
-Each episode is amr_sim.episode.run_episode with the same Simulator and controller classes as the
-ROS path. Episodes run in worker processes (forkserver, else spawn: no fork of a parent that may
-hold threads); each worker imports the simulator and its numba kernels once and then runs many
-episodes.
+scripts/evaluate.py is the command line around it; bench.py and tests use it directly. Each episode
+is amr_sim.episode.run_episode with the same Simulator and controller classes as the ROS path.
 """
 from __future__ import annotations
 
-import csv
-import json
 import math
 import multiprocessing
 import os
 import re
 import signal
-import sys
 import time
 import traceback
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterable, Mapping, Sequence, TextIO
+from typing import Any, Callable, Mapping, Sequence
 
 from amr_control.controller_loader import (DEFAULT_CONTROLLER, ControllerSpecError,
                                            load_controller_class, parse_overrides)
@@ -28,8 +22,7 @@ from amr_control.controller_loader import (DEFAULT_CONTROLLER, ControllerSpecErr
 __all__ = [
     "DEFAULT_CONTROLLER", "ControllerSpecError", "EvaluationError", "EpisodeSpec", "EpisodeOutcome",
     "parse_name_list", "parse_seeds", "parse_overrides", "expand_grid", "load_config",
-    "load_ros_params_file", "check_controller", "run_episodes", "outcome_row", "write_json",
-    "write_csv", "format_table", "verdict", "ProgressBar", "RESULT_COLUMNS",
+    "load_ros_params_file", "check_controller", "run_episodes",
 ]
 
 CONFIG_KEYS = ("worlds", "starts", "profiles", "seeds", "duration", "dt", "controller", "params_file",
@@ -292,6 +285,8 @@ def run_one(spec: EpisodeSpec) -> EpisodeOutcome:
 
 
 def _context() -> multiprocessing.context.BaseContext:
+    # forkserver, else spawn: no fork of a parent that may hold threads. Workers import the simulator
+    # and its numba kernels once (preload / _init_worker) and then run many episodes.
     methods = multiprocessing.get_all_start_methods()
     if "forkserver" in methods:
         ctx = multiprocessing.get_context("forkserver")
@@ -325,145 +320,3 @@ def run_episodes(specs: Sequence[EpisodeSpec], jobs: int | None = None,
             if progress:
                 progress(done, len(specs), outcome)
     return outcomes  # type: ignore[return-value]
-
-
-# --- results -------------------------------------------------------------------------------
-
-RESULT_COLUMNS = ("world", "start", "profile", "seed", "sim_time_s", "collisions",
-                  "first_collision_time_s", "min_clearance_m", "distance_m", "laps",
-                  "explored_fraction", "rms_wall_error_m", "wall_time_s", "error")
-
-
-def _finite_or_none(value: Any) -> Any:
-    if value is None or isinstance(value, (bool, str)):
-        return value
-    if hasattr(value, "item"):  # numpy scalar
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
-
-
-def outcome_row(outcome: EpisodeOutcome) -> dict[str, Any]:
-    """The flat per-episode metrics (JSON-safe: non-finite numbers become None)."""
-    spec, result = outcome.spec, outcome.result
-    row: dict[str, Any] = {"world": Path(spec.world).stem if spec.world.endswith((".yaml", ".yml", ".json"))
-                           else spec.world, "start": spec.start, "profile": spec.profile, "seed": spec.seed}
-    metrics = _result_metrics(result) if result is not None else {}
-    for column in RESULT_COLUMNS[4:-2]:
-        row[column] = _finite_or_none(metrics.get(column))
-    row["wall_time_s"] = round(outcome.wall_time_s, 3)
-    row["error"] = outcome.error
-    return row
-
-
-def _result_metrics(result: Any) -> dict[str, Any]:
-    # EpisodeResult fields carry their units in their names, like the columns.
-    return {column: getattr(result, column, None) for column in RESULT_COLUMNS[4:-2]}
-
-
-def write_json(path: str | os.PathLike, outcomes: Sequence[EpisodeOutcome], meta: Mapping[str, Any]) -> Path:
-    """results.json: {"meta": {...}, "episodes": [row, ...]} (strict JSON, no NaN)."""
-    path = Path(path)
-    payload = {"meta": dict(meta), "episodes": [outcome_row(o) for o in outcomes]}
-    path.write_text(json.dumps(payload, indent=1, allow_nan=False) + "\n", encoding="utf-8")
-    return path
-
-
-def write_csv(path: str | os.PathLike, outcomes: Sequence[EpisodeOutcome]) -> Path:
-    """results.csv: one row per episode, RESULT_COLUMNS, empty cells for missing values."""
-    path = Path(path)
-    with path.open("w", newline="", encoding="utf-8") as stream:
-        writer = csv.DictWriter(stream, fieldnames=RESULT_COLUMNS)
-        writer.writeheader()
-        for outcome in outcomes:
-            writer.writerow({k: ("" if v is None else v) for k, v in outcome_row(outcome).items()})
-    return path
-
-
-_TABLE = (  # header, row key, formatter
-    ("world", "world", str), ("start", "start", lambda v: v or "-"), ("profile", "profile", str),
-    ("seed", "seed", str), ("sim s", "sim_time_s", lambda v: f"{v:.0f}"),
-    ("collisions", "collisions", str), ("1st coll. s", "first_collision_time_s", lambda v: f"{v:.1f}"),
-    ("min clear. cm", "min_clearance_m", lambda v: f"{v * 100:.1f}"),
-    ("distance m", "distance_m", lambda v: f"{v:.1f}"), ("laps", "laps", str),
-    ("explored %", "explored_fraction", lambda v: f"{v * 100:.0f}"),
-    ("RMS err. cm", "rms_wall_error_m", lambda v: f"{v * 100:.1f}"),
-    ("wall s", "wall_time_s", lambda v: f"{v:.1f}"),
-)
-_LEFT_ALIGNED = {"world", "start", "profile"}
-
-
-def format_table(rows: Iterable[Mapping[str, Any]]) -> str:
-    """Aligned text table of outcome rows; an episode that failed shows its error instead."""
-    rows = list(rows)
-    cells = [[h for h, _, _ in _TABLE]]
-    errors: list[str] = []
-    for row in rows:
-        line = []
-        for _, key, fmt in _TABLE:
-            value = row.get(key)
-            line.append("-" if value is None else fmt(value))
-        cells.append(line)
-        if row.get("error"):
-            errors.append(f"  {row['world']}/{row['start'] or '-'}/{row['profile']}/seed {row['seed']}: "
-                          f"ERROR {row['error']}")
-    widths = [max(len(r[i]) for r in cells) for i in range(len(_TABLE))]
-    lines = []
-    for r in cells:
-        lines.append("  ".join(c.ljust(w) if _TABLE[i][1] in _LEFT_ALIGNED else c.rjust(w)
-                               for i, (c, w) in enumerate(zip(r, widths))).rstrip())
-    lines.insert(1, "  ".join("-" * w for w in widths))
-    return "\n".join(lines + errors)
-
-
-def verdict(outcomes: Sequence[EpisodeOutcome]) -> tuple[str, int]:
-    """One summary line and the exit code: 0 clean, 1 any collision, 3 any episode failed."""
-    rows = [outcome_row(o) for o in outcomes]
-    failed = [r for r in rows if r["error"]]
-    collided = [r for r in rows if not r["error"] and (r["collisions"] or 0) > 0]
-    clear = [r for r in rows if r["min_clearance_m"] is not None]
-    parts = []
-    if collided:
-        names = ", ".join(f"{_short(r)} ({r['collisions']})" for r in collided[:5])
-        more = f" and {len(collided) - 5} more" if len(collided) > 5 else ""
-        parts.append(f"COLLISIONS in {len(collided)}/{len(rows)} episodes: {names}{more}")
-    else:
-        parts.append(f"no collisions in {len(rows) - len(failed)}/{len(rows)} episodes")
-    if clear:
-        worst = min(clear, key=lambda r: r["min_clearance_m"])
-        parts.append(f"worst clearance {worst['min_clearance_m'] * 100:.1f} cm ({_short(worst)})")
-    if failed:
-        parts.append(f"{len(failed)} episode(s) FAILED to run")
-    code = 3 if failed else 1 if collided else 0
-    return "verdict: " + "; ".join(parts), code
-
-
-def _short(row: Mapping[str, Any]) -> str:
-    return f"{row['world']}/{row['start'] or '-'}/{row['profile']}/seed {row['seed']}"
-
-
-class ProgressBar:
-    """A one-line \\r progress bar, drawn only when the stream is a terminal."""
-
-    def __init__(self, total: int, stream: TextIO | None = None, width: int = 30) -> None:
-        self.stream = stream if stream is not None else sys.stderr
-        self.enabled = bool(getattr(self.stream, "isatty", lambda: False)())
-        self.total, self.width = max(int(total), 1), width
-        self.start = time.monotonic()
-
-    def __call__(self, done: int, total: int, outcome: EpisodeOutcome | None = None) -> None:
-        if not self.enabled:
-            return
-        fraction = min(done / max(total, 1), 1.0)
-        filled = int(round(fraction * self.width))
-        elapsed = time.monotonic() - self.start
-        eta = elapsed * (total - done) / done if done else 0.0
-        self.stream.write(f"\r[{'#' * filled}{'-' * (self.width - filled)}] {done}/{total} episodes"
-                          f"  {elapsed:5.0f} s elapsed, ~{eta:4.0f} s left ")
-        self.stream.flush()
-
-    def finish(self) -> None:
-        if self.enabled:
-            self.stream.write("\r" + " " * (self.width + 60) + "\r")
-            self.stream.flush()

@@ -16,23 +16,27 @@ from geometry_msgs.msg import Quaternion, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import LaserScan
-from transforms3d.euler import euler2quat, quat2euler
+from transforms3d.euler import quat2euler
 
 _NS_PER_S = 1_000_000_000
 
 
 # --- time ---------------------------------------------------------------------------------
 
-def seconds_to_time(seconds: float) -> Time:
+def seconds_to_time(seconds: float, stamp: Time | None = None) -> Time:
     """builtin_interfaces/Time of a time in seconds, rounded to the nanosecond.
 
     Rounding the total in nanoseconds (not the fraction) keeps consecutive stamps k*dt apart by
-    exactly round(dt * 1e9) ns; a non-finite time raises ValueError.
+    exactly round(dt * 1e9) ns; a non-finite time raises ValueError. Fills `stamp` in place
+    when given (building a Time costs more than the rest of this function).
     """
     if not math.isfinite(seconds):
         raise ValueError(f"cannot convert non-finite time {seconds!r} to a stamp")
     sec, nanosec = divmod(round(seconds * _NS_PER_S), _NS_PER_S)
-    return Time(sec=int(sec), nanosec=int(nanosec))
+    if stamp is None:
+        return Time(sec=int(sec), nanosec=int(nanosec))
+    stamp.sec, stamp.nanosec = int(sec), int(nanosec)
+    return stamp
 
 
 def time_to_seconds(stamp: Time) -> float:
@@ -55,12 +59,15 @@ def clock_message(seconds: float | Time) -> Clock:
 def yaw_to_quaternion(yaw: float, quaternion: Quaternion | None = None) -> Quaternion:
     """Quaternion of a rotation by `yaw` radians about +z (REP 103: counter-clockwise).
 
-    Fills `quaternion` in place when given (saves building a message per step).
+    Fills `quaternion` in place when given (saves building a message per step). The closed
+    form (0, 0, sin(yaw/2), cos(yaw/2)) is what transforms3d's euler2quat(0, 0, yaw) gives, at
+    a tenth of its cost (this runs every simulation step).
     """
-    w, x, y, z = euler2quat(0.0, 0.0, yaw)  # transforms3d orders quaternions (w, x, y, z)
+    half = 0.5 * float(yaw)
+    z, w = math.sin(half), math.cos(half)
     if quaternion is None:
-        return Quaternion(x=float(x), y=float(y), z=float(z), w=float(w))
-    quaternion.x, quaternion.y, quaternion.z, quaternion.w = float(x), float(y), float(z), float(w)
+        return Quaternion(x=0.0, y=0.0, z=z, w=w)
+    quaternion.x, quaternion.y, quaternion.z, quaternion.w = 0.0, 0.0, z, w
     return quaternion
 
 

@@ -3,8 +3,9 @@
 Thin: commands become `Simulator.step(v, w)` calls and results become messages
 (amr_sim.ros_conversions). Two modes:
 - lockstep (default, as CoppeliaSim stepping): each /cmd_vel advances exactly one dt, then
-  /clock, /ground_truth, the odometry topic and /scan are published with the simulated time as
-  stamp; on activation a first measurement is published so the loop starts.
+  /clock and /ground_truth (while anyone subscribes), the odometry topic and /scan are
+  published with the simulated time as stamp; on activation a first measurement is published
+  so the loop starts.
 - realtime: a wall-clock timer at dt advances the simulation with the newest command (older than
   `command_timeout` = zero) and each sensor is published at its profile's own rate.
 With `enable_localization`, /pose (amr_msgs/PoseStamped) is compared with the true pose and
@@ -18,9 +19,10 @@ import math
 import time
 from typing import Any, Callable
 
+from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
-from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.clock import Clock, ClockType
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -29,8 +31,10 @@ from sensor_msgs.msg import LaserScan
 
 from amr_control.node_runner import run_lifecycle_node
 from amr_sim.simulator import Simulator
+from amr_sim.simulator_params import (DEFAULT_START, NUMERIC_PARAMETERS, PARAMETERS,
+                                     check_parameters)
 from amr_sim.world import World
-from amr_sim.ros_conversions import (command_from_twist,
+from amr_sim.ros_conversions import (command_from_twist, float32_array,
                                      laser_scan_from_profile, odometry_message,
                                      pose_from_message, seconds_to_time)
 
@@ -42,59 +46,6 @@ def scan_qos(depth: int) -> QoSProfile:
     """Best effort like a LiDAR driver (SensorDataQoS uses depth 5)."""
     return QoSProfile(depth=depth, reliability=ReliabilityPolicy.BEST_EFFORT,
                       history=HistoryPolicy.KEEP_LAST)
-
-
-DEFAULT_START = "outer"  # the course's "outer corridor" start in lab02
-_S, _B, _D, _DA, _I = (ParameterType.PARAMETER_STRING, ParameterType.PARAMETER_BOOL,
-                       ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_DOUBLE_ARRAY,
-                       ParameterType.PARAMETER_INTEGER)
-# name: (default, type, description). Numbers accept ints or doubles (`-p dt:=1` must not kill
-# the process): they are declared with dynamic typing and checked in on_configure.
-PARAMETERS: dict[str, tuple[Any, int, str]] = {
-    "world": ("lab02", _S, "Bundled world name or path to a world .yaml / course map .json"),
-    "start": (DEFAULT_START, _S, "Start pose: a name from the world file or 'x,y,theta' "
-                                 "(m, m, rad); '' or the default 'outer' in a world without "
-                                 "it = the world's first start"),
-    "profile": ("ideal", _S, "Sensor profile: 'ideal' (CoppeliaSim robot) or 'turtlebot3' "
-                             "(the real Burger: LDS-01 at 5 Hz, /odom pose at 20 Hz)"),
-    "dt": (0.05, _D, "Simulation step in seconds (0 < dt <= 1)"),
-    "seed": (0, _I, "Seed of the sensor noise: the same seed gives the same run"),
-    "mode": ("lockstep", _S, "'lockstep': each /cmd_vel advances one dt; 'realtime': a "
-                             "wall-clock timer advances one dt with the newest command"),
-    "cmd_vel_stamped": (True, _B, "Subscribe /cmd_vel as geometry_msgs/TwistStamped (Jazzy); "
-                                  "false = geometry_msgs/Twist as a Humble robot"),
-    "command_timeout": (0.5, _D, "Realtime mode: a command older than this (s) counts as zero; "
-                                 "0 = never (the real turtlebot3_node keeps the last command)"),
-    "goal": ([], _DA, "Goal [x, y] in metres; [] = the world's goal, if it has one"),
-    "goal_tolerance": (0.15, _D, "Distance (m) of the true position to the goal that counts "
-                                 "as reached"),
-    "enable_localization": (False, _B, "Synchronize /pose (amr_msgs/PoseStamped) with /cmd_vel, "
-                                       "log its error and finish at the goal once localized"),
-    "odom_frame": ("odom", _S, "Frame of the odometry pose"),
-    "base_frame": ("base_footprint", _S, "Robot frame (child frame of odometry)"),
-    "scan_frame": ("base_scan", _S, "Frame of the LaserScan"),
-    "world_frame": ("map", _S, "Frame of /ground_truth"),
-    "publish_ground_truth": (True, _B, "Publish the true pose and velocities on /ground_truth"),
-}
-_NUMERIC = {"dt", "seed", "command_timeout", "goal", "goal_tolerance"}
-
-
-def parse_start(text: str) -> str | tuple[float, float, float] | None:
-    """'name' -> name, 'x,y,theta' -> floats, '' -> None (the world's first start)."""
-    text = text.strip()
-    if not text:
-        return None
-    if "," not in text:
-        return text
-    parts = text.split(",")
-    try:
-        values = tuple(float(p) for p in parts)
-    except ValueError:
-        values = ()
-    if len(values) != 3 or not all(math.isfinite(v) for v in values):
-        raise ValueError(f"start '{text}' is neither a start name nor 'x,y,theta' "
-                         "with three finite numbers")
-    return values
 
 
 def true_velocity(before: tuple, after: tuple, dt: float) -> tuple[float, float]:
@@ -112,7 +63,7 @@ class SimulatorNode(LifecycleNode):
         for name, (default, type_, description) in PARAMETERS.items():
             if not self.has_parameter(name):
                 self.declare_parameter(name, default, ParameterDescriptor(
-                    description=description, type=type_, dynamic_typing=name in _NUMERIC))
+                    description=description, type=type_, dynamic_typing=name in NUMERIC_PARAMETERS))
         # Run scripts append callables here; each is called with the simulator after a step.
         self.on_step: list[Callable[[Any], None]] = []
         self._reset()
@@ -129,7 +80,7 @@ class SimulatorNode(LifecycleNode):
         # One message per output, refilled every step: building Odometry messages dominated
         # the step time (publish copies the message, so reuse is safe).
         self._messages = {"clock": ClockMessage(), "truth": Odometry(), "odom": Odometry(),
-                          "scan": LaserScan()}
+                          "scan": LaserScan(), "stamp": Time()}
         self._inputs: list = []
         self._filters: list = []
         self._synchronizer = None
@@ -143,40 +94,7 @@ class SimulatorNode(LifecycleNode):
 
     def _read_parameters(self) -> dict[str, Any]:
         """Parameter values, checked; raises ValueError naming every bad one."""
-        p = {name: self.get_parameter(name).value for name in PARAMETERS}
-        problems = []
-
-        def number(name: str, low: float, high: float) -> None:
-            value = p[name]
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or \
-                    not (math.isfinite(value) and low <= value <= high):
-                problems.append(f"{name} must be a number in [{low}, {high}] (got {value!r})")
-            else:
-                p[name] = float(value)
-
-        number("dt", 1e-4, 1.0)
-        number("command_timeout", 0.0, 3600.0)
-        number("goal_tolerance", 1e-3, 100.0)
-        if isinstance(p["seed"], bool) or not isinstance(p["seed"], int) or p["seed"] < 0:
-            problems.append(f"seed must be a non-negative integer (got {p['seed']!r})")
-        if p["mode"] not in ("lockstep", "realtime"):
-            problems.append(f"mode must be 'lockstep' or 'realtime' (got '{p['mode']}')")
-        goal = p["goal"]
-        if goal is None or (hasattr(goal, "__len__") and len(goal) == 0):
-            p["goal"] = None
-        elif isinstance(goal, (list, tuple)) and len(goal) == 2 and all(
-                isinstance(g, (int, float)) and not isinstance(g, bool) and math.isfinite(g)
-                for g in goal):
-            p["goal"] = (float(goal[0]), float(goal[1]))
-        else:
-            problems.append(f"goal must be [] or [x, y] with finite numbers (got {goal!r})")
-        try:
-            p["start"] = parse_start(p["start"])
-        except ValueError as exc:
-            problems.append(str(exc))
-        if problems:
-            raise ValueError("; ".join(problems))
-        return p
+        return check_parameters({name: self.get_parameter(name).value for name in PARAMETERS})
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         self._reset()
@@ -215,6 +133,10 @@ class SimulatorNode(LifecycleNode):
             self._outputs["truth"] = self.create_lifecycle_publisher(
                 Odometry, "/ground_truth", RELIABLE_10)
         self._create_inputs(p)
+        scan_time = profile.scan_period if self.realtime and profile.scan_period else p["dt"]
+        laser_scan_from_profile(self.simulator.last_scan, profile, stamp=Time(),
+                                frame_id=p["scan_frame"], scan_time=scan_time,
+                                message=self._messages["scan"])
         x, y, theta = self.simulator.pose
         self.get_logger().info(
             f"configured: world '{world.name}' ({world.source}), start ({x:.3f}, {y:.3f}, "
@@ -265,7 +187,7 @@ class SimulatorNode(LifecycleNode):
             return result
         simulator = self.simulator
         z_scan, z_v, z_w = simulator.measure()  # first measurement: starts a lockstep loop
-        self._publish(z_scan, z_v, z_w, simulator.pose, (0.0, 0.0), True, True)
+        self._publish(z_scan, z_v, z_w, simulator.pose, simulator.pose, True, True)
         if self.realtime:
             profile = simulator.profile
             self._next_publish = {"odom": simulator.time + (profile.odom_period or 0.0),
@@ -356,8 +278,7 @@ class SimulatorNode(LifecycleNode):
         goal_reached = self._goal_reached(pose)
         if goal_reached:
             publish_odom = publish_scan = False  # the loop stops here, as in the template
-        self._publish(z_scan, z_v, z_w, pose, true_velocity(pose_before, pose, simulator.dt),
-                      publish_odom, publish_scan)
+        self._publish(z_scan, z_v, z_w, pose_before, pose, publish_odom, publish_scan)
         if goal_reached:
             self.get_logger().warning("Congratulations, you reached the goal!")
             self.finish("goal reached")
@@ -374,18 +295,20 @@ class SimulatorNode(LifecycleNode):
             self._next_publish[sensor] = now + period
         return True
 
-    def _publish(self, z_scan, z_v: float, z_w: float, pose: tuple, velocity: tuple,
+    def _publish(self, z_scan, z_v: float, z_w: float, pose_before: tuple, pose: tuple,
                  publish_odom: bool, publish_scan: bool) -> None:
         simulator, p, messages = self.simulator, self.params, self._messages
-        stamp = seconds_to_time(simulator.time)
-        # /clock first: a use_sim_time subscriber then has the time before the measurements.
-        messages["clock"].clock = stamp
-        self._outputs["clock"].publish(messages["clock"])
-        # Nobody evaluating: skip building and publishing the true-pose Odometry (~40 us).
+        stamp = seconds_to_time(simulator.time, messages["stamp"])  # shared: publish copies
+        # /clock and /ground_truth only while someone listens (each costs ~40 us per step, a
+        # tenth of a lockstep round trip). /clock first: a use_sim_time subscriber then has
+        # the time before the measurements.
+        if self._outputs["clock"].get_subscription_count() > 0:
+            messages["clock"].clock = stamp
+            self._outputs["clock"].publish(messages["clock"])
         if "truth" in self._outputs and self._outputs["truth"].get_subscription_count() > 0:
+            velocity = true_velocity(pose_before, pose, simulator.dt)
             self._outputs["truth"].publish(odometry_message(
                 stamp, p["world_frame"], p["base_frame"], pose, velocity, messages["truth"]))
-        profile = simulator.profile
         if publish_odom:
             # The real robot's /odom carries a pose only; /odometry also the twist.
             twist = (z_v, z_w) if self.odometry_topic == "/odometry" else None
@@ -393,11 +316,11 @@ class SimulatorNode(LifecycleNode):
                 stamp, p["odom_frame"], p["base_frame"], simulator.odometry_pose, twist,
                 messages["odom"]))
         if publish_scan:
-            scan_time = profile.scan_period if self.realtime and profile.scan_period else \
-                simulator.dt
-            self._outputs["scan"].publish(laser_scan_from_profile(
-                z_scan, profile, stamp=stamp, frame_id=p["scan_frame"], scan_time=scan_time,
-                message=messages["scan"]))
+            # Every other field was filled in on_configure.
+            scan = messages["scan"]
+            scan.header.stamp = stamp
+            scan.ranges = float32_array(z_scan)
+            self._outputs["scan"].publish(scan)
 
     # --- localization and goal -------------------------------------------------------------
     def _check_estimated_pose(self, message) -> None:

@@ -28,9 +28,10 @@ if str(REPO) not in sys.path:  # run from a checkout without installing
     sys.path.insert(0, str(REPO))
 
 from amr_sim.evaluation import (DEFAULT_CONTROLLER, ControllerSpecError, EvaluationError,  # noqa: E402
-                                ProgressBar, check_controller, expand_grid, format_table,
-                                load_config, load_ros_params_file, outcome_row, parse_overrides,
-                                run_episodes, verdict, write_csv, write_json)
+                                check_controller, expand_grid, load_config, load_ros_params_file,
+                                parse_overrides, run_episodes)
+from amr_sim.evaluation_report import (ProgressBar, format_table, outcome_row, verdict,  # noqa: E402
+                                       write_csv, write_json)
 from amr_control.controller_loader import load_controller_class  # noqa: E402
 
 # run_sim.py gives the wall follower node this file: the same gains here keep both paths equal.

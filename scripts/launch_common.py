@@ -56,18 +56,18 @@ def node_args(params_file: Path | str | None) -> list[str] | None:
     return ["--ros-args", "--params-file", str(path)]
 
 
-def make_wall_follower(context, *, params_file, overrides: dict[str, Any],
-                       use_sim_time: bool = False):
+def make_wall_follower(context, *, params_file, overrides: dict[str, Any]):
+    """The wall follower with a params file and overrides. use_sim_time is left to them: in
+    simulation mode the node stamps each command with its measurement's stamp and needs no
+    clock, so following /clock (one more message per lockstep step) is opt-in."""
     from amr_control.wall_follower_node import WallFollowerNode
-    values = dict(overrides)
-    values.setdefault("use_sim_time", use_sim_time)
     return WallFollowerNode(context=context, cli_args=node_args(params_file),
-                            parameter_overrides=overrides_to_parameters(values))
+                            parameter_overrides=overrides_to_parameters(dict(overrides)))
 
 
 def make_robot_graph(context, *, params_file=ROBOT_PARAMS, dt: float | None = None,
                      cmd_vel_stamped: bool | None = None, controller: str | None = None,
-                     tuning: dict[str, Any] | None = None, use_sim_time: bool = False) -> list:
+                     tuning: dict[str, Any] | None = None) -> list:
     """The real-robot graph: /odom -> amr_odometry -> /odometry, wall follower in robot mode.
 
     Returns the lifecycle nodes in startup order.
@@ -81,8 +81,6 @@ def make_robot_graph(context, *, params_file=ROBOT_PARAMS, dt: float | None = No
         overrides["cmd_vel_stamped"] = cmd_vel_stamped
     if controller is not None:
         overrides["controller"] = controller
-    odometry = OdometryNode(context=context, parameter_overrides=overrides_to_parameters(
-        {"use_sim_time": use_sim_time}))
-    wall_follower = make_wall_follower(context, params_file=params_file, overrides=overrides,
-                                       use_sim_time=use_sim_time)
+    odometry = OdometryNode(context=context)
+    wall_follower = make_wall_follower(context, params_file=params_file, overrides=overrides)
     return [odometry, wall_follower]

@@ -57,8 +57,7 @@ class SimSession:
             tuning.update({"simulation": True, "dt": args.dt,
                            "enable_localization": args.enable_localization})
             self.control_nodes = [make_wall_follower(
-                self.context, params_file=args.params_file or SIM_PARAMS, overrides=tuning,
-                use_sim_time=True)]
+                self.context, params_file=args.params_file or SIM_PARAMS, overrides=tuning)]
         self.wall_follower = self.control_nodes[-1]
         order = [node.get_name() for node in self.control_nodes] + [
             self.simulator_node.get_name()]

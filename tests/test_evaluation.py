@@ -1,4 +1,4 @@
-"""evaluate.py and amr_sim.evaluation: grids, overrides, controller loading, result files, a real run."""
+"""evaluate.py, amr_sim.evaluation and evaluation_report: grids, overrides, controllers, result files."""
 from __future__ import annotations
 
 import csv
@@ -11,9 +11,10 @@ from pathlib import Path
 import pytest
 
 from amr_sim.evaluation import (ControllerSpecError, EpisodeOutcome, EpisodeSpec, EvaluationError,
-                                ProgressBar, check_controller, expand_grid, format_table,
-                                load_config, outcome_row, parse_overrides, parse_seeds, verdict,
-                                write_csv, write_json)
+                                check_controller, expand_grid, load_config, parse_overrides,
+                                parse_seeds)
+from amr_sim.evaluation_report import (ProgressBar, format_table, outcome_row, verdict, write_csv,
+                                       write_json)
 
 REPO = Path(__file__).resolve().parent.parent
 EVALUATE = REPO / "scripts" / "evaluate.py"

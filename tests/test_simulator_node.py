@@ -21,7 +21,8 @@ from sensor_msgs.msg import LaserScan
 from amr_sim.ros_conversions import (laser_scan, odometry_message, pose_from_message,
                                      quaternion_to_yaw, scan_ranges, seconds_to_time,
                                      time_to_nanoseconds, twist_stamped, yaw_to_quaternion)
-from amr_sim.simulator_node import SimulatorNode, parse_start
+from amr_sim.simulator_node import SimulatorNode
+from amr_sim.simulator_params import parse_start
 
 DT_NS = 50_000_000
 RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)

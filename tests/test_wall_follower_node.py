@@ -112,6 +112,9 @@ def test_deactivation_publishes_zero(ros):
     ros.spin_until(lambda: len(robot.commands) == 2, 5.0, "the zero command")
     assert twist_of(robot.commands[-1]).linear.x == 0.0
     assert twist_of(robot.commands[-1]).angular.z == 0.0
+    # Simulation mode needs no clock: the zero carries the last measurement's (simulated) stamp.
+    last = robot.commands[-1].header.stamp
+    assert (last.sec, last.nanosec) == (0, 50_000_000)
     robot.send(100_000_000)  # inactive: no more commands
     ros.spin_for(0.5)
     assert len(robot.commands) == 2

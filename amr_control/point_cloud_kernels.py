@@ -1,0 +1,420 @@
+"""Loop kernels behind LocalPointCloud (scan_sectors.py): moving the points with the odometry,
+merging a new scan, and the per-step queries (sectors, swept path, side walls, line fit).
+
+Why loops: the wall follower runs these on a few hundred points every control step, and as
+numpy expressions they were ~75 small array operations (~0.3 ms per step, most of it call
+overhead). As numba-compiled loops they take a few microseconds each. Without numba the same
+functions run as plain Python (slower, ~ms per step, still far inside a 50 ms control period).
+
+Conventions: the cloud is one (3, n) array whose rows are the points' x and y (m, robot frame,
+REP 103) and their ages (s since their ray last returned them); `side` is +1.0 (left) or -1.0
+(right); "none" results are NaN, "open" distances inf. No rclpy import.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+try:
+    import numba
+
+    HAVE_NUMBA = True
+except ImportError:  # pragma: no cover - numba is a pinned dependency
+    HAVE_NUMBA = False
+
+TWO_PI = 2.0 * math.pi
+MIN_LATERAL_M = 0.02   # points closer than this to the robot's x axis are on neither side
+
+
+def jit(function):
+    """numba.njit (cached on disk, numpy error model) when numba is there, else the function."""
+    if not HAVE_NUMBA:
+        return function
+    return numba.njit(cache=True, nogil=True, error_model="numpy")(function)
+
+
+@jit
+def move_points(cloud, distance, rotation, dt):
+    """In place: age every point by dt, then express it in the robot frame after the robot drove
+    `distance` (m) along the chord of an arc and turned `rotation` (rad)."""
+    px = cloud[0]
+    py = cloud[1]
+    ages = cloud[2]
+    n = px.shape[0]
+    for i in range(n):
+        ages[i] += dt
+    if n == 0 or (distance == 0.0 and rotation == 0.0):
+        return
+    half = 0.5 * rotation
+    shift_x = distance * math.cos(half)
+    shift_y = distance * math.sin(half)
+    c = math.cos(rotation)
+    s = math.sin(rotation)
+    for i in range(n):
+        sx = px[i] - shift_x
+        sy = py[i] - shift_y
+        # Rotate by -rotation: the new frame is the old one turned by +rotation.
+        px[i] = c * sx + s * sy
+        py[i] = -s * sx + c * sy
+
+
+@jit
+def same_readings(last, ranges):
+    """True if two scans have the same readings (NaN equal to NaN): a held LaserScan."""
+    if last.shape[0] != ranges.shape[0]:
+        return False
+    for i in range(ranges.shape[0]):
+        a = last[i]
+        b = ranges[i]
+        if a != b and not (math.isnan(a) and math.isnan(b)):
+            return False
+    return True
+
+
+@jit
+def merge_scan(cloud, ranges, ray_cos, ray_sin, angle_min, angle_increment,
+               range_min, range_max, hold_range, hold_time, lidar_offset_x):
+    """The cloud after a new scan: its valid readings (age 0) followed by the held points (close
+    ones younger than hold_time whose ray in this scan returned nothing).
+
+    Returns (new cloud, number of valid readings).
+    """
+    px = cloud[0]
+    py = cloud[1]
+    ages = cloud[2]
+    n_rays = ranges.shape[0]
+    valid = np.empty(n_rays, np.bool_)
+    n_new = 0
+    for i in range(n_rays):
+        r = ranges[i]
+        ok = math.isfinite(r) and r > 0.0 and r >= range_min and r <= range_max
+        valid[i] = ok
+        if ok:
+            n_new += 1
+    # With every ray valid no point can be held: skip the per-point bearings (atan2 is most
+    # of this kernel's time, and the ideal profile's scans are always complete).
+    n_old = px.shape[0] if n_new < n_rays else 0
+    keep = np.empty(n_old, np.int64)
+    n_keep = 0
+    step = abs(angle_increment)
+    direction = 1.0 if angle_increment > 0.0 else -1.0
+    full_turn = int(round(TWO_PI / step))
+    hold_range_squared = hold_range * hold_range
+    for j in range(n_old):
+        if px[j] * px[j] + py[j] * py[j] <= hold_range_squared and ages[j] < hold_time:
+            offset = ((math.atan2(py[j], px[j]) - angle_min) * direction) % TWO_PI
+            ray = int(round(offset / step))
+            if ray >= full_turn:
+                ray -= full_turn
+            if not (0 <= ray < n_rays and valid[ray]):
+                keep[n_keep] = j
+                n_keep += 1
+    merged = np.empty((3, n_new + n_keep))
+    k = 0
+    for i in range(n_rays):
+        if valid[i]:
+            merged[0, k] = ranges[i] * ray_cos[i] + lidar_offset_x
+            merged[1, k] = ranges[i] * ray_sin[i]
+            merged[2, k] = 0.0
+            k += 1
+    for m in range(n_keep):
+        j = keep[m]
+        merged[0, k] = px[j]
+        merged[1, k] = py[j]
+        merged[2, k] = ages[j]
+        k += 1
+    return merged, n_new
+
+
+@jit
+def sector_distances(cloud, centre_cos, centre_sin, half_width, percentiles, out):
+    """For each sector (centre direction (centre_cos, centre_sin), +-half_width < pi/2): the
+    closest range in it, or its `percentiles[s]`-th percentile (lowest-rank value) when that is
+    > 0; inf if it is empty."""
+    n = cloud.shape[1]
+    ranges = np.empty(n)
+    for i in range(n):
+        ranges[i] = math.sqrt(cloud[0, i] * cloud[0, i] + cloud[1, i] * cloud[1, i])
+    cos_half_width = math.cos(half_width)
+    inside = np.empty(n)
+    for s in range(centre_cos.shape[0]):
+        cc = centre_cos[s]
+        sc = centre_sin[s]
+        closest = math.inf
+        count = 0
+        for i in range(n):
+            r = ranges[i]
+            # Within half_width of the centre direction: cos(angle between) >= cos(half_width).
+            if cloud[0, i] * cc + cloud[1, i] * sc >= r * cos_half_width:
+                if r < closest:
+                    closest = r
+                inside[count] = r
+                count += 1
+        if percentiles[s] <= 0.0 or count == 0:
+            out[s] = closest
+        else:
+            k = int(percentiles[s] / 100.0 * (count - 1))
+            out[s] = np.sort(inside[:count])[k]
+
+
+@jit
+def path_distance(cloud, half_width):
+    """Smallest x > 0 of the points with |y| <= half_width (the swept corridor ahead); inf if none."""
+    px = cloud[0]
+    py = cloud[1]
+    best = math.inf
+    for i in range(px.shape[0]):
+        x = px[i]
+        if x > 0.0 and abs(py[i]) <= half_width and x < best:
+            best = x
+    return best
+
+
+@jit
+def beside_distance(cloud, side, half_length):
+    """Smallest lateral distance of the points on one side with |x| <= half_length; inf if none."""
+    px = cloud[0]
+    py = cloud[1]
+    best = math.inf
+    for i in range(px.shape[0]):
+        lateral = side * py[i]
+        if lateral >= MIN_LATERAL_M and abs(px[i]) <= half_length and lateral < best:
+            best = lateral
+    return best
+
+
+@jit
+def side_gap(cloud, side, max_lateral, lookback, ahead):
+    """Points on one side within max_lateral: the largest x in [-lookback, 0] (NaN if none) and
+    the number of points with x > 0, whose x are written to `ahead` in cloud order."""
+    px = cloud[0]
+    py = cloud[1]
+    wall_end = math.nan
+    count = 0
+    for i in range(px.shape[0]):
+        lateral = side * py[i]
+        if lateral < MIN_LATERAL_M or lateral > max_lateral:
+            continue
+        x = px[i]
+        if x > 0.0:
+            ahead[count] = x
+            count += 1
+        elif x >= -lookback and not (x <= wall_end):   # also replaces the initial NaN
+            wall_end = x
+    return wall_end, count
+
+
+@jit
+def _beside_points(cloud, side, max_lateral, half_length):
+    """x, y and lateral distance of the points on one side within max_lateral and |x| <=
+    half_length, in cloud order."""
+    px = cloud[0]
+    py = cloud[1]
+    n = px.shape[0]
+    xs = np.empty(n)
+    ys = np.empty(n)
+    lateral = np.empty(n)
+    count = 0
+    for i in range(n):
+        d = side * py[i]
+        if d >= MIN_LATERAL_M and d <= max_lateral and abs(px[i]) <= half_length:
+            xs[count] = px[i]
+            ys[count] = py[i]
+            lateral[count] = d
+            count += 1
+    return xs[:count], ys[:count], lateral[:count]
+
+
+@jit
+def wall_reach(xs, lateral, side, window, fit_distance, fit_angle, beside):
+    """How far ahead (x, m) the wall beside the robot continues without a 4 cm gap, from the
+    beside points (x, lateral distance; see _beside_points); NaN if there is none. Its points
+    are those within 4 cm of the fitted line (fit_distance, fit_angle; NaN = no fit: within 4 cm
+    of the `beside` distance; a fit steeper than 1 rad: all points)."""
+    if xs.shape[0] == 0:
+        return math.nan
+    have_fit = not math.isnan(fit_distance)
+    slope = side * math.tan(fit_angle) if have_fit else 0.0
+    chosen = np.empty(xs.shape[0])
+    count = 0
+    for i in range(xs.shape[0]):
+        x = xs[i]
+        if have_fit and abs(fit_angle) < 1.0:
+            near = abs(lateral[i] - (fit_distance + x * slope)) <= 0.04
+        elif not have_fit:
+            near = abs(lateral[i] - beside) <= 0.04
+        else:
+            near = True
+        if near and x >= -window:
+            chosen[count] = x
+            count += 1
+    if count == 0:
+        return math.nan
+    ordered = np.sort(chosen[:count])
+    previous = ordered[0]
+    for x in ordered:                 # the first gap ends the wall
+        if x - previous > 0.04:
+            return previous
+        previous = x
+    return previous
+
+
+@jit
+def _fit_line(xs, ys, mask, min_points, min_span):
+    """Total least squares through the masked points: (ok, distance, angle, span, mean x, mean y,
+    normal x, normal y); the line's direction has a non-negative x component."""
+    n = 0
+    sum_x = 0.0
+    sum_y = 0.0
+    low = math.inf
+    high = -math.inf
+    for i in range(xs.shape[0]):
+        if mask[i]:
+            n += 1
+            sum_x += xs[i]
+            sum_y += ys[i]
+            low = min(low, xs[i])
+            high = max(high, xs[i])
+    if n < min_points or high - low < min_span:
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    mean_x = sum_x / n
+    mean_y = sum_y / n
+    sxx = 0.0
+    sxy = 0.0
+    syy = 0.0
+    for i in range(xs.shape[0]):
+        if mask[i]:
+            cx = xs[i] - mean_x
+            cy = ys[i] - mean_y
+            sxx += cx * cx
+            sxy += cx * cy
+            syy += cy * cy
+    # Principal axis of the 2x2 scatter matrix in closed form.
+    theta = 0.5 * math.atan2(2.0 * sxy, sxx - syy)
+    dx = math.cos(theta)
+    dy = math.sin(theta)
+    if dx < 0.0:
+        dx = -dx
+        dy = -dy
+    normal_x = -dy
+    normal_y = dx
+    distance = abs(normal_x * mean_x + normal_y * mean_y)
+    return True, distance, math.atan2(dy, dx), high - low, mean_x, mean_y, normal_x, normal_y
+
+
+@jit
+def fit_side_wall(xs, ys, lateral, min_points, min_span):
+    """Line through the beside points (see _beside_points) of one side, with outlier
+    rejection: start from the points within 6 cm of the median lateral distance (the wall
+    alongside, not a wall leaving sideways at a corner), then refit on the points within 3 cm
+    of the line until the inlier set stops changing (at most 3 fits).
+
+    Returns (ok, distance, angle, rms residual, span along x, inlier count).
+    """
+    count = xs.shape[0]
+    if count < min_points:
+        return False, 0.0, 0.0, 0.0, 0.0, 0
+    ordered = np.sort(lateral)
+    half = count // 2
+    median = ordered[half] if count % 2 else (ordered[half - 1] + ordered[half]) / 2.0
+    mask = np.empty(count, np.bool_)
+    for i in range(count):
+        mask[i] = abs(lateral[i] - median) <= 0.06
+    fit_mask = mask.copy()
+    ok, distance, angle, span, mean_x, mean_y, nx, ny = _fit_line(xs, ys, mask, min_points,
+                                                                  min_span)
+    for iteration in range(3):
+        if iteration > 0 and not np.array_equal(mask, fit_mask):
+            # The same inliers give the same fit: refit only when the set changed.
+            fit_mask = mask.copy()
+            ok, distance, angle, span, mean_x, mean_y, nx, ny = _fit_line(
+                xs, ys, mask, min_points, min_span)
+        if not ok:
+            return False, 0.0, 0.0, 0.0, 0.0, 0
+        for i in range(count):
+            mask[i] = abs((xs[i] - mean_x) * nx + (ys[i] - mean_y) * ny) <= 0.03
+        if np.array_equal(mask, fit_mask):
+            break                     # converged: further passes would repeat this one
+    inliers = 0
+    for i in range(count):
+        if mask[i]:
+            inliers += 1
+    if not np.array_equal(mask, fit_mask):
+        refit = _fit_line(xs, ys, mask, min_points, min_span)
+        if refit[0]:
+            ok, distance, angle, span, mean_x, mean_y, nx, ny = refit
+            fit_mask = mask
+    squares = 0.0
+    used = 0
+    for i in range(count):
+        if fit_mask[i]:
+            residual = (xs[i] - mean_x) * nx + (ys[i] - mean_y) * ny
+            squares += residual * residual
+            used += 1
+    return True, distance, angle, math.sqrt(squares / used), span, inliers
+
+
+@jit
+def perceive(cloud, side, sector_cos, sector_sin, sector_half_width, sector_percentiles,
+             path_half_width, side_window, side_open, fit_half_length, min_points, min_span,
+             sector_out):
+    """Everything the wall follower asks of the cloud in one control step, in one call (each
+    separate call from Python costs ~2 us of dispatch, as much as the work itself):
+
+    sector_out: sector_distances of the sectors given (closest or percentile range, inf = open).
+    Returns (path distance, beside distance on the followed side, beside distance on the other
+    side (both within +-side_window along x), fit_side_wall's 6 values for the followed side
+    within side_open and +-fit_half_length, and wall_reach of that side (NaN = none)).
+    """
+    sector_distances(cloud, sector_cos, sector_sin, sector_half_width, sector_percentiles,
+                     sector_out)
+    path = path_distance(cloud, path_half_width)
+    beside_followed = beside_distance(cloud, side, side_window)
+    beside_other = beside_distance(cloud, -side, side_window)
+    xs, ys, lateral = _beside_points(cloud, side, side_open, fit_half_length)
+    fit = fit_side_wall(xs, ys, lateral, min_points, min_span)
+    reach = wall_reach(xs, lateral, side, side_window, fit[1] if fit[0] else math.nan, fit[2],
+                       beside_followed)
+    return path, beside_followed, beside_other, fit, reach
+
+
+# Layout of step_cloud's `config` array (values fixed for a controller's lifetime).
+CONFIG_FIELDS = ("hold_range", "hold_time", "lidar_offset_x", "side", "sector_half_width",
+                 "path_half_width", "side_window", "side_open", "fit_half_length", "min_points",
+                 "min_span")
+
+
+@jit
+def step_cloud(cloud, distance, rotation, dt, ranges, scan_given, last_scan, ray_cos, ray_sin,
+               angle_min, angle_increment, range_min, range_max, config, sectors, sector_out):
+    """One control step in one call: move the cloud with the odometry, merge the scan if it
+    differs from `last_scan`, then perceive (see perceive; `sectors` rows: centre cos, centre
+    sin, percentile). One call instead of several matters inside a ROS loop: every call wakes
+    numba's dispatcher, which costs ~20 us when the caches are cold.
+
+    Returns (cloud, valid readings of the merged scan or -1 if none was merged, then perceive's
+    values).
+    """
+    move_points(cloud, distance, rotation, dt)
+    valid = -1
+    if scan_given and not same_readings(last_scan, ranges):
+        cloud, valid = merge_scan(cloud, ranges, ray_cos, ray_sin, angle_min, angle_increment,
+                                  range_min, range_max, config[0], config[1], config[2])
+    path, beside, beside_other, fit, reach = perceive(
+        cloud, config[3], sectors[0], sectors[1], config[4], sectors[2], config[5], config[6],
+        config[7], config[8], int(config[9]), config[10], sector_out)
+    return cloud, valid, path, beside, beside_other, fit, reach
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's cache) every kernel now, on tiny inputs, so that the first
+    control step does not pay for it (seconds on a first run, ~0.1 s from the cache)."""
+    cloud = np.array([[0.3, 0.1, -0.2], [0.2, -0.2, 0.25], [0.0, 0.0, 0.0]])
+    ranges = np.array([1.0, 0.2, math.nan, 0.0])
+    table = np.array([1.0, 0.0, -1.0, 0.0])
+    config = np.array([0.3, 0.6, 0.0, -1.0, 0.2, 0.135, 0.03, 0.32, 0.15, 6.0, 0.06])
+    sectors = np.array([table, table, table])
+    cloud = step_cloud(cloud, 0.01, 0.01, 0.05, ranges, True, np.zeros(0), table, table, 0.0,
+                       math.pi / 2, 0.1, 3.5, config, sectors, np.empty(4))[0]
+    side_gap(cloud, -1.0, 0.32, 0.6, np.empty(cloud.shape[1]))

@@ -1,0 +1,99 @@
+"""The `amr_simulator` node's parameters: names, defaults, types, descriptions, and their
+checking (plain Python: rcl_interfaces' ParameterType constants only, no rclpy)."""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from rcl_interfaces.msg import ParameterType
+
+DEFAULT_START = "outer"  # the course's "outer corridor" start in lab02
+_S, _B, _D, _DA, _I = (ParameterType.PARAMETER_STRING, ParameterType.PARAMETER_BOOL,
+                       ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_DOUBLE_ARRAY,
+                       ParameterType.PARAMETER_INTEGER)
+# name: (default, type, description). Numbers accept ints or doubles (`-p dt:=1` must not kill
+# the process): they are declared with dynamic typing and checked in on_configure.
+PARAMETERS: dict[str, tuple[Any, int, str]] = {
+    "world": ("lab02", _S, "Bundled world name or path to a world .yaml / course map .json"),
+    "start": (DEFAULT_START, _S, "Start pose: a name from the world file or 'x,y,theta' "
+                                 "(m, m, rad); '' or the default 'outer' in a world without "
+                                 "it = the world's first start"),
+    "profile": ("ideal", _S, "Sensor profile: 'ideal' (CoppeliaSim robot) or 'turtlebot3' "
+                             "(the real Burger: LDS-01 at 5 Hz, /odom pose at 20 Hz)"),
+    "dt": (0.05, _D, "Simulation step in seconds (0 < dt <= 1)"),
+    "seed": (0, _I, "Seed of the sensor noise: the same seed gives the same run"),
+    "mode": ("lockstep", _S, "'lockstep': each /cmd_vel advances one dt; 'realtime': a "
+                             "wall-clock timer advances one dt with the newest command"),
+    "cmd_vel_stamped": (True, _B, "Subscribe /cmd_vel as geometry_msgs/TwistStamped (Jazzy); "
+                                  "false = geometry_msgs/Twist as a Humble robot"),
+    "command_timeout": (0.5, _D, "Realtime mode: a command older than this (s) counts as zero; "
+                                 "0 = never (the real turtlebot3_node keeps the last command)"),
+    "goal": ([], _DA, "Goal [x, y] in metres; [] = the world's goal, if it has one"),
+    "goal_tolerance": (0.15, _D, "Distance (m) of the true position to the goal that counts "
+                                 "as reached"),
+    "enable_localization": (False, _B, "Synchronize /pose (amr_msgs/PoseStamped) with /cmd_vel, "
+                                       "log its error and finish at the goal once localized"),
+    "odom_frame": ("odom", _S, "Frame of the odometry pose"),
+    "base_frame": ("base_footprint", _S, "Robot frame (child frame of odometry)"),
+    "scan_frame": ("base_scan", _S, "Frame of the LaserScan"),
+    "world_frame": ("map", _S, "Frame of /ground_truth"),
+    "publish_ground_truth": (True, _B, "Publish the true pose and velocities on /ground_truth"),
+}
+NUMERIC_PARAMETERS = {"dt", "seed", "command_timeout", "goal", "goal_tolerance"}
+
+
+def parse_start(text: str) -> str | tuple[float, float, float] | None:
+    """'name' -> name, 'x,y,theta' -> floats, '' -> None (the world's first start)."""
+    text = text.strip()
+    if not text:
+        return None
+    if "," not in text:
+        return text
+    parts = text.split(",")
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        values = ()
+    if len(values) != 3 or not all(math.isfinite(v) for v in values):
+        raise ValueError(f"start '{text}' is neither a start name nor 'x,y,theta' "
+                         "with three finite numbers")
+    return values
+
+
+def check_parameters(values: dict[str, Any]) -> dict[str, Any]:
+    """The node's parameter values (name -> value as declared), checked and normalised (floats,
+    goal as a tuple or None, start parsed); raises ValueError naming every bad one."""
+    p = dict(values)
+    problems = []
+
+    def number(name: str, low: float, high: float) -> None:
+        value = p[name]
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+                not (math.isfinite(value) and low <= value <= high):
+            problems.append(f"{name} must be a number in [{low}, {high}] (got {value!r})")
+        else:
+            p[name] = float(value)
+
+    number("dt", 1e-4, 1.0)
+    number("command_timeout", 0.0, 3600.0)
+    number("goal_tolerance", 1e-3, 100.0)
+    if isinstance(p["seed"], bool) or not isinstance(p["seed"], int) or p["seed"] < 0:
+        problems.append(f"seed must be a non-negative integer (got {p['seed']!r})")
+    if p["mode"] not in ("lockstep", "realtime"):
+        problems.append(f"mode must be 'lockstep' or 'realtime' (got '{p['mode']}')")
+    goal = p["goal"]
+    if goal is None or (hasattr(goal, "__len__") and len(goal) == 0):
+        p["goal"] = None
+    elif isinstance(goal, (list, tuple)) and len(goal) == 2 and all(
+            isinstance(g, (int, float)) and not isinstance(g, bool) and math.isfinite(g)
+            for g in goal):
+        p["goal"] = (float(goal[0]), float(goal[1]))
+    else:
+        problems.append(f"goal must be [] or [x, y] with finite numbers (got {goal!r})")
+    try:
+        p["start"] = parse_start(p["start"])
+    except ValueError as exc:
+        problems.append(str(exc))
+    if problems:
+        raise ValueError("; ".join(problems))
+    return p
