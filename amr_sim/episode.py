@@ -75,14 +75,24 @@ class EpisodeResult:
                 f"explored {100 * self.explored_fraction:.0f} %, laps {self.laps}, wall error RMS {rms}")
 
 
-def default_controller(dt: float):
-    """The project's wall follower (imported lazily: it lives in amr_control)."""
+def default_controller(dt: float, profile: SensorProfile | None = None):
+    """The project's wall follower (imported lazily: it lives in amr_control), told where the
+    profile's LiDAR sits."""
     try:
         from amr_control.wall_follower import WallFollower
     except ImportError as exc:
         raise ImportError("run_episode needs a controller: amr_control.wall_follower.WallFollower "
                           f"is not importable ({exc}); pass controller= or controller_factory=") from exc
-    return WallFollower(dt)
+    return WallFollower(dt, **(robot_parameters(WallFollower, profile) if profile else {}))
+
+
+def robot_parameters(controller_class: Any, profile: SensorProfile) -> dict[str, Any]:
+    """What the simulated robot fixes for a controller class that has such parameters (listed
+    by its `parameter_descriptions()`): where its LiDAR sits (`lidar_offset_x_m`). The run
+    scripts apply these unless the user set the parameter (-p or a params file)."""
+    described = getattr(controller_class, "parameter_descriptions", None)
+    names = described() if callable(described) else {}
+    return {"lidar_offset_x_m": profile.lidar_offset_x} if "lidar_offset_x_m" in names else {}
 
 
 def run_episode(world: World | str, start=None, profile: str | SensorProfile = "ideal", seed: int = 0,
@@ -101,7 +111,8 @@ def run_episode(world: World | str, start=None, profile: str | SensorProfile = "
     prof = get_profile(profile)
     sim = Simulator(world_obj, start=start, dt=dt, profile=prof, seed=seed)
     if controller is None:
-        controller = controller_factory(sim.dt) if controller_factory is not None else default_controller(sim.dt)
+        controller = controller_factory(sim.dt) if controller_factory is not None else \
+            default_controller(sim.dt, prof)
     if callable(getattr(controller, "set_scan_geometry", None)):
         controller.set_scan_geometry(prof.angle_min, prof.angle_increment, prof.range_min, prof.range_max)
 

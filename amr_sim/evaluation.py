@@ -269,12 +269,15 @@ def _run_indexed(item: tuple[int, EpisodeSpec]) -> tuple[int, EpisodeOutcome]:
 
 def run_one(spec: EpisodeSpec) -> EpisodeOutcome:
     """Run one episode in this process; an exception becomes the outcome's error text."""
-    from amr_sim.episode import run_episode
+    from amr_sim.episode import robot_parameters, run_episode
+    from amr_sim.profiles import get_profile
 
     start = time.perf_counter()
     try:
         controller_class = load_controller_class(spec.controller)
-        params = dict(spec.params)
+        # The simulated robot's own values (LiDAR position) unless the spec sets them.
+        params = {**robot_parameters(controller_class, get_profile(spec.profile)),
+                  **dict(spec.params)}
         result = run_episode(spec.world, spec.start, profile=spec.profile, seed=spec.seed,
                              duration=spec.duration, dt=spec.dt,
                              controller_factory=lambda dt: controller_class(dt, **params))

@@ -1,11 +1,11 @@
 """Sensor and actuation profiles: the course's idealised CoppeliaSim robot and the real Burger.
 
 `ideal` reproduces the course simulator (turtlebot3.md / course-template.md): a 240-ray scan over
-360 deg every step with NaN for no return, and an /odometry twist every step. `turtlebot3`
-imitates the real TurtleBot3 Burger with its LDS-01: 360 rays at 1 deg, 0.12-3.5 m, 0.0 for no
-return, Gaussian range noise (sigma 0.01 m), a new scan every 0.2 s (5 Hz), /odom with a pose only
-at 20 Hz, and commands quantised like turtlebot3_node (int(v * 100) / 100) and limited to
-0.22 m/s and 2.84 rad/s.
+360 deg every step from the robot centre with NaN for no return, and an /odometry twist every
+step. `turtlebot3` imitates the real TurtleBot3 Burger with its LDS-01: 360 rays at 1 deg from
+base_scan, 32 mm behind the robot centre, 0.12-3.5 m, 0.0 for no return, Gaussian range noise
+(sigma 0.01 m), a new scan every 0.2 s (5 Hz), /odom with a pose only at 20 Hz, and commands
+quantised like turtlebot3_node (int(v * 100) / 100) and limited to 0.22 m/s and 2.84 rad/s.
 """
 from __future__ import annotations
 
@@ -33,6 +33,8 @@ class SensorProfile:
     # saturation (turtlebot3_node); False: only the wheel-speed saturation, which keeps the
     # curvature (the course robot; it bounds |v| <= 0.22 and |w| <= 2.75 by itself).
     clamp_commands: bool = False
+    # m, forward position of the LiDAR (the scan's origin) from the robot centre, along its axis.
+    lidar_offset_x: float = 0.0
 
     @property
     def angle_max(self) -> float:
@@ -49,7 +51,8 @@ TURTLEBOT3 = SensorProfile(
     name="turtlebot3", scan_rays=360, angle_min=0.0, angle_increment=2.0 * math.pi / 360,
     range_min=0.12, range_max=3.5, no_return=0.0, range_noise_sigma=0.01,
     scan_period=0.2, odom_period=0.05, odom_topic="/odom", command_resolution=0.01,
-    max_linear=0.22, max_angular=2.84, clamp_commands=True)
+    max_linear=0.22, max_angular=2.84, clamp_commands=True,
+    lidar_offset_x=-0.032)  # base_scan at (-0.032, 0, 0.172) from base_link (turtlebot3.md)
 
 PROFILES: dict[str, SensorProfile] = {p.name: p for p in (IDEAL, TURTLEBOT3)}
 

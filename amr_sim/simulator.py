@@ -239,7 +239,16 @@ class Simulator:
     def _new_scan(self) -> np.ndarray:
         p = self._profile
         noise = self._rng.standard_normal(p.scan_rays) * p.range_noise_sigma if p.range_noise_sigma > 0 else None
-        return self._lidar.scan(self._x, self._y, self._theta, noise)
+        x, y = self.lidar_position
+        return self._lidar.scan(x, y, self._theta, noise)
+
+    @property
+    def lidar_position(self) -> tuple[float, float]:
+        """World position (x, y) of the LiDAR, the origin of the scan's rays (m)."""
+        offset = self._profile.lidar_offset_x
+        if offset == 0.0:
+            return self._x, self._y
+        return (self._x + offset * math.cos(self._theta), self._y + offset * math.sin(self._theta))
 
     def _clean_command(self, v, w) -> tuple[float, float]:
         try:

@@ -22,6 +22,23 @@ from amr_control.node_runner import make_executor, shutdown_node
 STALL_TIMEOUT_S = 10.0  # lockstep: no step for this long (wall clock) means the loop broke
 
 
+def _robot_parameters(tuning: dict, params_file, profile_name: str) -> dict:
+    """The simulated robot's values for the controller (where its LiDAR sits) that neither the
+    -p overrides nor the params file set (the rehearsal's turtlebot3.yaml sets them itself)."""
+    from amr_control.controller_loader import DEFAULT_CONTROLLER, load_controller_class
+    from amr_sim.episode import robot_parameters
+    from amr_sim.evaluation import load_ros_params_file
+    from amr_sim.profiles import get_profile
+    try:
+        in_file = load_ros_params_file(params_file)
+        controller_class = load_controller_class(
+            tuning.get("controller", in_file.get("controller", DEFAULT_CONTROLLER)))
+    except Exception:  # a bad file or class: the node reports it when it configures
+        return {}
+    defaults = robot_parameters(controller_class, get_profile(profile_name))
+    return {k: v for k, v in defaults.items() if k not in in_file and k not in tuning}
+
+
 def _start_label(start) -> str:
     return start if isinstance(start, str) else ",".join(f"{v:g}" for v in start)
 
@@ -56,8 +73,10 @@ class SimSession:
         else:
             tuning.update({"simulation": True, "dt": args.dt,
                            "enable_localization": args.enable_localization})
+            params_file = args.params_file or SIM_PARAMS
+            tuning = {**_robot_parameters(tuning, params_file, args.profile), **tuning}
             self.control_nodes = [make_wall_follower(
-                self.context, params_file=args.params_file or SIM_PARAMS, overrides=tuning)]
+                self.context, params_file=params_file, overrides=tuning)]
         self.wall_follower = self.control_nodes[-1]
         order = [node.get_name() for node in self.control_nodes] + [
             self.simulator_node.get_name()]

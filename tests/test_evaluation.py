@@ -313,3 +313,31 @@ def test_ros_params_file_gives_the_controller_what_the_node_gets(tmp_path):
     config = tmp_path / "set.yaml"  # a config's params_file is relative to the config
     config.write_text("worlds: [lab02]\nparams_file: sim.yaml\n")
     assert load_config(config)["params_file"] == str(params)
+
+
+class LidarAwareController(RecordingController):
+    """A controller that, like WallFollower, has a lidar_offset_x_m parameter."""
+    received: list = []
+
+    def __init__(self, dt, lidar_offset_x_m=0.0):
+        super().__init__(dt)
+        LidarAwareController.received.append(lidar_offset_x_m)
+
+    @classmethod
+    def parameter_descriptions(cls):
+        return {"lidar_offset_x_m": (0.0, "Forward position of the LiDAR [m].")}
+
+
+@pytest.mark.parametrize("profile, params, expected", [
+    ("ideal", {}, 0.0),                                  # the course robot scans from its centre
+    ("turtlebot3", {}, -0.032),                          # the Burger's base_scan
+    ("turtlebot3", {"lidar_offset_x_m": -0.05}, -0.05),  # the user's value wins
+])
+def test_episodes_tell_the_controller_where_the_profiles_lidar_is(profile, params, expected):
+    from amr_sim.evaluation import run_one
+    LidarAwareController.received.clear()
+    spec = EpisodeSpec(world="lab02", start="outer", profile=profile, seed=0, duration=0.1,
+                       controller=f"{__name__}:LidarAwareController", params=params)
+    outcome = run_one(spec)
+    assert outcome.error is None
+    assert LidarAwareController.received == [expected]

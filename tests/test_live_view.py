@@ -146,8 +146,9 @@ def test_draws_a_real_simulation(headless, tmp_path):
         assert _colour(view, *back) == live_view.ROBOT
         valid = np.flatnonzero((scan >= sim.profile.range_min) & (scan <= sim.profile.range_max))
         assert valid.size > 0
-        hits = [(x + scan[i] * math.cos(theta + i * sim.profile.angle_increment),
-                 y + scan[i] * math.sin(theta + i * sim.profile.angle_increment)) for i in valid]
+        lx, ly = sim.lidar_position     # 32 mm behind the centre on the Burger
+        hits = [(lx + scan[i] * math.cos(theta + i * sim.profile.angle_increment),
+                 ly + scan[i] * math.sin(theta + i * sim.profile.angle_increment)) for i in valid]
         drawn = sum(_colour(view, hx, hy) == live_view.HIT for hx, hy in hits)
         assert drawn >= 0.9 * len(hits)  # a few hits are covered by later rays
         view.save_screenshot(tmp_path / "lab02.png")

@@ -91,16 +91,18 @@ def test_gui_runs_headless(tmp_path, monkeypatch):
     assert json.loads(report.read_text())["steps"] == 60
 
 
-def test_ros_lockstep_path_and_headless_episode_drive_the_same_trajectory(tmp_path):
-    """evaluate.py's headless episodes stand for the ROS graph: same core, same controller."""
+@pytest.mark.parametrize("profile", ["ideal", "turtlebot3"])
+def test_ros_lockstep_path_and_headless_episode_drive_the_same_trajectory(tmp_path, profile):
+    """evaluate.py's headless episodes stand for the ROS graph: same core, same controller,
+    told the same LiDAR position (the Burger's is 32 mm behind the centre)."""
     import numpy as np
     from amr_sim.episode import run_episode
 
     report_path = tmp_path / "ros.json"
     run_sim.main(["--world", "lab02", "--start", "inner", "--duration", "30", "--seed", "3",
-                  "--report", str(report_path)])
+                  "--profile", profile, "--report", str(report_path)])
     over_ros = np.array(json.loads(report_path.read_text())["trajectory"])
-    headless = np.array(run_episode("lab02", "inner", profile="ideal", seed=3,
+    headless = np.array(run_episode("lab02", "inner", profile=profile, seed=3,
                                     duration=30.0).trajectory)
     assert over_ros.shape == headless.shape == (601, 4)
     # LaserScan carries float32 ranges: the only difference between the two paths.

@@ -79,7 +79,7 @@ def test_turtlebot3_encoding_zero_beyond_3_5_m_and_below_0_12_m(long_corridor):
     z = sim.measure()[0]
     assert z.shape == (360,)
     assert z[0] == 0.0  # 19 m ahead: beyond range_max
-    assert z[180] == pytest.approx(1.0)  # behind
+    assert z[180] == pytest.approx(1.0 - 0.032)  # behind, from base_scan 32 mm behind the centre
     assert z[90] == pytest.approx(0.89)  # left: y = 1
     assert z[270] == 0.0  # right: 0.11 m < range_min
     assert np.all((z == 0.0) | ((z >= 0.12) & (z <= 3.5)))
@@ -93,7 +93,8 @@ def test_turtlebot3_noise_sigma_and_reproducibility(room):
     c = Simulator(room, start=pose, profile="turtlebot3", seed=4).measure()[0]
     np.testing.assert_array_equal(a, b)
     assert not np.array_equal(a, c)
-    truth = np.array([room_distance(pose[0], pose[1], pose[2] + math.radians(i)) for i in range(360)])
+    lx, ly = pose[0] - 0.032 * math.cos(pose[2]), pose[1] - 0.032 * math.sin(pose[2])  # base_scan
+    truth = np.array([room_distance(lx, ly, pose[2] + math.radians(i)) for i in range(360)])
     valid = truth < 3.4  # away from range_max, where noise can drop a reading
     err = a[valid] - truth[valid]
     assert valid.sum() > 250
@@ -113,6 +114,19 @@ def test_turtlebot3_scan_refreshes_at_5_hz(room):
         np.testing.assert_array_equal(scans[k], scans[3])
     assert not np.array_equal(scans[7], scans[3])
     assert sim.scan_time == pytest.approx(0.4)
+
+
+@pytest.mark.parametrize("theta", [0.0, 0.7, -2.4])
+def test_turtlebot3_scans_from_base_scan_32_mm_behind_the_centre(room, theta):
+    noiseless = dataclasses.replace(TURTLEBOT3, range_noise_sigma=0.0)
+    sim = Simulator(room, start=(2.0, 1.5, theta), profile=noiseless)
+    lx, ly = sim.lidar_position
+    assert (lx, ly) == pytest.approx((2.0 - 0.032 * math.cos(theta), 1.5 - 0.032 * math.sin(theta)))
+    z = sim.measure()[0]
+    expected = [room_distance(lx, ly, theta + math.radians(i)) for i in range(360)]
+    np.testing.assert_allclose(z, expected, atol=1e-9)
+    # The ideal (course) robot scans from its centre.
+    assert Simulator(room, start=(2.0, 1.5, theta), profile="ideal").lidar_position == (2.0, 1.5)
 
 
 def test_numba_and_numpy_kernels_agree():
