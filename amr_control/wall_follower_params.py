@@ -83,6 +83,9 @@ def check_parameters(overrides: dict[str, Any]) -> dict[str, Any]:
     checked["max_angular_speed_radps"] = min(checked["max_angular_speed_radps"], 2.84)
     if checked["front_stop_distance_m"] >= checked["front_turn_distance_m"]:
         raise ValueError("WallFollower: front_stop_distance_m must be below front_turn_distance_m")
+    if not 0.0 < checked["sector_half_width_rad"] < 0.5 * math.pi:
+        raise ValueError("WallFollower: sector_half_width_rad must be in (0, pi/2), got "
+                         f"{checked['sector_half_width_rad']!r}")
     return checked
 
 

@@ -319,7 +319,8 @@ def test_parameter_descriptions_cover_the_constructor_and_have_units():
 
 
 @pytest.mark.parametrize("bad", [{"follow_side": "up"}, {"kp": float("nan")}, {"kp": "fast"},
-                                 {"wall_distance": 0.2}, {"front_stop_distance_m": 0.5}])
+                                 {"wall_distance": 0.2}, {"front_stop_distance_m": 0.5},
+                                 {"sector_half_width_rad": 0.0}, {"sector_half_width_rad": 2.0}])
 def test_bad_parameters_raise_clear_errors(bad):
     with pytest.raises(ValueError, match="WallFollower"):
         WallFollower(DT, **bad)
