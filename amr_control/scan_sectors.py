@@ -14,9 +14,6 @@ import numpy as np
 
 from amr_control import point_cloud_kernels as kernels
 
-TWO_PI = 2.0 * math.pi
-
-
 
 @dataclass(frozen=True)
 class ScanGeometry:
