@@ -16,22 +16,10 @@ import math
 
 import numpy as np
 
-try:
-    import numba
-
-    HAVE_NUMBA = True
-except ImportError:  # pragma: no cover - numba is a pinned dependency
-    HAVE_NUMBA = False
+from amr_control.jit import jit
 
 TWO_PI = 2.0 * math.pi
 MIN_LATERAL_M = 0.02   # points closer than this to the robot's x axis are on neither side
-
-
-def jit(function):
-    """numba.njit (cached on disk, numpy error model) when numba is there, else the function."""
-    if not HAVE_NUMBA:
-        return function
-    return numba.njit(cache=True, nogil=True, error_model="numpy")(function)
 
 
 @jit

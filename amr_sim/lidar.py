@@ -14,12 +14,7 @@ import math
 
 import numpy as np
 
-try:
-    import numba
-
-    HAVE_NUMBA = True
-except ImportError:  # pragma: no cover - numba is a pinned dependency
-    HAVE_NUMBA = False
+from amr_control.jit import HAVE_NUMBA, jit
 
 
 def _scan_python(segments, ox, oy, theta, base_cos, base_sin, range_min, range_max, no_return, noise, out):
@@ -69,8 +64,7 @@ def _segment_offset_python(segments, k, px, py):
 
 # Kernels below call `segment_offset`: the jitted version when numba is there (numba resolves
 # the global when it compiles them), the Python one otherwise.
-segment_offset = (numba.njit(cache=True, error_model="numpy", nogil=True)(_segment_offset_python)
-                  if HAVE_NUMBA else _segment_offset_python)
+segment_offset = jit(_segment_offset_python)
 
 
 def _nearest_wall_python(segments, px, py):
@@ -90,9 +84,8 @@ def _nearest_wall_python(segments, px, py):
     return best, nx, ny
 
 
-if HAVE_NUMBA:
-    _scan_kernel = numba.njit(cache=True, error_model="numpy", nogil=True)(_scan_python)
-    _nearest_wall_kernel = numba.njit(cache=True, error_model="numpy", nogil=True)(_nearest_wall_python)
+_scan_kernel = jit(_scan_python)
+_nearest_wall_kernel = jit(_nearest_wall_python)
 
 
 def _scan_numpy(segments, ox, oy, theta, base_cos, base_sin, range_min, range_max, no_return, noise, out):

@@ -29,6 +29,8 @@ import time as _time
 import numpy as np
 import pymunk
 
+from amr_control.jit import jit
+
 from . import robot
 from .lidar import Lidar, nearest_wall, segment_offset
 from .profiles import SensorProfile, get_profile
@@ -66,12 +68,7 @@ def _constrain_velocity_python(segments, px, py, vx, vy, h, radius, allowed_pene
     return 0.0, 0.0  # not converged (a narrow wedge): stopping is always safe
 
 
-try:
-    import numba
-
-    _constrain_velocity = numba.njit(cache=True, error_model="numpy", nogil=True)(_constrain_velocity_python)
-except ImportError:  # pragma: no cover - numba is a pinned dependency
-    _constrain_velocity = _constrain_velocity_python
+_constrain_velocity = jit(_constrain_velocity_python)
 
 log = logging.getLogger("amr_sim.simulator")
 
