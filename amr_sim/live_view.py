@@ -204,8 +204,7 @@ class LiveView:
         if index.size == 0:
             return
         angles = theta + angle_min + increment * index
-        offset = float(getattr(profile, "lidar_offset_x", 0.0))   # rays start at the LiDAR
-        x, y = x + offset * math.cos(theta), y + offset * math.sin(theta)
+        x, y = getattr(sim, "lidar_position", (x, y))   # rays start at the LiDAR
         hx = x + ranges[index] * np.cos(angles)
         hy = y + ranges[index] * np.sin(angles)
         origin = self.to_pixels(x, y)
