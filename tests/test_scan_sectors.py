@@ -7,7 +7,9 @@ import numpy as np
 import pytest
 
 from amr_control import point_cloud_kernels as kernels
+from amr_control.jit import HAVE_NUMBA
 from amr_control.scan_sectors import LocalPointCloud, PerceptionSpec, ScanGeometry
+from tests.test_wall_follower import LDS01_360, cast   # the synthetic LiDAR
 
 SECTORS = {"front": 0.0, "left": 0.5 * math.pi, "right": -0.5 * math.pi, "back": math.pi}
 RAYS_360 = ScanGeometry(0.0, 2.0 * math.pi / 360, 0.12, 3.5)   # LDS-01 convention
@@ -19,17 +21,20 @@ def make_cloud(side=-1.0, hold_time=0.6, hold_range=0.3):
     return LocalPointCloud(hold_time, hold_range, 0.0, spec)
 
 
-def wall_scan(distance, angle=0.0, geometry=RAYS_360, rays=360, noise=0.0, seed=0):
-    """Ranges of the rays that hit a straight wall on the right at `distance` (m) from the
-    robot, rotated by `angle` (rad) in the robot frame; 0.0 (no return) elsewhere or beyond
-    range_max."""
-    a = geometry.angle_min + geometry.angle_increment * np.arange(rays)
-    normal = np.array([math.sin(angle), -math.cos(angle)])      # from the robot to the wall
-    facing = np.cos(a) * normal[0] + np.sin(a) * normal[1]
-    with np.errstate(divide="ignore"):
-        r = np.where(facing > 1e-9, distance / facing, np.inf)
-    r = r + np.random.default_rng(seed).normal(0.0, noise, rays) if noise else r
-    return np.where((r >= geometry.range_min) & (r <= geometry.range_max), r, 0.0)
+def wall_scan(distance, angle=0.0, noise=0.0, seed=0):
+    """LDS-01 ranges (0.0 = no return) of a straight wall on the right at `distance` (m) from
+    the robot, rotated by `angle` (rad) in the robot frame, with Gaussian range noise."""
+    normal = (math.sin(angle), -math.cos(angle))        # from the robot to the wall
+    along = (math.cos(angle), math.sin(angle))
+    foot = (distance * normal[0], distance * normal[1])
+    wall = [[foot[0] - 5 * along[0], foot[1] - 5 * along[1],
+             foot[0] + 5 * along[0], foot[1] + 5 * along[1]]]   # longer than range_max
+    r = cast(wall, LDS01_360)
+    if noise:
+        hit = r > 0.0
+        r[hit] += np.random.default_rng(seed).normal(0.0, noise, int(hit.sum()))
+        r[(r < RAYS_360.range_min) | (r > RAYS_360.range_max)] = 0.0
+    return r
 
 
 def test_straight_wall_gives_its_distance_angle_and_beside_distance():
@@ -139,5 +144,5 @@ def test_a_wrong_perception_spec_is_refused():
 
 def test_kernels_are_compiled_by_numba():
     # The pinned environment has numba: the per-step cost depends on it (pure Python ~100x).
-    assert kernels.HAVE_NUMBA
+    assert HAVE_NUMBA
     assert hasattr(kernels.step_cloud, "signatures") and kernels.step_cloud.signatures
