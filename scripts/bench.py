@@ -83,7 +83,7 @@ def main(argv=None) -> int:
         figures["sim"] = bench_sim.main()
     if "ros" in chosen:
         import bench_ros
-        figures["ros"] = bench_ros.measure(*((3, 300) if args.quick else (12, 500)))
+        figures["ros"] = bench_ros.measure(3, 300) if args.quick else bench_ros.measure()
         print(bench_ros.report(figures["ros"]))
     if "sync" in chosen:
         import bench_sync

@@ -166,7 +166,10 @@ GRAPHS = {
 }
 
 
-def measure(cycles: int = 12, segment: int = 500, warm_up: int = 300) -> dict:
+CYCLES, SEGMENT = 12, 500   # the default run: 12 turns of 500 loops per graph
+
+
+def measure(cycles: int = CYCLES, segment: int = SEGMENT, warm_up: int = 300) -> dict:
     """Loops/s of every graph over `cycles` round-robin segments of `segment` loops each, and
     each lockstep graph's ratio to the ping-pong (total, and min/max over the cycles)."""
     graphs = {name: make() for name, make in GRAPHS.items()}
@@ -215,8 +218,8 @@ def report(r: dict) -> str:
 
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--cycles", type=int, default=12)
-    parser.add_argument("--segment", type=int, default=500, help="loops per segment")
+    parser.add_argument("--cycles", type=int, default=CYCLES)
+    parser.add_argument("--segment", type=int, default=SEGMENT, help="loops per segment")
     args = parser.parse_args(argv)
     isolate_local_graph()
     result = measure(args.cycles, args.segment)
