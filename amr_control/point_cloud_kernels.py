@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from amr_control.jit import jit
+from amr_common.jit import jit
 
 TWO_PI = 2.0 * math.pi
 MIN_LATERAL_M = 0.02   # points closer than this to the robot's x axis are on neither side

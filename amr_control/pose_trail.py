@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from amr_control.jit import jit
+from amr_common.jit import jit
 
 CAPACITY = 4000          # poses kept; the oldest 1000 are dropped when it is full
 SPACING_M = 0.05         # a pose is recorded every this much travel

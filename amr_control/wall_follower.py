@@ -38,13 +38,13 @@ from typing import Any
 
 import numpy as np
 
+from amr_common.geometry import wrap_angle
+from amr_common.robot import MAX_LINEAR_SPEED
 from amr_control.pose_trail import PoseTrail
-from amr_control.wall_follower_params import PARAMETERS, check_parameters
 from amr_control.scan_sectors import LocalPointCloud, Perception, PerceptionSpec, ScanGeometry
+from amr_control.wall_follower_params import PARAMETERS, check_parameters
 
 _LOG = logging.getLogger(__name__)
-
-_WHEEL_LINEAR_SPEED_MAX_MPS = 0.22   # TurtleBot3 Burger: each wheel's rim speed limit
 
 
 class WallFollower:
@@ -52,8 +52,8 @@ class WallFollower:
 
     def __init__(self, dt: float, **params: Any) -> None:
         """Args:
-            dt: control period [s].
-            **params: any name of `parameter_descriptions()`; unknown names raise ValueError.
+        dt: control period [s].
+        **params: any name of `parameter_descriptions()`; unknown names raise ValueError.
         """
         if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0.0):
             raise ValueError(f"WallFollower: dt must be a positive number of seconds, got {dt!r}")
@@ -197,7 +197,7 @@ class WallFollower:
         reference = self._reference()
         if reference is None:
             return speed, 0.0
-        w = self.heading_gain_per_s * _wrap(reference - self._heading)
+        w = self.heading_gain_per_s * wrap_angle(reference - self._heading)
         limit = self.follow_max_angular_speed_radps
         return speed, max(-limit, min(limit, w))
 
@@ -372,16 +372,12 @@ class WallFollower:
             ramp = (path - self.front_stop_distance_m) / max(self.front_slowdown_distance_m, 1e-3)
             v = min(v, self.max_linear_speed_mps * max(0.0, min(1.0, ramp)))
         # Keep both wheels within the linear speed limit, giving priority to the rotation.
-        v_max = max(0.0, _WHEEL_LINEAR_SPEED_MAX_MPS - abs(w) * 0.5 * self.track_m)
+        v_max = max(0.0, MAX_LINEAR_SPEED - abs(w) * 0.5 * self.track_m)
         v = max(-v_max, min(v_max, v))
         return float(v), float(w)
 
 
 _SECTOR_CENTRES = {"front": 0.0, "left": 0.5 * math.pi, "right": -0.5 * math.pi, "back": math.pi}
-
-
-def _wrap(angle: float) -> float:
-    return math.atan2(math.sin(angle), math.cos(angle))
 
 
 def _is_finite_number(value: Any) -> bool:

@@ -22,22 +22,17 @@ from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.publisher import Publisher
-from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy
 from sensor_msgs.msg import LaserScan
 
-from amr_control import message_filters
-from amr_control.controller_loader import DEFAULT_CONTROLLER, ControllerSpecError, \
-    load_controller_class
-from amr_control.node_runner import run_lifecycle_node
-
-# TurtleBot3 Burger limits (turtlebot3.md): anything beyond is clamped before publishing.
-MAX_LINEAR_SPEED = 0.22
-MAX_ANGULAR_SPEED = 2.84
-
-RELIABLE_10 = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
-                         history=HistoryPolicy.KEEP_LAST)
-BEST_EFFORT_10 = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT,
-                            history=HistoryPolicy.KEEP_LAST)
+from amr_common import message_filters
+from amr_common.controller_loader import (
+    DEFAULT_CONTROLLER,
+    ControllerSpecError,
+    load_controller_class,
+)
+from amr_common.node_runner import run_lifecycle_node
+from amr_common.qos import RELIABLE_10, scan_qos
+from amr_common.robot import MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED
 
 _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
     "simulation": (True, "true: compute on each synchronized set (lockstep with the simulator);"
@@ -143,7 +138,7 @@ class WallFollowerNode(LifecycleNode):
             message_filters.Subscriber(self, Odometry, p["odometry_topic"],
                                        qos_profile=RELIABLE_10),
             message_filters.Subscriber(self, LaserScan, p["scan_topic"],
-                                       qos_profile=BEST_EFFORT_10)]
+                                       qos_profile=scan_qos(10))]
         if p["enable_localization"]:
             from amr_msgs.msg import PoseStamped
             self._subscribers.append(message_filters.Subscriber(

@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from amr_common.robot import MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED, ROBOT_RADIUS, TRACK
+
 # name: (default, description). Defaults work in the simulator's "ideal" and "turtlebot3" profiles.
 PARAMETERS: dict[str, tuple[Any, str]] = {
     "follow_side": ("right", "Wall kept on this side: 'right' (right-hand rule) or 'left'."),
@@ -12,8 +14,8 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     "kp": (10.0, "Proportional gain: angular speed per metre of wall-distance error [rad/s/m]."),
     "kd": (10.0, "Derivative gain: angular speed per m/s of wall-distance rate, the rate being "
                  "estimated from the fitted wall angle at cruise speed [rad/s per m/s]."),
-    "max_linear_speed_mps": (0.20, "Cruise (maximum) forward speed [m/s]; at most 0.22."),
-    "max_angular_speed_radps": (2.84, "Hard limit on the commanded angular speed [rad/s]."),
+    "max_linear_speed_mps": (0.20, f"Cruise (maximum) forward speed [m/s]; at most {MAX_LINEAR_SPEED}."),
+    "max_angular_speed_radps": (MAX_ANGULAR_SPEED, "Hard limit on the commanded angular speed [rad/s]."),
     "follow_max_angular_speed_radps": (1.5, "Limit on the angular speed while following [rad/s]."),
     "turn_speed_radps": (1.5, "Angular speed of in-place turns [rad/s]."),
     "min_turn_speed_radps": (0.3, "Slowest angular speed at the end of an in-place turn [rad/s]."),
@@ -45,11 +47,11 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     "invalid_hold_time_s": (0.6, "A close point whose ray stops returning is kept this long [s]."),
     "invalid_hold_range_m": (0.30, "Only points closer than this are kept when their ray goes "
                                    "invalid (LDS-01 reports 0.0 below 0.12 m) [m]."),
-    "robot_radius_m": (0.105, "Radius of the robot footprint [m]."),
+    "robot_radius_m": (ROBOT_RADIUS, "Radius of the robot footprint [m]."),
     "path_margin_m": (0.03, "Lateral margin added to the radius for the swept-path check [m]."),
     "lidar_offset_x_m": (0.0, "Forward position of the LiDAR relative to the robot centre [m] "
                               "(-0.032 on a real Burger)."),
-    "track_m": (0.16, "Wheel separation [m], to keep both wheels within max_linear_speed."),
+    "track_m": (TRACK, "Wheel separation [m], to keep both wheels within max_linear_speed."),
 }
 
 
@@ -79,8 +81,8 @@ def check_parameters(overrides: dict[str, Any]) -> dict[str, Any]:
         if not math.isfinite(number) or (number < 0.0 and name != "lidar_offset_x_m"):
             raise ValueError(f"WallFollower: {name} must be finite and >= 0, got {value!r}")
         checked[name] = number
-    checked["max_linear_speed_mps"] = min(checked["max_linear_speed_mps"], 0.22)
-    checked["max_angular_speed_radps"] = min(checked["max_angular_speed_radps"], 2.84)
+    checked["max_linear_speed_mps"] = min(checked["max_linear_speed_mps"], MAX_LINEAR_SPEED)
+    checked["max_angular_speed_radps"] = min(checked["max_angular_speed_radps"], MAX_ANGULAR_SPEED)
     if checked["front_stop_distance_m"] >= checked["front_turn_distance_m"]:
         raise ValueError("WallFollower: front_stop_distance_m must be below front_turn_distance_m")
     if not 0.0 < checked["sector_half_width_rad"] < 0.5 * math.pi:

@@ -17,7 +17,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
-ROBOT_RADIUS_M = 0.105          # TurtleBot3 Burger footprint
+from amr_common.robot import ROBOT_RADIUS
+
 DEFAULT_MAX_WINDOW_PX = (1000, 800)
 MARGIN_M = 0.25
 TEXT_BAR_PX = 30
@@ -179,9 +180,9 @@ class LiveView:
             if self._last_scan is not None:
                 self._draw_scan(sim, x, y, theta)
             centre = self.to_pixels(x, y)
-            radius = max(3, int(round(ROBOT_RADIUS_M * self.scale)))
+            radius = max(3, int(round(ROBOT_RADIUS * self.scale)))
             pg.draw.circle(screen, ROBOT, centre, radius)
-            tip = self.to_pixels(x + ROBOT_RADIUS_M * math.cos(theta), y + ROBOT_RADIUS_M * math.sin(theta))
+            tip = self.to_pixels(x + ROBOT_RADIUS * math.cos(theta), y + ROBOT_RADIUS * math.sin(theta))
             pg.draw.line(screen, HEADING, centre, tip, max(2, radius // 4))
         for cx, cy in list(getattr(sim, "collision_points", []) or [])[-200:]:
             px, py = self.to_pixels(cx, cy)

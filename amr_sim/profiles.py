@@ -12,6 +12,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from amr_common.robot import LIDAR_OFFSET_X, MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED
+
 
 @dataclass(frozen=True)
 class SensorProfile:
@@ -45,14 +47,14 @@ IDEAL = SensorProfile(
     name="ideal", scan_rays=240, angle_min=0.0, angle_increment=2.0 * math.pi / 240,
     range_min=0.016, range_max=8.0, no_return=math.nan, range_noise_sigma=0.0,
     scan_period=None, odom_period=None, odom_topic="/odometry", command_resolution=None,
-    max_linear=0.22, max_angular=2.84)
+    max_linear=MAX_LINEAR_SPEED, max_angular=MAX_ANGULAR_SPEED)
 
 TURTLEBOT3 = SensorProfile(
     name="turtlebot3", scan_rays=360, angle_min=0.0, angle_increment=2.0 * math.pi / 360,
     range_min=0.12, range_max=3.5, no_return=0.0, range_noise_sigma=0.01,
     scan_period=0.2, odom_period=0.05, odom_topic="/odom", command_resolution=0.01,
-    max_linear=0.22, max_angular=2.84, clamp_commands=True,
-    lidar_offset_x=-0.032)  # base_scan at (-0.032, 0, 0.172) from base_link (turtlebot3.md)
+    max_linear=MAX_LINEAR_SPEED, max_angular=MAX_ANGULAR_SPEED, clamp_commands=True,
+    lidar_offset_x=LIDAR_OFFSET_X)  # base_scan at (-0.032, 0, 0.172) from base_link (turtlebot3.md)
 
 PROFILES: dict[str, SensorProfile] = {p.name: p for p in (IDEAL, TURTLEBOT3)}
 

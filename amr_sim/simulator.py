@@ -29,12 +29,14 @@ import time as _time
 import numpy as np
 import pymunk
 
-from amr_control.jit import jit
+from amr_common import robot
+from amr_common.geometry import wrap_angle
+from amr_common.jit import jit
+from amr_common.raycast import nearest_wall, segment_offset
+from amr_common.world import World
+from amr_sim.lidar import Lidar
+from amr_sim.profiles import SensorProfile, get_profile
 
-from . import robot
-from .lidar import Lidar, nearest_wall, segment_offset
-from .profiles import SensorProfile, get_profile
-from .world import World, WorldError
 
 def _constrain_velocity_python(segments, px, py, vx, vy, h, radius, allowed_penetration):
     """Limit (vx, vy) so that after moving h seconds no wall is closer than radius - allowed.
@@ -76,17 +78,8 @@ _ROBOT_TYPE = 1
 _WALL_TYPE = 2
 ALLOWED_PENETRATION = 0.0005  # m: resting contact depth, below collision_slop so it is stable
 _ROBOT_RADIUS = robot.ROBOT_RADIUS
-_WHEEL_RADIUS = robot.WHEEL_RADIUS
-_TRACK = robot.TRACK
-_HALF_TRACK = robot.TRACK / 2.0
-_WHEEL_SPEED_MAX = robot.WHEEL_SPEED_MAX
 _COMMAND_CLIP = 1.0e6  # |v|, |w| beyond this are absurd
 _WARN_INTERVAL = 5.0  # s of wall time between repeated bad-command warnings
-
-
-def wrap_angle(a: float) -> float:
-    """Angle wrapped to (-pi, pi]."""
-    return math.pi - ((math.pi - a) % (2.0 * math.pi))
 
 
 class Simulator:
@@ -159,7 +152,6 @@ class Simulator:
 
     def step(self, v: float, w: float) -> tuple[np.ndarray, float, float]:
         """Advance one dt with the command (v m/s, w rad/s); return (z_scan, z_v, z_w)."""
-        # The maths of robot.py is inlined here: this runs 10,000s of times per second.
         if not (type(v) is float and type(w) is float and -_COMMAND_CLIP < v < _COMMAND_CLIP
                 and -_COMMAND_CLIP < w < _COMMAND_CLIP):  # NaN fails the comparisons
             v, w = self._clean_command(v, w)
@@ -170,14 +162,7 @@ class Simulator:
         if p.clamp_commands:
             v = min(max(v, -p.max_linear), p.max_linear)
             w = min(max(w, -p.max_angular), p.max_angular)
-        # Wheel-speed saturation: both wheels scaled by one factor (keeps the curvature).
-        w_right = (v + w * _HALF_TRACK) / _WHEEL_RADIUS
-        w_left = (v - w * _HALF_TRACK) / _WHEEL_RADIUS
-        fastest = max(abs(w_left), abs(w_right))
-        if fastest > _WHEEL_SPEED_MAX:
-            scale = _WHEEL_SPEED_MAX / fastest
-            v = _WHEEL_RADIUS * (w_right + w_left) * scale / 2.0
-            w = _WHEEL_RADIUS * (w_right - w_left) * scale / _TRACK
+        v, w = robot.saturate(v, w)  # wheel-speed limit: one factor on both wheels
         self._command = (v, w)
 
         dt = self._dt
@@ -204,13 +189,11 @@ class Simulator:
         mid = th0 + 0.5 * dth
         chord = dx * math.cos(mid) + dy * math.sin(mid)
         ds = chord / robot.sinc_half(dth)
-        dphi_l = (ds - dth * _HALF_TRACK) / _WHEEL_RADIUS
-        dphi_r = (ds + dth * _HALF_TRACK) / _WHEEL_RADIUS
+        dphi_l, dphi_r = robot.encoder_increments(ds, dth)
         wheels = self._wheel_angles
         wheels[0] += dphi_l
         wheels[1] += dphi_r
-        self._z_v = _WHEEL_RADIUS * (dphi_r + dphi_l) / (2.0 * dt)
-        self._z_w = _WHEEL_RADIUS * (dphi_r - dphi_l) / (_TRACK * dt)
+        self._z_v, self._z_w = robot.twist_from_increments(dphi_l, dphi_r, dt)
         # Dead reckoning (the encoders do not see sideways sliding along a wall).
         odom = self._odom
         odom_mid = odom[2] + 0.5 * dth
@@ -384,4 +367,4 @@ class Simulator:
         return self._bad_commands
 
 
-__all__ = ["Simulator", "World", "WorldError", "wrap_angle"]
+__all__ = ["Simulator"]

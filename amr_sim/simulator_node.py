@@ -1,7 +1,7 @@
 """The `amr_simulator` lifecycle node: the amr_sim core behind the course's ROS interface.
 
 Thin: commands become `Simulator.step(v, w)` calls and results become messages
-(amr_sim.ros_conversions). Two modes:
+(amr_common.ros_conversions). Two modes:
 - lockstep (default, as CoppeliaSim stepping): each /cmd_vel advances exactly one dt, then
   /clock and /ground_truth (while anyone subscribes), the odometry topic and /scan are
   published with the simulated time as stamp; on activation a first measurement is published
@@ -25,32 +25,33 @@ from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.clock import Clock, ClockType
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMessage
 from sensor_msgs.msg import LaserScan
 
-from amr_control.node_runner import run_lifecycle_node
+from amr_common.geometry import angle_difference
+from amr_common.node_runner import run_lifecycle_node
+from amr_common.qos import RELIABLE_10, scan_qos
+from amr_common.ros_conversions import (
+    command_from_twist,
+    float32_array,
+    laser_scan_from_profile,
+    odometry_message,
+    pose_from_message,
+    seconds_to_time,
+)
+from amr_common.world import World
 from amr_sim.simulator import Simulator
-from amr_sim.simulator_params import (DEFAULT_START, NUMERIC_PARAMETERS, PARAMETERS,
-                                     check_parameters)
-from amr_sim.world import World
-from amr_sim.ros_conversions import (command_from_twist, float32_array,
-                                     laser_scan_from_profile, odometry_message,
-                                     pose_from_message, seconds_to_time)
-
-RELIABLE_10 = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
-                         history=HistoryPolicy.KEEP_LAST)
-
-
-def scan_qos(depth: int) -> QoSProfile:
-    """Best effort like a LiDAR driver (SensorDataQoS uses depth 5)."""
-    return QoSProfile(depth=depth, reliability=ReliabilityPolicy.BEST_EFFORT,
-                      history=HistoryPolicy.KEEP_LAST)
+from amr_sim.simulator_params import (
+    DEFAULT_START,
+    NUMERIC_PARAMETERS,
+    PARAMETERS,
+    check_parameters,
+)
 
 
 def true_velocity(before: tuple, after: tuple, dt: float) -> tuple[float, float]:
     """Body-frame (v, w) that moved the robot from pose `before` to `after` in dt."""
-    d_theta = math.atan2(math.sin(after[2] - before[2]), math.cos(after[2] - before[2]))
+    d_theta = angle_difference(after[2], before[2])
     mid_heading = before[2] + 0.5 * d_theta
     forward = (after[0] - before[0]) * math.cos(mid_heading) + \
         (after[1] - before[1]) * math.sin(mid_heading)
@@ -152,7 +153,7 @@ class SimulatorNode(LifecycleNode):
         if synchronize:
             # As the course template: a step needs a command AND the pose estimate it was
             # computed with (slop 10 s: in lockstep the stamps are simulated times).
-            from amr_control import message_filters
+            from amr_common import message_filters
             self._filters = [
                 message_filters.Subscriber(self, TwistStamped, "/cmd_vel",
                                            qos_profile=RELIABLE_10),
@@ -334,7 +335,7 @@ class SimulatorNode(LifecycleNode):
             return
         x, y, th = self.simulator.pose
         position_error = math.hypot(x_h - x, y_h - y)
-        heading_error = math.atan2(math.sin(th_h - th), math.cos(th_h - th))
+        heading_error = angle_difference(th_h, th)
         self.localization_error = (position_error, heading_error)
         text = (f"estimated ({x_h:.2f}, {y_h:.2f}, {math.degrees(th_h):.1f} deg) | true "
                 f"({x:.2f}, {y:.2f}, {math.degrees(th):.1f} deg) | error {position_error:.3f} m, "

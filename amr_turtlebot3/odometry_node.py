@@ -21,13 +21,11 @@ from typing import Any
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from amr_control.node_runner import run_lifecycle_node
+from amr_common.node_runner import run_lifecycle_node
+from amr_common.qos import RELIABLE_10
 from amr_turtlebot3.velocity_estimator import Status, VelocityEstimator
 
-RELIABLE_10 = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
-                         history=HistoryPolicy.KEEP_LAST)
 WARNING_PERIOD = 5.0  # seconds between repeated warnings of one kind
 
 _PARAMETERS: dict[str, tuple[Any, str]] = {

@@ -30,12 +30,10 @@ import enum
 import math
 from dataclasses import dataclass
 
-from transforms3d.euler import quat2euler
+from amr_common.geometry import quaternion_to_yaw, wrap_angle
+
 
 # Below this norm a quaternion carries no orientation (all-zero default messages).
-_MIN_QUATERNION_NORM = 1e-6
-
-
 class Status(enum.Enum):
     OK = "ok"
     FIRST = "first sample, nothing to differentiate yet"
@@ -48,6 +46,7 @@ class Status(enum.Enum):
 @dataclass(frozen=True)
 class VelocityEstimate:
     """Result of one update: v [m/s] and w [rad/s], both None unless status is OK."""
+
     v: float | None
     w: float | None
     status: Status
@@ -64,27 +63,6 @@ class _Sample:
     y: float
     yaw: float
     stamp_ns: int
-
-
-def wrap_angle(angle: float) -> float:
-    """Angle wrapped to [-pi, pi]."""
-    return math.remainder(angle, math.tau)
-
-
-def yaw_from_quaternion(qx: float, qy: float, qz: float, qw: float) -> float:
-    """Yaw [rad] (rotation about z, REP 103) of a quaternion given in ROS (x, y, z, w) order.
-
-    Non-unit quaternions are normalized. Raises ValueError for a NaN/inf or zero-norm quaternion.
-    """
-    components = (qx, qy, qz, qw)
-    if not all(math.isfinite(c) for c in components):
-        raise ValueError(f"quaternion has non-finite components {components}")
-    norm = math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw)
-    if norm < _MIN_QUATERNION_NORM:
-        raise ValueError(f"quaternion norm {norm:.3g} is zero: no orientation")
-    # transforms3d orders quaternions (w, x, y, z); 'sxyz' returns (roll, pitch, yaw).
-    _, _, yaw = quat2euler((qw / norm, qx / norm, qy / norm, qz / norm), "sxyz")
-    return float(yaw)
 
 
 class VelocityEstimator:
@@ -110,7 +88,7 @@ class VelocityEstimator:
                stamp_ns: int) -> VelocityEstimate:
         """Add a pose with a ROS-order (x, y, z, w) orientation quaternion."""
         try:
-            yaw = yaw_from_quaternion(qx, qy, qz, qw)
+            yaw = quaternion_to_yaw(qx, qy, qz, qw)
         except ValueError as exc:
             return VelocityEstimate(None, None, Status.REJECTED, str(exc))
         return self.update_pose(x, y, yaw, stamp_ns)
@@ -163,5 +141,4 @@ class VelocityEstimator:
         return self._filtered
 
 
-__all__ = ["Status", "VelocityEstimate", "VelocityEstimator", "wrap_angle",
-           "yaw_from_quaternion"]
+__all__ = ["Status", "VelocityEstimate", "VelocityEstimator"]

@@ -22,8 +22,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import launch_common  # noqa: E402,F401  (puts the repo on sys.path)
-
-from amr_control.ros_env import isolate_local_graph  # noqa: E402
+from amr_common.ros_env import isolate_local_graph  # noqa: E402
 
 
 def _rate(count: int, seconds: float) -> float:
@@ -32,6 +31,7 @@ def _rate(count: int, seconds: float) -> float:
 
 def bench_controller(calls: int) -> dict:
     import numpy as np
+
     from amr_control.wall_follower import WallFollower
     from amr_sim.simulator import Simulator
     sim = Simulator("lab02", start="outer", profile="turtlebot3", seed=0)
@@ -54,7 +54,7 @@ def bench_controller(calls: int) -> dict:
 
 
 def bench_evaluate(episodes: int, duration: float) -> dict:
-    from amr_sim.evaluation import EpisodeSpec, run_episodes
+    from amr_evaluation.evaluation import EpisodeSpec, run_episodes
     specs = [EpisodeSpec(world="lab02", start="outer", profile="ideal", seed=seed,
                          duration=duration) for seed in range(episodes)]
     results = {}

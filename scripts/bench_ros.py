@@ -25,8 +25,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import launch_common  # noqa: E402,F401  (puts the repo on sys.path)
-
-from amr_control.ros_env import claim_free_domain_id, isolate_local_graph  # noqa: E402
+from amr_common.ros_env import claim_free_domain_id, isolate_local_graph  # noqa: E402
 
 DT = 0.05
 
@@ -46,7 +45,8 @@ class _Graph:
 
     def __init__(self) -> None:
         import rclpy
-        from amr_control.node_runner import make_executor
+
+        from amr_common.node_runner import make_executor
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=claim_free_domain_id())
         self.executor = make_executor(self.context)
@@ -129,6 +129,7 @@ class Lockstep(_Graph):
     def __init__(self, controller: str, use_sim_time: bool, name_suffix: str = "") -> None:
         super().__init__()
         from rclpy.parameter import Parameter
+
         from amr_control.wall_follower_node import WallFollowerNode
         from amr_sim.simulator_node import SimulatorNode
         # Distinct node names: the graphs share the process's loggers.

@@ -2,7 +2,7 @@
 """Score a controller on many episodes at once: worlds x starts x profiles x seeds, in parallel.
 
 Each episode runs headless with the same Simulator and controller class as the ROS path
-(amr_sim.episode.run_episode). Writes results.json, results.csv and sheet.png (every episode's
+(amr_evaluation.episode.run_episode). Writes results.json, results.csv and sheet.png (every episode's
 trajectory) to --out, prints a table and a one-line verdict.
 Exit code: 0 no collision, 1 some episode collided, 2 bad options, 3 some episode failed to run.
 
@@ -27,12 +27,26 @@ REPO = Path(__file__).resolve().parent.parent
 if str(REPO) not in sys.path:  # run from a checkout without installing
     sys.path.insert(0, str(REPO))
 
-from amr_sim.evaluation import (DEFAULT_CONTROLLER, ControllerSpecError, EvaluationError,  # noqa: E402
-                                check_controller, expand_grid, load_config, load_ros_params_file,
-                                parse_overrides, run_episodes)
-from amr_sim.evaluation_report import (ProgressBar, format_table, outcome_row, verdict,  # noqa: E402
-                                       write_csv, write_json)
-from amr_control.controller_loader import load_controller_class  # noqa: E402
+from amr_common.controller_loader import load_controller_class  # noqa: E402
+from amr_evaluation.evaluation import (  # noqa: E402
+    DEFAULT_CONTROLLER,
+    ControllerSpecError,
+    EvaluationError,
+    check_controller,
+    expand_grid,
+    load_config,
+    load_ros_params_file,
+    parse_overrides,
+    run_episodes,
+)
+from amr_evaluation.evaluation_report import (  # noqa: E402
+    ProgressBar,
+    format_table,
+    outcome_row,
+    verdict,
+    write_csv,
+    write_json,
+)
 
 # run_sim.py gives the wall follower node this file: the same gains here keep both paths equal.
 SIM_PARAMS = REPO / "amr_control" / "params" / "sim.yaml"
@@ -138,7 +152,7 @@ def main(argv: list[str] | None = None) -> int:
     if not args.no_sheet:
         ran = [o.result for o in outcomes if o.result is not None]
         if ran:
-            from amr_sim.plot import plot_episodes_sheet
+            from amr_evaluation.plot import plot_episodes_sheet
             # Title: the controller and what differs from its params file (all would not fit).
             changed = " ".join(f"{k}={v}" for k, v in parse_overrides(args.param).items())
             plot_episodes_sheet(ran, out / "sheet.png",

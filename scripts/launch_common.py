@@ -31,7 +31,8 @@ def add_controller_options(parser, params_file_default, params_file_help: str) -
 def check_common_options(parser, args) -> None:
     """Validate dt and parse the -p overrides into args.overrides (argparse errors on failure)."""
     import math
-    from amr_control.controller_loader import ControllerSpecError, parse_overrides
+
+    from amr_common.controller_loader import ControllerSpecError, parse_overrides
     if args.dt is not None and not (math.isfinite(args.dt) and args.dt > 0):
         parser.error("--dt must be > 0")
     try:

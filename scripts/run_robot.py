@@ -17,9 +17,13 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from launch_common import ROBOT_PARAMS, add_controller_options, check_common_options, \
-    make_robot_graph  # noqa: E402
-from amr_control.ros_env import describe_graph_settings  # noqa: E402
+from amr_common.ros_env import describe_graph_settings  # noqa: E402
+from launch_common import (
+    ROBOT_PARAMS,
+    add_controller_options,
+    check_common_options,
+    make_robot_graph,  # noqa: E402
+)
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -47,8 +51,9 @@ def main(argv=None) -> int:
         os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
     import rclpy
     from rclpy.signals import SignalHandlerOptions
-    from amr_control.lifecycle_manager import LifecycleManager, run_managed
-    from amr_control.node_runner import StopFlag
+
+    from amr_common.lifecycle_manager import LifecycleManager, run_managed
+    from amr_common.node_runner import StopFlag
 
     # Own signal handling: the final zero command must go out before the context shuts down.
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)

@@ -23,9 +23,8 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from amr_common.ros_env import describe_graph_settings, isolate_local_graph  # noqa: E402
 from launch_common import add_controller_options, check_common_options  # noqa: E402
-
-from amr_control.ros_env import describe_graph_settings, isolate_local_graph  # noqa: E402
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -72,7 +71,7 @@ def parse_args(argv=None) -> argparse.Namespace:
 def main(argv=None) -> int:
     args = parse_args(argv)
     isolate_local_graph(args.domain_id)
-    from amr_sim.world import World, WorldError
+    from amr_common.world import World, WorldError
     try:
         world = World.load(args.world)
         starts = list(world.starts) if args.start == "all" else [args.start]
@@ -106,7 +105,7 @@ def _write_outputs(args, world, reports) -> None:
         path.write_text(json.dumps(reports[0] if len(reports) == 1 else reports, indent=1))
         print(f"run_sim: report written to {path}")
     if args.plot:
-        from amr_sim.plot import plot_episode
+        from amr_evaluation.plot import plot_episode
         path = Path(args.plot)
         path.parent.mkdir(parents=True, exist_ok=True)
         for index, report in enumerate(reports):

@@ -14,10 +14,15 @@ from pathlib import Path
 import rclpy
 from rclpy.signals import SignalHandlerOptions
 
-from launch_common import ROBOT_PARAMS, SIM_PARAMS, make_robot_graph, make_wall_follower, \
-    overrides_to_parameters
-from amr_control.lifecycle_manager import LifecycleManager, LifecycleStartupError
-from amr_control.node_runner import make_executor, shutdown_node
+from amr_common.lifecycle_manager import LifecycleManager, LifecycleStartupError
+from amr_common.node_runner import make_executor, shutdown_node
+from launch_common import (
+    ROBOT_PARAMS,
+    SIM_PARAMS,
+    make_robot_graph,
+    make_wall_follower,
+    overrides_to_parameters,
+)
 
 STALL_TIMEOUT_S = 10.0  # lockstep: no step for this long (wall clock) means the loop broke
 
@@ -25,9 +30,9 @@ STALL_TIMEOUT_S = 10.0  # lockstep: no step for this long (wall clock) means the
 def _robot_parameters(tuning: dict, params_file, profile_name: str) -> dict:
     """The simulated robot's values for the controller (where its LiDAR sits) that neither the
     -p overrides nor the params file set (the rehearsal's turtlebot3.yaml sets them itself)."""
-    from amr_control.controller_loader import DEFAULT_CONTROLLER, load_controller_class
-    from amr_sim.episode import robot_parameters
-    from amr_sim.evaluation import load_ros_params_file
+    from amr_common.controller_loader import DEFAULT_CONTROLLER, load_controller_class
+    from amr_evaluation.episode import robot_parameters
+    from amr_evaluation.evaluation import load_ros_params_file
     from amr_sim.profiles import get_profile
     try:
         in_file = load_ros_params_file(params_file)
@@ -106,7 +111,7 @@ class SimSession:
             self.view = LiveView(self.world, title=f"amr_sim: {args.world} / "
                                                    f"{_start_label(self.start)}")
         if args.record:
-            from amr_sim.mcap_recorder import McapRecorder
+            from amr_common.mcap_recorder import McapRecorder
             Path(args.record).parent.mkdir(parents=True, exist_ok=True)
             self.recorder = McapRecorder(args.record, metadata={
                 "world": self.world.name, "start": _start_label(self.start),
@@ -161,7 +166,8 @@ class SimSession:
 
     def _report(self, sim, wall_time: float) -> dict:
         import numpy as np
-        from amr_sim.episode import count_laps, explored_fraction
+
+        from amr_evaluation.episode import count_laps, explored_fraction
         positions = np.array([row[1:3] for row in self.trajectory])
         rms = (math.sqrt(sum(e * e for e in self.wall_errors) / len(self.wall_errors))
                if self.wall_errors else None)

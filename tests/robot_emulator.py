@@ -62,11 +62,17 @@ from dataclasses import dataclass, field
 from typing import TextIO
 
 import numpy as np
-from cyclonedds.core import Policy, Qos, ReadCondition, SampleState, InstanceState, ViewState, \
-    WaitSet
+from cyclonedds.core import (
+    InstanceState,
+    Policy,
+    Qos,
+    ReadCondition,
+    SampleState,
+    ViewState,
+    WaitSet,
+)
 from cyclonedds.domain import DomainParticipant
-from cyclonedds.idl import IdlStruct
-from cyclonedds.idl import types
+from cyclonedds.idl import IdlStruct, types
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic

@@ -1,4 +1,4 @@
-"""evaluate.py, amr_sim.evaluation and evaluation_report: grids, overrides, controllers, result files."""
+"""evaluate.py, amr_evaluation.evaluation and evaluation_report: grids, overrides, controllers, result files."""
 from __future__ import annotations
 
 import csv
@@ -10,11 +10,25 @@ from pathlib import Path
 
 import pytest
 
-from amr_sim.evaluation import (ControllerSpecError, EpisodeOutcome, EpisodeSpec, EvaluationError,
-                                check_controller, expand_grid, load_config, parse_overrides,
-                                parse_seeds)
-from amr_sim.evaluation_report import (ProgressBar, format_table, outcome_row, verdict, write_csv,
-                                       write_json)
+from amr_evaluation.evaluation import (
+    ControllerSpecError,
+    EpisodeOutcome,
+    EpisodeSpec,
+    EvaluationError,
+    check_controller,
+    expand_grid,
+    load_config,
+    parse_overrides,
+    parse_seeds,
+)
+from amr_evaluation.evaluation_report import (
+    ProgressBar,
+    format_table,
+    outcome_row,
+    verdict,
+    write_csv,
+    write_json,
+)
 
 REPO = Path(__file__).resolve().parent.parent
 EVALUATE = REPO / "scripts" / "evaluate.py"
@@ -24,7 +38,7 @@ EVALUATE = REPO / "scripts" / "evaluate.py"
 
 def test_grid_is_worlds_x_starts_x_profiles_x_seeds():
     specs = expand_grid("lab02,corridor_loop", "all", "ideal,turtlebot3", "0,1", duration=30.0)
-    from amr_sim.world import World
+    from amr_common.world import World
     starts = {w: list(World.load(w).starts) for w in ("lab02", "corridor_loop")}
     expected = [(w, s, p, seed) for w in ("lab02", "corridor_loop") for s in starts[w]
                 for p in ("ideal", "turtlebot3") for seed in (0, 1)]
@@ -43,7 +57,7 @@ def test_named_starts_apply_to_the_worlds_that_have_them():
 
 
 def test_all_worlds_and_bad_names():
-    from amr_sim.world import bundled_worlds
+    from amr_common.world import bundled_worlds
     assert {s.world for s in expand_grid("all", "all", "ideal", "0")} == set(bundled_worlds())
     with pytest.raises(EvaluationError, match="unknown world 'atlantis'"):
         expand_grid("atlantis")
@@ -144,7 +158,7 @@ def test_evaluate_reports_a_bad_controller_and_exits_2(tmp_path):
 # --- result files and summaries --------------------------------------------------------------
 
 def _result(spec, **metrics):
-    from amr_sim.episode import EpisodeResult
+    from amr_evaluation.episode import EpisodeResult
     return EpisodeResult(world=spec.world, start=spec.start, profile=spec.profile, seed=spec.seed,
                          steps=1200, sim_time_s=60.0, wall_time_s=1.0, **metrics)
 
@@ -287,7 +301,7 @@ def test_a_collision_gives_exit_code_1_and_its_time(tmp_path):
 
 
 def test_a_failing_controller_is_reported_not_fatal():
-    from amr_sim.evaluation import run_episodes
+    from amr_evaluation.evaluation import run_episodes
     specs = [EpisodeSpec("lab02", "outer", duration=1.0, controller="tests.test_evaluation:Exploding"),
              EpisodeSpec("lab02", "outer", duration=1.0, controller="tests.test_evaluation:DriveStraight")]
     seen = []
@@ -300,7 +314,7 @@ def test_a_failing_controller_is_reported_not_fatal():
 
 def test_ros_params_file_gives_the_controller_what_the_node_gets(tmp_path):
     from amr_control.wall_follower import WallFollower
-    from amr_sim.evaluation import load_ros_params_file
+    from amr_evaluation.evaluation import load_ros_params_file
     params = tmp_path / "sim.yaml"
     params.write_text("wall_follower:\n  ros__parameters:\n    kp: 2.5\n    use_sim_time: true\n"
                       "    controller: amr_control.wall_follower:WallFollower\n"
@@ -317,6 +331,7 @@ def test_ros_params_file_gives_the_controller_what_the_node_gets(tmp_path):
 
 class LidarAwareController(RecordingController):
     """A controller that, like WallFollower, has a lidar_offset_x_m parameter."""
+
     received: list = []
 
     def __init__(self, dt, lidar_offset_x_m=0.0):
@@ -334,7 +349,7 @@ class LidarAwareController(RecordingController):
     ("turtlebot3", {"lidar_offset_x_m": -0.05}, -0.05),  # the user's value wins
 ])
 def test_episodes_tell_the_controller_where_the_profiles_lidar_is(profile, params, expected):
-    from amr_sim.evaluation import run_one
+    from amr_evaluation.evaluation import run_one
     LidarAwareController.received.clear()
     spec = EpisodeSpec(world="lab02", start="outer", profile=profile, seed=0, duration=0.1,
                        controller=f"{__name__}:LidarAwareController", params=params)

@@ -5,7 +5,6 @@ import math
 from pathlib import Path
 
 import pytest
-from amr_msgs.msg import PoseStamped as GroundTruthPose
 from geometry_msgs.msg import TwistStamped
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
@@ -13,7 +12,8 @@ from nav_msgs.msg import Odometry
 from rosbags.highlevel import AnyReader
 from sensor_msgs.msg import LaserScan
 
-from amr_sim.mcap_recorder import McapRecorder, cdr_header_stamp_ns, full_message_definition
+from amr_common.mcap_recorder import McapRecorder, cdr_header_stamp_ns, full_message_definition
+from amr_msgs.msg import PoseStamped as GroundTruthPose
 
 DT_NS = 50_000_000  # 0.05 s
 STEPS = 20

@@ -1,4 +1,4 @@
-"""amr_control.message_filters: the message_filters API, reference-identical output, ROS use."""
+"""amr_common.message_filters: the message_filters API, reference-identical output, ROS use."""
 from __future__ import annotations
 
 import math
@@ -19,9 +19,13 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import LaserScan
 from std_msgs.msg import String
 
-from amr_control import message_filters
-from amr_control.message_filters import (ApproximateTimeSynchronizer, SimpleFilter, Subscriber,
-                                         TimeSynchronizer)
+from amr_common import message_filters
+from amr_common.message_filters import (
+    ApproximateTimeSynchronizer,
+    SimpleFilter,
+    Subscriber,
+    TimeSynchronizer,
+)
 from tests.test_time_matching import ReferenceApproximateSync, random_scenario
 
 NS = 1_000_000_000

@@ -4,13 +4,13 @@ from __future__ import annotations
 import math
 
 import pytest
+from geometry_msgs.msg import TwistStamped
 from nav_msgs.msg import Odometry
 from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from amr_turtlebot3.odometry_node import OdometryNode
-from geometry_msgs.msg import TwistStamped
 from tests.test_robot_emulator import running_emulator
 
 RELIABLE_10 = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,

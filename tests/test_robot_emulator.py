@@ -21,8 +21,13 @@ from nav_msgs.msg import Odometry
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan
 
-from tests.robot_emulator import (FOOTPRINT_RADIUS, SCANNER_OFFSET_X, Robot,
-                                  apply_like_turtlebot3, corridor_walls)
+from tests.robot_emulator import (
+    FOOTPRINT_RADIUS,
+    SCANNER_OFFSET_X,
+    Robot,
+    apply_like_turtlebot3,
+    corridor_walls,
+)
 
 EMULATOR = Path(__file__).with_name("robot_emulator.py")
 RELIABLE_10 = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,

@@ -96,7 +96,8 @@ def test_ros_lockstep_path_and_headless_episode_drive_the_same_trajectory(tmp_pa
     """evaluate.py's headless episodes stand for the ROS graph: same core, same controller,
     told the same LiDAR position (the Burger's is 32 mm behind the centre)."""
     import numpy as np
-    from amr_sim.episode import run_episode
+
+    from amr_evaluation.episode import run_episode
 
     report_path = tmp_path / "ros.json"
     run_sim.main(["--world", "lab02", "--start", "inner", "--duration", "30", "--seed", "3",

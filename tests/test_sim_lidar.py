@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
+from amr_common.world import World
 from amr_sim.lidar import Lidar
 from amr_sim.profiles import IDEAL, TURTLEBOT3, get_profile
 from amr_sim.simulator import Simulator
-from amr_sim.world import World
 
 ROOM = (4.0, 3.0)  # rectangular room [0, 4] x [0, 3]
 

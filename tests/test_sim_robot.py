@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from amr_sim import robot
+from amr_common import robot
 from amr_sim.simulator import Simulator
 
 EXACT_TOL = 1e-9  # m and rad: free motion is the exact unicycle solution up to rounding

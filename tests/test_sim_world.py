@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from amr_sim.robot import ROBOT_RADIUS
-from amr_sim.world import World, WorldError, bundled_worlds
+from amr_common.robot import ROBOT_RADIUS
+from amr_common.world import World, WorldError, bundled_worlds
 
 REQUIRED_WORLDS = {"lab02", "corridor_loop", "maze_deadends", "room_obstacles", "wide_maze"}
 

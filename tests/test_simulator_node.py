@@ -18,9 +18,17 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import LaserScan
 
-from amr_sim.ros_conversions import (laser_scan, odometry_message, pose_from_message,
-                                     quaternion_to_yaw, scan_ranges, seconds_to_time,
-                                     time_to_nanoseconds, twist_stamped, yaw_to_quaternion)
+from amr_common.ros_conversions import (
+    laser_scan,
+    odometry_message,
+    pose_from_message,
+    quaternion_to_yaw,
+    scan_ranges,
+    seconds_to_time,
+    time_to_nanoseconds,
+    twist_stamped,
+    yaw_to_quaternion,
+)
 from amr_sim.simulator_node import SimulatorNode
 from amr_sim.simulator_params import parse_start
 

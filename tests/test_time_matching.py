@@ -1,4 +1,4 @@
-"""amr_control.time_matching against an oracle: the reference algorithm written out literally.
+"""amr_common.time_matching against an oracle: the reference algorithm written out literally.
 
 `ReferenceApproximateSync` below is the Jazzy message_filters ApproximateTimeSynchronizer.add
 search as specified in shared/notes/message_filters.md (exponential itertools.product walk), on
@@ -12,7 +12,7 @@ import random
 
 import pytest
 
-from amr_control import time_matching as tm
+from amr_common import time_matching as tm
 
 
 class ReferenceApproximateSync:

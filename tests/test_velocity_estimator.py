@@ -10,8 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from amr_turtlebot3.velocity_estimator import (Status, VelocityEstimator, wrap_angle,
-                                               yaw_from_quaternion)
+from amr_turtlebot3.velocity_estimator import Status, VelocityEstimator
 
 EXACT = 1e-9
 ODOM_PERIOD_NS = 50_000_000  # 20 Hz like the TurtleBot3
@@ -52,14 +51,6 @@ def assert_all(estimates, v: float, w: float, tolerance: float = EXACT) -> None:
     ws = np.array([e.w for e in estimates])
     assert np.max(np.abs(vs - v)) < tolerance, f"v error {np.max(np.abs(vs - v)):.3g}"
     assert np.max(np.abs(ws - w)) < tolerance, f"w error {np.max(np.abs(ws - w)):.3g}"
-
-
-def test_yaw_from_quaternion_and_wrap():
-    for yaw in (0.0, 1.0, -2.5, math.pi - 1e-6, -math.pi + 1e-6):
-        assert yaw_from_quaternion(*quaternion(yaw)) == pytest.approx(yaw, abs=1e-9)
-        assert yaw_from_quaternion(*quaternion(yaw, scale=3.0)) == pytest.approx(yaw, abs=1e-9)
-    assert wrap_angle(3 * math.pi / 2) == pytest.approx(-math.pi / 2)
-    assert wrap_angle(-3 * math.pi / 2) == pytest.approx(math.pi / 2)
 
 
 def test_straight_line():

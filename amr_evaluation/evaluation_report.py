@@ -1,7 +1,7 @@
 """Batch evaluation of a controller, the results side: per-episode rows, results.json/.csv files,
 the aligned text table, the pass/fail verdict with its exit code, and a terminal progress bar.
 
-Rows come from amr_sim.evaluation.EpisodeOutcome; scripts/evaluate.py prints and writes them.
+Rows come from amr_evaluation.evaluation.EpisodeOutcome; scripts/evaluate.py prints and writes them.
 """
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence, TextIO
 
-from amr_sim.evaluation import EpisodeOutcome
+from amr_evaluation.evaluation import EpisodeOutcome
 
 __all__ = [
     "RESULT_COLUMNS", "outcome_row", "write_json", "write_csv", "format_table", "verdict", "ProgressBar",

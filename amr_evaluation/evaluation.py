@@ -1,7 +1,7 @@
 """Batch evaluation of a controller, the running side: episode specs, grids, config files, a pool.
 
 scripts/evaluate.py is the command line around it; bench.py and tests use it directly. Each episode
-is amr_sim.episode.run_episode with the same Simulator and controller classes as the ROS path.
+is amr_evaluation.episode.run_episode with the same Simulator and controller classes as the ROS path.
 """
 from __future__ import annotations
 
@@ -16,8 +16,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
-from amr_control.controller_loader import (DEFAULT_CONTROLLER, ControllerSpecError,
-                                           load_controller_class, parse_overrides)
+from amr_common.controller_loader import (
+    DEFAULT_CONTROLLER,
+    ControllerSpecError,
+    load_controller_class,
+    parse_overrides,
+)
 
 __all__ = [
     "DEFAULT_CONTROLLER", "ControllerSpecError", "EvaluationError", "EpisodeSpec", "EpisodeOutcome",
@@ -37,6 +41,7 @@ class EvaluationError(ValueError):
 @dataclass(frozen=True)
 class EpisodeSpec:
     """One episode to run: picklable, so it can be sent to a worker process."""
+
     world: str
     start: str | None = None
     profile: str = "ideal"
@@ -64,6 +69,7 @@ class EpisodeSpec:
 @dataclass
 class EpisodeOutcome:
     """What one episode produced: the run_episode result, or the error that stopped it."""
+
     spec: EpisodeSpec
     result: Any = None
     error: str | None = None
@@ -124,8 +130,8 @@ def expand_grid(worlds: str | Sequence[str], starts: str | Sequence[str] = "all"
     `worlds` "all" means every bundled world; `starts` "all" means every named start of each world.
     A start name applies to the worlds that have it; a name no chosen world has is an error.
     """
+    from amr_common.world import World, WorldError, bundled_worlds
     from amr_sim.profiles import get_profile
-    from amr_sim.world import World, WorldError, bundled_worlds
 
     world_names = parse_name_list(worlds)
     if world_names == ["all"]:
@@ -257,7 +263,7 @@ def _init_worker() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     # Import once per worker: the simulator's numba kernels load (or compile) here, not per episode.
     try:
-        import amr_sim.episode  # noqa: F401
+        import amr_evaluation.episode  # noqa: F401
     except Exception:  # noqa: BLE001 - an initializer that raises makes Pool respawn workers forever;
         pass           # run_one imports it again and reports the error per episode instead
 
@@ -269,7 +275,7 @@ def _run_indexed(item: tuple[int, EpisodeSpec]) -> tuple[int, EpisodeOutcome]:
 
 def run_one(spec: EpisodeSpec) -> EpisodeOutcome:
     """Run one episode in this process; an exception becomes the outcome's error text."""
-    from amr_sim.episode import robot_parameters, run_episode
+    from amr_evaluation.episode import robot_parameters, run_episode
     from amr_sim.profiles import get_profile
 
     start = time.perf_counter()
@@ -293,7 +299,7 @@ def _context() -> multiprocessing.context.BaseContext:
     methods = multiprocessing.get_all_start_methods()
     if "forkserver" in methods:
         ctx = multiprocessing.get_context("forkserver")
-        ctx.set_forkserver_preload(["amr_sim.episode"])
+        ctx.set_forkserver_preload(["amr_evaluation.episode"])
         return ctx
     return multiprocessing.get_context("spawn")
 

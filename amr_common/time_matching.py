@@ -1,7 +1,7 @@
 """Time matching behind our drop-in ``message_filters`` synchronizers (pure Python, no rclpy).
 
-`amr_control.message_filters` wraps this in the ROS 2 Jazzy ``message_filters`` API
-(``from amr_control import message_filters``); this module holds only the queue and search logic,
+`amr_common.message_filters` wraps this in the ROS 2 Jazzy ``message_filters`` API
+(``from amr_common import message_filters``); this module holds only the queue and search logic,
 so it also serves offline use (e.g. pairing messages read from a bag) and fast tests.
 
 Queues are dicts ``{stamp_ns: message}`` in insertion order, exactly like the reference, and
@@ -106,7 +106,7 @@ def message_stamp_ns(msg: Any) -> int | None:
 
 
 def _whole_ns(value: Any, scale: int, stamp: Any) -> int:
-    """value * scale as int ns (float parts truncated like rclpy.time.Time); rejects <0 and NaN."""
+    """Value * scale as int ns (float parts truncated like rclpy.time.Time); rejects <0 and NaN."""
     if isinstance(value, int):
         result = value * scale
     else:

@@ -2,7 +2,7 @@
 
 Two file formats load with `World.load(name_or_path)`:
 
-1. The project's own YAML world file (bundled ones live in amr_sim/worlds/<name>.yaml and load by
+1. The project's own YAML world file (bundled ones live in amr_common/worlds/<name>.yaml and load by
    name, e.g. `World.load("lab02")`; any other file loads by path)::
 
        name: lab02                      # optional, defaults to the file stem
@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from .robot import ROBOT_RADIUS
+
 WORLDS_DIR = Path(__file__).resolve().parent / "worlds"
 
 _PI_EXPR = re.compile(r"^\s*([+-]?)\s*(\d+(?:\.\d*)?)?\s*\*?\s*pi\s*(?:/\s*(\d+(?:\.\d*)?))?\s*$")

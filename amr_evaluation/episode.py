@@ -26,15 +26,15 @@ from __future__ import annotations
 
 import math
 import time
-from pathlib import Path
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
 
-from .profiles import SensorProfile, get_profile
-from .simulator import Simulator
-from .world import WORLDS_DIR, World
+from amr_common.world import WORLDS_DIR, World
+from amr_sim.profiles import SensorProfile, get_profile
+from amr_sim.simulator import Simulator
 
 
 @dataclass

@@ -62,12 +62,3 @@ def parse_overrides(items: list[str] | None) -> dict[str, Any]:
             raise ControllerSpecError(f"override '{item}' must look like name:=value")
         overrides[name.strip()] = parse_value(value)
     return overrides
-
-
-def make_controller(spec: str, dt: float, params: dict[str, Any] | None = None):
-    """Instantiate the controller class with dt and keyword parameters."""
-    cls = load_controller_class(spec)
-    try:
-        return cls(dt, **(params or {}))
-    except TypeError as exc:
-        raise ControllerSpecError(f"controller '{spec}' rejected its parameters: {exc}") from exc

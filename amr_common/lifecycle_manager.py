@@ -25,7 +25,7 @@ from rclpy.lifecycle import LifecycleNode
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
-from amr_control.node_runner import StopFlag, make_executor, shutdown_node, spin_until_stopped
+from amr_common.node_runner import StopFlag, make_executor, shutdown_node, spin_until_stopped
 
 _TRANSITION_LABELS = {Transition.TRANSITION_CONFIGURE: "configure",
                       Transition.TRANSITION_ACTIVATE: "activate"}

@@ -1,4 +1,6 @@
-"""TurtleBot3 Burger: constants and differential-drive kinematics (pure functions, no physics).
+"""TurtleBot3 Burger: the one home of its constants and differential-drive kinematics.
+
+Pure functions, no physics, no rclpy. Sources: turtlebot3.md (ROBOTIS jazzy branch, e-manual).
 
 Inverse kinematics saturates the wheel speeds like the course robot: if a wheel would exceed
 WHEEL_SPEED_MAX, both wheel speeds are scaled by the same factor, so the turning direction and the
@@ -11,10 +13,14 @@ import math
 WHEEL_RADIUS = 0.033  # m
 TRACK = 0.16  # m, wheel separation
 ROBOT_RADIUS = 0.105  # m, footprint
-LINEAR_SPEED_MAX = 0.22  # m/s
+MAX_LINEAR_SPEED = 0.22  # m/s, official limit (also each wheel's rim speed limit)
+MAX_ANGULAR_SPEED = 2.84  # rad/s, official limit
+LINEAR_SPEED_MAX = MAX_LINEAR_SPEED  # the course template's name
 WHEEL_SPEED_MAX = LINEAR_SPEED_MAX / WHEEL_RADIUS  # rad/s
+LIDAR_OFFSET_X = -0.032  # m, base_scan from base_link along x (LDS-01 on the Burger)
 MASS = 1.0  # kg, Burger (affects only contact impulses; the drive reaches commands within a step)
 
+_HALF_TRACK = TRACK / 2.0
 # Commands beyond this are absurd; clipping first keeps v +- w * TRACK / 2 finite.
 _COMMAND_CLIP = 1.0e6
 
@@ -41,8 +47,20 @@ def forward_kinematics(w_left: float, w_right: float) -> tuple[float, float]:
 
 
 def saturate(v: float, w: float) -> tuple[float, float]:
-    """The twist the robot actually executes for a command: inverse then forward kinematics."""
-    return forward_kinematics(*inverse_kinematics(v, w))
+    """The twist the robot executes for a command (v m/s, w rad/s): unchanged while both wheels
+    are within WHEEL_SPEED_MAX, else both wheel speeds scaled by one factor (the curvature kept).
+
+    Equal to forward_kinematics(*inverse_kinematics(v, w)) up to rounding; a command within the
+    limits comes back bit-for-bit (the simulator runs this every step).
+    """
+    w_right = (v + w * _HALF_TRACK) / WHEEL_RADIUS
+    w_left = (v - w * _HALF_TRACK) / WHEEL_RADIUS
+    fastest = max(abs(w_left), abs(w_right))
+    if fastest > WHEEL_SPEED_MAX:
+        scale = WHEEL_SPEED_MAX / fastest
+        return (WHEEL_RADIUS * (w_right + w_left) * scale / 2.0,
+                WHEEL_RADIUS * (w_right - w_left) * scale / TRACK)
+    return v, w
 
 
 def sinc_half(angle: float) -> float:
@@ -63,4 +81,10 @@ def unicycle_step(x: float, y: float, theta: float, v: float, w: float, dt: floa
 
 def encoder_increments(ds: float, dtheta: float) -> tuple[float, float]:
     """Wheel angle increments (dphi_L, dphi_R) in rad for an arc of length ds and turn dtheta."""
-    return ((ds - dtheta * TRACK / 2.0) / WHEEL_RADIUS, (ds + dtheta * TRACK / 2.0) / WHEEL_RADIUS)
+    return (ds - dtheta * _HALF_TRACK) / WHEEL_RADIUS, (ds + dtheta * _HALF_TRACK) / WHEEL_RADIUS
+
+
+def twist_from_increments(dphi_left: float, dphi_right: float, dt: float) -> tuple[float, float]:
+    """Body twist (v m/s, w rad/s) the encoders report for wheel angle increments over dt."""
+    return (WHEEL_RADIUS * (dphi_right + dphi_left) / (2.0 * dt),
+            WHEEL_RADIUS * (dphi_right - dphi_left) / (TRACK * dt))

@@ -143,7 +143,7 @@ class McapRecorder:
             raise FileNotFoundError(f"cannot record to {self.path}: folder {self.path.parent} does not exist")
         self._stream = open(self.path, "wb")
         self._writer = Writer(self._stream, chunk_size=chunk_size, compression=_chunk_compression())
-        self._writer.start(profile="ros2", library="amr_sim.mcap_recorder")
+        self._writer.start(profile="ros2", library="amr_common.mcap_recorder")
         self._lock = threading.Lock()
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, tuple[int, str]] = {}  # topic -> (channel id, type name)

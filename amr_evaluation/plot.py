@@ -14,8 +14,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 
-from .robot import ROBOT_RADIUS
-from .world import World
+from amr_common.robot import ROBOT_RADIUS
+from amr_common.world import World
 
 _WALL_COLOUR = "#222222"
 

@@ -1,0 +1,48 @@
+"""Planar geometry shared by every package: angle wrapping and yaw <-> quaternion.
+
+Pure math on floats (no message classes, no rclpy); amr_common.ros_conversions applies it to
+geometry_msgs. REP 103: x forward/east, y left/north, yaw counter-clockwise about +z.
+"""
+from __future__ import annotations
+
+import math
+
+from transforms3d.euler import quat2euler
+
+_MIN_QUATERNION_NORM = 1e-6
+
+
+def wrap_angle(angle: float) -> float:
+    """Angle wrapped to (-pi, pi] (pi stays pi, -pi becomes pi)."""
+    return math.pi - ((math.pi - angle) % math.tau)
+
+
+def angle_difference(a: float, b: float) -> float:
+    """A - b taken the short way round, in (-pi, pi]."""
+    return wrap_angle(a - b)
+
+
+def yaw_to_quaternion(yaw: float) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of a rotation by `yaw` rad about +z: (0, 0, sin(yaw/2), cos(yaw/2))."""
+    half = 0.5 * float(yaw)
+    return 0.0, 0.0, math.sin(half), math.cos(half)
+
+
+def quaternion_to_yaw(x: float, y: float, z: float, w: float) -> float:
+    """Yaw in (-pi, pi] of a quaternion in ROS (x, y, z, w) order.
+
+    A non-unit quaternion is normalised first (with math.hypot, so a norm of 1e300 neither
+    overflows nor changes the yaw). Raises ValueError for non-finite or zero-norm input.
+    """
+    components = (x, y, z, w)
+    if not all(math.isfinite(c) for c in components):
+        raise ValueError(f"quaternion has non-finite components {components} (x, y, z, w)")
+    norm = math.hypot(x, y, z, w)
+    if not math.isfinite(norm) or norm < _MIN_QUATERNION_NORM:
+        raise ValueError(f"quaternion {components} (x, y, z, w) has no usable norm ({norm:.3g})")
+    # transforms3d orders quaternions (w, x, y, z); 'sxyz' returns (roll, pitch, yaw).
+    _, _, yaw = quat2euler((w / norm, x / norm, y / norm, z / norm), "sxyz")
+    return float(yaw)
+
+
+__all__ = ["wrap_angle", "angle_difference", "yaw_to_quaternion", "quaternion_to_yaw"]

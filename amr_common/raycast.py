@@ -1,0 +1,123 @@
+"""Ray casting and nearest-wall queries against 2D wall segments (the map's geometry kernels).
+
+Shared by the simulator's LiDAR, the particle filter's expected ranges and the planner.
+
+The kernel loops over segments outside and rays inside, branch-free, so numba vectorises the
+inner loop (error_model='numpy' lets x/0 give inf/nan instead of raising, which the branch-free
+validity test relies on). Measured in simulation.md: ~70 us per 360-ray scan against 200
+segments, against ~1,700 us for pymunk's per-ray segment_query_first. Without numba the same
+maths runs as a numpy rays x segments matrix (about 15x slower).
+
+A ray from origin o with direction d hits segment p1 + u * (p2 - p1), u in [0, 1], at range t > 0.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from amr_common.jit import HAVE_NUMBA, jit
+
+
+def scan_python(segments, ox, oy, theta, base_cos, base_sin, range_min, range_max, no_return, noise, out):
+    """Ranges along rays at angles theta + a_i (base_cos/sin = cos/sin a_i), written into out.
+
+    noise (same length as out) is added to true ranges; readings outside [range_min, range_max]
+    (including rays that hit nothing) become no_return.
+    """
+    n = base_cos.shape[0]
+    cos_t = math.cos(theta)
+    sin_t = math.sin(theta)
+    dx = np.empty(n)
+    dy = np.empty(n)
+    for i in range(n):
+        dx[i] = cos_t * base_cos[i] - sin_t * base_sin[i]
+        dy[i] = sin_t * base_cos[i] + cos_t * base_sin[i]
+        out[i] = np.inf
+    for k in range(segments.shape[0]):
+        qx = segments[k, 0] - ox
+        qy = segments[k, 1] - oy
+        ex = segments[k, 2] - segments[k, 0]
+        ey = segments[k, 3] - segments[k, 1]
+        q_cross_e = qx * ey - qy * ex
+        for i in range(n):
+            inv_den = 1.0 / (dx[i] * ey - dy[i] * ex)  # inf when parallel: then hit is False
+            t = q_cross_e * inv_den
+            u = (qx * dy[i] - qy * dx[i]) * inv_den
+            r = t if (t > 0.0) & (u >= 0.0) & (u <= 1.0) else np.inf
+            out[i] = r if r < out[i] else out[i]  # measured 1.5-2x faster than min() here
+    for i in range(n):
+        r = out[i] + noise[i]
+        out[i] = r if (r >= range_min) & (r <= range_max) else no_return
+
+
+def segment_offset_python(segments, k, px, py):
+    """Vector (cx, cy) from (px, py) to the closest point of segment k, and its length."""
+    x1 = segments[k, 0]
+    y1 = segments[k, 1]
+    ex = segments[k, 2] - x1
+    ey = segments[k, 3] - y1
+    t = ((px - x1) * ex + (py - y1) * ey) / (ex * ex + ey * ey)
+    t = min(max(t, 0.0), 1.0)
+    cx = x1 + t * ex - px
+    cy = y1 + t * ey - py
+    return cx, cy, math.sqrt(cx * cx + cy * cy)
+
+
+# Kernels below call `segment_offset`: the jitted version when numba is there (numba resolves
+# the global when it compiles them), the Python one otherwise.
+segment_offset = jit(segment_offset_python)
+
+
+def nearest_wall_python(segments, px, py):
+    """Distance from (px, py) to the nearest segment and the unit vector pointing to it."""
+    best = np.inf
+    nx = 0.0
+    ny = 0.0
+    for k in range(segments.shape[0]):
+        cx, cy, d = segment_offset(segments, k, px, py)
+        if d < best:
+            best = d
+            nx = cx
+            ny = cy
+    if best > 0.0:
+        nx /= best
+        ny /= best
+    return best, nx, ny
+
+
+scan_kernel = jit(scan_python)
+nearest_wall_kernel = jit(nearest_wall_python)
+
+
+def scan_numpy(segments, ox, oy, theta, base_cos, base_sin, range_min, range_max, no_return, noise, out):
+    """The same maths as a rays x segments matrix (fallback without numba)."""
+    cos_t, sin_t = math.cos(theta), math.sin(theta)
+    dx = (cos_t * base_cos - sin_t * base_sin)[:, None]
+    dy = (sin_t * base_cos + cos_t * base_sin)[:, None]
+    qx, qy = segments[:, 0] - ox, segments[:, 1] - oy
+    ex, ey = segments[:, 2] - segments[:, 0], segments[:, 3] - segments[:, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        den = dx * ey - dy * ex
+        t = (qx * ey - qy * ex) / den
+        u = (qx * dy - qy * dx) / den
+        t = np.where((t > 0.0) & (u >= 0.0) & (u <= 1.0), t, np.inf)
+    r = t.min(axis=1) + noise
+    out[:] = np.where((r >= range_min) & (r <= range_max), r, no_return)
+
+
+def nearest_wall_numpy(segments, px, py):
+    x1, y1 = segments[:, 0], segments[:, 1]
+    ex, ey = segments[:, 2] - x1, segments[:, 3] - y1
+    t = np.clip(((px - x1) * ex + (py - y1) * ey) / (ex * ex + ey * ey), 0.0, 1.0)
+    cx, cy = x1 + t * ex - px, y1 + t * ey - py
+    d = np.hypot(cx, cy)
+    k = int(np.argmin(d))
+    best = float(d[k])
+    if best > 0.0:
+        return best, float(cx[k]) / best, float(cy[k]) / best
+    return best, 0.0, 0.0
+
+
+scan_into = scan_kernel if HAVE_NUMBA else scan_numpy
+nearest_wall = nearest_wall_kernel if HAVE_NUMBA else nearest_wall_numpy
