@@ -20,7 +20,7 @@ import numpy as np
 from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from rclpy.publisher import Publisher
 from sensor_msgs.msg import LaserScan
 
@@ -30,6 +30,7 @@ from amr_common.controller_loader import (
     ControllerSpecError,
     load_controller_class,
 )
+from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.qos import RELIABLE_10, scan_qos
 from amr_common.robot import MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED
@@ -58,7 +59,7 @@ _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
 }
 
 
-def _load_controller_spec(node: LifecycleNode) -> str:
+def _load_controller_spec(node: GuardedLifecycleNode) -> str:
     """The `controller` parameter, declared early so its tuning parameters can be declared."""
     if not node.has_parameter("controller"):
         default, description = _NODE_PARAMETERS["controller"]
@@ -66,7 +67,7 @@ def _load_controller_spec(node: LifecycleNode) -> str:
     return str(node.get_parameter("controller").value)
 
 
-class WallFollowerNode(LifecycleNode):
+class WallFollowerNode(GuardedLifecycleNode):
     def __init__(self, node_name: str = "wall_follower", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
         for name, (default, description) in _NODE_PARAMETERS.items():

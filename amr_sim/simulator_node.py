@@ -24,11 +24,12 @@ from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.clock import Clock, ClockType
-from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from rosgraph_msgs.msg import Clock as ClockMessage
 from sensor_msgs.msg import LaserScan
 
 from amr_common.geometry import angle_difference
+from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.qos import RELIABLE_10, scan_qos
 from amr_common.ros_conversions import (
@@ -58,7 +59,7 @@ def true_velocity(before: tuple, after: tuple, dt: float) -> tuple[float, float]
     return forward / dt, d_theta / dt
 
 
-class SimulatorNode(LifecycleNode):
+class SimulatorNode(GuardedLifecycleNode):
     def __init__(self, node_name: str = "amr_simulator", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
         for name, (default, type_, description) in PARAMETERS.items():

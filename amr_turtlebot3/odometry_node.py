@@ -20,8 +20,9 @@ from typing import Any
 
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 
+from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.qos import RELIABLE_10
 from amr_turtlebot3.velocity_estimator import Status, VelocityEstimator
@@ -46,7 +47,7 @@ def _as_float(value: Any) -> float | None:
     return float(value)
 
 
-class OdometryNode(LifecycleNode):
+class OdometryNode(GuardedLifecycleNode):
     def __init__(self, node_name: str = "amr_odometry", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
         for name, (default, description) in _PARAMETERS.items():
