@@ -32,8 +32,15 @@ from amr_common.controller_loader import (
 )
 from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.node_runner import run_lifecycle_node
+from amr_common.python_logging import forward_to_ros_logger
 from amr_common.qos import RELIABLE_10, scan_qos
-from amr_common.robot import MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED
+from amr_common.robot import (
+    MAX_ANGULAR_SPEED,
+    MAX_LINEAR_SPEED,
+    MAX_PLAUSIBLE_ANGULAR_SPEED,
+    MAX_PLAUSIBLE_LINEAR_SPEED,
+    is_plausible_twist,
+)
 
 _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
     "simulation": (True, "true: compute on each synchronized set (lockstep with the simulator);"
@@ -99,6 +106,7 @@ class WallFollowerNode(GuardedLifecycleNode):
         self._scan_geometry: tuple | None = None
         self._last_stamp = None  # newest measurement's stamp (simulated time in lockstep)
         self._active = False
+        self._stop_log_forwarding = None
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         p = {name: self.get_parameter(name).value for name in _NODE_PARAMETERS}
@@ -147,6 +155,9 @@ class WallFollowerNode(GuardedLifecycleNode):
         self._synchronizer = message_filters.ApproximateTimeSynchronizer(
             self._subscribers, p["queue_size"], slop)
         self._synchronizer.registerCallback(self._on_synchronized)
+        # The controller's (throttled) Python warnings go to this node's ROS logger.
+        self._stop_log_forwarding = forward_to_ros_logger(type(self.controller).__module__,
+                                                          self.get_logger())
         mode = "simulation (lockstep)" if self.simulation else f"robot (timer every {self.dt} s)"
         self.get_logger().info(
             f"configured: {mode}, controller {p['controller']}, slop {slop} s, /cmd_vel as "
@@ -189,6 +200,8 @@ class WallFollowerNode(GuardedLifecycleNode):
             subscriber.close()
         if self._cmd_publisher is not None:
             self.destroy_lifecycle_publisher(self._cmd_publisher)
+        if self._stop_log_forwarding is not None:
+            self._stop_log_forwarding()
         self._reset_runtime()
 
     # --- data path -------------------------------------------------------------------------
@@ -216,6 +229,13 @@ class WallFollowerNode(GuardedLifecycleNode):
             self.get_logger().warning("odometry twist is not finite: set ignored",
                                       throttle_duration_sec=2.0)
             return None
+        if not is_plausible_twist(z_v, z_w):
+            # A corrupt message: the Burger cannot move like this. The next good one is used.
+            self.get_logger().warning(
+                f"odometry twist (v={z_v:.3g} m/s, w={z_w:.3g} rad/s) is physically impossible "
+                f"(limits {MAX_PLAUSIBLE_LINEAR_SPEED:.2f} m/s, {MAX_PLAUSIBLE_ANGULAR_SPEED:.2f}"
+                f" rad/s): set ignored", throttle_duration_sec=2.0)
+            return None
         if len(scan.ranges) == 0 or not (math.isfinite(scan.angle_min)
                                          and math.isfinite(scan.angle_increment)
                                          and scan.angle_increment != 0.0):
@@ -223,9 +243,17 @@ class WallFollowerNode(GuardedLifecycleNode):
                                       throttle_duration_sec=2.0)
             return None
         geometry = (scan.angle_min, scan.angle_increment, scan.range_min, scan.range_max)
-        if geometry != self._scan_geometry and hasattr(self.controller, "set_scan_geometry"):
+        if not (math.isfinite(scan.range_min) and math.isfinite(scan.range_max)
+                and 0.0 <= scan.range_min < scan.range_max):
+            self.get_logger().warning(
+                f"scan range limits [{scan.range_min}, {scan.range_max}] m are unusable: the "
+                f"controller decides which readings to trust", throttle_duration_sec=5.0)
+        # NaN never equals itself: compare a NaN-free key, so a repeated broken geometry is
+        # handed to the controller once, not with every scan.
+        key = tuple(None if math.isnan(value) else value for value in geometry)
+        if key != self._scan_geometry and hasattr(self.controller, "set_scan_geometry"):
             self.controller.set_scan_geometry(*geometry)
-            self._scan_geometry = geometry
+            self._scan_geometry = key
         return np.asarray(scan.ranges, dtype=float), float(z_v), float(z_w)
 
     def _on_timer(self) -> None:
