@@ -167,7 +167,7 @@ class SimSession:
     def _report(self, sim, wall_time: float) -> dict:
         import numpy as np
 
-        from amr_evaluation.episode import count_laps, explored_fraction
+        from amr_evaluation.episode import trajectory_metrics
         positions = np.array([row[1:3] for row in self.trajectory])
         rms = (math.sqrt(sum(e * e for e in self.wall_errors) / len(self.wall_errors))
                if self.wall_errors else None)
@@ -185,8 +185,7 @@ class SimSession:
             "collisions": sim.collisions,
             "first_collision_time_s": sim.first_collision_time,
             "min_clearance_m": sim.min_clearance, "distance_m": sim.distance,
-            "explored_fraction": explored_fraction(self.world, positions),
-            "laps": count_laps(self.world, positions),
+            **trajectory_metrics(self.world, positions),  # None + metric_errors if not computable
             "rms_wall_error_m": rms,
             "trajectory": self.trajectory,
             "collision_points": [list(p) for p in sim.collision_points],
@@ -199,7 +198,8 @@ class SimSession:
                 f"{report['wall_time_s']:.1f} s ({report['real_time_factor']}x real time), "
                 f"{report['steps']} steps, collisions {report['collisions']}, min clearance "
                 f"{report['min_clearance_m'] * 100:.1f} cm, distance {report['distance_m']:.1f} m,"
-                f" explored {report['explored_fraction'] * 100:.0f}%"
+                + (" explored n/a" if report["explored_fraction"] is None else
+                   f" explored {report['explored_fraction'] * 100:.0f}%")
                 + (f", laps {laps}" if laps else ""))
 
     def close(self) -> None:
