@@ -4,7 +4,8 @@
 Each episode runs headless with the same Simulator and controller class as the ROS path
 (amr_evaluation.episode.run_episode). Writes results.json, results.csv and sheet.png (every episode's
 trajectory) to --out, prints a table and a one-line verdict.
-Exit code: 0 no collision, 1 some episode collided, 2 bad options, 3 some episode failed to run.
+Exit code: 0 no collision, 1 some episode collided or commanded NaN/inf/non-numbers, 2 bad
+options, 3 some episode failed to run (an exception, sys.exit, or its worker process died).
 
 Examples:
   .venv/bin/python scripts/evaluate.py --worlds lab02 --seeds 0,1,2 --duration 120

@@ -188,8 +188,8 @@ def test_json_and_csv_hold_every_episode(tmp_path):
     assert first == {"world": "lab02", "start": "outer", "profile": "ideal", "seed": 0,
                      "sim_time_s": 60.0, "collisions": 0, "first_collision_time_s": None,
                      "min_clearance_m": 0.0421, "distance_m": 11.5, "laps": 2,
-                     "explored_fraction": 0.5, "rms_wall_error_m": 0.012, "wall_time_s": 1.234,
-                     "error": None}
+                     "explored_fraction": 0.5, "rms_wall_error_m": 0.012, "invalid_commands": 0,
+                     "wall_time_s": 1.234, "error": None}
     assert second["rms_wall_error_m"] is None and second["first_collision_time_s"] == 12.5
     assert third["error"] == "RuntimeError: controller exploded" and third["collisions"] is None
     with open(tmp_path / "r.csv", newline="") as stream:
