@@ -76,9 +76,11 @@ class Subscriber(SimpleFilter):
                                             **kwargs)
 
     def callback(self, msg: Any) -> None:
+        """The subscription's callback: pass the message on to the connected filters."""
         self.signalMessage(msg)
 
     def getTopic(self) -> str:  # noqa: N802
+        """The subscribed topic name (reference API)."""
         return self.topic
 
     def close(self) -> None:
@@ -136,6 +138,7 @@ class TimeSynchronizer(SimpleFilter):
 
     @property
     def queue_size(self) -> int:
+        """Messages kept per input."""
         return self._queue_size
 
     @queue_size.setter

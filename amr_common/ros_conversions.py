@@ -70,7 +70,10 @@ def yaw_to_quaternion(yaw: float, quaternion: Quaternion | None = None) -> Quate
 
 
 def quaternion_to_yaw(quaternion: Quaternion) -> float:
-    """Yaw in (-pi, pi] of a geometry_msgs/Quaternion (normalised first; ValueError if unusable)."""
+    """Yaw in (-pi, pi] of a geometry_msgs/Quaternion.
+
+    Normalised first; ValueError if unusable.
+    """
     return geometry.quaternion_to_yaw(quaternion.x, quaternion.y, quaternion.z, quaternion.w)
 
 

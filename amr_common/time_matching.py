@@ -303,6 +303,7 @@ class ApproximateTimeMatcher:
         self.queues: list[Queue] = [{} for _ in range(num_inputs)]
 
     def add(self, input_index: int, stamp_ns: int, msg: Any) -> list[Any] | None:
+        """Queue `msg` on input `input_index`; the matched set (one per input) or None."""
         stamp_ns = operator.index(stamp_ns)  # float stamps would blur the slop edges
         insert_and_evict(self.queues[input_index], stamp_ns, msg, self.queue_size)
         stamps = find_approximate_match(self.queues, stamp_ns, self.slop_ns, input_index)
@@ -323,6 +324,7 @@ class ExactTimeMatcher:
         self.queues: list[Queue] = [{} for _ in range(num_inputs)]
 
     def add(self, input_index: int, stamp_ns: int, msg: Any) -> list[list[Any]]:
+        """Queue `msg` on input `input_index`; every completed set, oldest first."""
         insert_and_evict(self.queues[input_index], operator.index(stamp_ns), msg,
                          self.queue_size)
         return pop_exact_matches(self.queues)
