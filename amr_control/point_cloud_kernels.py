@@ -148,7 +148,10 @@ def sector_distances(cloud, centre_cos, centre_sin, half_width, percentiles, out
 
 @jit
 def path_distance(cloud, half_width):
-    """Smallest x > 0 of the points with |y| <= half_width (the swept corridor ahead); inf if none."""
+    """Smallest x > 0 of the points with |y| <= half_width (the swept corridor ahead).
+
+    inf if there is none.
+    """
     px = cloud[0]
     py = cloud[1]
     best = math.inf

@@ -50,6 +50,7 @@ class PoseTrail:
         return self._count
 
     def clear(self) -> None:
+        """Forget every recorded pose."""
         self._count = 0
 
     def record_and_close(self, odometer: float, x: float, y: float, heading: float,

@@ -29,6 +29,7 @@ class ScanGeometry:
     range_max: float
 
     def is_sane(self) -> bool:
+        """Finite values, a ray spacing in (1e-4, pi] rad and 0 <= range_min < range_max."""
         return (all(math.isfinite(v) for v in (self.angle_min, self.angle_increment,
                                                 self.range_min, self.range_max))
                 and 1e-4 < abs(self.angle_increment) <= math.pi
@@ -125,6 +126,7 @@ class LocalPointCloud:
 
     @property
     def size(self) -> int:
+        """Number of points in the cloud."""
         return int(self._cloud.shape[1])
 
     def step(self, distance_m: float, rotation_rad: float, dt: float,

@@ -243,7 +243,8 @@ class WallFollower:
         if state.startswith("turn_"):
             return self._run_turn()
         if state == "outer_corner":
-            timed_out = self._state_time > 3.0 + self._advance_target / max(self.settle_speed_mps, 0.01)
+            timed_out = (self._state_time
+                         > 3.0 + self._advance_target / max(self.settle_speed_mps, 0.01))
             if front_blocked or self._travelled >= self._advance_target or timed_out:
                 self._start_turn("turn_outer", self._side * 0.5 * math.pi)
                 return None
@@ -277,16 +278,21 @@ class WallFollower:
         remaining = (direction * (self._turn_goal - self._heading)) % (2.0 * math.pi)
         if remaining > 1.5 * math.pi:       # overshot the goal
             remaining = 0.0
-        if remaining <= 0.02 or self._state_time > 2.0 * math.pi / max(self.min_turn_speed_radps, 0.05):
+        turn_time_limit = 2.0 * math.pi / max(self.min_turn_speed_radps, 0.05)
+        if remaining <= 0.02 or self._state_time > turn_time_limit:
             self._set_reference(self._turn_goal)
-            self._enter({"turn_outer": "approach", "turn_escape": "escape"}.get(self.state, "settle"))
+            after_turn = {"turn_outer": "approach", "turn_escape": "escape"}
+            self._enter(after_turn.get(self.state, "settle"))
             return None
         # Slow down over the last part so that the turn ends on target (force control lags).
         speed = min(self.turn_speed_radps, max(self.min_turn_speed_radps, 4.0 * remaining))
         return 0.0, direction * speed
 
     def _decide(self, allow_approach: bool) -> tuple[float, float] | None:
-        """Right-hand rule (mirrored for the left): followed side > straight > other side > back."""
+        """Right-hand rule (mirrored for the left).
+
+        Followed side > straight > other side > back.
+        """
         side = self._side
         front_blocked = self._front_blocked()
         if self._side_distance() > self.side_open_distance_m:
@@ -356,7 +362,8 @@ class WallFollower:
                 self._island_lap_done = self._closed_loop_around_island()
         else:
             distance = self._side_distance()
-            error = (distance if math.isfinite(distance) else self.wall_distance_m) - self.wall_distance_m
+            error = ((distance if math.isfinite(distance) else self.wall_distance_m)
+                     - self.wall_distance_m)
             rate = 0.0
         w = side * (self.kp * error + self.kd * rate)
         limit = self.follow_max_angular_speed_radps
