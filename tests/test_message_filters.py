@@ -26,7 +26,7 @@ from amr_common.message_filters import (
     Subscriber,
     TimeSynchronizer,
 )
-from tests.test_time_matching import ReferenceApproximateSync, random_scenario
+from tests.sync_reference import ReferenceApproximateSync, random_scenario
 
 NS = 1_000_000_000
 

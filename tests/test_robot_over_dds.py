@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.test_robot_emulator import commands_in, read_log, running_emulator
+from tests.emulator_process import commands_in, read_log, running_emulator
 
 RUN_ROBOT = Path(__file__).resolve().parent.parent / "scripts" / "run_robot.py"
 pytestmark = pytest.mark.slow

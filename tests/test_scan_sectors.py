@@ -9,7 +9,7 @@ import pytest
 from amr_common.jit import HAVE_NUMBA
 from amr_control import point_cloud_kernels as kernels
 from amr_control.scan_sectors import LocalPointCloud, PerceptionSpec, ScanGeometry
-from tests.test_wall_follower import LDS01_360, cast  # the synthetic LiDAR
+from tests.scan_helpers import LDS01_360, cast  # the synthetic LiDAR
 
 SECTORS = {"front": 0.0, "left": 0.5 * math.pi, "right": -0.5 * math.pi, "back": math.pi}
 RAYS_360 = ScanGeometry(0.0, 2.0 * math.pi / 360, 0.12, 3.5)   # LDS-01 convention
