@@ -19,7 +19,6 @@ from amr_evaluation.evaluation import (
     check_controller,
     expand_grid,
     load_config,
-    parse_overrides,
     parse_seeds,
 )
 from amr_evaluation.evaluation_report import (
@@ -82,18 +81,6 @@ def test_seeds_parse_lists_and_ranges():
     for bad in ("x", "-1", "5-2", "1.5", [True]):
         with pytest.raises(EvaluationError, match="seed"):
             parse_seeds(bad)
-
-
-def test_overrides_are_typed_like_ros_parameters():
-    got = parse_overrides(["kp:=4", "kd:=0.25", "follow_left:=true", "side:=right", "big:=1e3",
-                           "off:=False", "neg:=-2"])
-    assert got == {"kp": 4, "kd": 0.25, "follow_left": True, "side": "right", "big": 1000.0,
-                   "off": False, "neg": -2}
-    assert type(got["kp"]) is int and type(got["kd"]) is float and type(got["follow_left"]) is bool
-    with pytest.raises(ControllerSpecError, match="name:=value"):
-        parse_overrides(["kp=4"])
-    with pytest.raises(ControllerSpecError, match="not finite"):
-        parse_overrides(["kp:=nan"])
 
 
 def test_config_file_is_validated(tmp_path):
