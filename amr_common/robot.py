@@ -50,8 +50,10 @@ def forward_kinematics(w_left: float, w_right: float) -> tuple[float, float]:
 
 
 def saturate(v: float, w: float) -> tuple[float, float]:
-    """The twist the robot executes for a command (v m/s, w rad/s): unchanged while both wheels
-    are within WHEEL_SPEED_MAX, else both wheel speeds scaled by one factor (the curvature kept).
+    """The twist the robot executes for a command (v m/s, w rad/s).
+
+    Unchanged while both wheels are within WHEEL_SPEED_MAX, else both wheel speeds scaled by one
+    factor (the curvature kept).
 
     Equal to forward_kinematics(*inverse_kinematics(v, w)) up to rounding; a command within the
     limits comes back bit-for-bit (the simulator runs this every step).

@@ -138,8 +138,11 @@ def pose_from_message(pose) -> tuple[float, float, float]:
 # --- laser scans --------------------------------------------------------------------------
 
 def float32_array(values: Sequence[float] | np.ndarray) -> array.array:
-    """array('f') of values: assigning one to a float32[] message field skips the per-element
-    type checks rclpy runs on lists (~100x faster for a 360-ray scan)."""
+    """array('f') of values, for a float32[] message field.
+
+    Assigning one skips the per-element type checks rclpy runs on lists (~100x faster for a
+    360-ray scan).
+    """
     packed = array.array("f")
     packed.frombytes(np.ascontiguousarray(values, dtype=np.float32).tobytes())
     return packed

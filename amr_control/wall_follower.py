@@ -51,7 +51,9 @@ class WallFollower:
     """Class to safely explore an environment (without crashing) by following walls."""
 
     def __init__(self, dt: float, **params: Any) -> None:
-        """Args:
+        """Set up the controller for control period `dt`.
+
+        Args:
         dt: control period [s].
         **params: any name of `parameter_descriptions()`; unknown names raise ValueError.
         """
@@ -103,9 +105,12 @@ class WallFollower:
 
     def set_scan_geometry(self, angle_min: float, angle_increment: float,
                           range_min: float, range_max: float) -> None:
-        """Tell where the rays point (angle_i = angle_min + i*angle_increment, rad) and the valid
-        range interval (m). Called per LaserScan by the node, so it may change between scans.
-        Absurd values are ignored with a warning (the course convention is used instead)."""
+        """Tell where the rays point and which ranges are valid.
+
+        angle_i = angle_min + i*angle_increment (rad); valid ranges in [range_min, range_max]
+        (m). Called per LaserScan by the node, so it may change between scans.
+        Absurd values are ignored with a warning (the course convention is used instead).
+        """
         geometry = ScanGeometry(float(angle_min), float(angle_increment),
                                 float(range_min), float(range_max))
         if not geometry.is_sane():
@@ -159,10 +164,12 @@ class WallFollower:
         self.distances["path"] = perception.path_m
 
     def _side_distance(self, followed: bool = True) -> float:
-        """Lateral distance to the closest point right beside the robot (|x| within the side
-        window) on the followed or the other side; inf if open. A box, not an angular sector:
-        at a right-angle outer corner the wall leaving sideways lies just behind the robot and
-        would keep a +-90 deg sector "closed" long after the followed wall has ended."""
+        """Lateral distance to the closest point right beside the robot; inf if open.
+
+        On the followed or the other side, |x| within the side window. A box, not an angular
+        sector: at a right-angle outer corner the wall leaving sideways lies just behind the
+        robot and would keep a +-90 deg sector "closed" long after the followed wall has ended.
+        """
         return self._perception.beside_m if followed else self._perception.beside_other_m
 
     # ---- state machine -------------------------------------------------------------------
@@ -172,8 +179,10 @@ class WallFollower:
         self._travelled = 0.0
 
     def _reference(self) -> float | None:
-        """Heading (odometry frame) the robot should be aligned with: the last well-fitted wall's
-        direction or the goal of the last turn, if recent enough; else None."""
+        """Heading (odometry frame) the robot should be aligned with, or None.
+
+        The last well-fitted wall's direction or the goal of the last turn, if recent enough.
+        """
         if self._odometer - self._reference_odometer <= self.heading_memory_m:
             return self._reference_heading
         return None
@@ -183,8 +192,10 @@ class WallFollower:
         self._reference_odometer = self._odometer
 
     def _start_turn(self, state: str, angle_rad: float) -> None:
-        """Turn in place by angle_rad relative to the reference heading (so that turns snap back
-        to the walls' directions instead of accumulating heading errors)."""
+        """Turn in place by angle_rad relative to the reference heading.
+
+        So that turns snap back to the walls' directions instead of accumulating heading errors.
+        """
         reference = self._reference()
         base = reference if reference is not None else self._heading
         self._enter(state)
@@ -223,10 +234,13 @@ class WallFollower:
         return 0.0, 0.0
 
     def _closed_loop_around_island(self) -> bool:
-        """Record the odometry pose every few cm while following; when the robot is back at a
-        recorded pose with the same heading it has been once around the wall it follows. Seen
+        """Record the odometry pose every few cm while following, and detect a closed loop.
+
+        When the robot is back at a recorded pose with the same heading it has been once around
+        the wall it follows. Seen
         with the wall on the followed side, that loop turned by +2 pi toward that side for an
-        island and by -2 pi for an enclosing boundary (which it keeps lapping)."""
+        island and by -2 pi for an enclosing boundary (which it keeps lapping).
+        """
         if not self.escape_islands:
             return False
         turned = self._trail.record_and_close(self._odometer, self._x, self._y, self._heading,

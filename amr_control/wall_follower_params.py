@@ -1,5 +1,8 @@
-"""The WallFollower's tuning parameters: name -> (default, description with units), and their
-checking. No rclpy import; the wall_follower node declares each as a ROS parameter."""
+"""The WallFollower's tuning parameters and their checking.
+
+name -> (default, description with units). No rclpy import; the wall_follower node declares
+each as a ROS parameter.
+"""
 from __future__ import annotations
 
 import math
@@ -60,10 +63,12 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
 
 
 def check_parameters(overrides: dict[str, Any]) -> dict[str, Any]:
-    """Every parameter's value (defaults updated with `overrides`), checked: follow_side 'right'
-    or 'left', escape_islands a boolean (or 'true'/'false'), the rest finite numbers >= 0
-    (lidar_offset_x_m may be negative). Speeds above the Burger's limits are clipped to them.
-    Raises ValueError naming the problem, or unknown names."""
+    """Every parameter's value (defaults updated with `overrides`), checked.
+
+    follow_side 'right' or 'left', escape_islands a boolean (or 'true'/'false'), the rest
+    finite numbers >= 0 (lidar_offset_x_m may be negative). Speeds above the Burger's limits
+    are clipped to them. Raises ValueError naming the problem, or unknown names.
+    """
     unknown = sorted(set(overrides) - set(PARAMETERS))
     if unknown:
         raise ValueError(f"WallFollower: unknown parameter(s) {unknown}; "

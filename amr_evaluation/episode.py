@@ -81,8 +81,10 @@ class EpisodeResult:
 
 
 def default_controller(dt: float, profile: SensorProfile | None = None):
-    """The project's wall follower (imported lazily: it lives in amr_control), told where the
-    profile's LiDAR sits."""
+    """The project's wall follower, told where the profile's LiDAR sits.
+
+    Imported lazily: it lives in amr_control.
+    """
     try:
         from amr_control.wall_follower import WallFollower
     except ImportError as exc:
@@ -93,9 +95,11 @@ def default_controller(dt: float, profile: SensorProfile | None = None):
 
 
 def robot_parameters(controller_class: Any, profile: SensorProfile) -> dict[str, Any]:
-    """What the simulated robot fixes for a controller class that has such parameters (listed
-    by its `parameter_descriptions()`): where its LiDAR sits (`lidar_offset_x_m`). The run
-    scripts apply these unless the user set the parameter (-p or a params file)."""
+    """What the simulated robot fixes for a controller class: where its LiDAR sits.
+
+    Only parameters the class lists in `parameter_descriptions()` (`lidar_offset_x_m`). The run
+    scripts apply these unless the user set the parameter (-p or a params file).
+    """
     described = getattr(controller_class, "parameter_descriptions", None)
     names = described() if callable(described) else {}
     return {"lidar_offset_x_m": profile.lidar_offset_x} if "lidar_offset_x_m" in names else {}

@@ -1,5 +1,7 @@
-"""Batch evaluation of a controller, the results side: per-episode rows, results.json/.csv files,
-the aligned text table, the pass/fail verdict with its exit code, and a terminal progress bar.
+"""Batch evaluation of a controller, the results side: rows, files, table, verdict, progress.
+
+Per-episode rows, results.json/.csv files, the aligned text table, the pass/fail verdict with
+its exit code, and a terminal progress bar.
 
 Rows come from amr_evaluation.evaluation.EpisodeOutcome; scripts/evaluate.py prints and writes
 them.

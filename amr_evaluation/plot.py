@@ -98,7 +98,8 @@ def draw_episode(ax, world: World, trajectory: Any, collision_points: Iterable =
                  colourbar: bool = True, small: bool = False) -> dict[str, float]:
     """Walls, the trajectory coloured by time, start/end markers and collisions on an Axes.
 
-    Returns the figures shown (collisions, min clearance, distance)."""
+    Returns the figures shown (collisions, min clearance, distance).
+    """
     traj, points, result = _episode_parts(trajectory, collision_points)
     draw_world(ax, world, show_starts=False)
     figures = _figures(world, traj, points, result)

@@ -1,5 +1,7 @@
-"""The oracle for the synchronizer: the Jazzy message_filters ApproximateTimeSynchronizer.add
-search written out literally, and random arrival sequences to feed it and ours.
+"""The oracle for the synchronizer, and random arrival sequences to feed it and ours.
+
+The oracle is the Jazzy message_filters ApproximateTimeSynchronizer.add search written out
+literally.
 
 As specified in shared/notes/message_filters.md (exponential itertools.product walk), on
 integer-nanosecond stamps. tests/test_time_matching.py and tests/test_message_filters.py compare
@@ -56,8 +58,11 @@ class ReferenceApproximateSync:
 
 
 def random_scenario(rng: random.Random, num_inputs: int, max_queue: int = 10):
-    """(queue_size, slop_ns, arrivals) with stamps on a grid so slop edges are hit exactly,
-    duplicated stamps, out-of-order arrival and bursts on one input. Arrivals: (input, stamp)."""
+    """A random (queue_size, slop_ns, arrivals); arrivals are (input, stamp) pairs.
+
+    Stamps lie on a grid so slop edges are hit exactly; duplicated stamps, out-of-order arrival
+    and bursts on one input.
+    """
     grid = rng.choice([1, 3, 1000, 1_000_000, 33_333_333])
     slop_ns = max(0, rng.randint(0, 6) * grid + rng.choice([0, 0, 0, 1, -1]))
     queue_size = rng.randint(1, max_queue)

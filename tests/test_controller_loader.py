@@ -1,5 +1,8 @@
-"""amr_common.controller_loader: "MODULE:CLASS" specs with errors that name the problem, and
-`name:=value` overrides typed like ROS parameters."""
+"""amr_common.controller_loader: controller specs and parameter overrides.
+
+"MODULE:CLASS" specs with errors that name the problem, and `name:=value` overrides typed like
+ROS parameters.
+"""
 from __future__ import annotations
 
 import pytest

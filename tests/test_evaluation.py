@@ -1,5 +1,7 @@
-"""evaluate.py, amr_evaluation.evaluation and evaluation_report: grids, overrides, controllers,
-result files."""
+"""evaluate.py, amr_evaluation.evaluation and evaluation_report.
+
+Grids, overrides, controllers, result files.
+"""
 from __future__ import annotations
 
 import csv

@@ -1,6 +1,7 @@
-"""amr_common.node_runner, the main of every lifecycle executable: `-p autostart:=true`
-configures and activates, a failing transition gives exit code 1, and Ctrl-C / SIGTERM end the
-spin and run the node's shutdown transition before the process exits.
+"""amr_common.node_runner, the main of every lifecycle executable.
+
+`-p autostart:=true` configures and activates, a failing transition gives exit code 1, and
+Ctrl-C / SIGTERM end the spin and run the node's shutdown transition before the process exits.
 
 The executable tests run a small journaling node as its own process, as a user starts one.
 """
@@ -29,8 +30,10 @@ REPO = Path(__file__).resolve().parent.parent
 
 
 class JournalNode(LifecycleNode):
-    """Appends each transition it goes through to the file named by its `journal` parameter
-    (and to `self.journal`); refuses the transition named by `fail_on`."""
+    """A lifecycle node that journals its transitions and refuses the one named by `fail_on`.
+
+    Each transition goes to `self.journal` and to the file named by the `journal` parameter.
+    """
 
     def __init__(self, node_name: str = "journal_node", **kwargs) -> None:
         super().__init__(node_name, **kwargs)

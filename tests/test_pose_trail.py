@@ -1,5 +1,8 @@
-"""amr_control.pose_trail: the wall follower's loop closure. A loop is closed only by coming
-back to a recorded pose with the same heading, at least MIN_LOOP_M of travel later."""
+"""amr_control.pose_trail: the wall follower's loop closure.
+
+A loop is closed only by coming back to a recorded pose with the same heading, at least
+MIN_LOOP_M of travel later.
+"""
 from __future__ import annotations
 
 import math
@@ -21,8 +24,10 @@ STEP_M = 1.0 / 64  # odometer step: a binary fraction, so the spacing test is ex
 
 
 def drive_circle(trail, radius, laps, centre=(0.0, 0.0), odometer=0.0, grow_per_lap=0.0):
-    """Drive counter-clockwise around `centre` (winding = angle turned). Returns every
-    (odometer, winding, result) of record_and_close."""
+    """Drive counter-clockwise around `centre` (winding = angle turned).
+
+    Returns every (odometer, winding, result) of record_and_close.
+    """
     results = []
     angle = 0.0
     while angle < laps * 2.0 * math.pi:

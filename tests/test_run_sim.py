@@ -94,8 +94,11 @@ def test_gui_runs_headless(tmp_path, monkeypatch):
 
 @pytest.mark.parametrize("profile", ["ideal", "turtlebot3"])
 def test_ros_lockstep_path_and_headless_episode_drive_the_same_trajectory(tmp_path, profile):
-    """evaluate.py's headless episodes stand for the ROS graph: same core, same controller,
-    told the same LiDAR position (the Burger's is 32 mm behind the centre)."""
+    """evaluate.py's headless episodes stand for the ROS graph.
+
+    Same core, same controller, told the same LiDAR position (the Burger's is 32 mm behind the
+    centre).
+    """
     import numpy as np
 
     from amr_evaluation.episode import run_episode
