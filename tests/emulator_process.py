@@ -12,6 +12,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from tests.processes import terminate
+
 EMULATOR = Path(__file__).with_name("robot_emulator.py")
 
 
@@ -27,12 +29,7 @@ def running_emulator(tmp_path: Path, *options: str):
     try:
         yield process, log
     finally:
-        process.terminate()
-        try:
-            process.wait(timeout=5.0)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
+        terminate(process, timeout=5.0)
         stderr.close()
         print((tmp_path / "emulator.stderr").read_text())  # shown if the test failed
         if log.exists():

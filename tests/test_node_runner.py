@@ -25,6 +25,7 @@ from amr_common.node_runner import (
     shutdown_node,
     spin_until_stopped,
 )
+from tests.processes import wait_for
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -106,19 +107,11 @@ def _finish(process: subprocess.Popen, timeout: float = 20.0) -> str:
             process.communicate()
 
 
-def _wait_for(condition, timeout: float, what: str) -> None:
-    deadline = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > deadline:
-            pytest.fail(f"timed out after {timeout} s waiting for {what}")
-        time.sleep(0.05)
-
-
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
 def test_autostart_activates_and_a_signal_runs_the_shutdown_transition(tmp_path, signum):
     process, journal = _start(tmp_path, "autostart:=true")
     try:
-        _wait_for(lambda: "activate" in _journal(journal) or process.poll() is not None, 30.0,
+        wait_for(lambda: "activate" in _journal(journal) or process.poll() is not None, 30.0,
                   "the node to activate")
         assert process.poll() is None, _finish(process)
         time.sleep(0.3)  # spinning now; the signal must end the spin, not the startup
@@ -135,7 +128,7 @@ def test_autostart_activates_and_a_signal_runs_the_shutdown_transition(tmp_path,
 def test_without_autostart_the_node_waits_unconfigured(tmp_path):
     process, journal = _start(tmp_path)
     try:
-        _wait_for(lambda: _journal(journal) or process.poll() is not None, 30.0,
+        wait_for(lambda: _journal(journal) or process.poll() is not None, 30.0,
                   "the node to be created")
         time.sleep(0.5)  # an autostart would follow the creation at once
         assert process.poll() is None, _finish(process)
@@ -217,7 +210,7 @@ def test_stop_flag_is_set_by_sigint_and_sigterm():
             stop = StopFlag().install()
             assert stop.requested is False
             os.kill(os.getpid(), signum)
-            _wait_for(lambda: stop.requested, 2.0, "the signal handler")
+            wait_for(lambda: stop.requested, 2.0, "the signal handler")
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
