@@ -32,8 +32,11 @@ class CoverageGridError(ValueError):
 
 @dataclass(frozen=True)
 class CoverageGrid:
-    """Cells of `cell_size` m; cell (row i, column j) has its centre at
-    (origin_x + (j + 0.5) * cell_size, origin_y + (i + 0.5) * cell_size)."""
+    """Square cells of `cell_size` m and which of them are free.
+
+    Cell (row i, column j) has its centre at
+    (origin_x + (j + 0.5) * cell_size, origin_y + (i + 0.5) * cell_size).
+    """
 
     origin_x: float
     origin_y: float

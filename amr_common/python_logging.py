@@ -1,5 +1,4 @@
-"""Python logging for the plain-Python algorithm modules: throttled warnings, and a bridge that
-sends those records to a ROS node's logger.
+"""Python logging for the plain-Python algorithm modules: throttled, and bridged to ROS.
 
 Algorithm modules (no rclpy) log with `logging.getLogger(__name__)`. Bad input that repeats with
 every message (a broken scan at 5-20 Hz) must not print one line per message:

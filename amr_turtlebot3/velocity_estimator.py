@@ -46,7 +46,7 @@ MIN_INTERVAL_NS = 1_000_000  # samples closer than 1 ms to the previous one are 
 
 
 class Status(enum.Enum):
-    """What one update did (the node logs the resets and rejections)."""
+    """What one update did; the value is the human-readable reason."""
 
     OK = "ok"
     FIRST = "first sample, nothing to differentiate yet"
@@ -69,6 +69,7 @@ class VelocityEstimate:
 
     @property
     def ok(self) -> bool:
+        """True when v and w were estimated."""
         return self.status is Status.OK
 
 

@@ -1,6 +1,9 @@
-"""The coverage grid behind "explored" and "laps" (issue 10, B7 / B12): aligned with the map,
-rasterized (big and fine worlds report in seconds), bounded with a clear error, and a metric
-that cannot be computed is reported as such while the rest of the report is kept."""
+"""The coverage grid behind "explored" and "laps" (issue 10, B7 / B12).
+
+Aligned with the map, rasterized (big and fine worlds report in seconds), bounded with a clear
+error, and a metric that cannot be computed is reported as such while the rest of the report
+is kept.
+"""
 from __future__ import annotations
 
 import json
@@ -31,6 +34,10 @@ starts:
   east: [0.8, 0.0, pi/2]
 """
 
+# +-1e6 m: a 0.4 m grid would have 2.5e13 cells (182 TiB of booleans and centres).
+HUGE_WORLD = ("boundary: [[-1.0e+6, -1.0e+6], [1.0e+6, -1.0e+6], [1.0e+6, 1.0e+6], "
+              "[-1.0e+6, 1.0e+6]]\nstarts: {a: [0, 0, 0]}\n")
+
 
 def course_style_world(tmp_path, extra: str = "") -> World:
     path = tmp_path / "course_style.yaml"
@@ -56,8 +63,10 @@ def inside(polygon: np.ndarray, x: float, y: float) -> bool:
 
 
 def reference_free_cells(world: World, origin: tuple[float, float]) -> np.ndarray:
-    """The definition, cell by cell: centre inside the boundary, outside every hole, clearance
-    above the robot radius."""
+    """The definition, cell by cell.
+
+    Centre inside the boundary, outside every hole, clearance above the robot radius.
+    """
     (xmin, ymin), (xmax, ymax) = world.boundary.min(axis=0), world.boundary.max(axis=0)
     cs = world.cell_size
     xs = origin[0] + (np.arange(math.floor((xmin - origin[0]) / cs + 1e-9),
@@ -132,8 +141,7 @@ def test_rasterized_cells_match_the_definition_on_a_cluttered_world(tmp_path):
 # ---- B7: big and fine worlds -------------------------------------------------------------------
 def test_a_grid_beyond_the_limit_is_a_clear_error_not_a_huge_allocation(tmp_path):
     path = tmp_path / "huge.yaml"
-    path.write_text("boundary: [[-1.0e+6, -1.0e+6], [1.0e+6, -1.0e+6], [1.0e+6, 1.0e+6], [-1.0e+6, 1.0e+6]]\n"
-                    "starts: {a: [0, 0, 0]}\n")
+    path.write_text(HUGE_WORLD)
     world = World.load(path)
     with pytest.raises(CoverageGridError, match=r"cell_size") as info:
         world.free_cells()
@@ -151,8 +159,7 @@ def test_a_grid_beyond_the_limit_is_a_clear_error_not_a_huge_allocation(tmp_path
 @pytest.mark.slow
 def test_run_sim_report_of_a_huge_world_is_written_with_the_metric_marked(tmp_path):
     world = tmp_path / "huge.yaml"
-    world.write_text("boundary: [[-1.0e+6, -1.0e+6], [1.0e+6, -1.0e+6], [1.0e+6, 1.0e+6], [-1.0e+6, 1.0e+6]]\n"
-                     "starts: {a: [0, 0, 0]}\n")
+    world.write_text(HUGE_WORLD)
     report_path = tmp_path / "report.json"
     process = subprocess.run(
         [sys.executable, str(REPO / "scripts" / "run_sim.py"), "--world", str(world),
@@ -167,8 +174,10 @@ def test_run_sim_report_of_a_huge_world_is_written_with_the_metric_marked(tmp_pa
 
 @pytest.mark.slow
 def test_metrics_of_a_2500_obstacle_world_do_not_hang(tmp_path):
-    """Before: simulation 1 s, metrics over 5 minutes (one polygon test per cell and obstacle).
-    A generous hang guard, not a speed target (scripts/bench*.py measure speed)."""
+    """Before: simulation 1 s, metrics over 5 minutes (a polygon test per cell and obstacle).
+
+    A generous hang guard, not a speed target (scripts/bench*.py measure speed).
+    """
     holes = [[[x, y], [x + 0.2, y], [x + 0.2, y + 0.2], [x, y + 0.2]]
              for x in range(1, 51) for y in range(1, 51)]
     path = tmp_path / "forest.yaml"

@@ -11,7 +11,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from amr_turtlebot3.odometry_node import OdometryNode
-from tests.test_robot_emulator import running_emulator
+from tests.emulator_process import running_emulator
 
 RELIABLE_10 = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                          history=HistoryPolicy.KEEP_LAST)
@@ -182,8 +182,11 @@ def test_velocities_of_the_cyclone_dds_emulated_robot(ros, tmp_path):
 
 
 def test_huge_quaternions_and_implausible_stamps_never_publish_absurd_velocities(ros, capfd):
-    """Issue 10 B11: a 1e300-norm quaternion keeps its yaw, stamps 1 ns apart are skipped and
-    a pose jump is not a speed; only the Burger's possible velocities come out."""
+    """Issue 10 B11: only the Burger's possible velocities come out.
+
+    A 1e300-norm quaternion keeps its yaw, stamps 1 ns apart are skipped and a pose jump is
+    not a speed.
+    """
     h = Harness(ros)
     h.node.trigger_configure()
     h.node.trigger_activate()

@@ -1,7 +1,9 @@
-"""Out-of-order lifecycle requests (activate before configure, configure twice, cleanup while
-active, ...) are refused with `success: false` and a log line; the node keeps running, keeps
-its state and keeps answering. Checked through the real lifecycle services, in-process and
-against each node's executable."""
+"""Out-of-order lifecycle requests are refused and logged; the node keeps running.
+
+Activate before configure, configure twice, cleanup while active, ...: each is answered
+`success: false` with a log line; the node keeps its state and keeps answering. Checked through
+the real lifecycle services, in-process and against each node's executable.
+"""
 from __future__ import annotations
 
 import os
@@ -20,6 +22,7 @@ from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_control.wall_follower_node import WallFollowerNode
 from amr_sim.simulator_node import SimulatorNode
 from amr_turtlebot3.odometry_node import OdometryNode
+from tests.processes import terminate, wait_for
 
 REPO = Path(__file__).resolve().parent.parent
 NODES = {"amr_simulator": SimulatorNode, "wall_follower": WallFollowerNode,
@@ -36,11 +39,12 @@ class LifecycleClient:
         self.change = client_node.create_client(ChangeState, f"/{target}/change_state")
         self.get = client_node.create_client(GetState, f"/{target}/get_state")
         ros.spin_until(lambda: self.change.service_is_ready() and self.get.service_is_ready(),
-                       20.0, f"{target}'s lifecycle services")
+                       60.0, f"{target}'s lifecycle services")
+        self.wait_until_answering(60.0)
 
-    def _call(self, client, request):
+    def _call(self, client, request, timeout: float = 20.0):
         future = client.call_async(request)
-        self.ros.spin_until(future.done, 10.0, "a lifecycle service answer")
+        self.ros.spin_until(future.done, timeout, "a lifecycle service answer")
         return future.result()
 
     def request(self, transition_id: int = 0, label: str = "") -> bool:
@@ -48,8 +52,25 @@ class LifecycleClient:
         request.transition.id, request.transition.label = transition_id, label
         return self._call(self.change, request).success
 
-    def state(self) -> str:
-        return self._call(self.get, GetState.Request()).current_state.label
+    def state(self, timeout: float = 20.0) -> str:
+        return self._call(self.get, GetState.Request(), timeout).current_state.label
+
+    def wait_until_answering(self, timeout: float) -> None:
+        """Ask get_state once a second until the node answers.
+
+        A request sent before the server's endpoints matched (or to a node of the same name
+        that an earlier test destroyed) is lost, so one call is not enough here.
+        """
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            future = self.get.call_async(GetState.Request())
+            end = min(time.monotonic() + 1.0, deadline)
+            while not future.done() and time.monotonic() < end:
+                self.ros.executor.spin_once(timeout_sec=0.05)
+            if future.done():
+                return
+            self.get.remove_pending_request(future)
+        pytest.fail(f"{self.get.srv_name} did not answer within {timeout} s")
 
 
 def out_of_order_sequence(client: LifecycleClient) -> None:
@@ -134,14 +155,12 @@ def test_every_executable_survives_out_of_order_requests(ros):
             assert client.state() == "inactive"
         for process in processes.values():
             process.send_signal(signal.SIGINT)
-        deadline = time.monotonic() + 15.0
-        while time.monotonic() < deadline and any(p.poll() is None for p in processes.values()):
-            time.sleep(0.1)
+        wait_for(lambda: all(p.poll() is not None for p in processes.values()), 15.0,
+                 "every node to exit on SIGINT")
     finally:
         outputs = {}
         for name, process in processes.items():
-            if process.poll() is None:
-                process.kill()
+            terminate(process, timeout=5.0)
             outputs[name] = process.communicate(timeout=10)[0]
     for name, process in processes.items():
         assert process.returncode == 0, f"{name}:\n{outputs[name]}"
