@@ -52,14 +52,16 @@ def matched_qos(publishers: Iterable, depth: int = 10) -> QoSProfile:
 
 
 def describe_qos(qos: QoSProfile) -> str:
-    """Short text such as 'reliable, transient local, keep last 1'."""
+    """Short text such as 'reliable, transient local, keep last 1' (history when known)."""
     reliability = {ReliabilityPolicy.RELIABLE: "reliable",
                    ReliabilityPolicy.BEST_EFFORT: "best effort"}.get(qos.reliability, "?")
     durability = {DurabilityPolicy.TRANSIENT_LOCAL: "transient local",
                   DurabilityPolicy.VOLATILE: "volatile"}.get(qos.durability, "?")
-    history = f"keep last {qos.depth}" if qos.history == HistoryPolicy.KEEP_LAST else \
-        "keep all" if qos.history == HistoryPolicy.KEEP_ALL else "?"
-    return f"{reliability}, {durability}, {history}"
+    if qos.history == HistoryPolicy.KEEP_LAST:
+        return f"{reliability}, {durability}, keep last {qos.depth}"
+    if qos.history == HistoryPolicy.KEEP_ALL:
+        return f"{reliability}, {durability}, keep all"
+    return f"{reliability}, {durability}"  # a remote endpoint's history is not announced
 
 
 def to_data(message: Any) -> Any:
