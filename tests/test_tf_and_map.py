@@ -289,3 +289,32 @@ def test_wall_follower_keeps_its_parameter_without_tf_static(ros):
     assert node.trigger_configure() == TransitionCallbackReturn.SUCCESS
     ros.spin_for(0.3)
     assert node.controller.lidar_offset_x_m == -0.032
+
+
+def test_generated_type_descriptions_carry_jazzys_hashes():
+    import sys
+    from pathlib import Path
+    share = Path(sys.prefix) / "share" / "tf2_msgs" / "msg"
+    expected = {"TFMessage": JAZZY_TFMESSAGE_HASH,
+                "TF2Error": "RIHS01_db2485e7d6a0ec75bf087e058ee45df682acc3a621ca7780503d10aac141809a"}
+    for name, hash_string in expected.items():
+        description = json.loads((share / f"{name}.json").read_text())
+        assert description["type_hashes"][0] == {"type_name": f"tf2_msgs/msg/{name}",
+                                                 "hash_string": hash_string}
+
+
+def test_build_skips_tf2_msgs_an_apt_ros_provides(tmp_path):
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+    repo = Path(__file__).resolve().parent.parent
+    fake = tmp_path / "opt_ros" / "tf2_msgs"
+    fake.mkdir(parents=True)
+    (fake / "__init__.py").write_text("")
+    env = dict(os.environ, PYTHONPATH=str(fake.parent))
+    result = subprocess.run([sys.executable, str(repo / "tools" / "build_amr_msgs.py"),
+                             str(repo / "third_party" / "tf2_msgs"), "--unless-provided"],
+                            env=env, capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0
+    assert f"tf2_msgs is provided by {fake}" in result.stdout
