@@ -1,13 +1,15 @@
 """Graph introspection without ros2cli: message classes by type name, publisher-matched QoS,
-and messages as plain data (for echo, CSV and YAML).
+messages as plain data (for echo, CSV and YAML), and the hidden probe node of the tools.
 
-Used by the Foxglove bridge, scripts/topic.py and scripts/ros_graph.py.
+Used by the Foxglove bridge and scripts/topic.py, lifecycle.py and ros_graph.py.
 """
 from __future__ import annotations
 
 import array
 import importlib
 import math
+import os
+import time
 from typing import Any, Iterable
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -127,5 +129,36 @@ def _scalar(value: Any) -> str:
     return str(value)
 
 
-__all__ = ["UnknownTypeError", "message_class", "matched_qos", "describe_qos", "to_data",
-           "flatten", "to_yaml"]
+class GraphProbe:
+    """A command-line tool's own rclpy context, hidden node (name starting with '_', which the
+    graph tools leave out) and executor, on the environment's ROS_DOMAIN_ID."""
+
+    def __init__(self, tool: str) -> None:
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        self._rclpy = rclpy
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node(f"_{tool}_{os.getpid()}", context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    def ok(self) -> bool:
+        """False once the context is shut down."""
+        return self._rclpy.ok(context=self.context)
+
+    def spin(self, seconds: float) -> None:
+        """Spin (and let discovery run) for `seconds`."""
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.executor.spin_once(timeout_sec=min(0.05, max(end - time.monotonic(), 0.0)))
+
+    def close(self) -> None:
+        """Destroy the node and shut the context down."""
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+        self._rclpy.shutdown(context=self.context)
+
+
+__all__ = ["GraphProbe", "UnknownTypeError", "message_class", "matched_qos", "describe_qos",
+           "to_data", "flatten", "to_yaml"]

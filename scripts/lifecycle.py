@@ -14,7 +14,10 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from amr_common.introspection import GraphProbe  # noqa: E402
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -39,19 +42,12 @@ def parse_args(argv=None) -> argparse.Namespace:
     return args
 
 
-class LifecycleClient:
+class LifecycleClient(GraphProbe):
     """Calls a node's <node>/get_state, get_available_transitions and change_state."""
 
     def __init__(self, timeout: float) -> None:
-        import rclpy
-        from rclpy.executors import SingleThreadedExecutor
-        self.rclpy = rclpy
+        super().__init__("lifecycle_tool")
         self.timeout = timeout
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context)
-        self.node = rclpy.create_node(f"_lifecycle_tool_{os.getpid()}", context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
 
     def call(self, service_type, name: str, request):
         """The response, or None (and a message) if the service does not answer in time."""
@@ -71,17 +67,10 @@ class LifecycleClient:
             self.node.destroy_client(client)
 
     def lifecycle_nodes(self, wait: float = 2.0) -> list[str]:
-        end = time.monotonic() + wait
-        while time.monotonic() < end:
-            self.executor.spin_once(timeout_sec=0.05)
+        self.spin(wait)
         return sorted(name.rsplit("/get_state", 1)[0] for name, types in
                       self.node.get_service_names_and_types()
                       if name.endswith("/get_state") and "lifecycle_msgs/srv/GetState" in types)
-
-    def close(self) -> None:
-        self.executor.shutdown(timeout_sec=1.0)
-        self.node.destroy_node()
-        self.rclpy.shutdown(context=self.context)
 
 
 def main(argv=None) -> int:

@@ -49,12 +49,9 @@ def shown(topic: str, include_all: bool) -> bool:
 
 def collect_graph(wait: float = 3.0, include_all: bool = False) -> RosGraph:
     """The graph as rclpy sees it after `wait` seconds of discovery (own context and node)."""
-    import rclpy
-
-    from amr_common.introspection import describe_qos
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    node = rclpy.create_node(f"_ros_graph_{os.getpid()}", context=context)
+    from amr_common.introspection import GraphProbe, describe_qos
+    probe = GraphProbe("ros_graph")
+    node = probe.node
     try:
         time.sleep(wait)  # discovery runs in the RMW's own threads
         graph = RosGraph()
@@ -82,8 +79,7 @@ def collect_graph(wait: float = 3.0, include_all: bool = False) -> RosGraph:
         graph.topics = dict(sorted(graph.topics.items()))
         return graph
     finally:
-        node.destroy_node()
-        rclpy.shutdown(context=context)
+        probe.close()
 
 
 def write_outputs(graph: RosGraph, outputs: list[str], show_qos: bool,

@@ -23,6 +23,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from amr_common.introspection import (  # noqa: E402
+    GraphProbe,
     UnknownTypeError,
     describe_qos,
     flatten,
@@ -68,23 +69,11 @@ def parse_args(argv=None) -> argparse.Namespace:
     return args
 
 
-class Graph:
-    """One rclpy context and a hidden node for looking at the graph."""
+class Graph(GraphProbe):
+    """The tool's probe node with the topic queries it needs."""
 
     def __init__(self) -> None:
-        import rclpy
-        from rclpy.executors import SingleThreadedExecutor
-        self.rclpy = rclpy
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context)
-        self.node = rclpy.create_node(f"_topic_tool_{os.getpid()}", context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-
-    def spin(self, seconds: float) -> None:
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            self.executor.spin_once(timeout_sec=min(0.05, max(end - time.monotonic(), 0.0)))
+        super().__init__("topic_tool")
 
     def topic_types(self) -> dict[str, list[str]]:
         return dict(self.node.get_topic_names_and_types())
@@ -99,11 +88,6 @@ class Graph:
             if time.monotonic() >= end:
                 return types
             self.spin(0.05)
-
-    def close(self) -> None:
-        self.executor.shutdown(timeout_sec=1.0)
-        self.node.destroy_node()
-        self.rclpy.shutdown(context=self.context)
 
 
 def resolve_type(graph: Graph, args) -> type | None:
@@ -196,7 +180,7 @@ def run_echo(graph: Graph, args) -> int:
 
     qos = matched_qos(graph.node.get_publishers_info_by_topic(args.topic))
     graph.node.create_subscription(msg_type, args.topic, show, qos)
-    while graph.rclpy.ok(context=graph.context) and not (limit and printed >= limit):
+    while graph.ok() and not (limit and printed >= limit):
         graph.executor.spin_once(timeout_sec=0.1)
     return 0
 
@@ -224,7 +208,7 @@ def run_hz(graph: Graph, args) -> int:
     qos = matched_qos(graph.node.get_publishers_info_by_topic(args.topic))
     graph.node.create_subscription(msg_type, args.topic, arrived, qos, raw=True)
     next_report = time.monotonic() + args.period
-    while graph.rclpy.ok(context=graph.context):
+    while graph.ok():
         graph.executor.spin_once(timeout_sec=0.05)
         if time.monotonic() < next_report:
             continue

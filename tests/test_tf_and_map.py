@@ -236,7 +236,7 @@ def test_map_publisher_refuses_bad_input(ros, parameters, reason):
 
 
 def burger_static_transforms(stamp, lidar_x: float = -0.032) -> TFMessage:
-    """What the Burger's robot_state_publisher latches: base_footprint -> base_link -> base_scan."""
+    """The Burger's robot_state_publisher: base_footprint -> base_link -> base_scan."""
     return TFMessage(transforms=[
         tf.planar_transform(stamp, "base_footprint", "base_link", 0.0, 0.0, 0.0, 0.010),
         tf.planar_transform(stamp, "base_link", "base_scan", lidar_x, 0.0, 0.0, 0.172)])
@@ -295,8 +295,8 @@ def test_generated_type_descriptions_carry_jazzys_hashes():
     import sys
     from pathlib import Path
     share = Path(sys.prefix) / "share" / "tf2_msgs" / "msg"
-    expected = {"TFMessage": JAZZY_TFMESSAGE_HASH,
-                "TF2Error": "RIHS01_db2485e7d6a0ec75bf087e058ee45df682acc3a621ca7780503d10aac141809a"}
+    tf2_error = "RIHS01_db2485e7d6a0ec75bf087e058ee45df682acc3a621ca7780503d10aac141809a"
+    expected = {"TFMessage": JAZZY_TFMESSAGE_HASH, "TF2Error": tf2_error}
     for name, hash_string in expected.items():
         description = json.loads((share / f"{name}.json").read_text())
         assert description["type_hashes"][0] == {"type_name": f"tf2_msgs/msg/{name}",
