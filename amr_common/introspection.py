@@ -1,7 +1,8 @@
-"""Graph introspection without ros2cli: message classes by type name, publisher-matched QoS,
-messages as plain data (for echo, CSV and YAML), and the hidden probe node of the tools.
+"""Graph introspection without ros2cli.
 
-Used by the Foxglove bridge and scripts/topic.py, lifecycle.py and ros_graph.py.
+Message classes by type name, publisher-matched QoS, messages as plain data (for echo, CSV and
+YAML), and the hidden probe node of the tools. Used by the Foxglove bridge and
+scripts/topic.py, lifecycle.py and ros_graph.py.
 """
 from __future__ import annotations
 
@@ -40,9 +41,11 @@ def message_class(type_name: str) -> type:
 
 
 def matched_qos(publishers: Iterable, depth: int = 10) -> QoSProfile:
-    """A subscription QoS that receives from every publisher in `publishers` (rclpy
-    TopicEndpointInfo): best effort if any offers only that, transient local if all keep
-    their last messages for late joiners (latched maps, /tf_static)."""
+    """A subscription QoS that receives from every publisher in `publishers`.
+
+    `publishers`: rclpy TopicEndpointInfo. Best effort if any offers only that, transient local
+    if all keep their last messages for late joiners (latched maps, /tf_static).
+    """
     infos = list(publishers)
     best_effort = any(i.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT for i in infos)
     latched = bool(infos) and all(
@@ -130,8 +133,11 @@ def _scalar(value: Any) -> str:
 
 
 class GraphProbe:
-    """A command-line tool's own rclpy context, hidden node (name starting with '_', which the
-    graph tools leave out) and executor, on the environment's ROS_DOMAIN_ID."""
+    """A command-line tool's own rclpy context, hidden node and executor.
+
+    On the environment's ROS_DOMAIN_ID; the node's name starts with '_', which the graph tools
+    leave out.
+    """
 
     def __init__(self, tool: str) -> None:
         import rclpy

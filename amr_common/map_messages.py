@@ -1,5 +1,7 @@
-"""A world as ROS map messages: nav_msgs/OccupancyGrid (/map) and visualization_msgs/MarkerArray
-of its walls (/map_markers). Message building only (no node); the raster comes from
+"""A world as ROS map messages: /map and /map_markers.
+
+nav_msgs/OccupancyGrid (/map) and visualization_msgs/MarkerArray of its walls (/map_markers).
+Message building only (no node); the raster comes from
 amr_common.map_raster (values in the OccupancyGrid convention, row 0 southmost).
 """
 from __future__ import annotations
@@ -22,8 +24,10 @@ GOAL_COLOR = ColorRGBA(r=0.1, g=0.7, b=0.2, a=0.8)
 
 def occupancy_grid(values: np.ndarray, resolution: float, origin: tuple[float, float],
                    frame_id: str = "map", stamp: Time | None = None) -> OccupancyGrid:
-    """OccupancyGrid of an int8 (rows, cols) array whose cell (0, 0) has its lower-left corner
-    at `origin` (x, y); rows run along +y, columns along +x."""
+    """OccupancyGrid of an int8 (rows, cols) array.
+
+    Cell (0, 0) has its lower-left corner at `origin` (x, y); rows run along +y, columns along +x.
+    """
     grid = np.ascontiguousarray(values, dtype=np.int8)
     if grid.ndim != 2 or grid.size == 0:
         raise ValueError(f"an occupancy grid needs a non-empty 2D array, got shape {grid.shape}")
@@ -49,8 +53,11 @@ def grid_values(message: OccupancyGrid) -> np.ndarray:
 
 def wall_markers(segments: np.ndarray, frame_id: str = "map", stamp: Time | None = None,
                  goal: tuple[float, float] | None = None) -> MarkerArray:
-    """MarkerArray: the walls as upright quads (a TRIANGLE_LIST, ns "walls") and the goal as a
-    sphere (ns "goal") when given. `segments`: (N, 4) rows x1, y1, x2, y2 in metres."""
+    """MarkerArray of the walls (upright quads) and of the goal.
+
+    The walls are a TRIANGLE_LIST (ns "walls"), the goal a sphere (ns "goal") when given.
+    `segments`: (N, 4) rows x1, y1, x2, y2 in metres.
+    """
     walls = Marker(ns="walls", id=0, type=Marker.TRIANGLE_LIST, action=Marker.ADD)
     walls.header.frame_id = frame_id
     if stamp is not None:

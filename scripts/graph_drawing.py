@@ -1,8 +1,10 @@
-"""Draw a ROS graph like rqt_graph: nodes as ellipses, topics as boxes, publisher and subscriber
-arrows, left to right. No ROS here (scripts/ros_graph.py collects the graph) and no Graphviz:
-DOT text is written for those who have it, and PNG/SVG are drawn with matplotlib after a small
-layered layout (Sugiyama style: cycles broken by reversing DFS back edges, longest-path layers,
-barycenter ordering within layers).
+"""Draw a ROS graph like rqt_graph.
+
+Nodes as ellipses, topics as boxes, publisher and subscriber arrows, left to right. No ROS here
+(scripts/ros_graph.py collects the graph) and no Graphviz: DOT text is written for those who
+have it, and PNG/SVG are drawn with matplotlib after a small layered layout (Sugiyama style:
+cycles broken by reversing DFS back edges, longest-path layers, barycenter ordering within
+layers).
 """
 from __future__ import annotations
 
@@ -12,8 +14,11 @@ from dataclasses import dataclass, field
 
 @dataclass
 class RosGraph:
-    """nodes: node names; topics: topic -> type names; publishes: (node, topic) pairs;
-    subscribes: (topic, node) pairs; qos: (source, target) pair -> short QoS text."""
+    """The nodes and topics of a graph and who publishes and subscribes what.
+
+    nodes: node names; topics: topic -> type names; publishes: (node, topic) pairs;
+    subscribes: (topic, node) pairs; qos: (source, target) pair -> short QoS text.
+    """
 
     nodes: list[str] = field(default_factory=list)
     topics: dict[str, list[str]] = field(default_factory=dict)
@@ -55,8 +60,10 @@ def to_dot(graph: RosGraph, show_qos: bool = False) -> str:
 
 def layered_layout(vertices: list[str], edges: list[tuple[str, str]],
                    sweeps: int = 8) -> tuple[dict[str, int], dict[str, int], set]:
-    """(layer of each vertex, order within its layer, reversed edges) for a left-to-right
-    drawing. Deterministic: ties are broken by name."""
+    """Layer and order within the layer of each vertex, and the reversed edges.
+
+    For a left-to-right drawing. Deterministic: ties are broken by name.
+    """
     successors: dict[str, list[str]] = defaultdict(list)
     indegree = {v: 0 for v in vertices}
     for a, b in edges:

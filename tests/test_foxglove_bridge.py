@@ -1,6 +1,9 @@
-"""The Foxglove bridge as Foxglove sees it: a WebSocket client (the `websockets` package) speaks
-the Foxglove protocol to it on 127.0.0.1, decodes /scan with the advertised ros2msg schema
-(mcap_ros2's decoder, not rclpy) and publishes /initialpose back into the graph."""
+"""The Foxglove bridge as Foxglove sees it.
+
+A WebSocket client (the `websockets` package) speaks the Foxglove protocol to it on 127.0.0.1,
+decodes /scan with the advertised ros2msg schema (mcap_ros2's decoder, not rclpy) and publishes
+/initialpose back into the graph.
+"""
 from __future__ import annotations
 
 import json
