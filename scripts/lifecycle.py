@@ -49,20 +49,26 @@ class LifecycleClient(GraphProbe):
         super().__init__("lifecycle_tool")
         self.timeout = timeout
 
-    def call(self, service_type, name: str, request):
-        """The response, or None (and a message) if the service does not answer in time."""
+    def call(self, service_type, name: str, request, attempts: int = 1):
+        """The response, or None (and a message) if the service does not answer in time.
+
+        Queries (`attempts` > 1) are sent again when unanswered: a request can go to a node
+        that has just left the graph while the new one is still being discovered.
+        """
         client = self.node.create_client(service_type, name)
         try:
             if not client.wait_for_service(timeout_sec=self.timeout):
                 print(f"no service {name} within {self.timeout} s: is the node running on "
                       f"this ROS_DOMAIN_ID?", file=sys.stderr)
                 return None
-            future = client.call_async(request)
-            self.executor.spin_until_future_complete(future, timeout_sec=self.timeout)
-            if not future.done():
-                print(f"{name} did not answer within {self.timeout} s", file=sys.stderr)
-                return None
-            return future.result()
+            for _ in range(attempts):
+                future = client.call_async(request)
+                self.executor.spin_until_future_complete(future,
+                                                         timeout_sec=self.timeout / attempts)
+                if future.done():
+                    return future.result()
+            print(f"{name} did not answer within {self.timeout} s", file=sys.stderr)
+            return None
         finally:
             self.node.destroy_client(client)
 
@@ -86,13 +92,14 @@ def main(argv=None) -> int:
                 print(name)
             return 0
         if args.command == "get":
-            response = tool.call(GetState, f"{args.node}/get_state", GetState.Request())
+            response = tool.call(GetState, f"{args.node}/get_state", GetState.Request(),
+                                 attempts=3)
             if response is None:
                 return 1
             print(f"{response.current_state.label} [{response.current_state.id}]")
             return 0
         available = tool.call(GetAvailableTransitions, f"{args.node}/get_available_transitions",
-                              GetAvailableTransitions.Request())
+                              GetAvailableTransitions.Request(), attempts=3)
         if available is None:
             return 1
         transitions = [d.transition for d in available.available_transitions]

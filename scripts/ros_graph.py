@@ -56,26 +56,32 @@ def collect_graph(wait: float = 3.0, include_all: bool = False) -> RosGraph:
         time.sleep(wait)  # discovery runs in the RMW's own threads
         graph = RosGraph()
         own = node.get_name()
-        for name, namespace in sorted(node.get_node_names_and_namespaces()):
-            if name == own or (name.startswith("_") and not include_all):
+
+        def hidden(name: str) -> bool:
+            return name == own or (name.startswith("_") and not include_all)
+
+        # Nodes once each (a node that just left may linger in the graph for a while), edges
+        # from each topic's endpoints, which also carry the QoS.
+        names = sorted({(n, ns) for n, ns in node.get_node_names_and_namespaces()
+                        if not hidden(n)})
+        graph.nodes = [ns.rstrip("/") + "/" + n for n, ns in names]
+        for topic, types in node.get_topic_names_and_types():
+            if not shown(topic, include_all):
                 continue
-            full = namespace.rstrip("/") + "/" + name
-            graph.nodes.append(full)
-            for kind, query in (("pub", node.get_publisher_names_and_types_by_node),
-                                ("sub", node.get_subscriber_names_and_types_by_node)):
-                for topic, types in query(name, namespace):
-                    if not shown(topic, include_all):
-                        continue
-                    graph.topics.setdefault(topic, list(types))
-                    edge = (full, topic) if kind == "pub" else (topic, full)
-                    (graph.publishes if kind == "pub" else graph.subscribes).append(edge)
-        for topic in graph.topics:
             for kind, infos in (("pub", node.get_publishers_info_by_topic(topic)),
                                 ("sub", node.get_subscriptions_info_by_topic(topic))):
                 for info in infos:
+                    if hidden(info.node_name):
+                        continue
                     full = info.node_namespace.rstrip("/") + "/" + info.node_name
                     edge = (full, topic) if kind == "pub" else (topic, full)
-                    graph.qos[edge] = describe_qos(info.qos_profile)
+                    edges = graph.publishes if kind == "pub" else graph.subscribes
+                    if edge not in edges:
+                        edges.append(edge)
+                        graph.qos[edge] = describe_qos(info.qos_profile)
+                    graph.topics.setdefault(topic, list(types))
+                    if full not in graph.nodes:
+                        graph.nodes.append(full)
         graph.topics = dict(sorted(graph.topics.items()))
         return graph
     finally:
