@@ -61,8 +61,8 @@ def parse_args(argv=None) -> argparse.Namespace:
         sub.add_argument("--timeout", type=float, default=5.0,
                          help="seconds to wait for the topic to appear (default 5)")
         sub.add_argument("--type", default=None, help="message type, if no publisher exists")
-    listing.add_argument("--timeout", type=float, default=2.0,
-                         help="seconds of discovery before listing (default 2)")
+    listing.add_argument("--timeout", type=float, default=3.0,
+                         help="seconds of discovery before listing (default 3)")
     args = parser.parse_args(argv)
     if args.command in ("echo", "hz", "info") and not args.topic.startswith("/"):
         args.topic = "/" + args.topic

@@ -63,7 +63,8 @@ def test_topic_echo_hz_list_and_info_on_known_publishers(ros, talker):
                                     "--period", "2")
     rate = float(out.split("average rate:")[1].split()[0])
     assert 15.0 < rate < 22.0  # a 20 Hz timer on a loaded 2-core machine
-    out = run_script_while_spinning(ros, "scripts/topic.py", "list", "-t")
+    # Discovery between processes can take one 3 s announcement period here.
+    out = run_script_while_spinning(ros, "scripts/topic.py", "list", "-t", "--timeout", "5")
     assert "/probe_scan [sensor_msgs/msg/LaserScan]" in out.splitlines()
     out = run_script_while_spinning(ros, "scripts/topic.py", "info", "/probe_scan", "-v")
     assert "Publisher count: 1" in out and "PUBLISHER /probe_talker" in out
