@@ -17,18 +17,25 @@ import pytest
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
 from rclpy.lifecycle import TransitionCallbackReturn
+from rclpy.parameter import Parameter
 
+from amr_common.foxglove_bridge import FoxgloveBridgeNode
 from amr_common.lifecycle_node import GuardedLifecycleNode
+from amr_common.map_publisher import MapPublisherNode
 from amr_control.wall_follower_node import WallFollowerNode
 from amr_sim.simulator_node import SimulatorNode
 from amr_turtlebot3.odometry_node import OdometryNode
 from tests.processes import terminate, wait_for
 
 REPO = Path(__file__).resolve().parent.parent
-NODES = {"amr_simulator": SimulatorNode, "wall_follower": WallFollowerNode,
-         "amr_odometry": OdometryNode}
-EXECUTABLES = {"amr_simulator": "amr_simulator", "wall_follower": "amr_wall_follower",
-               "amr_odometry": "amr_odometry"}
+# Every lifecycle node of the project: (class, parameter overrides) by node name ...
+NODES = {"amr_simulator": (SimulatorNode, {}), "wall_follower": (WallFollowerNode, {}),
+         "amr_odometry": (OdometryNode, {}), "map_publisher": (MapPublisherNode, {}),
+         "foxglove_bridge": (FoxgloveBridgeNode, {"port": 0})}  # any free port
+# ... and its executable with its arguments.
+EXECUTABLES = {"amr_simulator": ["amr_simulator"], "wall_follower": ["amr_wall_follower"],
+               "amr_odometry": ["amr_odometry"], "map_publisher": ["amr_map_publisher"],
+               "foxglove_bridge": ["amr_foxglove_bridge", "--ros-args", "-p", "port:=0"]}
 
 
 class LifecycleClient:
@@ -94,9 +101,15 @@ def out_of_order_sequence(client: LifecycleClient) -> None:
     assert client.state() == "unconfigured"
 
 
+def make_node(ros, name: str) -> GuardedLifecycleNode:
+    node_class, overrides = NODES[name]
+    return ros.add(node_class(context=ros.context, parameter_overrides=[
+        Parameter(key, value=value) for key, value in overrides.items()]))
+
+
 @pytest.mark.parametrize("name", list(NODES))
 def test_out_of_order_requests_through_the_service_are_refused_and_logged(ros, name):
-    node = ros.add(NODES[name](context=ros.context))
+    node = make_node(ros, name)
     assert isinstance(node, GuardedLifecycleNode)
     refused = []
     node._log_refusal = lambda text, original=node._log_refusal: (refused.append(text),
@@ -110,7 +123,7 @@ def test_out_of_order_requests_through_the_service_are_refused_and_logged(ros, n
 
 @pytest.mark.parametrize("name", list(NODES))
 def test_out_of_order_triggers_in_process_return_failure_without_raising(ros, name):
-    node = ros.add(NODES[name](context=ros.context))
+    node = make_node(ros, name)
     assert node.trigger_activate() == TransitionCallbackReturn.FAILURE
     assert node.trigger_cleanup() == TransitionCallbackReturn.FAILURE
     assert node.trigger_configure() == TransitionCallbackReturn.SUCCESS
@@ -142,9 +155,9 @@ def test_every_executable_survives_out_of_order_requests(ros):
     env = dict(os.environ, PYTHONPATH=str(REPO))
     bin_dir = Path(sys.executable).parent
     processes = {name: subprocess.Popen(
-        [str(bin_dir / executable)],
+        [str(bin_dir / command[0]), *command[1:]],
         cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        for name, executable in EXECUTABLES.items()}
+        for name, command in EXECUTABLES.items()}
     client_node = ros.node("lifecycle_client")
     try:
         for name, process in processes.items():
