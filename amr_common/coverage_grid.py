@@ -10,8 +10,9 @@ Rasterized with numpy: each polygon is scan-converted row by row over the cells 
 box (even-odd rule, the same arithmetic as a point-by-point test) and each wall marks only the
 cells within the margin of its bounding box, so the cost grows with the cells plus the walls,
 not with their product (a 2,500-obstacle world: well under a second instead of minutes).
-A grid of more than MAX_GRID_CELLS cells is refused with CoverageGridError (+-1e6 m coordinates
-at 0.4 m would need 2.5e13 cells).
+A grid of more than MAX_GRID_CELLS cells is refused with GridTooLargeError (+-1e6 m coordinates
+at 0.4 m would need 2.5e13 cells). The /map raster (amr_common.map_raster) uses the same polygon
+fill, bounding boxes and limit.
 """
 from __future__ import annotations
 
@@ -26,8 +27,21 @@ _CHUNK_CELLS = 262_144  # rows are processed in blocks of about this many cells
 _EPS = 1e-9  # relative slack so that a boundary on a grid line does not add a row of cells
 
 
-class CoverageGridError(ValueError):
-    """The coverage grid cannot be built (too many cells); the message says what to change."""
+class GridTooLargeError(ValueError):
+    """A grid over a world would have too many cells; the message says what to change."""
+
+
+def check_grid_size(columns: float, rows: float, cell_size: float, what: str,
+                    remedy: str) -> None:
+    """Raise GridTooLargeError if a rows x columns grid exceeds MAX_GRID_CELLS.
+
+    Floats: an absurd count is reported, never allocated. `what` names the grid (and its
+    file), `remedy` says what to change.
+    """
+    if columns * rows > MAX_GRID_CELLS:
+        raise GridTooLargeError(
+            f"{what} would need {columns:.3g} x {rows:.3g} = {columns * rows:.3g} cells of "
+            f"{cell_size:g} m (limit {MAX_GRID_CELLS:,}): {remedy}")
 
 
 @dataclass(frozen=True)
@@ -81,7 +95,7 @@ def build_coverage_grid(segments: np.ndarray, boundary: np.ndarray | None,
     """Rasterize the free cells over the boundary's bounding box (all walls' without one).
 
     `origin`: a point the grid lines pass through; None = the box's lower-left corner.
-    Raises CoverageGridError naming `source` if the grid would exceed MAX_GRID_CELLS.
+    Raises GridTooLargeError naming `source` if the grid would exceed MAX_GRID_CELLS.
     """
     extent = boundary if boundary is not None else segments.reshape(-1, 2)
     xmin, ymin = (float(v) for v in extent.min(axis=0))
@@ -90,19 +104,17 @@ def build_coverage_grid(segments: np.ndarray, boundary: np.ndarray | None,
     cs = float(cell_size)
     first_x, count_x = _cell_range(xmin, xmax, ox, cs)
     first_y, count_y = _cell_range(ymin, ymax, oy, cs)
-    cells = count_x * count_y
-    if cells > MAX_GRID_CELLS:
-        raise CoverageGridError(
-            f"{source}: the coverage grid would need {count_x:.3g} x {count_y:.3g} = "
-            f"{cells:.3g} cells of {cs:g} m over {xmax - xmin:.3g} m x {ymax - ymin:.3g} m "
-            f"(limit {MAX_GRID_CELLS:,}): set a larger cell_size in the world file")
+    check_grid_size(count_x, count_y, cs, f"{source}: the coverage grid over "
+                    f"{xmax - xmin:.3g} m x {ymax - ymin:.3g} m",
+                    "set a larger cell_size in the world file")
     grid_x, grid_y = ox + first_x * cs, oy + first_y * cs
     xs = grid_x + (np.arange(int(count_x)) + 0.5) * cs
     ys = grid_y + (np.arange(int(count_y)) + 0.5) * cs
-    free = _inside_polygon(boundary, xs, ys) if boundary is not None else \
+    free = inside_polygon_grid(boundary, xs, ys) if boundary is not None else \
         np.ones((ys.size, xs.size), dtype=bool)
     for hole in holes:
-        _clear_inside(free, hole, xs, ys)
+        columns, rows = box_slices(xs, ys, *hole.min(axis=0), *hole.max(axis=0))
+        free[rows, columns] &= ~inside_polygon_grid(hole, xs[columns], ys[rows])
     for segment in segments:
         _clear_near_segment(free, segment, xs, ys, margin)
     return CoverageGrid(grid_x, grid_y, cs, free)
@@ -135,11 +147,15 @@ def _cell_range(low: float, high: float, origin: float, cs: float) -> tuple[floa
     return float(first), float(max(last - first, 0))
 
 
-def _inside_polygon(polygon: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
-    """(len(ys), len(xs)) bool: cell centres inside a closed polygon, row by row (even-odd)."""
+def inside_polygon_grid(polygon: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+    """(len(ys), len(xs)) bool: grid points (xs increasing) inside a closed polygon.
+
+    Even-odd rule, row by row: the same arithmetic as inside_polygon_points, at a cost of
+    rows x edges + points instead of points x edges.
+    """
     px, py = polygon[:, 0], polygon[:, 1]
     qx, qy = np.roll(px, -1), np.roll(py, -1)
-    out = np.zeros((ys.size, xs.size), dtype=bool)
+    out = np.zeros((np.size(ys), np.size(xs)), dtype=bool)
     for row, y in enumerate(ys):
         crosses = (py > y) != (qy > y)
         if not crosses.any():
@@ -152,27 +168,24 @@ def _inside_polygon(polygon: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.n
     return out
 
 
-def _box_slices(xs: np.ndarray, ys: np.ndarray, x0: float, y0: float, x1: float, y1: float
-                ) -> tuple[slice, slice]:
-    """Column and row slices of the centres within [x0, x1] x [y0, y1]."""
+def box_slices(xs: np.ndarray, ys: np.ndarray, x0: float, y0: float, x1: float, y1: float
+               ) -> tuple[slice, slice]:
+    """Column and row slices of the grid points (xs, ys increasing) within [x0, x1] x [y0, y1].
+
+    Polygons and walls touch only the cells of their bounding box: restricting the work to it
+    keeps a world of thousands of small obstacles cheap.
+    """
     return (slice(int(np.searchsorted(xs, x0, side="left")),
                   int(np.searchsorted(xs, x1, side="right"))),
             slice(int(np.searchsorted(ys, y0, side="left")),
                   int(np.searchsorted(ys, y1, side="right"))))
 
 
-def _clear_inside(free: np.ndarray, polygon: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> None:
-    (x0, y0), (x1, y1) = polygon.min(axis=0), polygon.max(axis=0)
-    columns, rows = _box_slices(xs, ys, x0, y0, x1, y1)
-    if columns.start < columns.stop and rows.start < rows.stop:
-        free[rows, columns] &= ~_inside_polygon(polygon, xs[columns], ys[rows])
-
-
 def _clear_near_segment(free: np.ndarray, segment: np.ndarray, xs: np.ndarray, ys: np.ndarray,
                         margin: float) -> None:
     """Clear the cells whose centre is within `margin` of the segment (clearance <= margin)."""
     x1, y1, x2, y2 = (float(v) for v in segment)
-    columns, rows = _box_slices(xs, ys, min(x1, x2) - margin, min(y1, y2) - margin,
+    columns, rows = box_slices(xs, ys, min(x1, x2) - margin, min(y1, y2) - margin,
                                 max(x1, x2) + margin, max(y1, y2) + margin)
     width = columns.stop - columns.start
     if width <= 0 or rows.start >= rows.stop:
@@ -188,5 +201,5 @@ def _clear_near_segment(free: np.ndarray, segment: np.ndarray, xs: np.ndarray, y
         free[band, columns] &= np.sqrt(dx * dx + dy * dy) > margin
 
 
-__all__ = ["MAX_GRID_CELLS", "CoverageGridError", "CoverageGrid", "build_coverage_grid",
-           "inside_polygon_points"]
+__all__ = ["MAX_GRID_CELLS", "GridTooLargeError", "check_grid_size", "CoverageGrid",
+           "build_coverage_grid", "inside_polygon_points", "inside_polygon_grid", "box_slices"]

@@ -4,7 +4,8 @@ Values as nav_msgs/OccupancyGrid: FREE 0, OCCUPIED 100, UNKNOWN -1. Row r, colum
 [x0 + c*res, x0 + (c+1)*res) x [y0 + r*res, y0 + (r+1)*res): row 0 is the southmost (the
 message's data is this array flattened row by row). A cell is OCCUPIED when a wall passes through
 it or it lies inside an obstacle (a world's `holes`), UNKNOWN outside the boundary, else FREE.
-The grid is aligned with multiples of the resolution and padded by `padding_m` of UNKNOWN.
+The grid is aligned with multiples of the resolution and padded by `padding_m` of UNKNOWN; one
+of more than amr_common.coverage_grid.MAX_GRID_CELLS cells raises GridTooLargeError.
 """
 from __future__ import annotations
 
@@ -12,6 +13,13 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
+from amr_common.coverage_grid import (
+    box_slices,
+    check_grid_size,
+    inside_polygon_grid,
+    inside_polygon_points,
+)
 
 FREE, OCCUPIED, UNKNOWN = 0, 100, -1
 
@@ -39,16 +47,9 @@ class Raster:
 
 def points_in_polygon(polygon: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Even-odd test of many points against one closed polygon ((K, 2) vertices)."""
-    inside = np.zeros(np.shape(x), dtype=bool)
-    px, py = polygon[:, 0], polygon[:, 1]
-    qx, qy = np.roll(px, -1), np.roll(py, -1)
-    for x1, y1, x2, y2 in zip(px, py, qx, qy):
-        if y1 == y2:
-            continue  # a horizontal edge never crosses the horizontal ray
-        crosses = (y1 > y) != (y2 > y)
-        x_cross = x1 + (y - y1) * (x2 - x1) / (y2 - y1)
-        inside ^= crosses & (x < x_cross)
-    return inside
+    x, y = np.broadcast_arrays(np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64))
+    points = np.column_stack([x.ravel(), y.ravel()])
+    return inside_polygon_points(polygon, points).reshape(x.shape)
 
 
 def rasterize_world(world, resolution: float = 0.05, padding_m: float = 0.1) -> Raster:
@@ -58,15 +59,21 @@ def rasterize_world(world, resolution: float = 0.05, padding_m: float = 0.1) -> 
     xmin, ymin, xmax, ymax = world.bounds
     x0 = math.floor((xmin - padding_m) / resolution) * resolution
     y0 = math.floor((ymin - padding_m) / resolution) * resolution
-    cols = int(math.ceil((xmax + padding_m - x0) / resolution))
-    rows = int(math.ceil((ymax + padding_m - y0) / resolution))
+    cols = math.ceil((xmax + padding_m - x0) / resolution)
+    rows = math.ceil((ymax + padding_m - y0) / resolution)
+    check_grid_size(float(cols), float(rows), resolution,
+                    f"{world.source}: the map raster over {xmax - xmin:.3g} m x "
+                    f"{ymax - ymin:.3g} m", "set a larger map resolution")
     raster = Raster(np.full((rows, cols), FREE, dtype=np.int8), float(resolution), (x0, y0))
     values = raster.values
-    cx, cy = raster.centres()
+    xs = x0 + (np.arange(cols) + 0.5) * resolution
+    ys = y0 + (np.arange(rows) + 0.5) * resolution
     if world.boundary is not None:
-        values[~points_in_polygon(world.boundary, cx, cy)] = UNKNOWN
-    for hole in world.holes:
-        values[points_in_polygon(hole, cx, cy)] = OCCUPIED
+        values[~inside_polygon_grid(world.boundary, xs, ys)] = UNKNOWN
+    for hole in world.holes:  # each within its bounding box: thousands of obstacles stay cheap
+        columns, band = box_slices(xs, ys, *hole.min(axis=0), *hole.max(axis=0))
+        block = values[band, columns]
+        block[inside_polygon_grid(hole, xs[columns], ys[band])] = OCCUPIED
     # Walls: every cell a segment passes through, sampled at a quarter cell.
     for x1, y1, x2, y2 in world.segments:
         n = max(2, int(math.ceil(math.hypot(x2 - x1, y2 - y1) / (0.25 * resolution))) + 1)

@@ -272,7 +272,7 @@ class World:
     def coverage_grid(self, margin: float = ROBOT_RADIUS) -> CoverageGrid:
         """The cell_size grid behind the coverage metrics (amr_common.coverage_grid).
 
-        Computed once per margin. Raises CoverageGridError if it would have too many cells.
+        Computed once per margin. Raises GridTooLargeError if it would have too many cells.
         """
         key = ("grid", float(margin))
         if key not in self._grids:

@@ -37,7 +37,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from amr_common.coverage_grid import CoverageGridError
+from amr_common.coverage_grid import GridTooLargeError
 from amr_common.world import WORLDS_DIR, World
 from amr_sim.profiles import SensorProfile, get_profile
 from amr_sim.simulator import Simulator
@@ -193,7 +193,7 @@ def run_episode(world: World | str, start=None, profile: str | SensorProfile = "
 def explored_fraction(world: World, positions: np.ndarray) -> float:
     """Share of the world's free cells whose centre some position passed within cell_size / 2 of.
 
-    Raises CoverageGridError if the world's coverage grid would be too large.
+    Raises GridTooLargeError if the world's coverage grid would be too large.
     """
     free = world.coverage_grid().free
     total = int(np.count_nonzero(free))
@@ -213,7 +213,7 @@ def trajectory_metrics(world: World, positions: np.ndarray) -> dict[str, Any]:
     for name, compute in (("explored_fraction", explored_fraction), ("laps", count_laps)):
         try:
             metrics[name] = compute(world, positions)
-        except (CoverageGridError, MemoryError) as exc:
+        except (GridTooLargeError, MemoryError) as exc:
             metrics[name] = None
             metrics["metric_errors"][name] = str(exc) or type(exc).__name__
     return metrics

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from amr_common.coverage_grid import MAX_GRID_CELLS, CoverageGridError
+from amr_common.coverage_grid import MAX_GRID_CELLS, GridTooLargeError
 from amr_common.robot import ROBOT_RADIUS
 from amr_common.world import World
 from amr_evaluation.episode import count_laps, explored_fraction, run_episode
@@ -143,7 +143,7 @@ def test_a_grid_beyond_the_limit_is_a_clear_error_not_a_huge_allocation(tmp_path
     path = tmp_path / "huge.yaml"
     path.write_text(HUGE_WORLD)
     world = World.load(path)
-    with pytest.raises(CoverageGridError, match=r"cell_size") as info:
+    with pytest.raises(GridTooLargeError, match=r"cell_size") as info:
         world.free_cells()
     assert "huge.yaml" in str(info.value) and f"{MAX_GRID_CELLS:,}" in str(info.value)
     # The episode still reports everything else, and says why two metrics are missing.
@@ -170,13 +170,15 @@ def test_run_sim_report_of_a_huge_world_is_written_with_the_metric_marked(tmp_pa
     assert report["steps"] == 40 and report["explored_fraction"] is None
     assert "cell_size" in report["metric_errors"]["explored_fraction"]
     assert "explored n/a" in process.stdout
+    assert "no /map" in process.stdout + process.stderr   # the map is skipped, the run is not
 
 
 @pytest.mark.slow
 def test_metrics_of_a_2500_obstacle_world_do_not_hang(tmp_path):
-    """Before: simulation 1 s, metrics over 5 minutes (a polygon test per cell and obstacle).
+    """Metrics and the /map raster of 2,500 obstacles come back (a hang guard).
 
-    A generous hang guard, not a speed target (scripts/bench*.py measure speed).
+    Before: simulation 1 s, metrics over 5 minutes (a polygon test per cell and obstacle),
+    the /map raster 40 s. A generous guard, not a speed target (scripts/bench*.py measure speed).
     """
     holes = [[[x, y], [x + 0.2, y], [x + 0.2, y + 0.2], [x, y + 0.2]]
              for x in range(1, 51) for y in range(1, 51)]
@@ -185,14 +187,18 @@ def test_metrics_of_a_2500_obstacle_world_do_not_hang(tmp_path):
                                 "holes": holes, "starts": {"a": [0.5, 0.5, 0.0]}}))
     code = ("import sys, numpy as np; from amr_common.world import World; "
             "from amr_evaluation.episode import trajectory_metrics; "
+            "from amr_common.map_raster import OCCUPIED, rasterize_world; "
             "w = World.load(sys.argv[1]); "
             "m = trajectory_metrics(w, np.array([[0.5, 0.5], [0.5, 51.5], [51.5, 51.5]])); "
-            "print(len(w.free_cells()), m['explored_fraction'], m['laps'])")
+            "r = rasterize_world(w, 0.05); "   # the simulator's /map
+            "print(len(w.free_cells()), m['explored_fraction'], m['laps'], "
+            "int((r.values == OCCUPIED).sum()))")
     process = subprocess.run([sys.executable, "-c", code, str(path)], cwd=REPO,
                              capture_output=True, text=True, timeout=120)
     assert process.returncode == 0, process.stderr
-    cells, explored, laps = process.stdout.split()
+    cells, explored, laps, occupied = process.stdout.split()
     assert int(cells) > 10_000 and 0.0 < float(explored) < 0.01 and laps == "0"
+    assert int(occupied) >= 2500 * 16   # each 0.2 m box covers at least 4 x 4 cells of 5 cm
 
 
 def test_clearance_kernels_agree_with_the_pointwise_distance():
