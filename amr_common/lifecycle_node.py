@@ -9,6 +9,8 @@ checks every request against the transitions available in the current state firs
   `success: false`, trigger_*() returns FAILURE; the node stays in its state and keeps running;
 - a transition callback that raises is logged (error) and the transition ends as ERROR (rclpy
   then runs on_error), instead of rclpy's silent ERROR.
+It also forwards a plain-Python algorithm's logging to the node's logger on request
+(forward_python_logging), until the node is destroyed.
 
 Use it exactly like rclpy.lifecycle.LifecycleNode (on_configure, on_activate, ... overrides).
 """
@@ -19,6 +21,8 @@ from typing import Callable
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+
+from amr_common.python_logging import forward_to_ros_logger
 
 _PRIMARY_STATES = ("unconfigured", "inactive", "active")
 _SHUTDOWN_TRANSITIONS = (Transition.TRANSITION_UNCONFIGURED_SHUTDOWN,
@@ -45,6 +49,29 @@ class GuardedLifecycleNode(LifecycleNode):
         service = getattr(self, "_service_change_state", None)
         if service is not None:  # None when created without the communication interface
             service.callback = self._on_change_state_request
+        self._log_forwardings: list[Callable[[], None]] = []
+
+    def forward_python_logging(self, logger_name: str) -> Callable[[], None]:
+        """Send Python logger `logger_name`'s records to this node's logger.
+
+        For the node's plain-Python algorithm (its warnings then reach rosout and the node's
+        log). Returns a function that stops the forwarding; destroy_node() stops it too.
+        """
+        stop = forward_to_ros_logger(logger_name, self.get_logger())
+        self._log_forwardings.append(stop)
+
+        def stop_once() -> None:
+            if stop in self._log_forwardings:
+                self._log_forwardings.remove(stop)
+                stop()
+        return stop_once
+
+    def destroy_node(self) -> None:
+        """Stop the Python log forwarding, then destroy the node as rclpy does."""
+        for stop in list(self._log_forwardings):
+            stop()
+        self._log_forwardings.clear()
+        super().destroy_node()
 
     # --- requests from code ------------------------------------------------------------------
     def trigger_configure(self) -> TransitionCallbackReturn:

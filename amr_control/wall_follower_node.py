@@ -36,7 +36,6 @@ from amr_common.controller_loader import (
 )
 from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.node_runner import run_lifecycle_node
-from amr_common.python_logging import forward_to_ros_logger
 from amr_common.qos import RELIABLE_10, scan_qos
 from amr_common.robot import (
     MAX_ANGULAR_SPEED,
@@ -188,8 +187,7 @@ class WallFollowerNode(GuardedLifecycleNode):
             self._subscribers, p["queue_size"], slop)
         self._synchronizer.registerCallback(self._on_synchronized)
         # The controller's (throttled) Python warnings go to this node's ROS logger.
-        self._stop_log_forwarding = forward_to_ros_logger(type(self.controller).__module__,
-                                                          self.get_logger())
+        self._stop_log_forwarding = self.forward_python_logging(type(self.controller).__module__)
         if "lidar_offset_x_m" in tuning:
             self._lidar_frames = (p["base_frame"], p["scan_frame"])
             self._static_listener = StaticTransformListener(self, self._on_static_transforms)
