@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence, TextIO
 
+from amr_common.world import start_label
 from amr_evaluation.evaluation import EpisodeOutcome
 
 __all__ = [
@@ -39,7 +40,8 @@ def outcome_row(outcome: EpisodeOutcome) -> dict[str, Any]:
     """The flat per-episode metrics (JSON-safe: non-finite numbers become None)."""
     spec, result = outcome.spec, outcome.result
     row: dict[str, Any] = {"world": Path(spec.world).stem if spec.world.endswith((".yaml", ".yml", ".json"))
-                           else spec.world, "start": spec.start, "profile": spec.profile, "seed": spec.seed}
+                           else spec.world, "start": start_label(spec.start) or None,
+                           "profile": spec.profile, "seed": spec.seed}
     metrics = _result_metrics(result) if result is not None else {}
     for column in RESULT_COLUMNS[4:-2]:
         row[column] = _finite_or_none(metrics.get(column))

@@ -72,16 +72,53 @@ def test_record_writes_an_mcap_that_an_independent_reader_opens(tmp_path):
     # rosbags reads ROS 2 bags as folders: give it one holding just the MCAP file.
     with AnyReader([record], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
-        stamps = {}
+        stamps, log_times = {}, {}
         for connection, timestamp, raw in reader.messages():
             msg = reader.deserialize(raw, connection.msgtype)
             stamps.setdefault(connection.topic, []).append(
                 msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec)
+            log_times.setdefault(connection.topic, []).append(timestamp)
     for topic in ("/scan", "/odometry", "/cmd_vel", "/ground_truth"):
-        assert 99 <= counts[topic] <= 101, (topic, counts)  # one per step (+ the first measurement)
-        steps = sorted(stamps[topic])
+        assert 99 <= counts[topic] <= 102, (topic, counts)  # one per step (+ the first
+        # measurement, + the final zero command)
+        steps = sorted(set(stamps[topic]))
         assert all(b - a == 50_000_000 for a, b in zip(steps, steps[1:])), topic
+        # One time base, simulated time, from t = 0 (not the wall clock for the first ones).
+        assert log_times[topic] == stamps[topic], topic
+        assert min(log_times[topic]) == 0, topic
     assert max(stamps["/scan"]) == 5 * 10**9
+
+
+def _log_times(path):
+    from rosbags.highlevel import AnyReader
+    with AnyReader([path]) as reader:
+        return {c.topic: [t for conn, t, _ in reader.messages([c])] for c in reader.connections}
+
+
+def test_the_realtime_rehearsal_records_on_simulated_time_only(tmp_path):
+    record = tmp_path / "rehearsal.mcap"
+    run_sim.main(["--profile", "turtlebot3", "--realtime", "--duration", "3",
+                  "--record", str(record)])
+    times = _log_times(record)
+    assert {"/scan", "/odom", "/odometry", "/cmd_vel"} <= set(times)
+    every = sorted(t for topic_times in times.values() for t in topic_times)
+    # The controller stamps its commands with the wall clock: logged at arrival, on the
+    # simulated clock like the rest (a wall-clock log time would be ~1.8e18 ns).
+    assert 0 <= every[0] and every[-1] <= 3.5e9, (every[0], every[-1])
+
+
+def test_record_with_every_start_writes_one_file_per_start(tmp_path, capsys):
+    from mcap.reader import make_reader
+    record = tmp_path / "run.mcap"
+    assert run_sim.main(["--world", "corridor_loop", "--start", "all", "--duration", "1",
+                         "--record", str(record)]) == 0
+    assert not record.exists()
+    for start in ("south", "north", "corner"):
+        path = tmp_path / f"run-{start}.mcap"
+        with open(path, "rb") as stream:
+            metadata = {m.name: m.metadata for m in make_reader(stream).iter_metadata()}
+        assert metadata["amr_sim"]["start"] == start
+        assert 20 <= len(_log_times(path)["/scan"]) <= 21
 
 
 def test_gui_runs_headless(tmp_path, monkeypatch):

@@ -1,0 +1,148 @@
+"""run_sim.py / run_robot.py options: start poses, -p names and types, output paths, domain ids,
+bad files. Every mistake is a one-line error with exit code 2, found before anything runs."""
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
+sys.path.insert(0, str(SCRIPTS))
+import run_robot  # noqa: E402
+import run_sim  # noqa: E402
+
+# The course's map JSON: a square room with a box in it, and no named starts.
+COURSE_MAP = {"metric": {"boundary": [[-2, -2], [2, -2], [2, 2], [-2, 2]],
+                         "holes": [[[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]]]}}
+
+
+@pytest.fixture
+def course_map(tmp_path):
+    path = tmp_path / "course_map.json"
+    path.write_text(json.dumps(COURSE_MAP))
+    return path
+
+
+def _fails_with(capsys, argv, message):
+    """run_sim.main(argv) exits 2 at once with `message` on one line, without a traceback."""
+    start = time.monotonic()
+    try:
+        code = run_sim.main(argv)
+    except SystemExit as exc:  # argparse errors
+        code = exc.code
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert message in err.strip().splitlines()[-1], err
+    assert "Traceback" not in err
+    assert time.monotonic() - start < 20.0  # checked up front: nothing simulated
+    return err
+
+
+# --- B1: start poses -----------------------------------------------------------------------
+
+@pytest.mark.slow
+def test_a_course_map_runs_from_a_pose_with_negative_numbers(tmp_path, course_map):
+    report_path = tmp_path / "run.json"
+    code = run_sim.main(["--world", str(course_map), "--start", "-1.0,-1.0,1.57",
+                         "--duration", "2", "--report", str(report_path)])
+    report = json.loads(report_path.read_text())
+    assert code == 0
+    assert report["start"] == "-1,-1,1.57" and report["steps"] == 40
+    assert report["trajectory"][0][1:] == pytest.approx([-1.0, -1.0, 1.57])
+
+
+def test_pose_options_take_negative_numbers():
+    args = run_sim.parse_args(["--start", "-1.0,-1.0,1.57", "--goal", "-0.5,1"])
+    assert args.start == (-1.0, -1.0, 1.57) and args.goal == [-0.5, 1.0]
+    assert run_sim.parse_args(["--start", "outer"]).start == "outer"
+
+
+def test_start_all_on_a_map_without_starts_is_an_error(capsys, course_map):
+    _fails_with(capsys, ["--world", str(course_map), "--start", "all"],
+                "names no start poses, so '--start all' runs nothing")
+    _fails_with(capsys, ["--world", str(course_map)], "give one with --start X,Y,THETA")
+    _fails_with(capsys, ["--start", "1,2"], "neither a start name nor 'x,y,theta'")
+
+
+# --- B5: -p names and types ------------------------------------------------------------------
+
+def test_a_misspelled_parameter_is_an_error_listing_the_known_ones(capsys):
+    err = _fails_with(capsys, ["-p", "kpp:=5"], "-p kpp: no such wall follower parameter")
+    assert "known: " in err and " kp, " in err and "wall_distance_m" in err
+
+
+@pytest.mark.slow
+def test_an_integer_for_a_float_parameter_runs(tmp_path):
+    report_path = tmp_path / "run.json"
+    assert run_sim.main(["-p", "kp:=5", "-p", "wall_distance_m:=0.2", "--duration", "1",
+                         "--report", str(report_path)]) == 0
+    assert json.loads(report_path.read_text())["steps"] == 20
+
+
+def test_a_bad_parameter_value_is_found_before_the_run(capsys):
+    _fails_with(capsys, ["-p", "kp:=-1"], "rejects its parameters: WallFollower: kp must be")
+
+
+# --- B9: output paths --------------------------------------------------------------------------
+
+def test_bad_output_paths_are_found_before_simulating(capsys, tmp_path):
+    a_file = tmp_path / "a_file"
+    a_file.write_text("")
+    _fails_with(capsys, ["--report", str(tmp_path)], "is a folder: give a file name")
+    _fails_with(capsys, ["--record", str(tmp_path)], "is a folder: give a file name")
+    _fails_with(capsys, ["--report", str(a_file / "r.json")], "is a file, not a folder")
+    _fails_with(capsys, ["--plot", str(tmp_path / "p.xyz")], "matplotlib cannot write '.xyz'")
+    _fails_with(capsys, ["--world", "corridor_loop", "--start", "all", "--plot",
+                         str(a_file / "p.png")], "is a file, not a folder")
+
+
+@pytest.mark.slow
+def test_the_printed_plot_path_is_the_file_written(capsys, tmp_path):
+    assert run_sim.main(["--duration", "1", "--plot", str(tmp_path / "run")]) == 0
+    out = capsys.readouterr().out
+    written = tmp_path / "run.png"
+    assert f"plot written to {written}\n" in out
+    assert written.read_bytes()[:4] == b"\x89PNG"
+
+
+# --- B10: domain ids and bad files -------------------------------------------------------------
+
+@pytest.mark.parametrize("script", [run_sim, run_robot])
+@pytest.mark.parametrize("domain_id", ["-1", "233", "500", "x"])
+def test_domain_ids_outside_0_232_are_refused(capsys, script, domain_id):
+    with pytest.raises(SystemExit) as exit_info:
+        script.parse_args([f"--domain-id={domain_id}"])
+    assert exit_info.value.code == 2
+    assert "0-232" in capsys.readouterr().err
+
+
+def test_domain_id_from_the_environment_is_checked(capsys, monkeypatch):
+    monkeypatch.setenv("ROS_DOMAIN_ID", "500")
+    _fails_with(capsys, ["--duration", "1"], "ROS_DOMAIN_ID in the environment must be within")
+    with pytest.raises(SystemExit):
+        run_robot.parse_args([])
+    assert "0-232" in capsys.readouterr().err
+
+
+def test_bad_params_files_and_controllers_are_one_line_errors(capsys, tmp_path, monkeypatch):
+    cases = {"broken.yaml": ("wall_follower:\n  ros__parameters:\n    kp: [1\n",
+                             "not a ROS 2 params file the nodes can read"),
+             "binary.yaml": (b"\x89PNG\r\n\x1a\n\x00\xff\xfe" * 20,
+                             "not a ROS 2 params file the nodes can read"),
+             "mixed.yaml": ("wall_follower:\n  ros__parameters:\n    kp: [1, a]\n",
+                            "Sequence should be of same type"),
+             "flat.yaml": ("kp: 5\n", "Cannot have a value before ros__parameters")}
+    for name, (content, message) in cases.items():
+        path = tmp_path / name
+        path.write_bytes(content) if isinstance(content, bytes) else path.write_text(content)
+        _fails_with(capsys, ["--params-file", str(path)], message)
+    (tmp_path / "broken_ctrl.py").write_text("class C:\n    def compute_commands(self)\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    _fails_with(capsys, ["--controller", "broken_ctrl:C"],
+                "cannot import module 'broken_ctrl': SyntaxError")
+    with pytest.raises(SystemExit):
+        run_robot.parse_args(["--controller", "broken_ctrl:C"])
+    assert "SyntaxError" in capsys.readouterr().err
