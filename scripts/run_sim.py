@@ -123,6 +123,7 @@ def main(argv=None) -> int:
 def _prepare(args):
     """(world, starts, outputs) with every start and output path checked, or exit code 2."""
     import sim_session  # noqa: F401  (the slow imports, while Ctrl-C can still simply abort)
+
     from amr_common.world import World, WorldError, start_label
     try:
         isolate_local_graph(args.domain_id)

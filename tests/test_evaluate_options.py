@@ -14,16 +14,6 @@ SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
 sys.path.insert(0, str(SCRIPTS))
 import evaluate  # noqa: E402
 
-COURSE_MAP = {"metric": {"boundary": [[-2, -2], [2, -2], [2, 2], [-2, 2]],
-                         "holes": [[[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]]]}}
-
-
-@pytest.fixture
-def course_map(tmp_path):
-    path = tmp_path / "course_map.json"
-    path.write_text(json.dumps(COURSE_MAP))
-    return path
-
 
 def _evaluate(capsys, *argv):
     code = evaluate.main([*argv, "--duration", "1", "--jobs", "1", "--no-sheet"])

@@ -13,17 +13,6 @@ sys.path.insert(0, str(SCRIPTS))
 import run_robot  # noqa: E402
 import run_sim  # noqa: E402
 
-# The course's map JSON: a square room with a box in it, and no named starts.
-COURSE_MAP = {"metric": {"boundary": [[-2, -2], [2, -2], [2, 2], [-2, 2]],
-                         "holes": [[[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]]]}}
-
-
-@pytest.fixture
-def course_map(tmp_path):
-    path = tmp_path / "course_map.json"
-    path.write_text(json.dumps(COURSE_MAP))
-    return path
-
 
 def _fails_with(capsys, argv, message):
     """run_sim.main(argv) exits 2 with `message` on one line, before simulating anything."""
