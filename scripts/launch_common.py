@@ -78,7 +78,7 @@ def read_params_file(path: Path | str) -> dict[str, Any]:
 
     ValueError with a one-line reason for a missing, binary, malformed or unusable file.
     """
-    from amr_evaluation.evaluation_config import load_ros_params_file
+    from amr_evaluation.evaluation import load_ros_params_file
     target = Path(path)
     if not target.is_file():
         raise ValueError(f"--params-file '{path}': no such file")

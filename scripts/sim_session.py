@@ -35,7 +35,7 @@ def _robot_parameters(tuning: dict, params_file, profile_name: str) -> dict:
     -p overrides nor the params file set (the rehearsal's turtlebot3.yaml sets them itself)."""
     from amr_common.controller_loader import DEFAULT_CONTROLLER, load_controller_class
     from amr_evaluation.episode import robot_parameters
-    from amr_evaluation.evaluation_config import load_ros_params_file
+    from amr_evaluation.evaluation import load_ros_params_file
     from amr_sim.profiles import get_profile
     try:
         in_file = load_ros_params_file(params_file)
