@@ -65,7 +65,7 @@ class StopFlag:
         self._previous: dict[int, object] = {}
 
     def install(self) -> "StopFlag":
-        """Handle SIGINT and SIGTERM from now on (main thread only); returns self."""
+        """Make SIGINT and SIGTERM set this flag; uninstall() restores their handlers."""
         for signum in (signal.SIGINT, signal.SIGTERM):
             self._previous[signum] = signal.signal(signum, self._handle)
         return self

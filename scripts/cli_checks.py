@@ -1,5 +1,7 @@
-"""Command-line checks the scripts share: poses with negative numbers, ROS domain ids, and
-output paths checked before a run instead of failing after it."""
+"""Command-line checks the scripts share: negative pose values, domain ids, output paths.
+
+Output paths are checked before a run instead of failing after it.
+"""
 from __future__ import annotations
 
 import argparse
@@ -90,8 +92,10 @@ def check_output_folder(path: str | os.PathLike, what: str) -> Path:
 
 
 def plot_file(path: str | os.PathLike) -> Path:
-    """The file a plot is saved to: PNG when the name has no suffix; ValueError for a format
-    matplotlib cannot write."""
+    """The file a plot is saved to: PNG when the name has no suffix.
+
+    ValueError for a format matplotlib cannot write.
+    """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     target = Path(path)

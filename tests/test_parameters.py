@@ -1,5 +1,8 @@
-"""Integers where a double is expected (`-p kp:=5`): accepted by every node, by -p, --ros-args
-and params files alike; other wrong types fail configure with a reason instead of a crash."""
+"""amr_common.parameters: integers where a double is expected (`-p kp:=5`).
+
+Accepted by every node, by -p, --ros-args and params files alike; other wrong types fail
+configure with a reason instead of a crash.
+"""
 from __future__ import annotations
 
 import os
@@ -14,6 +17,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from amr_common.parameters import declare_parameters, read_parameters
+from tests.processes import terminate
 
 REPO = Path(__file__).resolve().parent.parent
 TABLE = {"gain": (10.0, "a double"), "count": (3, "an integer"), "side": ("right", "a string"),
@@ -96,8 +100,7 @@ def test_wall_follower_executable_survives_an_integer_gain():
         process.send_signal(signal.SIGINT)
         output = "".join(lines) + process.communicate(timeout=20)[0]
     finally:
-        if process.poll() is None:
-            process.kill()
+        terminate(process, 5.0)
     assert "configured:" in output, output
     assert process.returncode == 0, output
     assert "Traceback" not in output and "InvalidParameterType" not in output

@@ -1,5 +1,8 @@
-"""evaluate.py options and config files: start poses (negative numbers included), worlds without
-named starts, integer parameters, bad files and output folders: one-line errors, exit code 2."""
+"""evaluate.py options and config files: start poses, integer parameters, bad input.
+
+Start poses with negative numbers, worlds without named starts, integer parameters, bad files
+and output folders (one-line errors, exit code 2).
+"""
 from __future__ import annotations
 
 import json
