@@ -202,7 +202,7 @@ class SimSession:
             # Stop stepping, then let the recorder take the last step's messages.
             if self.simulator_node._state_machine.current_state[1] == "active":
                 self.simulator_node.trigger_deactivate()
-            self._spin_for(0.3)
+            self._spin_for(0.15)
         return self._report(sim, wall_time)
 
     def _spin_for(self, seconds: float) -> None:
