@@ -8,6 +8,7 @@ does not change discovery, it prints what it uses.
 
   .venv/bin/python scripts/run_robot.py --domain-id 30 --cmd-vel stamped   # Jazzy bringup
   .venv/bin/python scripts/run_robot.py --domain-id 30 --cmd-vel twist     # Humble bringup
+  .venv/bin/python scripts/run_robot.py --domain-id 30 --foxglove --map course_map.json
 Ctrl-C stops the robot: the wall follower publishes a zero command before exiting.
 """
 from __future__ import annotations
@@ -23,8 +24,10 @@ from cli_checks import domain_id_argument  # noqa: E402
 from launch_common import (  # noqa: E402
     ROBOT_PARAMS,
     add_controller_options,
+    add_foxglove_options,
     check_common_options,
     make_robot_graph,
+    make_viewer_nodes,
 )
 
 
@@ -41,6 +44,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     add_controller_options(parser, str(ROBOT_PARAMS), "wall follower ROS params YAML "
                            "(default params/turtlebot3.yaml)")
     parser.add_argument("--dt", type=float, default=None, help="control period in seconds")
+    parser.add_argument("--map", default=None, metavar="MAP", help="also publish this course "
+                        "map JSON / world YAML as /map and /map_markers (amr_map_publisher)")
+    add_foxglove_options(parser)
     args = parser.parse_args(argv)
     if args.domain_id is None:
         try:
@@ -68,6 +74,12 @@ def main(argv=None) -> int:
     nodes = make_robot_graph(None, params_file=args.params_file, dt=args.dt,
                              cmd_vel_stamped=stamped, controller=args.controller,
                              tuning=args.overrides)
+    if args.map:
+        from amr_common.map_publisher import MapPublisherNode
+        from launch_common import overrides_to_parameters
+        nodes.insert(0, MapPublisherNode(parameter_overrides=overrides_to_parameters(
+            {"world": args.map})))
+    nodes = make_viewer_nodes(None, args) + nodes  # shut down last (reverse order)
     manager = LifecycleManager([node.get_name() for node in nodes])
     manager.get_logger().info(f"run_robot: {describe_graph_settings()}; Ctrl-C stops the robot")
     return run_managed(manager, stop, nodes)

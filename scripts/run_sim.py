@@ -13,6 +13,7 @@ Examples:
   .venv/bin/python scripts/run_sim.py --controller my_pkg.my_ctrl:MyController -p kp:=5.0
   .venv/bin/python scripts/run_sim.py --report out/run.json --plot out/run.png
   .venv/bin/python scripts/run_sim.py --record out/run.mcap --duration 60
+  .venv/bin/python scripts/run_sim.py --profile turtlebot3 --realtime --foxglove   # live
   .venv/bin/python scripts/run_sim.py --world course_map.json --start -1.0,-1.0,1.57
 Local runs are isolated: loopback discovery and a free ROS_DOMAIN_ID (printed at startup).
 Ctrl-C ends the whole run: the controller commands zero and the partial report is written,
@@ -39,6 +40,7 @@ from launch_common import (  # noqa: E402
     ROBOT_PARAMS,
     SIM_PARAMS,
     add_controller_options,
+    add_foxglove_options,
     check_common_options,
 )
 
@@ -74,6 +76,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--record", default=None, help="record topics to this .mcap file (one "
                         "file per start with --start all: NAME-START.mcap)")
     parser.add_argument("--gui", action="store_true", help="live view window (pygame)")
+    add_foxglove_options(parser)
     parser.add_argument("--domain-id", type=domain_id_argument, default=None,
                         help="ROS_DOMAIN_ID, 0-232 (default: $ROS_DOMAIN_ID if set and not 0, "
                         "else a free one)")

@@ -23,6 +23,7 @@ from launch_common import (
     ROBOT_PARAMS,
     SIM_PARAMS,
     make_robot_graph,
+    make_viewer_nodes,
     make_wall_follower,
     overrides_to_parameters,
 )
@@ -110,7 +111,9 @@ class SimSession:
         sim_values = {"world": args.world, "start": start_label(self.start),
                       "profile": args.profile, "dt": args.dt, "seed": args.seed,
                       "mode": "realtime" if args.realtime else "lockstep",
-                      "enable_localization": args.enable_localization}
+                      "enable_localization": args.enable_localization,
+                      # Viewers get a whole TF tree; a localization node sends its own map -> odom.
+                      "map_to_odom_from_truth": not args.enable_localization}
         if args.goal:
             sim_values["goal"] = list(args.goal)
         self.simulator_node = SimulatorNode(
@@ -131,10 +134,12 @@ class SimSession:
             self.control_nodes = [make_wall_follower(
                 self.context, params_file=params_file, overrides=tuning)]
         self.wall_follower = self.control_nodes[-1]
-        order = [node.get_name() for node in self.control_nodes] + [
+        # Viewers (the Foxglove bridge) first: they see the graph from its first message.
+        self.viewer_nodes = make_viewer_nodes(self.context, args, use_sim_time=True)
+        order = [node.get_name() for node in [*self.viewer_nodes, *self.control_nodes]] + [
             self.simulator_node.get_name()]
         self.manager = LifecycleManager(order, context=self.context)
-        for node in [*self.control_nodes, self.simulator_node, self.manager]:
+        for node in [*self.viewer_nodes, *self.control_nodes, self.simulator_node, self.manager]:
             self.executor.add_node(node)
         self.trajectory: list[list[float]] = []
         self.wall_errors: list[float] = []
@@ -212,9 +217,17 @@ class SimSession:
 
     def _attach_recorder(self) -> None:
         from geometry_msgs.msg import Twist, TwistStamped
-        from nav_msgs.msg import Odometry
+        from nav_msgs.msg import OccupancyGrid, Odometry
         from sensor_msgs.msg import LaserScan
-        topics = {"/scan": LaserScan, "/ground_truth": Odometry, "/odometry": Odometry}
+        from tf2_msgs.msg import TFMessage
+        from visualization_msgs.msg import MarkerArray
+
+        from amr_common.tf import TF_STATIC_LISTENER_QOS
+        topics = {"/scan": LaserScan, "/ground_truth": Odometry, "/odometry": Odometry,
+                  "/tf": TFMessage, "/tf_static": TFMessage, "/map": OccupancyGrid,
+                  "/map_markers": MarkerArray}
+        latched = {topic: TF_STATIC_LISTENER_QOS for topic in ("/tf_static", "/map",
+                                                                "/map_markers")}
         if self.rehearsal:  # the simulated robot's pose-only /odom, before amr_odometry
             topics["/odom"] = Odometry
         stamped = not self.rehearsal or self.wall_follower.get_parameter(
@@ -222,10 +235,10 @@ class SimSession:
         topics["/cmd_vel"] = TwistStamped if stamped else Twist
         recorder_node = rclpy.create_node("mcap_recorder", context=self.context)
         self.executor.add_node(recorder_node)  # destroyed with the others in close()
-        # One time base per file: simulated time. In lockstep every message is stamped with it
-        # (exact log times); in real time the controller stamps with the wall clock, so each
-        # message is logged when it arrives, on the simulated clock.
-        self.recorder.attach(recorder_node, topics, clock=lambda: self._sim_time_ns,
+        # One time base per file, simulated time. In lockstep every message is stamped with it
+        # (exact log times; /tf by its first transform); in real time the controller stamps
+        # with the wall clock, so each message is logged when it arrives, on the simulated clock.
+        self.recorder.attach(recorder_node, topics, qos=latched, clock=lambda: self._sim_time_ns,
                              log_time="receive" if self.args.realtime else "header")
 
     def _report(self, sim, wall_time: float) -> dict:
@@ -256,7 +269,8 @@ class SimSession:
             shutdown_node(node)
         if self.recorder is not None:
             self._spin_for(0.1)  # the recording ends with that zero command
-        shutdown_node(self.simulator_node)
+        for node in [self.simulator_node, *self.viewer_nodes]:
+            shutdown_node(node)
         if self.recorder is not None:
             self.recorder.close()
         if self.view is not None:

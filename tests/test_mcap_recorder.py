@@ -163,7 +163,15 @@ def test_stamp_is_read_from_serialized_bytes():
     ns = 1_234_567_891_011
     assert cdr_header_stamp_ns(serialize_message(_scan(ns, 0))) == ns
     assert cdr_header_stamp_ns(serialize_message(_command(ns, 0))) == ns
-    assert cdr_header_stamp_ns(serialize_message(LaserScan())) == 0  # a simulation's t = 0
+    assert cdr_header_stamp_ns(serialize_message(LaserScan())) is None  # zero: unset
+    assert cdr_header_stamp_ns(serialize_message(LaserScan()), zero_is_unset=False) == 0
+    from geometry_msgs.msg import TransformStamped
+    from tf2_msgs.msg import TFMessage
+    transform = TransformStamped()
+    _stamp(transform, ns)
+    tf = serialize_message(TFMessage(transforms=[transform]))
+    assert cdr_header_stamp_ns(tf, in_sequence=True) == ns
+    assert cdr_header_stamp_ns(serialize_message(TFMessage()), in_sequence=True) is None
     assert cdr_header_stamp_ns(b"\x00\x01\x00") is None
 
 
