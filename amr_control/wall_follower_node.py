@@ -23,7 +23,6 @@ from typing import Any
 import numpy as np
 from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from rclpy.publisher import Publisher
 from sensor_msgs.msg import LaserScan
@@ -36,6 +35,7 @@ from amr_common.controller_loader import (
 )
 from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.node_runner import run_lifecycle_node
+from amr_common.parameters import declare_parameters, read_parameters
 from amr_common.qos import RELIABLE_10, scan_qos
 from amr_common.robot import (
     MAX_ANGULAR_SPEED,
@@ -76,10 +76,24 @@ _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
 
 def _load_controller_spec(node: GuardedLifecycleNode) -> str:
     """The `controller` parameter, declared early so its tuning parameters can be declared."""
-    if not node.has_parameter("controller"):
-        default, description = _NODE_PARAMETERS["controller"]
-        node.declare_parameter("controller", default, ParameterDescriptor(description=description))
+    declare_parameters(node, {"controller": _NODE_PARAMETERS["controller"]})
     return str(node.get_parameter("controller").value)
+
+
+def tuning_table(controller_class: type) -> dict[str, tuple[Any, str]]:
+    """The controller's tuning parameters the node declares: name -> (default, description).
+
+    From the class's `parameter_descriptions()`, if it has one.
+    """
+    described = getattr(controller_class, "parameter_descriptions", None)
+    table = described() if callable(described) else {}
+    return {name: spec for name, spec in table.items()
+            if name not in _NODE_PARAMETERS and name != "use_sim_time"}
+
+
+def parameter_names(controller_class: type) -> list[str]:
+    """Every parameter the node declares with this controller class (run scripts check -p)."""
+    return sorted({*_NODE_PARAMETERS, *tuning_table(controller_class), "use_sim_time"})
 
 
 class WallFollowerNode(GuardedLifecycleNode):
@@ -94,19 +108,13 @@ class WallFollowerNode(GuardedLifecycleNode):
 
     def __init__(self, node_name: str = "wall_follower", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
-        for name, (default, description) in _NODE_PARAMETERS.items():
-            if not self.has_parameter(name):
-                self.declare_parameter(name, default, ParameterDescriptor(description=description))
+        # Numbers take ints for doubles (`-p kp:=5`): amr_common.parameters.
+        declare_parameters(self, _NODE_PARAMETERS)
         # The controller's tuning values become ROS parameters when the class describes them.
-        self._tuning_names: list[str] = []
+        self._tuning: dict[str, tuple[Any, str]] = {}
         try:
-            controller_class = load_controller_class(_load_controller_spec(self))
-            described = getattr(controller_class, "parameter_descriptions", None)
-            for name, (default, description) in (described() if described else {}).items():
-                if name in _NODE_PARAMETERS or self.has_parameter(name):
-                    continue
-                self.declare_parameter(name, default, ParameterDescriptor(description=description))
-                self._tuning_names.append(name)
+            self._tuning = tuning_table(load_controller_class(_load_controller_spec(self)))
+            declare_parameters(self, self._tuning)
         except ControllerSpecError as exc:
             self.get_logger().error(f"{exc} (configure will fail)")
         self._lidar_offset_from_tf: float | None = None  # kept across configures
@@ -137,9 +145,13 @@ class WallFollowerNode(GuardedLifecycleNode):
         synchronizer. A bad parameter or a controller that cannot be loaded or built returns
         FAILURE with the reason logged, before anything is created.
         """
-        p = {name: self.get_parameter(name).value for name in _NODE_PARAMETERS}
-        problems = []
-        if not (isinstance(p["dt"], float) and math.isfinite(p["dt"]) and p["dt"] > 0):
+        p, problems = read_parameters(self, _NODE_PARAMETERS)
+        tuning, tuning_problems = read_parameters(self, self._tuning)
+        problems += tuning_problems
+        if problems:
+            self.get_logger().error("configure failed: " + "; ".join(problems))
+            return TransitionCallbackReturn.FAILURE
+        if not (math.isfinite(p["dt"]) and p["dt"] > 0):
             problems.append(f"dt must be a positive number of seconds (got {p['dt']})")
         if p["queue_size"] < 1:
             problems.append(f"queue_size must be >= 1 (got {p['queue_size']})")
@@ -152,7 +164,6 @@ class WallFollowerNode(GuardedLifecycleNode):
         if problems:
             self.get_logger().error("configure failed: " + "; ".join(problems))
             return TransitionCallbackReturn.FAILURE
-        tuning = {name: self.get_parameter(name).value for name in self._tuning_names}
         if "lidar_offset_x_m" in tuning and self._lidar_offset_from_tf is not None:
             tuning["lidar_offset_x_m"] = self._lidar_offset_from_tf
         try:

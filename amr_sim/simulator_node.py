@@ -26,7 +26,6 @@ from typing import Any, Callable
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.clock import Clock, ClockType
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from rosgraph_msgs.msg import Clock as ClockMessage
@@ -35,6 +34,7 @@ from sensor_msgs.msg import LaserScan
 from amr_common.geometry import angle_difference
 from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.node_runner import run_lifecycle_node
+from amr_common.parameters import declare_parameters, read_parameters
 from amr_common.qos import RELIABLE_10, scan_qos
 from amr_common.ros_conversions import (
     command_from_twist,
@@ -48,8 +48,8 @@ from amr_common.world import World
 from amr_sim.simulator import Simulator
 from amr_sim.simulator_params import (
     DEFAULT_START,
-    NUMERIC_PARAMETERS,
-    PARAMETERS,
+    PARAMETER_TABLE,
+    PARAMETER_TYPES,
     check_parameters,
 )
 from amr_sim.simulator_tf import SimulatorTf
@@ -76,11 +76,8 @@ class SimulatorNode(GuardedLifecycleNode):
 
     def __init__(self, node_name: str = "amr_simulator", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
-        for name, (default, type_, description) in PARAMETERS.items():
-            if not self.has_parameter(name):
-                self.declare_parameter(name, default, ParameterDescriptor(
-                    description=description, type=type_,
-                    dynamic_typing=name in NUMERIC_PARAMETERS))
+        # Numbers take ints for doubles (`-p dt:=1`): amr_common.parameters.
+        declare_parameters(self, PARAMETER_TABLE, types=PARAMETER_TYPES)
         # Run scripts append callables here; each is called with the simulator after a step.
         self.on_step: list[Callable[[Any], None]] = []
         self._reset()
@@ -112,7 +109,10 @@ class SimulatorNode(GuardedLifecycleNode):
 
     def _read_parameters(self) -> dict[str, Any]:
         """Parameter values, checked; raises ValueError naming every bad one."""
-        return check_parameters({name: self.get_parameter(name).value for name in PARAMETERS})
+        values, problems = read_parameters(self, PARAMETER_TABLE, types=PARAMETER_TYPES)
+        if problems:
+            raise ValueError("; ".join(problems))
+        return check_parameters(values)
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Check the parameters, load the world, build the Simulator and create the topics.

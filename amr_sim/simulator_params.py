@@ -9,12 +9,14 @@ from typing import Any
 
 from rcl_interfaces.msg import ParameterType
 
+from amr_common.world import parse_start
+
 DEFAULT_START = "outer"  # the course's "outer corridor" start in lab02
 _S, _B, _D, _DA, _I = (ParameterType.PARAMETER_STRING, ParameterType.PARAMETER_BOOL,
                        ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_DOUBLE_ARRAY,
                        ParameterType.PARAMETER_INTEGER)
 # name: (default, type, description). Numbers accept ints or doubles (`-p dt:=1` must not kill
-# the process): they are declared with dynamic typing and checked in on_configure.
+# the process): amr_common.parameters declares them with dynamic typing, on_configure checks.
 PARAMETERS: dict[str, tuple[Any, int, str]] = {
     "world": ("lab02", _S, "Bundled world name or path to a world .yaml / course map .json"),
     "start": (DEFAULT_START, _S, "Start pose: a name from the world file or 'x,y,theta' "
@@ -49,26 +51,10 @@ PARAMETERS: dict[str, tuple[Any, int, str]] = {
                               "/map_markers (walls) once, latched"),
     "map_resolution": (0.05, _D, "Cell size of /map in metres (0.005 to 1)"),
 }
-NUMERIC_PARAMETERS = {"dt", "seed", "command_timeout", "goal", "goal_tolerance",
-                      "map_resolution"}
-
-
-def parse_start(text: str) -> str | tuple[float, float, float] | None:
-    """'name' -> name, 'x,y,theta' -> floats, '' -> None (the world's first start)."""
-    text = text.strip()
-    if not text:
-        return None
-    if "," not in text:
-        return text
-    parts = text.split(",")
-    try:
-        values = tuple(float(p) for p in parts)
-    except ValueError:
-        values = ()
-    if len(values) != 3 or not all(math.isfinite(v) for v in values):
-        raise ValueError(f"start '{text}' is neither a start name nor 'x,y,theta' "
-                         "with three finite numbers")
-    return values
+# The forms amr_common.parameters declares and reads.
+PARAMETER_TABLE = {name: (default, description)
+                   for name, (default, _, description) in PARAMETERS.items()}
+PARAMETER_TYPES = {name: type_ for name, (_, type_, _) in PARAMETERS.items()}
 
 
 def check_parameters(values: dict[str, Any]) -> dict[str, Any]:

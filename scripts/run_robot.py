@@ -19,7 +19,8 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from amr_common.ros_env import describe_graph_settings  # noqa: E402
+from amr_common.ros_env import describe_graph_settings, environment_domain_id  # noqa: E402
+from cli_checks import domain_id_argument  # noqa: E402
 from launch_common import (  # noqa: E402
     ROBOT_PARAMS,
     add_controller_options,
@@ -34,8 +35,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter,
                                      epilog=__doc__.split("\n\n", 1)[1])
-    parser.add_argument("--domain-id", type=int, default=None,
-                        help="ROS_DOMAIN_ID shared with the robot (default: $ROS_DOMAIN_ID)")
+    parser.add_argument("--domain-id", type=domain_id_argument, default=None,
+                        help="ROS_DOMAIN_ID shared with the robot, 0-232 (default: "
+                        "$ROS_DOMAIN_ID)")
     parser.add_argument("--cmd-vel", choices=["stamped", "twist"], default=None,
                         help="/cmd_vel type: stamped = TwistStamped (Jazzy bringup), twist = "
                         "Twist (Humble); default from the params file")
@@ -46,8 +48,11 @@ def parse_args(argv=None) -> argparse.Namespace:
                         "map JSON / world YAML as /map and /map_markers (amr_map_publisher)")
     add_foxglove_options(parser)
     args = parser.parse_args(argv)
-    if args.domain_id is not None and not 0 <= args.domain_id <= 232:
-        parser.error("--domain-id must be within 0-232")
+    if args.domain_id is None:
+        try:
+            environment_domain_id()
+        except ValueError as exc:
+            parser.error(str(exc))
     check_common_options(parser, args)
     return args
 
