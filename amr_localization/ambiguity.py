@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -66,17 +67,19 @@ class AmbiguityGuard:
                           math.remainder(theta + w * dt, 2.0 * math.pi))
 
     def observe(self, estimate, estimate_match: float, matcher: ScanMatcher, ranges: np.ndarray,
-                tolerance: float, particles: np.ndarray,
-                weights: np.ndarray) -> RivalTrack | None:
-        """After a measurement update: re-anchor open tracks on their particles and refute
-        those that no longer explain the scan while the estimate does.
+                tolerance: float, particles: np.ndarray, weights: np.ndarray,
+                search: Callable[[tuple], Alternative]) -> RivalTrack | None:
+        """After a measurement update: re-anchor open tracks on their particles, refute those
+        that no longer explain the scan while the estimate does.
 
-        Every decision compares locally refined poses (the best match within a few cm and
-        degrees, pose_search.refine), so a hypothesis is judged by how well the BEST pose near it
-        explains the scan, not by a small error of its current pose. Returns the best open track
-        if the evidence turned the other way: it explains at least localize_fraction of the rays
-        while the estimate explains fewer than rival_fraction. The caller moves the filter there;
-        the old estimate is then a refuted track."""
+        Decisions compare locally refined poses (pose_search.refine), so a hypothesis is judged
+        by the best pose near it, not by a small error of its current pose; before refuting,
+        `search(pose)` (PoseSearch.best_near) must find NO pose within the track's
+        neighbourhood (TRACK_DISTANCE_M, TRACK_ANGLE_RAD: the same one that later matches
+        rivals to it) that explains the scan. Returns the best open track if the evidence
+        turned the other way: it explains at least localize_fraction of the rays while the
+        estimate explains fewer than rival_fraction. The caller moves the filter there; the
+        old estimate is then a refuted track."""
         winner = None
         refined_estimate: float | None = None
         for track in self.open_tracks:
@@ -87,11 +90,14 @@ class AmbiguityGuard:
             if not decisive:
                 track.last_match = match
                 continue
-            better = refine(track.pose, matcher, ranges, tolerance)
-            track.pose, match = better.pose, better.match_fraction
-            track.last_match = match
             if refined_estimate is None:
                 refined_estimate = refine(estimate, matcher, ranges, tolerance).match_fraction
+            better = refine(track.pose, matcher, ranges, tolerance)
+            if better.match_fraction < self.rival_fraction and \
+                    refined_estimate >= self.localize_fraction:
+                better = search(track.pose)  # the whole neighbourhood, before refuting
+            track.pose, match = better.pose, better.match_fraction
+            track.last_match = match
             if match < self.rival_fraction and refined_estimate >= self.localize_fraction:
                 track.refuted = True
             elif match >= self.localize_fraction and refined_estimate < self.rival_fraction and \
@@ -105,7 +111,8 @@ class AmbiguityGuard:
 
     def unresolved(self, alternatives: list[Alternative]) -> list[Alternative]:
         """The rivals among `alternatives` (explaining >= rival_fraction) that no refuted track
-        accounts for; each becomes (or updates) an open track."""
+        accounts for; each one not near any track becomes an open track (a track keeps its own
+        pose: the search's coarse pose may be a neighbour that fits less well)."""
         left = []
         for alternative in alternatives:
             if alternative.match_fraction < self.rival_fraction:
@@ -117,8 +124,6 @@ class AmbiguityGuard:
             if track is None:
                 self.tracks.append(RivalTrack(alternative.pose,
                                               last_match=alternative.match_fraction))
-            else:
-                track.pose = alternative.pose
             left.append(alternative)
         return left
 

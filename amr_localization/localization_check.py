@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -97,13 +98,17 @@ class ScanMatcher:
     """Fraction of a scan's rays that a pose explains, ray-cast exactly against the walls."""
 
     def __init__(self, segments: np.ndarray, angle_min: float, angle_increment: float,
-                 rays: int, range_min: float, range_max: float, lidar_offset: float) -> None:
+                 rays: int, range_min: float, range_max: float, lidar_offset: float,
+                 allowed: Callable[[float, float], bool] | None = None) -> None:
+        """`allowed(x, y)`: False where the robot centre cannot be (a pose there explains
+        nothing: match fraction 0)."""
         angles = angle_min + angle_increment * np.arange(rays)
         self.segments = np.ascontiguousarray(segments, dtype=np.float64)
         self.base_cos, self.base_sin = np.cos(angles), np.sin(angles)
         self.range_min, self.range_max = float(range_min), float(range_max)
         self.lidar_offset = float(lidar_offset)
         self.rays = int(rays)
+        self.allowed = allowed
         self._expected = np.empty(rays)
         self._zeros = np.zeros(rays)
 
@@ -120,6 +125,8 @@ class ScanMatcher:
                        tolerance: float) -> float:
         """Share of rays where reading and expectation agree within `tolerance` (m), or where
         both have no return. Readings: NaN, inf, 0.0 or outside the limits = no return."""
+        if self.allowed is not None and not self.allowed(pose[0], pose[1]):
+            return 0.0
         expected = self.expected(pose)
         r = np.asarray(ranges, dtype=np.float64)
         with np.errstate(invalid="ignore"):

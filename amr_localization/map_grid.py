@@ -69,6 +69,14 @@ class MapGrid:
         gx, gy = np.meshgrid(xs, ys)
         return np.column_stack([gx.ravel(), gy.ravel()])
 
+    def cell_of(self, x: float, y: float) -> int:
+        """Row-major index of the cell holding (x, y), or -1 off the grid (or not finite)."""
+        fi = (x - self.x0) / self.resolution
+        fj = (y - self.y0) / self.resolution
+        if not (0.0 <= fi < self.nx and 0.0 <= fj < self.ny):
+            return -1
+        return int(fj) * self.nx + int(fi)
+
     def robot_cells(self, radius: float = ROBOT_RADIUS, slack: float = 0.0) -> np.ndarray:
         """(ny * nx,) uint8: 1 where a robot centre may be: inside, clearance >= radius - slack."""
         return (self.inside & (self.clearance >= radius - slack)).astype(np.uint8)

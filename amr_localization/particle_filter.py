@@ -22,7 +22,7 @@ import numpy as np
 
 from amr_common.robot import ROBOT_RADIUS
 from amr_common.world import World
-from amr_localization.ambiguity import AmbiguityGuard
+from amr_localization.ambiguity import TRACK_ANGLE_RAD, TRACK_DISTANCE_M, AmbiguityGuard
 from amr_localization.beam_model import log_likelihood_table, log_likelihoods, reading_to_mm
 from amr_localization.expected_ranges import expected_range_table
 from amr_localization.localization_check import (
@@ -173,7 +173,14 @@ class ParticleFilter:
         self._beam_bins = np.remainder(angles * bins_per_rad, self.table.angles)
         self._range_limits = (range_min, range_max)
         self.matcher = ScanMatcher(self.world.segments, angle_min, angle_increment, rays,
-                                   range_min, range_max, self.params["lidar_offset_x_m"])
+                                   range_min, range_max, self.params["lidar_offset_x_m"],
+                                   allowed=self.robot_can_be_at)
+
+    def robot_can_be_at(self, x: float, y: float) -> bool:
+        """True if a particle's centre at (x, y) is in the free space, clear of the walls
+        (robot radius, less the grid's slack)."""
+        cell = self.table.grid.cell_of(x, y)
+        return cell >= 0 and bool(self._robot_ok[cell])
 
     @property
     def scan_rays(self) -> int:
@@ -230,7 +237,7 @@ class ParticleFilter:
         if not self.localized and self.guard.tracks:
             winner = self.guard.observe(self.estimate, self.match_fraction, self.matcher, ranges,
                                         self.params["match_tolerance_m"], self.particles,
-                                        self.weights)
+                                        self.weights, self._searcher(ranges))
             if winner is not None:
                 self._move_to(winner.pose)
                 self.events.append(("switch", self.total_updates))
@@ -249,6 +256,19 @@ class ParticleFilter:
                 len(self.weights):
             self._resample()
         return True
+
+    def _searcher(self, ranges: np.ndarray):
+        """best_near(pose) of PoseSearch for this scan, over a rival track's neighbourhood."""
+        p = self.params
+        range_min, range_max = self._range_limits
+        z_mm = reading_to_mm(ranges[self._beams], range_min, range_max)
+        limits = (int(math.ceil(range_min * 1000.0)), int(range_max * 1000.0))
+
+        def search(pose):
+            return self.search.best_near(pose, TRACK_DISTANCE_M, TRACK_ANGLE_RAD,
+                                         self._beam_bins, z_mm, limits, p["lidar_offset_x_m"],
+                                         self.matcher, ranges, p["match_tolerance_m"])
+        return search
 
     def _check_ambiguity(self, ranges: np.ndarray) -> str:
         """Declare the candidate only if no other pose explains the scan nearly as well;
@@ -306,7 +326,8 @@ class ParticleFilter:
                         int(math.ceil(range_min * 1000.0)), int(range_max * 1000.0), scores)
         best = scores.max()
         if not np.isfinite(best):  # every particle inside a wall or off the map
-            log.warning("no particle is in the free space: global search")
+            log.info("every particle is in a wall or off the map (an impossible hypothesis): "
+                     "global search")
             self.initialize_global()
             return
         scores -= best

@@ -153,6 +153,42 @@ class PoseSearch:
         poses[:, 2] = np.remainder(theta + math.pi, 2.0 * math.pi) - math.pi
         return poses
 
+    def best_near(self, pose, radius: float, angle: float, beam_bins, z_mm, range_limits_mm,
+                  lidar_offset: float, matcher: ScanMatcher, ranges: np.ndarray,
+                  match_tolerance: float) -> Alternative:
+        """The pose within `radius` (m) and `angle` (rad) of `pose` that explains the scan best:
+        coarse scores of that neighbourhood, then the best three distinct candidates (and
+        `pose` itself) refined exactly. Used before calling a hypothesis refuted: refuted must
+        mean that NO pose near it explains the scan, not that its current pose drifted."""
+        grid, table = self.table.grid, self.table
+        centres = self.centres[self.cells]
+        near = np.flatnonzero(np.hypot(centres[:, 0] - pose[0], centres[:, 1] - pose[1])
+                              <= radius)
+        candidates = [tuple(pose)]
+        if near.size:
+            cells = np.ascontiguousarray(self.cells[near])
+            scores = np.empty((len(cells), self.headings), dtype=np.int32)
+            order = interleaved_order(len(beam_bins))
+            score_poses(cells, self.centres, self.headings, table.ranges, table.angles,
+                        grid.x0, grid.y0, grid.resolution, grid.nx, lidar_offset,
+                        np.ascontiguousarray(beam_bins[order]),
+                        np.ascontiguousarray(z_mm[order]), self.tolerance_mm,
+                        range_limits_mm[0], range_limits_mm[1], len(beam_bins), scores)
+            headings = np.arange(self.headings) * self.step[1]
+            off = np.abs(np.remainder(headings - pose[2] + math.pi, 2.0 * math.pi) - math.pi)
+            scores[:, off > angle] = -1
+            for flat in np.argsort(-scores.ravel(), kind="stable")[:64]:
+                c, h = divmod(int(flat), self.headings)
+                x, y = self.centres[cells[c]]
+                candidate = (float(x), float(y), math.remainder(h * self.step[1], 2.0 * math.pi))
+                if not any(close_poses(candidate, other, 0.05, math.radians(5.0))
+                           for other in candidates):
+                    candidates.append(candidate)
+                if len(candidates) >= 4:
+                    break
+        refined = [refine(c, matcher, ranges, match_tolerance, self.step) for c in candidates]
+        return max(refined, key=lambda a: a.match_fraction)
+
     def alternatives(self, estimate, beam_bins, z_mm, range_limits_mm, lidar_offset: float,
                      matcher: ScanMatcher, ranges: np.ndarray, match_tolerance: float,
                      exclusion_m: float = 0.15,
