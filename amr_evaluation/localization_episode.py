@@ -166,9 +166,9 @@ def run_localization_episode(world: World | str, start=None,
                     next_odom += odom_period
         started = time.perf_counter()
         pf.predict(held_v, held_w, sim.dt)
-        if sim.scan_time != scan_time:
-            scan_time = sim.scan_time
-            pf.correct(z_scan)
+        new_scan = sim.scan_time != scan_time
+        scan_time = sim.scan_time
+        pf.correct(z_scan, new_scan=new_scan)
         filter_time += time.perf_counter() - started
         particles_max = max(particles_max, pf.particle_count)
         truth[k] = (sim.time, *sim.pose)

@@ -205,16 +205,19 @@ class ParticleFilter:
         since[1] += abs(w) * dt
         since[2] += dt
 
-    def update_due(self) -> bool:
-        """True when the robot moved or turned enough, or enough time passed, since the last
-        measurement update."""
+    def update_due(self, new_scan: bool = True) -> bool:
+        """True when a measurement update is due: for a new scan, once the robot moved or turned
+        enough or update_max_interval_s passed since the last update; for a scan seen before
+        (held between sensor updates, or a stationary robot's identical one) only by time."""
         p, (distance, angle, elapsed) = self.params, self._since_update
-        return (distance >= p["update_min_distance_m"] or angle >= p["update_min_angle_rad"]
-                or elapsed >= p["update_max_interval_s"])
+        if elapsed >= p["update_max_interval_s"]:
+            return True
+        return new_scan and (distance >= p["update_min_distance_m"]
+                             or angle >= p["update_min_angle_rad"])
 
-    def correct(self, ranges: np.ndarray, force: bool = False) -> bool:
-        """Weigh the particles with a NEW scan (if update_due() or force), resample, re-check
-        the localized flag. Returns True if a measurement update happened."""
+    def correct(self, ranges: np.ndarray, force: bool = False, new_scan: bool = True) -> bool:
+        """Weigh the particles with the scan (if update_due(new_scan) or force), resample,
+        re-check the localized flag. Returns True if a measurement update happened."""
         if self.matcher is None:
             raise RuntimeError("set_scan_geometry() before correct()")
         ranges = np.asarray(ranges, dtype=np.float64)
@@ -222,7 +225,7 @@ class ParticleFilter:
             raise ValueError(f"scan has {ranges.size} rays, the scan geometry {self.matcher.rays}")
         if self._seed_pending:
             self._seed_from_scan(ranges)
-        elif not (force or self.update_due()):
+        elif not (force or self.update_due(new_scan)):
             return False
         self._weigh(ranges)
         self._since_update = [0.0, 0.0, 0.0]

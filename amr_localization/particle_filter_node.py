@@ -7,8 +7,9 @@ Thin: messages become ParticleFilter.predict / correct calls and results become 
 - Every approximately synchronized (/odometry, /scan) pair is answered with exactly one /pose,
   stamped with the scan's stamp, in frame `map` (the lockstep loop and the simulator's
   /cmd_vel-/pose synchronization must never stall). A scan whose readings differ from the
-  previous one (the lockstep simulator re-publishes the last 5 Hz scan every step) is weighed
-  when the robot moved enough (ParticleFilter.correct).
+  previous one is weighed when the robot moved enough; one seen before (the lockstep simulator
+  re-publishes the last 5 Hz scan every step; a standing robot's ideal scan repeats) only every
+  update_max_interval_s (ParticleFilter.correct).
 - /amcl_pose (geometry_msgs/PoseWithCovarianceStamped) after every measurement update;
   /particles (geometry_msgs/PoseArray) at most every `particles_period_s` of stamp time.
 - /initialpose (RViz's and Foxglove's "2D Pose Estimate") re-initializes around that pose.
@@ -100,7 +101,7 @@ class ParticleFilterNode(LifecycleNode):
     # --- lifecycle -------------------------------------------------------------------------
     def _reset_runtime(self) -> None:
         self.filter: ParticleFilter | None = None
-        self._publishers: dict[str, Any] = {}
+        self._outputs: dict[str, Any] = {}
         self._subscribers: list = []
         self._initialpose_subscription = None
         self._synchronizer = None
@@ -149,7 +150,7 @@ class ParticleFilterNode(LifecycleNode):
         self.node_params = node
         self._pose_message = PoseStamped()
         self._pose_message.header.frame_id = node["map_frame"]
-        self._publishers = {
+        self._outputs = {
             "pose": self.create_lifecycle_publisher(PoseStamped, node["pose_topic"],
                                                     RELIABLE_10),
             "amcl_pose": self.create_lifecycle_publisher(
@@ -211,7 +212,7 @@ class ParticleFilterNode(LifecycleNode):
             subscriber.close()
         if self._initialpose_subscription is not None:
             self.destroy_subscription(self._initialpose_subscription)
-        for publisher in self._publishers.values():
+        for publisher in self._outputs.values():
             self.destroy_lifecycle_publisher(publisher)
         self._reset_runtime()
 
@@ -247,15 +248,17 @@ class ParticleFilterNode(LifecycleNode):
         ranges = self._usable_ranges(scan)
         if ranges is not None:
             raw = ranges.tobytes()
-            if raw != self._last_ranges:  # a new reading, not the held one again
+            new_scan = raw != self._last_ranges  # not the held one again
+            if new_scan:
                 self._last_ranges = raw
                 self._last_scan_ns = stamp_ns
-                try:
-                    if self.filter.correct(ranges):
-                        self._publish_amcl_pose(scan.header.stamp)
-                except Exception as exc:  # never take the executor down
-                    self.get_logger().error(f"measurement update failed: {exc!r}",
-                                            throttle_duration_sec=2.0)
+            try:
+                if self.filter.correct(ranges, new_scan=new_scan):
+                    self._last_scan_ns = stamp_ns
+                    self._publish_amcl_pose(scan.header.stamp)
+            except Exception as exc:  # never take the executor down
+                self.get_logger().error(f"measurement update failed: {exc!r}",
+                                        throttle_duration_sec=2.0)
         self._publish_pose(scan.header.stamp, stamp_ns)
         self._publish_particles(scan.header.stamp, stamp_ns)
 
@@ -308,7 +311,7 @@ class ParticleFilterNode(LifecycleNode):
         message.header.stamp = stamp
         _fill_pose(message.pose, (x, y, theta) if finite else (0.0, 0.0, 0.0))
         message.localized = finite and self.localized(stamp_ns)
-        self._publishers["pose"].publish(message)
+        self._outputs["pose"].publish(message)
         self.pose_count += 1
 
     def _publish_amcl_pose(self, stamp) -> None:
@@ -323,14 +326,14 @@ class ParticleFilterNode(LifecycleNode):
         index = [0, 1, 5]  # x, y, yaw in ROS's (x, y, z, roll, pitch, yaw) order
         covariance[np.ix_(index, index)] = cov
         message.pose.covariance = covariance.ravel().tolist()
-        self._publishers["amcl_pose"].publish(message)
+        self._outputs["amcl_pose"].publish(message)
 
     def _publish_particles(self, stamp, stamp_ns: int) -> None:
         period_ns = int(self.node_params["particles_period_s"] * 1e9)
         if self._last_particles_ns is not None and 0 <= stamp_ns - self._last_particles_ns \
                 < period_ns:
             return
-        publisher = self._publishers["particles"]
+        publisher = self._outputs["particles"]
         if publisher.get_subscription_count() == 0:
             return
         self._last_particles_ns = stamp_ns
