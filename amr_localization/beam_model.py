@@ -98,12 +98,15 @@ def log_likelihoods_numpy(particles, count, table, angles, x0, y0, resolution, n
         fi = (x - x0) / resolution
         fj = (y - y0) / resolution
         on_grid = (fi >= 0) & (fj >= 0) & (fi < nx) & (fj < ny)
-    cell = np.where(on_grid, fj.astype(np.int64) * nx + fi.astype(np.int64), 0)
+    fi, fj = np.where(on_grid, fi, 0.0), np.where(on_grid, fj, 0.0)
+    cell = fj.astype(np.int64) * nx + fi.astype(np.int64)
     ok = on_grid & (robot_ok[cell] != 0)
-    li = ((x + lidar_offset * np.cos(theta) - x0) / resolution).astype(np.int64)
-    lj = ((y + lidar_offset * np.sin(theta) - y0) / resolution).astype(np.int64)
+    lx = np.where(ok, x + lidar_offset * np.cos(theta), x0)
+    ly = np.where(ok, y + lidar_offset * np.sin(theta), y0)
+    li = ((lx - x0) / resolution).astype(np.int64)
+    lj = ((ly - y0) / resolution).astype(np.int64)
     row = np.where(ok, lj * nx + li, 0)
-    t = theta * (angles / (2.0 * math.pi))
+    t = np.where(ok, theta, 0.0) * (angles / (2.0 * math.pi))
     t = t - np.floor(t / angles) * angles + 0.5
     k = (t[:, None] + beam_bins[None, :]).astype(np.int64) % angles
     r = table[row[:, None], k].astype(np.int32)
