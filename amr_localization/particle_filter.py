@@ -284,6 +284,10 @@ class ParticleFilter:
         """Declare the candidate only if no other pose explains the scan nearly as well;
         otherwise add particles at those poses (the filter must then tell them apart)."""
         p = self.params
+        live = [t for t in self.guard.open_tracks if t.last_match >= p["ambiguity_match_fraction"]]
+        if live:  # known rivals still explain the scan: no need to search again
+            self.check.reject()
+            return "ambiguous"
         range_min, range_max = self._range_limits
         z_mm = reading_to_mm(ranges[self._beams], range_min, range_max)
         alternatives = self.search.alternatives(

@@ -196,9 +196,10 @@ class PoseSearch:
         """The best distinct poses farther than exclusion_m / exclusion_rad from `estimate`,
         each refined locally, best first."""
         scores = self._score(beam_bins, z_mm, range_limits_mm, lidar_offset)
-        top = min(4000, scores.size)
-        best = np.argpartition(-scores, top - 1)[:top]
-        best = best[np.argsort(-scores[best], kind="stable")]
+        # Candidates: the poses within a few beams of the best (a rival explaining >= 90 % of
+        # the rays matches nearly every beam at this tolerance), best first.
+        best = np.flatnonzero(scores >= scores.max() - max(len(beam_bins) // 6, 2))
+        best = best[np.argsort(-scores[best], kind="stable")][:4000]
         chosen: list[tuple[float, float, float]] = []
         for flat in best:
             c, h = divmod(int(flat), self.headings)
