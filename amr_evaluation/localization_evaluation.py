@@ -31,6 +31,7 @@ class LocalizationSpec:
 
     @property
     def label(self) -> str:
+        """A short name for logs: world/start/profile/seed[/kidnap@t]."""
         kidnap = "" if self.kidnap is None else f"/kidnap@{self.kidnap[0]:g}s"
         return f"{self.world}/{self.start or '-'}/{self.profile}/seed {self.seed}{kidnap}"
 

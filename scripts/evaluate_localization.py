@@ -9,8 +9,7 @@ Exit code 1 if any episode declared a wrong pose localized (error > 10 cm or 10 
 
 Examples:
   .venv/bin/python scripts/evaluate_localization.py --worlds all --seeds 0-4 --duration 60
-  .venv/bin/python scripts/evaluate_localization.py --worlds maze_deadends --seeds 0-9 \\
-      --kidnap-at 25 --duration 70
+  .venv/bin/python scripts/evaluate_localization.py --worlds twin_maze --seeds 0-9 --kidnap-at 25
   .venv/bin/python scripts/evaluate_localization.py --worlds lab02 -p beams:=30
 """
 from __future__ import annotations
