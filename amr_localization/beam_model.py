@@ -40,13 +40,23 @@ def reading_to_mm(ranges: np.ndarray, range_min: float, range_max: float) -> np.
     return out
 
 
+def split_beams(beam_bins: np.ndarray, z_mm: np.ndarray):
+    """(valid_bins, valid_z_mm, invalid_bins): the kernels loop over beams with a reading and
+    beams without one separately (no branch in the inner loop)."""
+    valid = z_mm >= 0
+    return (np.ascontiguousarray(beam_bins[valid]), np.ascontiguousarray(z_mm[valid]),
+            np.ascontiguousarray(beam_bins[~valid]))
+
+
 def log_likelihoods_python(particles, count, table, angles, x0, y0, resolution, nx, ny,
-                           robot_ok, lidar_offset, beam_bins, z_mm, lut, range_min_mm,
-                           range_max_mm, out):
-    """out[p] = sum over beams of the log-likelihood of particle p (p < count), or -inf."""
+                           robot_ok, lidar_offset, valid_bins, valid_z, invalid_bins, lut,
+                           range_min_mm, range_max_mm, out):
+    """out[p] = sum over beams of the log-likelihood of particle p (p < count), or -inf.
+
+    valid_bins / valid_z: table-angle offsets (from the heading) and readings (mm) of the beams
+    with a return; invalid_bins: offsets of the beams without one (see split_beams)."""
     inv_res = 1.0 / resolution
     bins_per_rad = angles / (2.0 * math.pi)
-    n_beams = beam_bins.shape[0]
     last = lut.shape[0] - 1
     miss = lut[last]
     for p in range(count):
@@ -62,26 +72,25 @@ def log_likelihoods_python(particles, count, table, angles, x0, y0, resolution, 
         if robot_ok[cell] == 0:
             out[p] = -np.inf
             continue
-        li = int((x + lidar_offset * math.cos(theta) - x0) * inv_res)
-        lj = int((y + lidar_offset * math.sin(theta) - y0) * inv_res)
-        row = lj * nx + li  # the LiDAR is within |offset| of a valid centre: inside the grid
+        if lidar_offset != 0.0:
+            fi += lidar_offset * math.cos(theta) * inv_res
+            fj += lidar_offset * math.sin(theta) * inv_res
+        row = int(fj) * nx + int(fi)  # the LiDAR is within |offset| of a valid centre
         t = theta * bins_per_rad
         t = t - math.floor(t / angles) * angles + 0.5  # + 0.5: truncation rounds to nearest
         total = 0.0
-        for b in range(n_beams):
-            k = int(t + beam_bins[b])
-            if k >= angles:
-                k -= angles
-                if k >= angles:
-                    k -= angles
+        for b in range(valid_bins.shape[0]):
+            k = int(t + valid_bins[b])
+            k = k - angles if k >= angles else k
+            k = k - angles if k >= angles else k
+            d = abs(valid_z[b] - np.int32(table[row, k]))
+            total += lut[d if d < last else last]
+        for b in range(invalid_bins.shape[0]):
+            k = int(t + invalid_bins[b])
+            k = k - angles if k >= angles else k
+            k = k - angles if k >= angles else k
             r = np.int32(table[row, k])
-            z = z_mm[b]
-            if z < 0:
-                if r >= range_min_mm and r <= range_max_mm:
-                    total += miss
-            else:
-                d = abs(z - r)
-                total += lut[d if d < last else last]
+            total += miss if (r >= range_min_mm) & (r <= range_max_mm) else 0.0
         out[p] = total
 
 
@@ -89,8 +98,8 @@ log_likelihoods_kernel = jit(log_likelihoods_python)
 
 
 def log_likelihoods_numpy(particles, count, table, angles, x0, y0, resolution, nx, ny,
-                          robot_ok, lidar_offset, beam_bins, z_mm, lut, range_min_mm,
-                          range_max_mm, out):
+                          robot_ok, lidar_offset, valid_bins, valid_z, invalid_bins, lut,
+                          range_min_mm, range_max_mm, out):
     """The same model with numpy array operations over particles x beams."""
     pts = particles[:count]
     x, y, theta = pts[:, 0], pts[:, 1], pts[:, 2]
@@ -101,23 +110,20 @@ def log_likelihoods_numpy(particles, count, table, angles, x0, y0, resolution, n
     fi, fj = np.where(on_grid, fi, 0.0), np.where(on_grid, fj, 0.0)
     cell = fj.astype(np.int64) * nx + fi.astype(np.int64)
     ok = on_grid & (robot_ok[cell] != 0)
-    lx = np.where(ok, x + lidar_offset * np.cos(theta), x0)
-    ly = np.where(ok, y + lidar_offset * np.sin(theta), y0)
-    li = ((lx - x0) / resolution).astype(np.int64)
-    lj = ((ly - y0) / resolution).astype(np.int64)
-    row = np.where(ok, lj * nx + li, 0)
-    t = np.where(ok, theta, 0.0) * (angles / (2.0 * math.pi))
-    t = t - np.floor(t / angles) * angles + 0.5
-    k = (t[:, None] + beam_bins[None, :]).astype(np.int64) % angles
-    r = table[row[:, None], k].astype(np.int32)
+    theta = np.where(ok, theta, 0.0)
+    li = (fi + lidar_offset * np.cos(theta) / resolution).astype(np.int64)
+    lj = (fj + lidar_offset * np.sin(theta) / resolution).astype(np.int64)
+    row = np.where(ok, lj * nx + li, 0)[:, None]
+    t = theta * (angles / (2.0 * math.pi))
+    t = (t - np.floor(t / angles) * angles + 0.5)[:, None]
     last = lut.shape[0] - 1
-    d = np.minimum(np.abs(z_mm[None, :] - r), last)
-    scores = lut[d]
-    invalid = z_mm < 0
-    if invalid.any():
-        expected_return = (r[:, invalid] >= range_min_mm) & (r[:, invalid] <= range_max_mm)
-        scores[:, invalid] = np.where(expected_return, lut[last], 0.0)
-    out[:count] = np.where(ok, scores.sum(axis=1), -np.inf)
+    r = table[row, (t + valid_bins[None, :]).astype(np.int64) % angles].astype(np.int32)
+    total = lut[np.minimum(np.abs(valid_z[None, :] - r), last)].sum(axis=1)
+    if invalid_bins.size:
+        r = table[row, (t + invalid_bins[None, :]).astype(np.int64) % angles].astype(np.int32)
+        total = total + np.where((r >= range_min_mm) & (r <= range_max_mm), lut[last],
+                                 0.0).sum(axis=1)
+    out[:count] = np.where(ok, total, -np.inf)
 
 
 log_likelihoods = log_likelihoods_kernel if HAVE_NUMBA else log_likelihoods_numpy

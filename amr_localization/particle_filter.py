@@ -23,7 +23,12 @@ import numpy as np
 from amr_common.robot import ROBOT_RADIUS
 from amr_common.world import World
 from amr_localization.ambiguity import TRACK_ANGLE_RAD, TRACK_DISTANCE_M, AmbiguityGuard
-from amr_localization.beam_model import log_likelihood_table, log_likelihoods, reading_to_mm
+from amr_localization.beam_model import (
+    log_likelihood_table,
+    log_likelihoods,
+    reading_to_mm,
+    split_beams,
+)
 from amr_localization.expected_ranges import expected_range_table
 from amr_localization.localization_check import (
     CheckSettings,
@@ -336,8 +341,9 @@ class ParticleFilter:
         scores = np.empty(len(self.particles))
         log_likelihoods(self.particles, len(self.particles), table.ranges, table.angles,
                         grid.x0, grid.y0, grid.resolution, grid.nx, grid.ny, self._robot_ok,
-                        self.params["lidar_offset_x_m"], self._beam_bins, z_mm, self._lut,
-                        int(math.ceil(range_min * 1000.0)), int(range_max * 1000.0), scores)
+                        self.params["lidar_offset_x_m"], *split_beams(self._beam_bins, z_mm),
+                        self._lut, int(math.ceil(range_min * 1000.0)), int(range_max * 1000.0),
+                        scores)
         best = scores.max()
         if not np.isfinite(best):  # every particle inside a wall or off the map
             log.info("every particle is in a wall or off the map (an impossible hypothesis): "

@@ -158,8 +158,9 @@ def _scores(world, poses, scan_pose, kernel, lidar_offset=0.0, rays=240):
     bins = np.remainder(angles[beams] * table.angles / (2 * math.pi), table.angles)
     out = np.empty(len(poses))
     kernel(np.asarray(poses, float), len(poses), table.ranges, table.angles, grid.x0, grid.y0,
-           grid.resolution, grid.nx, grid.ny, grid.robot_cells(slack=0.02), lidar_offset, bins,
-           z_mm, beam_model.log_likelihood_table(0.03, 0.05), 16, 8000, out)
+           grid.resolution, grid.nx, grid.ny, grid.robot_cells(slack=0.02), lidar_offset,
+           *beam_model.split_beams(bins, z_mm), beam_model.log_likelihood_table(0.03, 0.05), 16,
+           8000, out)
     return out
 
 
