@@ -29,14 +29,24 @@ def log_likelihood_table(sigma_m: float, z_random: float) -> np.ndarray:
     return np.log((1.0 - z_random) * np.exp(-0.5 * (d / sigma_m) ** 2) + z_random)
 
 
+def _reading_to_mm(ranges, range_min, range_max, out):
+    for i in range(ranges.shape[0]):
+        r = ranges[i]
+        if r >= range_min and r <= range_max and r > 0.0 and r < 2.0e6:  # NaN, inf fail
+            out[i] = np.int32(round(r * 1000.0))
+        else:
+            out[i] = -1
+
+
+_reading_to_mm_kernel = jit(_reading_to_mm)
+
+
 def reading_to_mm(ranges: np.ndarray, range_min: float, range_max: float) -> np.ndarray:
     """Ranges (m) as int32 mm, with -1 for readings without a return (NaN, inf, 0.0, outside
     [range_min, range_max]): the measured side of the model."""
-    r = np.asarray(ranges, dtype=np.float64)
-    with np.errstate(invalid="ignore"):
-        valid = np.isfinite(r) & (r >= range_min) & (r <= range_max) & (r > 0.0)
-    out = np.full(r.shape, -1, dtype=np.int32)
-    out[valid] = np.minimum(np.round(r[valid] * 1000.0), 2**31 - 1).astype(np.int32)
+    r = np.ascontiguousarray(ranges, dtype=np.float64)
+    out = np.empty(r.shape, dtype=np.int32)
+    _reading_to_mm_kernel(r, float(range_min), float(range_max), out)
     return out
 
 

@@ -28,70 +28,28 @@ from typing import Callable
 
 import numpy as np
 
+from amr_common.jit import jit
 from amr_common.raycast import scan_into
+from amr_localization.cluster import Cluster, dominant_cluster, weighted_pose_mean
 
 
-@dataclass
-class Cluster:
-    """The heaviest group of particles and its weighted mean."""
-
-    pose: tuple[float, float, float]  # weighted mean (x, y, theta)
-    share: float  # weight carried by the cluster, in [0, 1]
-    members: np.ndarray  # (N,) bool
-
-
-def weighted_pose_mean(particles: np.ndarray, weights: np.ndarray) -> tuple[float, float, float]:
-    """Weighted mean position and circular mean heading of particles (N, 3)."""
-    total = float(weights.sum())
-    if not total > 0.0:
-        weights = np.ones(len(particles))
-        total = float(len(particles))
-    x = float(np.dot(weights, particles[:, 0]) / total)
-    y = float(np.dot(weights, particles[:, 1]) / total)
-    theta = math.atan2(float(np.dot(weights, np.sin(particles[:, 2]))),
-                       float(np.dot(weights, np.cos(particles[:, 2]))))
-    return x, y, theta
+def _count_matches(expected, ranges, range_min, range_max, tolerance):
+    """Rays where reading and expectation agree within tolerance, or both have no return
+    (expected: NaN = no return; readings: NaN, inf, 0.0 or outside the limits)."""
+    matches = 0
+    for i in range(ranges.shape[0]):
+        r = ranges[i]
+        valid = r >= range_min and r <= range_max and r > 0.0  # NaN fails
+        e = expected[i]
+        if valid:
+            if e == e and abs(r - e) <= tolerance:
+                matches += 1
+        elif e != e:
+            matches += 1
+    return matches
 
 
-def dominant_cluster(particles: np.ndarray, weights: np.ndarray, radius: float,
-                     angle: float) -> Cluster:
-    """The particles within `radius` (m) and `angle` (rad) of the heaviest region.
-
-    The region is found on a coarse histogram (bins of radius x radius x angle, weighted), then
-    the cluster is gathered around that bin's weighted mean and re-centred once on its own mean.
-    """
-    x, y, theta = particles[:, 0], particles[:, 1], particles[:, 2]
-    bx = np.floor((x - x.min()) / radius).astype(np.int64)
-    by = np.floor((y - y.min()) / radius).astype(np.int64)
-    nbt = max(int(math.ceil(2.0 * math.pi / angle)), 1)
-    bt = np.minimum(np.floor((theta + math.pi) / angle).astype(np.int64), nbt - 1)
-    nby = int(by.max()) + 1
-    key = (bx * nby + by) * nbt + bt
-    heaviest = int(np.argmax(np.bincount(key, weights=weights)))
-    in_bin = key == heaviest
-    centre = weighted_pose_mean(particles[in_bin], weights[in_bin])
-    members = in_bin
-    for _ in range(2):
-        near = ((x - centre[0]) ** 2 + (y - centre[1]) ** 2 <= radius * radius) & \
-            (np.abs(np.remainder(theta - centre[2] + math.pi, 2.0 * math.pi) - math.pi) <= angle)
-        if not near.any():
-            break
-        members = near
-        centre = weighted_pose_mean(particles[members], weights[members])
-    total = float(weights.sum())
-    share = float(weights[members].sum() / total) if total > 0 else 0.0
-    return Cluster(pose=centre, share=share, members=members)
-
-
-def pose_covariance(particles: np.ndarray, weights: np.ndarray,
-                    mean: tuple[float, float, float]) -> np.ndarray:
-    """3 x 3 weighted covariance of (x, y, theta) about `mean` (headings wrapped around it)."""
-    total = float(weights.sum())
-    w = weights / total if total > 0 else np.full(len(weights), 1.0 / max(len(weights), 1))
-    d = np.column_stack([particles[:, 0] - mean[0], particles[:, 1] - mean[1],
-                         np.remainder(particles[:, 2] - mean[2] + math.pi, 2.0 * math.pi)
-                         - math.pi])
-    return (d * w[:, None]).T @ d
+count_matches = jit(_count_matches)
 
 
 class ScanMatcher:
@@ -127,14 +85,14 @@ class ScanMatcher:
         both have no return. Readings: NaN, inf, 0.0 or outside the limits = no return."""
         if self.allowed is not None and not self.allowed(pose[0], pose[1]):
             return 0.0
-        expected = self.expected(pose)
-        r = np.asarray(ranges, dtype=np.float64)
-        with np.errstate(invalid="ignore"):
-            valid = np.isfinite(r) & (r >= self.range_min) & (r <= self.range_max) & (r > 0)
-            expected_valid = np.isfinite(expected)
-            close = np.abs(r - expected) <= tolerance
-        matches = (valid & expected_valid & close) | (~valid & ~expected_valid)
-        return float(np.count_nonzero(matches)) / max(self.rays, 1)
+        x, y, theta = pose
+        ox = x + self.lidar_offset * math.cos(theta)
+        oy = y + self.lidar_offset * math.sin(theta)
+        scan_into(self.segments, ox, oy, theta, self.base_cos, self.base_sin, self.range_min,
+                  self.range_max, math.nan, self._zeros, self._expected)
+        matches = count_matches(self._expected, np.asarray(ranges, dtype=np.float64),
+                                self.range_min, self.range_max, float(tolerance))
+        return matches / max(self.rays, 1)
 
 
 @dataclass
@@ -197,5 +155,5 @@ class LocalizedDecision:
         return ""
 
 
-__all__ = ["Cluster", "weighted_pose_mean", "dominant_cluster", "pose_covariance", "ScanMatcher",
-           "CheckSettings", "LocalizedDecision"]
+__all__ = ["Cluster", "weighted_pose_mean", "dominant_cluster", "ScanMatcher", "CheckSettings",
+           "LocalizedDecision"]

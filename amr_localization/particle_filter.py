@@ -35,7 +35,6 @@ from amr_localization.localization_check import (
     LocalizedDecision,
     ScanMatcher,
     dominant_cluster,
-    pose_covariance,
 )
 from amr_localization.map_grid import clearances, sample_free_poses
 from amr_localization.motion_model import MotionNoise, sample_motion
@@ -156,7 +155,7 @@ class ParticleFilter:
         cluster = dominant_cluster(self.particles, self.weights, self.params["cluster_radius_m"],
                                    self.params["cluster_angle_rad"])
         self.estimate, self.cluster_share = cluster.pose, cluster.share
-        self.covariance = pose_covariance(self.particles, self.weights, self.estimate)
+        self.covariance = cluster.covariance
 
     # --- scan geometry ---------------------------------------------------------------------
     def set_scan_geometry(self, angle_min: float, angle_increment: float, rays: int,
@@ -239,7 +238,7 @@ class ParticleFilter:
         cluster = dominant_cluster(self.particles, self.weights, self.params["cluster_radius_m"],
                                    self.params["cluster_angle_rad"])
         self.estimate, self.cluster_share = cluster.pose, cluster.share
-        self.covariance = pose_covariance(self.particles, self.weights, self.estimate)
+        self.covariance = cluster.covariance
         tolerance = self.params["match_tolerance_m"]
         self.match_fraction = self.matcher.match_fraction(self.estimate, ranges, tolerance)
         if not self.localized and self.cluster_share >= self.params["cluster_min_share"] and \

@@ -32,13 +32,17 @@ def score_poses_python(cells, centres, headings, table, angles, x0, y0, resoluti
     inv_res = 1.0 / resolution
     n_beams = beam_bins.shape[0]
     bins_per_heading = angles / headings
+    offset_x = np.empty(headings)
+    offset_y = np.empty(headings)
+    for h in range(headings):
+        offset_x[h] = lidar_offset * math.cos(h * (2.0 * math.pi / headings)) - x0
+        offset_y[h] = lidar_offset * math.sin(h * (2.0 * math.pi / headings)) - y0
     for c in range(cells.shape[0]):
         cx = centres[cells[c], 0]
         cy = centres[cells[c], 1]
         for h in range(headings):
-            theta = h * (2.0 * math.pi / headings)
-            li = int((cx + lidar_offset * math.cos(theta) - x0) * inv_res)
-            lj = int((cy + lidar_offset * math.sin(theta) - y0) * inv_res)
+            li = int((cx + offset_x[h]) * inv_res)
+            lj = int((cy + offset_y[h]) * inv_res)
             row = lj * nx + li
             t = h * bins_per_heading + 0.5
             matched = 0
