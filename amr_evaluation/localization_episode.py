@@ -1,4 +1,6 @@
-"""Headless localization episodes: Simulator + wall follower + ParticleFilter, the same classes
+"""Headless localization episodes: simulator, wall follower and particle filter.
+
+Headless localization episodes: Simulator + wall follower + ParticleFilter, the same classes
 as the ROS nodes, with the figures that say whether the filter can be trusted.
 
     result = run_localization_episode("lab02", "outer", profile="turtlebot3", seed=3,
@@ -204,8 +206,10 @@ def pose_errors(truth: np.ndarray, estimate: np.ndarray) -> tuple[np.ndarray, np
 
 def localization_metrics(truth: np.ndarray, estimate: np.ndarray, distances: np.ndarray,
                          kidnap=None) -> dict[str, Any]:
-    """The metrics of the module docstring from per-step rows: truth [t, x, y, theta],
-    estimate [t, x, y, theta, localized], distance travelled (m)."""
+    """The metrics of the module docstring from per-step rows.
+
+    Truth [t, x, y, theta], estimate [t, x, y, theta, localized], distance travelled (m).
+    """
     t = truth[:, 0]
     localized = estimate[:, 4] > 0.5
     position, heading = pose_errors(truth, estimate)

@@ -1,4 +1,6 @@
-"""Batch localization episodes (worlds x starts x profiles x seeds, optional kidnapping) on a
+"""Batch localization episodes on a process pool, and their aggregate figures.
+
+Batch localization episodes (worlds x starts x profiles x seeds, optional kidnapping) on a
 process pool, and the aggregate figures that say whether the filter can be trusted.
 
 scripts/evaluate_localization.py is the command line; evaluate.py --localize uses the same
@@ -48,8 +50,11 @@ class LocalizationOutcome:
 
 
 def kidnap_pose(world_name: str, start: str | None, at: float) -> tuple[float, ...] | None:
-    """A kidnapping for `start`: at time `at`, to the world's next named start (turned by a
-    quarter turn, so the view differs), or None if the world has a single start."""
+    """A kidnapping pose for `start` at time `at`.
+
+    A kidnapping for `start`: at time `at`, to the world's next named start (turned by a
+    quarter turn, so the view differs), or None if the world has a single start.
+    """
     from amr_common.world import World
     world = World.load(world_name)
     names = list(world.starts)

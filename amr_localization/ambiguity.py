@@ -69,7 +69,9 @@ class AmbiguityGuard:
     def observe(self, estimate, estimate_match: float, matcher: ScanMatcher, ranges: np.ndarray,
                 tolerance: float, particles: np.ndarray, weights: np.ndarray,
                 search: Callable[[tuple], Alternative]) -> RivalTrack | None:
-        """After a measurement update: re-anchor open tracks on their particles, refute those
+        """Judge the open tracks after a measurement update.
+
+        After a measurement update: re-anchor open tracks on their particles, refute those
         that no longer explain the scan while the estimate does.
 
         Decisions compare locally refined poses (pose_search.refine), so a hypothesis is judged
@@ -79,7 +81,8 @@ class AmbiguityGuard:
         rivals to it) that explains the scan. Returns the best open track if the evidence
         turned the other way: it explains at least localize_fraction of the rays while the
         estimate explains fewer than rival_fraction. The caller moves the filter there; the
-        old estimate is then a refuted track."""
+        old estimate is then a refuted track.
+        """
         winner = None
         refined_estimate: float | None = None
         for track in self.open_tracks:
@@ -110,9 +113,12 @@ class AmbiguityGuard:
         return winner
 
     def unresolved(self, alternatives: list[Alternative]) -> list[Alternative]:
-        """The rivals among `alternatives` (explaining >= rival_fraction) that no refuted track
+        """The rivals among `alternatives` that no refuted track accounts for.
+
+        The rivals among `alternatives` (explaining >= rival_fraction) that no refuted track
         accounts for; each one not near any track becomes an open track (a track keeps its own
-        pose: the search's coarse pose may be a neighbour that fits less well)."""
+        pose: the search's coarse pose may be a neighbour that fits less well).
+        """
         left = []
         for alternative in alternatives:
             if alternative.match_fraction < self.rival_fraction:

@@ -42,8 +42,11 @@ _reading_to_mm_kernel = jit(_reading_to_mm)
 
 
 def reading_to_mm(ranges: np.ndarray, range_min: float, range_max: float) -> np.ndarray:
-    """Ranges (m) as int32 mm, with -1 for readings without a return (NaN, inf, 0.0, outside
-    [range_min, range_max]): the measured side of the model."""
+    """Ranges (m) as int32 mm, -1 for readings without a return.
+
+    Ranges (m) as int32 mm, with -1 for readings without a return (NaN, inf, 0.0, outside
+    [range_min, range_max]): the measured side of the model.
+    """
     r = np.ascontiguousarray(ranges, dtype=np.float64)
     out = np.empty(r.shape, dtype=np.int32)
     _reading_to_mm_kernel(r, float(range_min), float(range_max), out)
@@ -51,8 +54,11 @@ def reading_to_mm(ranges: np.ndarray, range_min: float, range_max: float) -> np.
 
 
 def split_beams(beam_bins: np.ndarray, z_mm: np.ndarray):
-    """(valid_bins, valid_z_mm, invalid_bins): the kernels loop over beams with a reading and
-    beams without one separately (no branch in the inner loop)."""
+    """Split the beams into those with a reading and those without one.
+
+    (valid_bins, valid_z_mm, invalid_bins): the kernels loop over beams with a reading and
+    beams without one separately (no branch in the inner loop).
+    """
     valid = z_mm >= 0
     return (np.ascontiguousarray(beam_bins[valid]), np.ascontiguousarray(z_mm[valid]),
             np.ascontiguousarray(beam_bins[~valid]))
@@ -64,7 +70,8 @@ def log_likelihoods_python(particles, count, table, angles, x0, y0, resolution, 
     """out[p] = sum over beams of the log-likelihood of particle p (p < count), or -inf.
 
     valid_bins / valid_z: table-angle offsets (from the heading) and readings (mm) of the beams
-    with a return; invalid_bins: offsets of the beams without one (see split_beams)."""
+    with a return; invalid_bins: offsets of the beams without one (see split_beams).
+    """
     inv_res = 1.0 / resolution
     bins_per_rad = angles / (2.0 * math.pi)
     last = lut.shape[0] - 1

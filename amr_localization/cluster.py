@@ -54,8 +54,11 @@ _wrap_kernel = jit(_wrap)
 
 
 def cluster_python(particles, weights, radius, angle, members, stats):
-    """members[p]: particle p belongs to the dominant cluster; stats = [x, y, theta, share,
-    then the 3 x 3 covariance of all particles about (x, y, theta) row by row]."""
+    """Dominant cluster membership, its weighted mean and the covariance.
+
+    members[p]: particle p belongs to the dominant cluster; stats = [x, y, theta, share,
+    then the 3 x 3 covariance of all particles about (x, y, theta) row by row].
+    """
     n = particles.shape[0]
     xmin = np.inf
     ymin = np.inf
@@ -128,8 +131,10 @@ cluster_kernel = jit(cluster_python)
 
 
 def weighted_pose_mean(particles: np.ndarray, weights: np.ndarray) -> tuple[float, float, float]:
-    """Weighted mean position and circular mean heading of particles (N, 3); the plain mean if
-    the weights sum to zero."""
+    """Weighted mean position and circular mean heading of particles (N, 3).
+
+    The plain mean if the weights sum to zero.
+    """
     particles = np.ascontiguousarray(particles, dtype=np.float64)
     weights = np.ascontiguousarray(weights, dtype=np.float64)
     if not weights.sum() > 0.0:

@@ -1,5 +1,7 @@
-"""The expected-range table of the beam model: for every cell of a fine grid over the map and
-every one of `angles` directions, the range (mm, uint16) a LiDAR at the cell centre would measure.
+"""The expected-range table of the beam model.
+
+For every cell of a fine grid over the map and every one of `angles` directions, the range (mm,
+uint16) a LiDAR at the cell centre would measure.
 
 Built once per world with the simulator's own ray-casting kernel (amr_common.raycast), so the
 filter's idea of a range is exactly the simulated LiDAR's. Cells where the LiDAR cannot be (outside
@@ -32,8 +34,11 @@ _CACHE_SIZE = 8
 
 @dataclass(frozen=True)
 class ExpectedRangeTable:
-    """ranges[cell, k]: expected range in mm from the centre of grid cell `cell` along the world
-    direction k * 2 pi / angles (k = 0 is +x)."""
+    """Expected ranges (mm) per grid cell and world direction.
+
+    ranges[cell, k]: expected range in mm from the centre of grid cell `cell` along the world
+    direction k * 2 pi / angles (k = 0 is +x).
+    """
 
     grid: MapGrid
     angles: int
@@ -99,8 +104,11 @@ def build_expected_range_table(world: World, resolution: float = 0.02, angles: i
 
 def expected_range_table(world: World, resolution: float = 0.02,
                          angles: int = 360) -> ExpectedRangeTable:
-    """The table for `world`, built on first use and cached in this process (keyed by the world
-    file, its walls, the resolution and the number of angles)."""
+    """The table for `world`, built on first use and cached in this process.
+
+    The table for `world`, built on first use and cached in this process (keyed by the world
+    file, its walls, the resolution and the number of angles).
+    """
     key = (world.source, world.segments.tobytes(), float(resolution), int(angles))
     with _CACHE_LOCK:
         table = _CACHE.get(key)

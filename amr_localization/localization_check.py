@@ -34,8 +34,11 @@ from amr_localization.cluster import Cluster, dominant_cluster, weighted_pose_me
 
 
 def _count_matches(expected, ranges, range_min, range_max, tolerance):
-    """Rays where reading and expectation agree within tolerance, or both have no return
-    (expected: NaN = no return; readings: NaN, inf, 0.0 or outside the limits)."""
+    """Count the rays where reading and expectation agree.
+
+    Rays where reading and expectation agree within tolerance, or both have no return
+    (expected: NaN = no return; readings: NaN, inf, 0.0 or outside the limits).
+    """
     matches = 0
     for i in range(ranges.shape[0]):
         r = ranges[i]
@@ -58,8 +61,11 @@ class ScanMatcher:
     def __init__(self, segments: np.ndarray, angle_min: float, angle_increment: float,
                  rays: int, range_min: float, range_max: float, lidar_offset: float,
                  allowed: Callable[[float, float], bool] | None = None) -> None:
-        """`allowed(x, y)`: False where the robot centre cannot be (a pose there explains
-        nothing: match fraction 0)."""
+        """Rays and limits of the scan, LiDAR position, where the robot can be.
+
+        `allowed(x, y)`: False where the robot centre cannot be (a pose there explains
+        nothing: match fraction 0).
+        """
         angles = angle_min + angle_increment * np.arange(rays)
         self.segments = np.ascontiguousarray(segments, dtype=np.float64)
         self.base_cos, self.base_sin = np.cos(angles), np.sin(angles)
@@ -81,8 +87,11 @@ class ScanMatcher:
 
     def match_fraction(self, pose: tuple[float, float, float], ranges: np.ndarray,
                        tolerance: float) -> float:
-        """Share of rays where reading and expectation agree within `tolerance` (m), or where
-        both have no return. Readings: NaN, inf, 0.0 or outside the limits = no return."""
+        """Share of rays where reading and expectation agree.
+
+        Within `tolerance` (m), or where both have no return. Readings: NaN, inf, 0.0 or outside
+        the limits = no return.
+        """
         if self.allowed is not None and not self.allowed(pose[0], pose[1]):
             return 0.0
         x, y, theta = pose
@@ -133,9 +142,12 @@ class LocalizedDecision:
         self.good_streak = 0
 
     def update(self, share: float, match: float) -> str:
-        """Record one update: returns "candidate" (the streak is complete: check for ambiguity,
+        """Record one measurement update and return what it decided.
+
+        Record one update: returns "candidate" (the streak is complete: check for ambiguity,
         then confirm() or reject()), "lost" (just lost: re-initialize globally), "reinit"
-        (converged on a pose that does not explain the scan) or ""."""
+        (converged on a pose that does not explain the scan) or "".
+        """
         s = self.settings
         if self.localized:
             self.bad_streak = self.bad_streak + 1 if match < s.keep_match_fraction else 0

@@ -1,4 +1,6 @@
-"""The filter's view of a World: a fine grid over the map with, per cell centre, whether it lies
+"""The filter's view of a World: a fine grid of free space and clearance.
+
+The filter's view of a World: a fine grid over the map with, per cell centre, whether it lies
 in the free space (inside the boundary, outside every hole) and its distance to the nearest wall.
 
 Particles are drawn and kept where the robot can be: centre inside the free space and at least
@@ -45,8 +47,10 @@ def in_free_space(world: World, points: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class MapGrid:
-    """A grid of square cells over the world's bounds: cell (i, j) spans x in
-    [x0 + i * resolution, x0 + (i + 1) * resolution) and likewise y with j (row-major, j * nx + i).
+    """A grid of square cells over the world's bounds.
+
+    Cell (i, j) spans x in [x0 + i * resolution, x0 + (i + 1) * resolution) and likewise y with j
+    (row-major, j * nx + i).
     """
 
     x0: float
@@ -112,7 +116,9 @@ def clearances(segments, points):
 
 def sample_free_poses(world: World, grid: MapGrid, count: int, rng: np.random.Generator,
                       radius: float = ROBOT_RADIUS) -> np.ndarray:
-    """(count, 3) poses uniform over the free space at least `radius` from every wall, headings
+    """Poses uniform over the free space, at least `radius` from every wall.
+
+    (count, 3) poses uniform over the free space at least `radius` from every wall, headings
     uniform in [-pi, pi).
 
     Cells whose centre is inside and could hold such a point are drawn by area, a point uniform

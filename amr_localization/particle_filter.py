@@ -100,7 +100,9 @@ class ParticleFilter:
     # --- (re-)initialization ---------------------------------------------------------------
     def initialize_global(self) -> None:
         """Uniform over the free space (clearance >= robot radius), all headings: not localized.
-        The next scan re-seeds the particles at the poses that fit it (_seed_from_scan)."""
+
+        The next scan re-seeds the particles at the poses that fit it (_seed_from_scan).
+        """
         count = self.params["max_particles"]
         self._set_particles(sample_free_poses(self.world, self.table.grid, count, self.rng))
         self._seed_pending = True
@@ -108,12 +110,15 @@ class ParticleFilter:
         self.events.append(("global", self.total_updates))
 
     def _seed_from_scan(self, ranges: np.ndarray) -> None:
-        """Particles of a global search from an exhaustive pose search on this scan: the
+        """Seed a global search from an exhaustive pose search on this scan.
+
+        Particles of a global search from an exhaustive pose search on this scan: the
         best-fitting grid poses (share 1 - seed_uniform_share) and uniform ones (the rest).
 
         Uniform particles alone are too sparse: 8,000 of them over a 2.4 m maze leave ~1 within
         5 cm and 10 degrees of any pose, and the first updates collapse onto the luckiest one,
-        in a symmetric maze often a rotated copy of the truth."""
+        in a symmetric maze often a rotated copy of the truth.
+        """
         p = self.params
         count = p["max_particles"]
         seeded = int(round(count * (1.0 - p["seed_uniform_share"])))
@@ -129,8 +134,11 @@ class ParticleFilter:
         self._seed_pending = False
 
     def initialize_pose(self, pose, sigma=None) -> None:
-        """Gaussian around pose (x, y, theta) with sigma [sx, sy, stheta] (default
-        initial_pose_sigma): not localized until the scans confirm it."""
+        """Re-initialize around a pose: Gaussian particles, not localized.
+
+        Gaussian around pose (x, y, theta) with sigma [sx, sy, stheta] (default
+        initial_pose_sigma): not localized until the scans confirm it.
+        """
         x, y, theta = (float(v) for v in pose)
         sx, sy, st = (float(v) for v in (sigma if sigma is not None
                                           else self.params["initial_pose_sigma"]))
@@ -160,8 +168,11 @@ class ParticleFilter:
     # --- scan geometry ---------------------------------------------------------------------
     def set_scan_geometry(self, angle_min: float, angle_increment: float, rays: int,
                           range_min: float, range_max: float) -> None:
-        """Where the scan's rays point (rad, counter-clockwise from angle_min), how many there
-        are and the valid range limits (m). Call again whenever they change."""
+        """Tell the filter where the scan's rays point and their valid limits.
+
+        Where the scan's rays point (rad, counter-clockwise from angle_min), how many there
+        are and the valid range limits (m). Call again whenever they change.
+        """
         if not (math.isfinite(angle_min) and math.isfinite(angle_increment)
                 and angle_increment != 0.0 and rays >= 1):
             raise ValueError(f"unusable scan geometry: angle_min {angle_min}, increment "
@@ -181,8 +192,11 @@ class ParticleFilter:
                                    allowed=self.robot_can_be_at)
 
     def robot_can_be_at(self, x: float, y: float) -> bool:
-        """True if a particle's centre at (x, y) is in the free space, clear of the walls
-        (robot radius, less the grid's slack)."""
+        """True if a particle's centre at (x, y) is where the robot can be.
+
+        True if a particle's centre at (x, y) is in the free space, clear of the walls
+        (robot radius, less the grid's slack).
+        """
         cell = self.table.grid.cell_of(x, y)
         return cell >= 0 and bool(self._robot_ok[cell])
 
@@ -210,9 +224,12 @@ class ParticleFilter:
         since[2] += dt
 
     def update_due(self, new_scan: bool = True) -> bool:
-        """True when a measurement update is due: for a new scan, once the robot moved or turned
-        enough or update_max_interval_s passed since the last update; for a scan seen before
-        (held between sensor updates, or a stationary robot's identical one) only by time."""
+        """True when a measurement update is due.
+
+        For a new scan, once the robot moved or turned enough or update_max_interval_s passed since
+        the last update; for a scan seen before (held between sensor updates, or a stationary
+        robot's identical one) only by time.
+        """
         p, (distance, angle, elapsed) = self.params, self._since_update
         if elapsed >= p["update_max_interval_s"]:
             return True
@@ -220,8 +237,11 @@ class ParticleFilter:
                              or angle >= p["update_min_angle_rad"])
 
     def correct(self, ranges: np.ndarray, force: bool = False, new_scan: bool = True) -> bool:
-        """Weigh the particles with the scan (if update_due(new_scan) or force), resample,
-        re-check the localized flag. Returns True if a measurement update happened."""
+        """Weigh the particles with a scan, resample, re-check the localized flag.
+
+        Weigh the particles with the scan (if update_due(new_scan) or force), resample,
+        re-check the localized flag. Returns True if a measurement update happened.
+        """
         if self.matcher is None:
             raise RuntimeError("set_scan_geometry() before correct()")
         ranges = np.asarray(ranges, dtype=np.float64)
@@ -285,8 +305,11 @@ class ParticleFilter:
         return search
 
     def _check_ambiguity(self, ranges: np.ndarray) -> str:
-        """Declare the candidate only if no other pose explains the scan nearly as well;
-        otherwise add particles at those poses (the filter must then tell them apart)."""
+        """Declare the candidate only if no other pose explains the scan as well.
+
+        Declare the candidate only if no other pose explains the scan nearly as well;
+        otherwise add particles at those poses (the filter must then tell them apart).
+        """
         p = self.params
         live = [t for t in self.guard.open_tracks if t.last_match >= p["ambiguity_match_fraction"]]
         if live:  # known rivals still explain the scan: no need to search again
@@ -308,8 +331,11 @@ class ParticleFilter:
         return "ambiguous"
 
     def _move_to(self, pose) -> None:
-        """All particles around `pose` (a rival that explains the scans better than the
-        estimate did), the rival tracks kept: not localized."""
+        """Move every particle to a rival that explains the scans better.
+
+        All particles around `pose` (a rival that explains the scans better than the
+        estimate did), the rival tracks kept: not localized.
+        """
         count = len(self.particles)
         sigma = np.array([0.02, 0.02, 0.03])
         particles = np.asarray(pose) + self.rng.standard_normal((count, 3)) * sigma
@@ -360,13 +386,16 @@ class ParticleFilter:
         self.weights = weights / total
 
     def _temper(self, scores: np.ndarray) -> float:
-        """The exponent beta in (0, 1] of the likelihood that keeps the effective sample size
+        """Flatten the likelihood while searching: the exponent beta in (0, 1].
+
+        The exponent beta in (0, 1] of the likelihood that keeps the effective sample size
         of the new weights at search_ess_fraction of the particles (1 if it already is).
 
         While searching, the particles are far sparser than the likelihood is narrow: the full
         likelihood would keep only the few luckiest particles, and in a symmetric maze the
         luckiest may sit at a rotated copy of the true pose. Flattening it keeps every
-        hypothesis that roughly fits alive until later scans decide."""
+        hypothesis that roughly fits alive until later scans decide.
+        """
         target = self.params["search_ess_fraction"] * len(scores)
         finite = np.isfinite(scores)
         prior = self.weights

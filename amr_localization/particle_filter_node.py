@@ -1,5 +1,7 @@
-"""The `particle_filter` lifecycle node: /odometry + /scan -> /pose (amr_msgs/PoseStamped with
-`localized`), /amcl_pose and /particles, on the world map of the simulator (one loader).
+"""The `particle_filter` lifecycle node: /odometry + /scan -> /pose.
+
+Outputs /pose (amr_msgs/PoseStamped with `localized`), /amcl_pose and /particles, on the world
+map of the simulator (one loader).
 
 Thin: messages become ParticleFilter.predict / correct calls and results become messages.
 - Every /odometry message moves the particles by its twist over the time since the previous one
@@ -114,9 +116,12 @@ class ParticleFilterNode(LifecycleNode):
         self.pose_count = 0  # /pose messages published (tests, run scripts)
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Load the world, build the filter, create the publishers, the synchronized
+        """Load the world, build the filter, create the publishers and inputs.
+
+        Load the world, build the filter, create the publishers, the synchronized
         /odometry + /scan inputs and the /initialpose subscription. FAILURE (with the reason
-        logged) for bad parameters or a missing/malformed world file."""
+        logged) for bad parameters or a missing/malformed world file.
+        """
         node = {name: self.get_parameter(name).value for name in _NODE_PARAMETERS}
         problems = []
         for name in ("slop", "max_odometry_gap_s", "max_scan_age_s", "particles_period_s"):
@@ -263,8 +268,11 @@ class ParticleFilterNode(LifecycleNode):
         self._publish_particles(scan.header.stamp, stamp_ns)
 
     def _usable_ranges(self, scan: LaserScan) -> np.ndarray | None:
-        """The scan's ranges if the message is usable (geometry consistent, enough valid
-        readings), after telling the filter a new geometry; None (and a warning) if not."""
+        """The scan's ranges if the message is usable, else None.
+
+        The scan's ranges if the message is usable (geometry consistent, enough valid
+        readings), after telling the filter a new geometry; None (and a warning) if not.
+        """
         n = len(scan.ranges)
         geometry = (scan.angle_min, scan.angle_increment, n, scan.range_min, scan.range_max)
         if n == 0 or not all(math.isfinite(v) for v in geometry) or scan.angle_increment == 0:

@@ -1,5 +1,8 @@
-"""The ParticleFilter's parameters: name -> (default, description with units), and their
-checking. No rclpy import; the particle_filter node declares each as a ROS parameter."""
+"""The ParticleFilter's parameters and their checking.
+
+The ParticleFilter's parameters: name -> (default, description with units), and their
+checking. No rclpy import; the particle_filter node declares each as a ROS parameter.
+"""
 from __future__ import annotations
 
 import math
@@ -78,8 +81,11 @@ _VECTORS = {"initial_pose", "initial_pose_sigma"}
 
 
 def check_parameters(overrides: dict[str, Any] | None = None) -> dict[str, Any]:
-    """Every parameter's value (defaults updated with `overrides`), checked and normalised
-    (floats, ints, tuples; initial_pose None when empty); ValueError naming every bad one."""
+    """Every parameter's value, checked and normalised.
+
+    Every parameter's value (defaults updated with `overrides`), checked and normalised
+    (floats, ints, tuples; initial_pose None when empty); ValueError naming every bad one.
+    """
     values = {name: default for name, (default, _) in PARAMETERS.items()}
     unknown = sorted(set(overrides or {}) - set(PARAMETERS))
     if unknown:

@@ -28,7 +28,8 @@ def score_poses_python(cells, centres, headings, table, angles, x0, y0, resoluti
 
     A pose is dropped (scored by what it matched so far) after more than max_misses misses:
     most poses are wrong, and their misses come early because beam_bins is in an interleaved
-    order (see PoseSearch)."""
+    order (see PoseSearch).
+    """
     inv_res = 1.0 / resolution
     n_beams = beam_bins.shape[0]
     bins_per_heading = angles / headings
@@ -74,8 +75,11 @@ score_poses_kernel = jit(score_poses_python)
 def score_poses_numpy(cells, centres, headings, table, angles, x0, y0, resolution, nx,
                       lidar_offset, beam_bins, z_mm, tolerance_mm, range_min_mm, range_max_mm,
                       max_misses, out):
-    """The same scores as numpy operations, one heading at a time (a pose's misses after the
-    (max_misses + 1)-th no longer hide its later matches: the same ranking above the cut)."""
+    """The same scores as numpy operations, one heading at a time.
+
+    The same scores as numpy operations, one heading at a time (a pose's misses after the
+    (max_misses + 1)-th no longer hide its later matches: the same ranking above the cut).
+    """
     cx, cy = centres[cells, 0], centres[cells, 1]
     for h in range(headings):
         theta = h * (2.0 * math.pi / headings)
@@ -141,7 +145,9 @@ class PoseSearch:
 
     def best_poses(self, count: int, beam_bins, z_mm, range_limits_mm, lidar_offset: float,
                    rng: np.random.Generator) -> np.ndarray:
-        """(count, 3) poses: the `count` best-scoring grid poses for this scan, each jittered
+        """The best-fitting grid poses for this scan, jittered: a global search's particles.
+
+        (count, 3) poses: the `count` best-scoring grid poses for this scan, each jittered
         uniformly within its grid step (the particles of a global search, so that every pose
         that fits the first scan, the true one and its symmetric copies alike, is represented).
         """
@@ -160,10 +166,13 @@ class PoseSearch:
     def best_near(self, pose, radius: float, angle: float, beam_bins, z_mm, range_limits_mm,
                   lidar_offset: float, matcher: ScanMatcher, ranges: np.ndarray,
                   match_tolerance: float) -> Alternative:
-        """The pose within `radius` (m) and `angle` (rad) of `pose` that explains the scan best:
+        """The pose near `pose` that explains the scan best.
+
+        The pose within `radius` (m) and `angle` (rad) of `pose` that explains the scan best:
         coarse scores of that neighbourhood, then the best three distinct candidates (and
         `pose` itself) refined exactly. Used before calling a hypothesis refuted: refuted must
-        mean that NO pose near it explains the scan, not that its current pose drifted."""
+        mean that NO pose near it explains the scan, not that its current pose drifted.
+        """
         grid, table = self.table.grid, self.table
         centres = self.centres[self.cells]
         near = np.flatnonzero(np.hypot(centres[:, 0] - pose[0], centres[:, 1] - pose[1])
@@ -197,8 +206,11 @@ class PoseSearch:
                      matcher: ScanMatcher, ranges: np.ndarray, match_tolerance: float,
                      exclusion_m: float = 0.15,
                      exclusion_rad: float = math.radians(15.0)) -> list[Alternative]:
-        """The best distinct poses farther than exclusion_m / exclusion_rad from `estimate`,
-        each refined locally, best first."""
+        """The best distinct poses away from `estimate`, refined, best first.
+
+        The best distinct poses farther than exclusion_m / exclusion_rad from `estimate`,
+        each refined locally, best first.
+        """
         scores = self._score(beam_bins, z_mm, range_limits_mm, lidar_offset)
         # Candidates: the poses within a few beams of the best (a rival explaining >= 90 % of
         # the rays matches nearly every beam at this tolerance), best first.
@@ -224,8 +236,10 @@ class PoseSearch:
 def refine(pose, matcher: ScanMatcher, ranges: np.ndarray, tolerance: float,
            step: tuple[float, float] = (0.04, math.radians(2.0)), halvings: int = 3
            ) -> Alternative:
-    """Coordinate ascent of the exact match fraction from `pose`, first steps half of `step`
-    (m, rad), halved whenever no neighbour is better (`halvings` times)."""
+    """Coordinate ascent of the exact match fraction from `pose`.
+
+    First steps half of `step` (m, rad), halved whenever no neighbour is better (`halvings` times).
+    """
     best = (tuple(pose), matcher.match_fraction(pose, ranges, tolerance))
     dxy, dth = step[0] / 2.0, step[1] / 2.0
     while halvings > 0:

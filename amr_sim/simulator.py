@@ -220,10 +220,13 @@ class Simulator:
         return self._scan, self._z_v, self._z_w
 
     def teleport(self, pose) -> None:
-        """Move the robot to `pose` (x, y, theta) at once, as if kidnapped: no time passes, the
+        """Teleport the robot to `pose` (x, y, theta), as if kidnapped.
+
+        Move the robot to `pose` (x, y, theta) at once, as if kidnapped: no time passes, the
         encoders and the dead-reckoned odometry see no motion, the distance does not grow, and
         the LiDAR reads the new place from its next scan on (every step with `ideal`, the next
-        0.2 s slot with `turtlebot3`). Raises WorldError for a pose inside or touching a wall."""
+        0.2 s slot with `turtlebot3`). Raises WorldError for a pose inside or touching a wall.
+        """
         x, y, theta = self._world.resolve_start(tuple(float(v) for v in pose))
         body = self._body
         body.position = (x, y)

@@ -1,5 +1,7 @@
 #!/usr/bin/env python3
-"""Sweep the particle filter over worlds x starts x profiles x seeds (optionally kidnapped),
+"""Sweep the particle filter over worlds, starts, profiles and seeds.
+
+Sweep the particle filter over worlds x starts x profiles x seeds (optionally kidnapped),
 headless, on all cores: the figures of the README's "Localize" section.
 
 Each episode runs the simulator, the wall follower (exploring on) and the particle filter with

@@ -1,7 +1,10 @@
-"""End to end without ROS: the wall follower explores, the particle filter localizes (the same
+"""End to end without ROS: the wall follower explores, the particle filter localizes.
+
+End to end without ROS: the wall follower explores, the particle filter localizes (the same
 classes as the nodes). Global localization on every bundled world in both profiles, the exactly
 symmetric world that must never be declared, and kidnapping. The large sweep behind the
-README's figures is scripts/evaluate_localization.py; these runs are its small, fixed sample."""
+README's figures is scripts/evaluate_localization.py; these runs are its small, fixed sample.
+"""
 from __future__ import annotations
 
 import math
@@ -44,8 +47,11 @@ def test_global_localization_is_fast_accurate_and_never_wrong(world):
 @pytest.mark.slow
 @pytest.mark.parametrize("profile", ["ideal", "turtlebot3"])
 def test_an_exactly_symmetric_world_is_never_declared(profile):
-    """corridor_loop is a rectangle ring around a rectangle block: every pose and its half turn
-    about the centre see the same scans forever. A trustworthy filter never says localized."""
+    """The exactly symmetric corridor_loop is never declared localized.
+
+    corridor_loop is a rectangle ring around a rectangle block: every pose and its half turn
+    about the centre see the same scans forever. A trustworthy filter never says localized.
+    """
     for start in ("south", "corner"):
         result = run_localization_episode("corridor_loop", start, profile=profile, seed=0,
                                           duration=45.0, record=False)
@@ -56,9 +62,12 @@ def test_an_exactly_symmetric_world_is_never_declared(profile):
 @pytest.mark.slow
 @pytest.mark.parametrize("profile", ["ideal", "turtlebot3"])
 def test_kidnapping_is_reported_and_recovered(profile):
-    """Kidnapped at 20 s from maze_deadends' south-west start to its centre (turned): the loss
+    """Kidnapping is reported within 2 s and recovered within 30 s.
+
+    Kidnapped at 20 s from maze_deadends' south-west start to its centre (turned): the loss
     is reported within 2 s and the filter relocalizes within 30 s, in at least 9 of 10 runs
-    over both profiles (5 seeds each here)."""
+    over both profiles (5 seeds each here).
+    """
     world = World.load("maze_deadends")
     x, y, theta = world.starts["centre"]
     kidnap = (20.0, x, y, math.remainder(theta + math.pi / 2, 2 * math.pi))

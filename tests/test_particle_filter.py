@@ -1,6 +1,8 @@
-"""The particle filter's parts without ROS: motion model, resampling, free-space sampling, the
-beam model on the expected-range table, KLD count, the localized decision; numba and plain
-Python/numpy paths agree."""
+"""The particle filter's parts without ROS.
+
+Motion model, resampling, free-space sampling, the beam model on the expected-range table, KLD
+count, the localized decision; numba and plain Python/numpy paths agree.
+"""
 from __future__ import annotations
 
 import math
@@ -27,8 +29,11 @@ from amr_sim.lidar import Lidar
 
 @pytest.fixture(scope="module")
 def corridor(tmp_path_factory):
-    """A straight 0.4 m corridor, 2.4 m long, closed at both ends: symmetric under a half turn
-    about its centre, and every beam endpoint of a rotated pose lies on SOME wall."""
+    """A straight 0.4 m corridor, 2.4 m long, closed at both ends.
+
+    Symmetric under a half turn about its centre, and every beam endpoint of a rotated pose lies on
+    SOME wall.
+    """
     path = tmp_path_factory.mktemp("worlds") / "corridor.yaml"
     path.write_text("boundary: [[0, 0], [2.4, 0], [2.4, 0.4], [0, 0.4]]\n")
     return World.load(path)
@@ -276,8 +281,11 @@ def test_parameters_are_checked_with_every_problem_named():
 
 
 def test_adaptive_count_shrinks_when_tracking():
-    """Tracking from a known pose converges to the minimum count; a global search starts with
-    the maximum."""
+    """Tracking converges to the minimum count; a search starts at the maximum.
+
+    Tracking from a known pose converges to the minimum count; a global search starts with
+    the maximum.
+    """
     world = World.load("lab02")
     pose = world.starts["inner"]
     pf = ParticleFilter(world, initial_pose=list(pose), min_particles=200,

@@ -29,8 +29,11 @@ def make_node(ros, **params):
 
 
 class FakeGraph:
-    """The test's side: a Simulator stepped by hand, publishing /odometry and /scan as the
-    lockstep simulator node does (both every step, the held 5 Hz scan again with turtlebot3)."""
+    """The test's side: a Simulator stepped by hand, publishing like the node.
+
+    The test's side: a Simulator stepped by hand, publishing /odometry and /scan as the
+    lockstep simulator node does (both every step, the held 5 Hz scan again with turtlebot3).
+    """
 
     def __init__(self, ros, world="lab02", start="inner", profile="turtlebot3"):
         from amr_msgs.msg import PoseStamped

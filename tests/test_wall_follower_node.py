@@ -159,8 +159,11 @@ def pose_msg(stamp_ns, localized):
 
 
 def test_lockstep_handover_publishes_nothing_while_localized_and_resumes_when_lost(ros):
-    """In lockstep the pure pursuit answers localized poses: the follower must be silent then
-    (two answers per step would advance the simulator twice) and answer again when lost."""
+    """In lockstep the follower is silent while localized and answers when lost.
+
+    In lockstep the pure pursuit answers localized poses: the follower must be silent then
+    (two answers per step would advance the simulator twice) and answer again when lost.
+    """
     from amr_msgs.msg import PoseStamped
     node = make_node(ros, controller="tests.controllers:ConstantController",
                      enable_localization=True)
