@@ -196,6 +196,24 @@ def run_localization_episode(world: World | str, start=None,
         particles_snapshot=snapshot if record else [], **metrics)
 
 
+def metrics_from_rows(trajectory, estimate, kidnap=None) -> dict[str, Any]:
+    """The metrics of the module docstring from a run's rows, as run_sim.py records them.
+
+    trajectory: [t, x, y, theta] of the truth at every simulation step; estimate: [t, x, y,
+    theta, localized] at every /pose (t = its stamp; in real time fewer rows than steps). Each
+    estimate is compared with the truth at its stamp.
+    """
+    truth = np.asarray(trajectory, dtype=np.float64).reshape(-1, 4)
+    rows = np.asarray(estimate, dtype=np.float64).reshape(-1, 5)
+    if len(rows) == 0 or len(truth) == 0:
+        return localization_metrics(np.zeros((0, 4)), np.zeros((0, 5)), np.zeros(0), kidnap)
+    index = np.clip(np.searchsorted(truth[:, 0], rows[:, 0] - 1e-6), 0, len(truth) - 1)
+    travelled = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(truth[:, 1:3], axis=0).T))])
+    at_stamps = truth[index].copy()
+    at_stamps[:, 0] = rows[:, 0]
+    return localization_metrics(at_stamps, rows, travelled[index], kidnap)
+
+
 def pose_errors(truth: np.ndarray, estimate: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Position (m) and absolute heading (rad) errors of estimate rows against truth rows."""
     position = np.hypot(estimate[:, 1] - truth[:, 1], estimate[:, 2] - truth[:, 2])
@@ -211,6 +229,13 @@ def localization_metrics(truth: np.ndarray, estimate: np.ndarray, distances: np.
     Truth [t, x, y, theta], estimate [t, x, y, theta, localized], distance travelled (m).
     """
     t = truth[:, 0]
+    if len(t) == 0:
+        return {"time_to_localized_s": None, "distance_to_localized_m": None,
+                "false_localizations": 0, "false_localized_s": 0.0, "localized_share": 0.0,
+                "relocalization_times_s": [], "loss_reported_after_s": None,
+                "relocalized_after_s": None, "tracking_error_mean_m": None,
+                "tracking_error_p95_m": None, "tracking_error_max_m": None,
+                "heading_error_p95_deg": None}
     localized = estimate[:, 4] > 0.5
     position, heading = pose_errors(truth, estimate)
     wrong = (position > FALSE_POSITION_M) | (heading > FALSE_HEADING_RAD)
@@ -230,6 +255,7 @@ def localization_metrics(truth: np.ndarray, estimate: np.ndarray, distances: np.
         excused = after & (t <= grace_end + 1e-9)
     false_steps = localized & wrong & ~excused
     false_runs = int(np.count_nonzero(false_steps[1:] & ~false_steps[:-1]) + false_steps[0])
+    durations = np.diff(t, prepend=t[0] - dt)  # rows may be uneven (a real-time /pose)
     first = np.flatnonzero(localized)
     rises = np.flatnonzero(localized[1:] & ~localized[:-1]) + 1
     tracked = localized & ~excused
@@ -237,7 +263,7 @@ def localization_metrics(truth: np.ndarray, estimate: np.ndarray, distances: np.
         "time_to_localized_s": float(t[first[0]]) if first.size else None,
         "distance_to_localized_m": float(distances[first[0]]) if first.size else None,
         "false_localizations": false_runs,
-        "false_localized_s": float(np.count_nonzero(false_steps) * dt),
+        "false_localized_s": float(durations[false_steps].sum()),
         "localized_share": float(np.mean(localized[first[0]:])) if first.size else 0.0,
         "relocalization_times_s": [float(t[i]) for i in rises if first.size and i > first[0]],
         "loss_reported_after_s": loss_after,

@@ -3,8 +3,9 @@
 Batch localization episodes (worlds x starts x profiles x seeds, optional kidnapping) on a
 process pool, and the aggregate figures that say whether the filter can be trusted.
 
-scripts/evaluate_localization.py is the command line; evaluate.py --localize uses the same
-functions. Each episode is amr_evaluation.localization_episode.run_localization_episode.
+`scripts/evaluate.py --localize` is the command line (evaluate_main). Each episode is
+amr_evaluation.localization_episode.run_localization_episode, with the wall follower built as
+evaluate.py builds it (its params file, -p overrides, the profile's LiDAR position).
 """
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ import os
 import time
 import traceback
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
@@ -30,6 +32,8 @@ class LocalizationSpec:
     duration: float = 60.0
     kidnap: tuple[float, float, float, float] | None = None
     filter_params: tuple[tuple[str, Any], ...] = ()
+    controller: str = "amr_control.wall_follower:WallFollower"
+    controller_params: tuple[tuple[str, Any], ...] = ()
 
     @property
     def label(self) -> str:
@@ -67,13 +71,21 @@ def kidnap_pose(world_name: str, start: str | None, at: float) -> tuple[float, .
 
 def run_one(spec: LocalizationSpec) -> LocalizationOutcome:
     """Run one episode in this process (an exception becomes the outcome's error)."""
+    from amr_common.controller_loader import load_controller_class
+    from amr_evaluation.episode import robot_parameters
     from amr_evaluation.localization_episode import run_localization_episode
+    from amr_sim.profiles import get_profile
     started = time.perf_counter()
     try:
+        controller_class = load_controller_class(spec.controller)
+        params = {**robot_parameters(controller_class, get_profile(spec.profile)),
+                  **dict(spec.controller_params)}
         result = run_localization_episode(spec.world, spec.start, profile=spec.profile,
                                           seed=spec.seed, duration=spec.duration,
                                           kidnap=spec.kidnap,
-                                          filter_params=dict(spec.filter_params), record=False)
+                                          filter_params=dict(spec.filter_params),
+                                          controller=controller_class(0.05, **params),
+                                          record=False)
         return LocalizationOutcome(spec, result=result,
                                    wall_time_s=time.perf_counter() - started)
     except Exception as exc:  # one broken episode must not lose the others
@@ -165,3 +177,86 @@ def outcome_row(outcome: LocalizationOutcome) -> dict[str, Any]:
         row[key] = data[key]
     row["real_time_factor"] = round(result.real_time_factor, 1)
     return row
+
+
+_TABLE = [("world", "world", "{}"), ("start", "start", "{}"), ("profile", "profile", "{}"),
+          ("seed", "seed", "{}"), ("localized_s", "time_to_localized_s", "{:.1f}"),
+          ("dist_m", "distance_to_localized_m", "{:.2f}"),
+          ("false", "false_localizations", "{}"),
+          ("err_mean_cm", "tracking_error_mean_m", "{:.2f}"),
+          ("err_p95_cm", "tracking_error_p95_m", "{:.2f}"),
+          ("err_max_cm", "tracking_error_max_m", "{:.2f}"),
+          ("hdg_p95_deg", "heading_error_p95_deg", "{:.2f}"),
+          ("reloc", "relocalization_times_s", "{}"), ("loss_s", "loss_reported_after_s", "{:.2f}"),
+          ("reloc_s", "relocalized_after_s", "{:.1f}"), ("rtf", "real_time_factor", "{:.0f}")]
+
+
+def format_table(rows: Sequence[dict[str, Any]]) -> str:
+    """Aligned text table of outcome rows (errors in cm, relocalizations counted)."""
+    lines = [[header for header, _, _ in _TABLE]]
+    for row in rows:
+        if "error" in row:
+            lines.append([str(row[k]) for k in ("world", "start", "profile", "seed")]
+                         + [f"ERROR {row['error']}"])
+            continue
+        cells = []
+        for _, key, fmt in _TABLE:
+            value = row.get(key)
+            if value is None:
+                cells.append("-")
+            elif key.endswith("_m") and key.startswith("tracking"):
+                cells.append(fmt.format(100 * value))
+            elif key == "relocalization_times_s":
+                cells.append(str(len(value)))
+            else:
+                cells.append(fmt.format(value))
+        lines.append(cells)
+    widths = [max(len(line[i]) for line in lines if i < len(line)) for i in range(len(_TABLE))]
+    return "\n".join("  ".join(cell.ljust(w) for cell, w in zip(line, widths)).rstrip()
+                     for line in lines)
+
+
+def evaluate_main(specs, settings: dict[str, Any], args, out: Path) -> int:
+    """evaluate.py --localize: localization episodes for evaluate.py's grid (EpisodeSpecs).
+
+    Writes results.json (summary + rows) and results.csv to `out`, prints the table and the
+    summary; exit code 1 if any episode declared a wrong pose localized, 3 if one failed.
+    """
+    import csv
+    import json
+
+    from amr_common.controller_loader import parse_overrides
+    kidnap_at = getattr(args, "kidnap_at", None)
+    filter_params = tuple(sorted(parse_overrides(getattr(args, "pf_param", [])).items()))
+    controller_params = tuple(sorted(settings["params"].items()))
+    local = [LocalizationSpec(s.world, s.start, s.profile, s.seed, s.duration,
+                              kidnap_pose(s.world, s.start, kidnap_at) if kidnap_at else None,
+                              filter_params, settings["controller"], controller_params)
+             for s in specs]
+    print(f"evaluate: {len(local)} localization episodes of {settings['duration']:g} s"
+          + (f", kidnapped at {kidnap_at:g} s" if kidnap_at else ""), flush=True)
+    started = time.monotonic()
+
+    def progress(done, total, outcome):
+        text = outcome.result.summary() if outcome.result is not None else \
+            f"{outcome.spec.label}: ERROR {outcome.error}"
+        print(f"[{done}/{total}] {text}", flush=True)
+
+    outcomes = run_localization_specs(local, jobs=settings["jobs"], progress=progress)
+    summary = summarize(outcomes)
+    summary["wall_time_s"] = round(time.monotonic() - started, 1)
+    rows = [outcome_row(o) for o in outcomes]
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "results.json").write_text(json.dumps({"summary": summary, "episodes": rows},
+                                                 indent=1, default=float))
+    with open(out / "results.csv", "w", newline="") as handle:
+        keys = list(dict.fromkeys(k for row in rows for k in row))
+        writer = csv.DictWriter(handle, fieldnames=keys)
+        writer.writeheader()
+        writer.writerows(rows)
+    print(format_table(rows))
+    print(json.dumps(summary, indent=1, default=float))
+    print(f"evaluate: results in {out}")
+    if summary["failed"]:
+        return 3
+    return 1 if summary["false_localizations"] else 0

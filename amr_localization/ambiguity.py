@@ -87,6 +87,9 @@ class AmbiguityGuard:
         refined_estimate: float | None = None
         for track in self.open_tracks:
             track.pose = self._anchor(track.pose, particles, weights)
+            if close_poses(track.pose, estimate, TRACK_DISTANCE_M, TRACK_ANGLE_RAD):
+                self.tracks.remove(track)  # it merged with the estimate: no longer a rival
+                continue
             match = matcher.match_fraction(track.pose, ranges, tolerance)
             decisive = match < self.rival_fraction or (
                 match >= self.localize_fraction and estimate_match < self.rival_fraction)

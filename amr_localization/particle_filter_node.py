@@ -98,6 +98,9 @@ class ParticleFilterNode(LifecycleNode):
                 descriptor = ParameterDescriptor(description=description,
                                                  dynamic_typing=isinstance(default, float))
             self.declare_parameter(name, default, descriptor)
+        # Run scripts append callables here: each is called with (stamp_ns, (x, y, theta),
+        # localized, node) after every /pose (in-process observation without a subscription).
+        self.on_pose: list = []
         self._reset_runtime()
 
     # --- lifecycle -------------------------------------------------------------------------
@@ -321,6 +324,12 @@ class ParticleFilterNode(LifecycleNode):
         message.localized = finite and self.localized(stamp_ns)
         self._outputs["pose"].publish(message)
         self.pose_count += 1
+        for hook in list(self.on_pose):
+            try:
+                hook(stamp_ns, (x, y, theta), message.localized, self)
+            except Exception as exc:  # an observer must not stop the filter
+                self.get_logger().error(f"on_pose hook {hook!r} failed: {exc!r}",
+                                        throttle_duration_sec=5.0)
 
     def _publish_amcl_pose(self, stamp) -> None:
         estimate, cov = self.filter.estimate, self.filter.covariance

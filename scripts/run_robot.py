@@ -8,6 +8,7 @@ does not change discovery, it prints what it uses.
 
   .venv/bin/python scripts/run_robot.py --domain-id 30 --cmd-vel stamped   # Jazzy bringup
   .venv/bin/python scripts/run_robot.py --domain-id 30 --cmd-vel twist     # Humble bringup
+  .venv/bin/python scripts/run_robot.py --domain-id 30 --localize --world lab02  # + localization
 Ctrl-C stops the robot: the wall follower publishes a zero command before exiting.
 """
 from __future__ import annotations
@@ -19,11 +20,12 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from amr_common.ros_env import describe_graph_settings  # noqa: E402
-from launch_common import (
+from launch_common import (  # noqa: E402
     ROBOT_PARAMS,
     add_controller_options,
+    add_localization_options,
     check_common_options,
-    make_robot_graph,  # noqa: E402
+    make_robot_graph,
 )
 
 
@@ -39,10 +41,21 @@ def parse_args(argv=None) -> argparse.Namespace:
     add_controller_options(parser, str(ROBOT_PARAMS), "wall follower ROS params YAML "
                            "(default params/turtlebot3.yaml)")
     parser.add_argument("--dt", type=float, default=None, help="control period in seconds")
+    add_localization_options(parser)
+    parser.add_argument("--world", default=None, help="with --localize: the map the robot is "
+                        "in (bundled world name or world YAML / course map JSON)")
     args = parser.parse_args(argv)
     if args.domain_id is not None and not 0 <= args.domain_id <= 232:
         parser.error("--domain-id must be within 0-232")
     check_common_options(parser, args)
+    if args.localize and args.world is None:
+        parser.error("--localize needs --world (the map the robot drives in)")
+    if args.world is not None:
+        from amr_common.world import World, WorldError
+        try:
+            World.load(args.world)
+        except WorldError as exc:
+            parser.error(str(exc))
     return args
 
 
@@ -62,7 +75,9 @@ def main(argv=None) -> int:
     stamped = None if args.cmd_vel is None else args.cmd_vel == "stamped"
     nodes = make_robot_graph(None, params_file=args.params_file, dt=args.dt,
                              cmd_vel_stamped=stamped, controller=args.controller,
-                             tuning=args.overrides)
+                             tuning=args.overrides,
+                             localize_world=args.world if args.localize else None,
+                             filter_overrides=args.pf_overrides)
     manager = LifecycleManager([node.get_name() for node in nodes])
     manager.get_logger().info(f"run_robot: {describe_graph_settings()}; Ctrl-C stops the robot")
     return run_managed(manager, stop, nodes)
