@@ -20,6 +20,8 @@ from amr_common.jit import HAVE_NUMBA, jit
 from amr_localization.expected_ranges import ExpectedRangeTable
 from amr_localization.localization_check import ScanMatcher
 
+SEARCH_BEAMS = 30
+
 
 def score_poses_python(cells, centres, headings, table, angles, x0, y0, resolution, nx,
                        lidar_offset, beam_bins, z_mm, tolerance_mm, range_min_mm, range_max_mm,
@@ -116,7 +118,7 @@ class PoseSearch:
     """Coarse exhaustive scoring + exact refinement of the best distinct candidates."""
 
     def __init__(self, table: ExpectedRangeTable, robot_ok: np.ndarray, stride: int = 2,
-                 headings: int = 180, tolerance_m: float = 0.06, candidates: int = 8,
+                 headings: int = 120, tolerance_m: float = 0.06, candidates: int = 8,
                  miss_share: float = 0.25) -> None:
         grid = table.grid
         keep = robot_ok.astype(bool).reshape(grid.ny, grid.nx)
@@ -135,12 +137,17 @@ class PoseSearch:
     def _score(self, beam_bins, z_mm, range_limits_mm, lidar_offset: float) -> np.ndarray:
         """Scores of every (cell, heading) of the coarse grid, flattened (cell-major)."""
         grid, table = self.table.grid, self.table
+        # At most SEARCH_BEAMS beams, spread around: a coarse ranking (the candidates are then
+        # refined with every ray), and half the lookups of 60 beams.
+        keep = np.arange(0, len(beam_bins), max(1, -(-len(beam_bins) // SEARCH_BEAMS)))
+        beam_bins, z_mm = beam_bins[keep], z_mm[keep]
         order = interleaved_order(len(beam_bins))
         score_poses(self.cells, self.centres, self.headings, table.ranges, table.angles,
                     grid.x0, grid.y0, grid.resolution, grid.nx, lidar_offset,
                     np.ascontiguousarray(beam_bins[order]), np.ascontiguousarray(z_mm[order]),
                     self.tolerance_mm, range_limits_mm[0], range_limits_mm[1],
                     int(self.miss_share * len(beam_bins)), self._scores)
+        self.scored_beams = len(beam_bins)
         return self._scores.ravel()
 
     def best_poses(self, count: int, beam_bins, z_mm, range_limits_mm, lidar_offset: float,
@@ -214,7 +221,7 @@ class PoseSearch:
         scores = self._score(beam_bins, z_mm, range_limits_mm, lidar_offset)
         # Candidates: the poses within a few beams of the best (a rival explaining >= 90 % of
         # the rays matches nearly every beam at this tolerance), best first.
-        best = np.flatnonzero(scores >= scores.max() - max(len(beam_bins) // 6, 2))
+        best = np.flatnonzero(scores >= scores.max() - max(self.scored_beams // 6, 2))
         best = best[np.argsort(-scores[best], kind="stable")][:4000]
         chosen: list[tuple[float, float, float]] = []
         for flat in best:
