@@ -91,8 +91,7 @@ class AmbiguityGuard:
                 self.tracks.remove(track)  # it merged with the estimate: no longer a rival
                 continue
             match = matcher.match_fraction(track.pose, ranges, tolerance)
-            decisive = match < self.rival_fraction or (
-                match >= self.localize_fraction and estimate_match < self.rival_fraction)
+            decisive = match < self.rival_fraction or estimate_match < self.rival_fraction
             if not decisive:
                 track.last_match = match
                 continue

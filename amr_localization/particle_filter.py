@@ -79,6 +79,7 @@ class ParticleFilter:
         self.search = PoseSearch(self.table, self._robot_ok)
         self.guard = AmbiguityGuard(p["ambiguity_match_fraction"], p["localize_match_fraction"])
         self.last_alternatives: list = []
+        self._last_doubt = -10**9  # total_updates at the last search for a better pose
         self._beams = np.zeros(0, dtype=np.int64)
         self._beam_bins = np.zeros(0)
         self.particles = np.zeros((0, 3))
@@ -268,6 +269,15 @@ class ParticleFilter:
             # pose within a couple of cm of it decides whether the cluster explains the scan.
             self.match_fraction = refine(self.estimate, self.matcher, ranges,
                                          tolerance).match_fraction
+        if not self.localized and self.cluster_share >= self.params["cluster_min_share"] and \
+                self.match_fraction < self.params["ambiguity_match_fraction"] and \
+                self.total_updates - self._last_doubt >= self.params["localize_updates"]:
+            # Converged on a pose that does not explain the scan: if the true pose lost its
+            # particles earlier (a symmetric maze), the exhaustive search finds it again.
+            self._last_doubt = self.total_updates
+            rivals = self.guard.unresolved(self._alternatives(ranges))
+            if rivals:
+                self._inject([a.pose for a in rivals])
         if not self.localized and self.guard.tracks:
             winner = self.guard.observe(self.estimate, self.match_fraction, self.matcher, ranges,
                                         self.params["match_tolerance_m"], self.particles,
@@ -315,20 +325,24 @@ class ParticleFilter:
         if live:  # known rivals still explain the scan: no need to search again
             self.check.reject()
             return "ambiguous"
-        range_min, range_max = self._range_limits
-        z_mm = reading_to_mm(ranges[self._beams], range_min, range_max)
-        alternatives = self.search.alternatives(
-            self.estimate, self._beam_bins, z_mm,
-            (int(math.ceil(range_min * 1000.0)), int(range_max * 1000.0)), p["lidar_offset_x_m"],
-            self.matcher, ranges, p["match_tolerance_m"])
-        rivals = self.guard.unresolved(alternatives)
-        self.last_alternatives = alternatives
+        rivals = self.guard.unresolved(self._alternatives(ranges))
         if not rivals:
             self.check.confirm()
             return "localized"
         self.check.reject()
         self._inject([a.pose for a in rivals])
         return "ambiguous"
+
+    def _alternatives(self, ranges: np.ndarray) -> list:
+        """The best poses away from the estimate for this scan (PoseSearch.alternatives)."""
+        p = self.params
+        range_min, range_max = self._range_limits
+        z_mm = reading_to_mm(ranges[self._beams], range_min, range_max)
+        self.last_alternatives = self.search.alternatives(
+            self.estimate, self._beam_bins, z_mm,
+            (int(math.ceil(range_min * 1000.0)), int(range_max * 1000.0)), p["lidar_offset_x_m"],
+            self.matcher, ranges, p["match_tolerance_m"])
+        return self.last_alternatives
 
     def _move_to(self, pose) -> None:
         """Move every particle to a rival that explains the scans better.
