@@ -196,3 +196,37 @@ def test_particles_are_throttled(ros):
     assert 3 <= len(graph.particles) <= 4, "one per 0.5 s of stamp time"
     assert all(len(m.poses) <= 110 for m in graph.particles)
     assert graph.particles[0].header.frame_id == "map"
+
+
+@pytest.mark.slow
+def test_the_executable_answers_with_autostart_and_exits_cleanly_on_ctrl_c(ros, tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from tests.processes import terminate, wait_for
+
+    repo = Path(__file__).resolve().parent.parent
+    graph = FakeGraph(ros, world="twin_maze_small", start="middle", profile="ideal")
+    log = open(tmp_path / "pf.log", "w")
+    process = subprocess.Popen(
+        [str(Path(sys.executable).parent / "amr_particle_filter"), "--ros-args",
+         "-p", "autostart:=true", "-p", "world:=twin_maze_small"],
+        cwd=repo, env=dict(os.environ), stdout=log, stderr=subprocess.STDOUT)
+    try:
+        def answered():
+            graph.publish()
+            ros.spin_for(0.1)
+            return bool(graph.poses)
+
+        wait_for(answered, 30.0, "a /pose from the executable")
+        process.send_signal(signal.SIGINT)
+        process.wait(timeout=15)
+    finally:
+        terminate(process, timeout=5)
+        log.close()
+    output = (tmp_path / "pf.log").read_text()
+    assert process.returncode == 0, output
+    assert "configured: world 'twin_maze_small'" in output
