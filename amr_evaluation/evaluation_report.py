@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence, TextIO
 
+from amr_common.world import start_label
 from amr_evaluation.evaluation import EpisodeOutcome
 
 __all__ = [
@@ -44,8 +45,8 @@ def outcome_row(outcome: EpisodeOutcome) -> dict[str, Any]:
     spec, result = outcome.spec, outcome.result
     world = (Path(spec.world).stem if spec.world.endswith((".yaml", ".yml", ".json"))
              else spec.world)
-    row: dict[str, Any] = {"world": world, "start": spec.start, "profile": spec.profile,
-                           "seed": spec.seed}
+    row: dict[str, Any] = {"world": world, "start": start_label(spec.start) or None,
+                           "profile": spec.profile, "seed": spec.seed}
     metrics = _result_metrics(result) if result is not None else {}
     for column in RESULT_COLUMNS[4:-2]:
         row[column] = _finite_or_none(metrics.get(column))

@@ -199,6 +199,8 @@ def plot_episodes_sheet(results: Sequence[Any], path: str | Path, columns: int |
 
 def _save(fig: Figure, path: str | Path, tight: bool = True) -> Path:
     path = Path(path)
+    if not path.suffix:  # what matplotlib would write: return the real file name
+        path = path.with_name(path.name + ".png")
     path.parent.mkdir(parents=True, exist_ok=True)
     if tight:
         fig.tight_layout()

@@ -30,12 +30,12 @@ from typing import Any
 import numpy as np
 from geometry_msgs.msg import Pose, PoseArray, PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
-from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import LaserScan
 
 from amr_common import message_filters
 from amr_common.node_runner import run_lifecycle_node
+from amr_common.parameters import declare_parameters, read_parameters
 from amr_common.qos import RELIABLE_10, scan_qos
 from amr_common.ros_conversions import (
     pose_from_message,
@@ -82,22 +82,9 @@ class ParticleFilterNode(LifecycleNode):
 
     def __init__(self, node_name: str = "particle_filter", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
-        for name, (default, description) in _NODE_PARAMETERS.items():
-            if not self.has_parameter(name):
-                self.declare_parameter(name, default, ParameterDescriptor(
-                    description=description,
-                    dynamic_typing=isinstance(default, float)))  # -p slop:=1 is fine
-        for name, (default, description) in FILTER_PARAMETERS.items():
-            if self.has_parameter(name):
-                continue
-            if name in _ARRAYS:
-                descriptor = ParameterDescriptor(
-                    description=description, type=ParameterType.PARAMETER_DOUBLE_ARRAY,
-                    dynamic_typing=True)
-            else:
-                descriptor = ParameterDescriptor(description=description,
-                                                 dynamic_typing=isinstance(default, float))
-            self.declare_parameter(name, default, descriptor)
+        # Numbers take ints for doubles (-p slop:=1), checked in on_configure.
+        declare_parameters(self, _NODE_PARAMETERS)
+        declare_parameters(self, FILTER_PARAMETERS)
         # Run scripts append callables here: each is called with (stamp_ns, (x, y, theta),
         # localized, node) after every /pose (in-process observation without a subscription).
         self.on_pose: list = []
@@ -125,8 +112,9 @@ class ParticleFilterNode(LifecycleNode):
         /odometry + /scan inputs and the /initialpose subscription. FAILURE (with the reason
         logged) for bad parameters or a missing/malformed world file.
         """
-        node = {name: self.get_parameter(name).value for name in _NODE_PARAMETERS}
-        problems = []
+        node, problems = read_parameters(self, _NODE_PARAMETERS)
+        filter_values, filter_problems = read_parameters(self, FILTER_PARAMETERS)
+        problems += filter_problems
         for name in ("slop", "max_odometry_gap_s", "max_scan_age_s", "particles_period_s"):
             value = node[name]
             if isinstance(value, bool) or not isinstance(value, (int, float)) or \
@@ -137,11 +125,14 @@ class ParticleFilterNode(LifecycleNode):
         for name in ("queue_size", "particles_published"):
             if node[name] < 1:
                 problems.append(f"{name} must be >= 1 (got {node[name]})")
-        try:
-            filter_params = check_parameters(
-                {name: self._parameter_value(name) for name in FILTER_PARAMETERS})
-        except ValueError as exc:
-            problems.append(str(exc))
+        filter_params: dict[str, Any] = {}
+        if not filter_problems:
+            try:
+                filter_params = check_parameters(
+                    {name: list(value) if name in _ARRAYS else value
+                     for name, value in filter_values.items()})
+            except ValueError as exc:
+                problems.append(str(exc))
         if problems:
             self.get_logger().error("configure failed: " + "; ".join(problems))
             return TransitionCallbackReturn.FAILURE
@@ -188,10 +179,6 @@ class ParticleFilterNode(LifecycleNode):
             f"particles, {filter_params['beams']} beams, expected-range table "
             f"{f.table.nbytes / 1e6:.1f} MB, LiDAR at x = {filter_params['lidar_offset_x_m']} m")
         return TransitionCallbackReturn.SUCCESS
-
-    def _parameter_value(self, name: str) -> Any:
-        value = self.get_parameter(name).value
-        return list(value) if name in _ARRAYS and value is not None else value
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Enable the publishers; messages are processed from now on."""

@@ -8,6 +8,10 @@ Thin: commands become `Simulator.step(v, w)` calls and results become messages
   so the loop starts.
 - realtime: a wall-clock timer at dt advances the simulation with the newest command (older than
   `command_timeout` = zero) and each sensor is published at its profile's own rate.
+TF (REP 105) as the robot's bringup: /tf_static base_footprint -> base_scan at the profile's LiDAR
+position; /tf with each odometry message (while anyone subscribes): odom -> base_footprint, map
+-> base_footprint_truth (the true pose) and, with `map_to_odom_from_truth`, map -> odom. /map and
+/map_markers: the world, latched, published on activation.
 With `enable_localization`, /pose (amr_msgs/PoseStamped) is compared with the true pose and
 reaching the goal while localized finishes the run (`finished`, `summary()`).
 For in-process run scripts: `node.simulator` and `node.on_step` (callables called with the
@@ -22,7 +26,6 @@ from typing import Any, Callable
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.clock import Clock, ClockType
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rosgraph_msgs.msg import Clock as ClockMessage
@@ -30,6 +33,7 @@ from sensor_msgs.msg import LaserScan
 
 from amr_common.geometry import angle_difference
 from amr_common.node_runner import run_lifecycle_node
+from amr_common.parameters import declare_parameters, read_parameters
 from amr_common.qos import RELIABLE_10, scan_qos
 from amr_common.ros_conversions import (
     command_from_twist,
@@ -43,10 +47,11 @@ from amr_common.world import World
 from amr_sim.simulator import Simulator
 from amr_sim.simulator_params import (
     DEFAULT_START,
-    NUMERIC_PARAMETERS,
-    PARAMETERS,
+    PARAMETER_TABLE,
+    PARAMETER_TYPES,
     check_parameters,
 )
+from amr_sim.simulator_tf import SimulatorTf
 
 
 def true_velocity(before: tuple, after: tuple, dt: float) -> tuple[float, float]:
@@ -70,11 +75,8 @@ class SimulatorNode(LifecycleNode):
 
     def __init__(self, node_name: str = "amr_simulator", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
-        for name, (default, type_, description) in PARAMETERS.items():
-            if not self.has_parameter(name):
-                self.declare_parameter(name, default, ParameterDescriptor(
-                    description=description, type=type_,
-                    dynamic_typing=name in NUMERIC_PARAMETERS))
+        # Numbers take ints for doubles (`-p dt:=1`): amr_common.parameters.
+        declare_parameters(self, PARAMETER_TABLE, types=PARAMETER_TYPES)
         # Run scripts append callables here; each is called with the simulator after a step.
         self.on_step: list[Callable[[Any], None]] = []
         self._reset()
@@ -103,10 +105,14 @@ class SimulatorNode(LifecycleNode):
         self._command_received: float | None = None  # monotonic time of the newest command
         self._next_publish = {"odom": 0.0, "scan": 0.0}
         self._kidnapped = False
+        self._tf: SimulatorTf | None = None
 
     def _read_parameters(self) -> dict[str, Any]:
         """Parameter values, checked; raises ValueError naming every bad one."""
-        return check_parameters({name: self.get_parameter(name).value for name in PARAMETERS})
+        values, problems = read_parameters(self, PARAMETER_TABLE, types=PARAMETER_TYPES)
+        if problems:
+            raise ValueError("; ".join(problems))
+        return check_parameters(values)
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Check the parameters, load the world, build the Simulator and create the topics.
@@ -155,6 +161,12 @@ class SimulatorNode(LifecycleNode):
             self._outputs["truth"] = self.create_lifecycle_publisher(
                 Odometry, "/ground_truth", RELIABLE_10)
         self._create_inputs(p)
+        try:
+            self._tf = SimulatorTf(self, self.simulator, p)
+        except Exception as exc:  # a map that cannot be built: the user's resolution
+            self.get_logger().error(f"configure failed: {exc}")
+            self._destroy_all()
+            return TransitionCallbackReturn.FAILURE
         scan_time = profile.scan_period if self.realtime and profile.scan_period else p["dt"]
         laser_scan_from_profile(self.simulator.last_scan, profile, stamp=Time(),
                                 frame_id=p["scan_frame"], scan_time=scan_time,
@@ -198,6 +210,8 @@ class SimulatorNode(LifecycleNode):
             self.destroy_subscription(subscription)
         for message_filter in self._filters:
             message_filter.close()
+        if self._tf is not None:
+            self._tf.destroy()
         self._reset()
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -213,6 +227,7 @@ class SimulatorNode(LifecycleNode):
         if self.finished:
             return result
         simulator = self.simulator
+        self._tf.publish_static(seconds_to_time(simulator.time))  # before the first measurement
         z_scan, z_v, z_w = simulator.measure()  # first measurement: starts a lockstep loop
         self._publish(z_scan, z_v, z_w, simulator.pose, simulator.pose, True, True)
         if self.realtime:
@@ -350,6 +365,7 @@ class SimulatorNode(LifecycleNode):
             self._outputs["truth"].publish(odometry_message(
                 stamp, p["world_frame"], p["base_frame"], pose, velocity, messages["truth"]))
         if publish_odom:
+            self._tf.publish(stamp, pose)
             # The real robot's /odom carries a pose only; /odometry also the twist.
             twist = (z_v, z_w) if self.odometry_topic == "/odometry" else None
             self._outputs["odom"].publish(odometry_message(

@@ -9,12 +9,14 @@ from typing import Any
 
 from rcl_interfaces.msg import ParameterType
 
+from amr_common.world import parse_start
+
 DEFAULT_START = "outer"  # the course's "outer corridor" start in lab02
 _S, _B, _D, _DA, _I = (ParameterType.PARAMETER_STRING, ParameterType.PARAMETER_BOOL,
                        ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_DOUBLE_ARRAY,
                        ParameterType.PARAMETER_INTEGER)
 # name: (default, type, description). Numbers accept ints or doubles (`-p dt:=1` must not kill
-# the process): they are declared with dynamic typing and checked in on_configure.
+# the process): amr_common.parameters declares them with dynamic typing, on_configure checks.
 PARAMETERS: dict[str, tuple[Any, int, str]] = {
     "world": ("lab02", _S, "Bundled world name or path to a world .yaml / course map .json"),
     "start": (DEFAULT_START, _S, "Start pose: a name from the world file or 'x,y,theta' "
@@ -41,28 +43,21 @@ PARAMETERS: dict[str, tuple[Any, int, str]] = {
     "odom_frame": ("odom", _S, "Frame of the odometry pose"),
     "base_frame": ("base_footprint", _S, "Robot frame (child frame of odometry)"),
     "scan_frame": ("base_scan", _S, "Frame of the LaserScan"),
-    "world_frame": ("map", _S, "Frame of /ground_truth"),
+    "world_frame": ("map", _S, "Frame of /ground_truth and /map"),
     "publish_ground_truth": (True, _B, "Publish the true pose and velocities on /ground_truth"),
+    "truth_frame": ("base_footprint_truth", _S, "Frame of the true robot pose on /tf "
+                                                "(world_frame -> truth_frame, for comparison)"),
+    "map_to_odom_from_truth": (False, _B, "Publish world_frame -> odom_frame on /tf from the "
+                                          "true pose (perfect localization, for viewers when "
+                                          "no localization node sends it)"),
+    "publish_map": (True, _B, "Publish the world as /map (nav_msgs/OccupancyGrid) and "
+                              "/map_markers (walls) once, latched"),
+    "map_resolution": (0.05, _D, "Cell size of /map in metres (0.005 to 1)"),
 }
-NUMERIC_PARAMETERS = {"dt", "seed", "command_timeout", "goal", "goal_tolerance", "kidnap"}
-
-
-def parse_start(text: str) -> str | tuple[float, float, float] | None:
-    """'name' -> name, 'x,y,theta' -> floats, '' -> None (the world's first start)."""
-    text = text.strip()
-    if not text:
-        return None
-    if "," not in text:
-        return text
-    parts = text.split(",")
-    try:
-        values = tuple(float(p) for p in parts)
-    except ValueError:
-        values = ()
-    if len(values) != 3 or not all(math.isfinite(v) for v in values):
-        raise ValueError(f"start '{text}' is neither a start name nor 'x,y,theta' "
-                         "with three finite numbers")
-    return values
+# The forms amr_common.parameters declares and reads.
+PARAMETER_TABLE = {name: (default, description)
+                   for name, (default, _, description) in PARAMETERS.items()}
+PARAMETER_TYPES = {name: type_ for name, (_, type_, _) in PARAMETERS.items()}
 
 
 def check_parameters(values: dict[str, Any]) -> dict[str, Any]:
@@ -85,6 +80,7 @@ def check_parameters(values: dict[str, Any]) -> dict[str, Any]:
     number("dt", 1e-4, 1.0)
     number("command_timeout", 0.0, 3600.0)
     number("goal_tolerance", 1e-3, 100.0)
+    number("map_resolution", 0.005, 1.0)
     if isinstance(p["seed"], bool) or not isinstance(p["seed"], int) or p["seed"] < 0:
         problems.append(f"seed must be a non-negative integer (got {p['seed']!r})")
     if p["mode"] not in ("lockstep", "realtime"):

@@ -33,7 +33,6 @@ if str(REPO) not in sys.path:  # run from a checkout without installing
 from amr_common.controller_loader import load_controller_class  # noqa: E402
 from amr_evaluation.evaluation import (  # noqa: E402
     DEFAULT_CONTROLLER,
-    ControllerSpecError,
     EvaluationError,
     check_controller,
     expand_grid,
@@ -50,6 +49,7 @@ from amr_evaluation.evaluation_report import (  # noqa: E402
     write_csv,
     write_json,
 )
+from cli_checks import check_output_folder, join_negative_values  # noqa: E402
 
 # run_sim.py gives the wall follower node this file: the same gains here keep both paths equal.
 SIM_PARAMS = REPO / "amr_control" / "params" / "sim.yaml"
@@ -63,8 +63,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         "profiles, seeds, duration, dt, controller, params_file, params, jobs)")
     parser.add_argument("--worlds", default=None, help="comma-separated world names or paths, "
                         "or 'all' (default lab02)")
-    parser.add_argument("--starts", default=None, help="'all' or comma-separated start names "
-                        "(default all)")
+    parser.add_argument("--starts", default=None, help="'all', or comma-separated start names "
+                        "and X,Y,THETA poses (m, m, rad; a pose applies to every world; default "
+                        "all)")
     parser.add_argument("--profiles", default=None, help="comma-separated sensor profiles: ideal, "
                         "turtlebot3 (default ideal)")
     parser.add_argument("--seeds", default=None, help="comma-separated seeds or ranges, e.g. "
@@ -94,7 +95,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         "named start, turned by 90 deg")
     parser.add_argument("--pf-param", action="append", default=[], metavar="NAME:=VALUE",
                         help="with --localize: particle filter parameter override")
-    return parser.parse_args(argv)
+    return parser.parse_args(join_negative_values(argv, ["--starts"]))
 
 
 def resolve_settings(args: argparse.Namespace) -> dict:
@@ -136,16 +137,16 @@ def main(argv: list[str] | None = None) -> int:
                             settings["seeds"], duration=settings["duration"], dt=settings["dt"],
                             controller=settings["controller"], params=settings["params"])
         check_controller(settings["controller"], settings["params"], settings["dt"])
-    except (EvaluationError, ControllerSpecError) as exc:
+        started = dt_module.datetime.now(dt_module.timezone.utc)
+        out = check_output_folder(args.out or Path("out") / f"evaluate-{started:%Y%m%d-%H%M%S}",
+                                  "--out")
+    except ValueError as exc:  # EvaluationError, ControllerSpecError, a bad --out
         print(f"evaluate: {exc}", file=sys.stderr)
         return 2
-    jobs = settings["jobs"] or os.cpu_count() or 1
-    started = dt_module.datetime.now(dt_module.timezone.utc)
-    out = Path(args.out) if args.out else Path("out") / f"evaluate-{started:%Y%m%d-%H%M%S}"
     if args.localize:
         from amr_evaluation.localization_evaluation import evaluate_main
         return evaluate_main(specs, settings, args, out)
-    out.mkdir(parents=True, exist_ok=True)
+    jobs = settings["jobs"] or os.cpu_count() or 1
     print(f"evaluate: {len(specs)} episodes of {settings['duration']:g} s on "
           f"{min(jobs, len(specs))} process(es), controller {settings['controller']}"
           + (f" {settings['params']}" if settings["params"] else ""), flush=True)
@@ -174,9 +175,9 @@ def main(argv: list[str] | None = None) -> int:
             from amr_evaluation.plot import plot_episodes_sheet
             # Title: the controller and what differs from its params file (all would not fit).
             changed = " ".join(f"{k}={v}" for k, v in parse_overrides(args.param).items())
-            plot_episodes_sheet(ran, out / "sheet.png",
-                                title=textwrap.shorten(f"{settings['controller']} {changed}",
-                                                       width=150, placeholder=" ..."))
+            sheet = plot_episodes_sheet(ran, out / "sheet.png", title=textwrap.shorten(
+                f"{settings['controller']} {changed}", width=150, placeholder=" ..."))
+            print(f"evaluate: trajectories drawn in {sheet}")
 
     print(format_table(outcome_row(o) for o in outcomes))
     line, code = verdict(outcomes)

@@ -28,6 +28,26 @@ def add_controller_options(parser, params_file_default, params_file_help: str) -
     parser.add_argument("--params-file", default=params_file_default, help=params_file_help)
 
 
+def add_foxglove_options(parser) -> None:
+    """--foxglove, --foxglove-port, --foxglove-host: a live Foxglove view (amr_foxglove_bridge)."""
+    parser.add_argument("--foxglove", action="store_true", help="serve the graph's topics to "
+                        "Foxglove (Open connection -> Foxglove WebSocket -> ws://HOST:PORT)")
+    parser.add_argument("--foxglove-port", type=int, default=8765,
+                        help="Foxglove WebSocket port (default 8765, as foxglove_bridge)")
+    parser.add_argument("--foxglove-host", default="127.0.0.1", help="address to listen on "
+                        "(default 127.0.0.1: this machine only; 0.0.0.0 for other machines)")
+
+
+def make_viewer_nodes(context, args, *, use_sim_time: bool = False) -> list:
+    """The Foxglove bridge node when args.foxglove, else nothing.
+
+    Lifecycle nodes to start before the rest of the graph.
+    """
+    if not getattr(args, "foxglove", False):
+        return []
+    from amr_common.foxglove_bridge import FoxgloveBridgeNode
+    return [FoxgloveBridgeNode(context=context, parameter_overrides=overrides_to_parameters({
+        "port": args.foxglove_port, "host": args.foxglove_host, "use_sim_time": use_sim_time}))]
 def add_localization_options(parser) -> None:
     """--localize and the particle filter's --pf-param NAME:=VALUE, shared by the run scripts."""
     parser.add_argument("--localize", action="store_true", help="also run the particle filter "
@@ -39,17 +59,90 @@ def add_localization_options(parser) -> None:
 
 
 def check_common_options(parser, args) -> None:
-    """Validate dt and parse the -p overrides into args.overrides (argparse errors on failure)."""
+    """Check dt, the -p overrides, the params file and the controller before anything runs.
+
+    Sets args.overrides (typed -p values) and args.controller_spec (the MODULE:CLASS the wall
+    follower will run); argparse errors (exit 2, one line) on failure,
+    including a -p name the wall follower does not have (the node would ignore it).
+    """
     import math
 
-    from amr_common.controller_loader import ControllerSpecError, parse_overrides
+    from amr_common.controller_loader import (
+        DEFAULT_CONTROLLER,
+        load_controller_class,
+        parse_overrides,
+    )
     if args.dt is not None and not (math.isfinite(args.dt) and args.dt > 0):
         parser.error("--dt must be > 0")
+    if getattr(args, "foxglove_port", 0) is not None and \
+            not 0 <= getattr(args, "foxglove_port", 0) <= 65535:
+        parser.error("--foxglove-port must be within 0-65535")
     try:
         args.overrides = parse_overrides(args.param)
         args.pf_overrides = parse_overrides(getattr(args, "pf_param", []))
-    except ControllerSpecError as exc:
+        in_file = read_params_file(args.params_file) if args.params_file else {}
+        spec = (args.controller or args.overrides.get("controller")
+                or in_file.get("controller") or DEFAULT_CONTROLLER)
+        args.controller_spec = str(spec)
+        controller_class = load_controller_class(args.controller_spec)
+    except ValueError as exc:  # ControllerSpecError, EvaluationError: one-line messages
         parser.error(str(exc))
+    from amr_control.wall_follower_node import parameter_names, tuning_table
+    known = parameter_names(controller_class)
+    unknown = [name for name in args.overrides if name not in known]
+    if unknown:
+        parser.error(f"-p {', '.join(unknown)}: no such wall follower parameter with controller "
+                     f"{spec}; known: {', '.join(known)}")
+    # Build the controller once with what the node will give it: a bad value fails now, before
+    # any node exists (and its compiled kernels load here, not while the graph starts).
+    values = {**in_file, **args.overrides}
+    tuning = {name: values[name] for name in tuning_table(controller_class) if name in values}
+    try:
+        dt = float(args.dt if args.dt is not None else values.get("dt", 0.05))
+    except (TypeError, ValueError):
+        return  # the node reports a bad dt when it configures
+    try:
+        controller_class(dt, **tuning)
+    except Exception as exc:  # a user's controller may raise anything
+        parser.error(f"controller {spec} rejects its parameters: {exc}")
+
+
+def read_params_file(path: Path | str) -> dict[str, Any]:
+    """Every parameter of a ROS 2 params file, after rcl (the nodes' own parser) has read it.
+
+    ValueError with a one-line reason for a missing, binary, malformed or unusable file.
+    """
+    from amr_evaluation.evaluation import load_ros_params_file
+    target = Path(path)
+    if not target.is_file():
+        raise ValueError(f"--params-file '{path}': no such file")
+    _parse_with_rcl(target)
+    return load_ros_params_file(target)
+
+
+def _parse_with_rcl(path: Path) -> None:
+    """Have rcl parse the params file now, instead of a node's constructor failing later."""
+    import os
+    import re
+
+    import rclpy
+    context = rclpy.Context()
+    sys.stderr.flush()
+    saved_stderr = os.dup(2)  # rcl logs a second, less clear line: keep the message one line
+    try:
+        with open(os.devnull, "w") as devnull:
+            os.dup2(devnull.fileno(), 2)
+            rclpy.init(args=["params_check", "--ros-args", "--params-file", str(path)],
+                       context=context, domain_id=0)
+    except Exception as exc:  # rclpy's RCLError carries rcl's message
+        detail = str(exc).split("Error: ", 1)[-1]
+        detail = re.sub(r",? at /\S+:\d+", "", detail).strip()
+        raise ValueError(f"--params-file '{path}': not a ROS 2 params file the nodes can read: "
+                         f"{detail}") from None
+    finally:
+        os.dup2(saved_stderr, 2)
+        os.close(saved_stderr)
+    rclpy.shutdown(context=context)
 
 
 def overrides_to_parameters(values: dict[str, Any]) -> list:

@@ -8,6 +8,7 @@ does not change discovery, it prints what it uses.
 
   .venv/bin/python scripts/run_robot.py --domain-id 30 --cmd-vel stamped   # Jazzy bringup
   .venv/bin/python scripts/run_robot.py --domain-id 30 --cmd-vel twist     # Humble bringup
+  .venv/bin/python scripts/run_robot.py --domain-id 30 --foxglove --map course_map.json
   .venv/bin/python scripts/run_robot.py --domain-id 30 --localize --world lab02  # + localization
 Ctrl-C stops the robot: the wall follower publishes a zero command before exiting.
 """
@@ -19,13 +20,16 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from amr_common.ros_env import describe_graph_settings  # noqa: E402
+from amr_common.ros_env import describe_graph_settings, environment_domain_id  # noqa: E402
+from cli_checks import domain_id_argument  # noqa: E402
 from launch_common import (  # noqa: E402
     ROBOT_PARAMS,
     add_controller_options,
+    add_foxglove_options,
     add_localization_options,
     check_common_options,
     make_robot_graph,
+    make_viewer_nodes,
 )
 
 
@@ -33,21 +37,30 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter,
                                      epilog=__doc__.split("\n\n", 1)[1])
-    parser.add_argument("--domain-id", type=int, default=None,
-                        help="ROS_DOMAIN_ID shared with the robot (default: $ROS_DOMAIN_ID)")
+    parser.add_argument("--domain-id", type=domain_id_argument, default=None,
+                        help="ROS_DOMAIN_ID shared with the robot, 0-232 (default: "
+                        "$ROS_DOMAIN_ID)")
     parser.add_argument("--cmd-vel", choices=["stamped", "twist"], default=None,
                         help="/cmd_vel type: stamped = TwistStamped (Jazzy bringup), twist = "
                         "Twist (Humble); default from the params file")
     add_controller_options(parser, str(ROBOT_PARAMS), "wall follower ROS params YAML "
                            "(default params/turtlebot3.yaml)")
     parser.add_argument("--dt", type=float, default=None, help="control period in seconds")
+    parser.add_argument("--map", default=None, metavar="MAP", help="also publish this course "
+                        "map JSON / world YAML as /map and /map_markers (amr_map_publisher)")
+    add_foxglove_options(parser)
     add_localization_options(parser)
     parser.add_argument("--world", default=None, help="with --localize: the map the robot is "
-                        "in (bundled world name or world YAML / course map JSON)")
+                        "in (bundled world name or world YAML / course map JSON; default --map)")
     args = parser.parse_args(argv)
-    if args.domain_id is not None and not 0 <= args.domain_id <= 232:
-        parser.error("--domain-id must be within 0-232")
+    if args.domain_id is None:
+        try:
+            environment_domain_id()
+        except ValueError as exc:
+            parser.error(str(exc))
     check_common_options(parser, args)
+    if args.localize and args.world is None:
+        args.world = args.map
     if args.localize and args.world is None:
         parser.error("--localize needs --world (the map the robot drives in)")
     if args.world is not None:
@@ -78,6 +91,12 @@ def main(argv=None) -> int:
                              tuning=args.overrides,
                              localize_world=args.world if args.localize else None,
                              filter_overrides=args.pf_overrides)
+    if args.map:
+        from amr_common.map_publisher import MapPublisherNode
+        from launch_common import overrides_to_parameters
+        nodes.insert(0, MapPublisherNode(parameter_overrides=overrides_to_parameters(
+            {"world": args.map})))
+    nodes = make_viewer_nodes(None, args) + nodes  # shut down last (reverse order)
     manager = LifecycleManager([node.get_name() for node in nodes])
     manager.get_logger().info(f"run_robot: {describe_graph_settings()}; Ctrl-C stops the robot")
     return run_managed(manager, stop, nodes)
