@@ -105,6 +105,7 @@ class SimulatorNode(GuardedLifecycleNode):
         self._command = (0.0, 0.0)
         self._command_received: float | None = None  # monotonic time of the newest command
         self._next_publish = {"odom": 0.0, "scan": 0.0}
+        self._kidnapped = False
         self._tf: SimulatorTf | None = None
 
     def _read_parameters(self) -> dict[str, Any]:
@@ -134,6 +135,8 @@ class SimulatorNode(GuardedLifecycleNode):
                 self.get_logger().info(f"world '{world.name}' has no start '{DEFAULT_START}' "
                                        f"(the default): starting at '{start}'")
             self._start_pose = world.resolve_start(start)
+            if p["kidnap"] is not None:  # a pose in a wall fails here, not mid-run
+                world.resolve_start(p["kidnap"][1:])
             self.simulator = Simulator(world, start=self._start_pose,
                                        dt=p["dt"], profile=p["profile"], seed=p["seed"])
         except Exception as exc:  # WorldError, unknown profile, bad values: all user errors
@@ -300,6 +303,13 @@ class SimulatorNode(GuardedLifecycleNode):
     # --- stepping and publishing -----------------------------------------------------------
     def _advance(self, v: float, w: float) -> None:
         simulator = self.simulator
+        kidnap = self.params["kidnap"]
+        if kidnap is not None and not self._kidnapped and simulator.time >= kidnap[0] - 1e-9:
+            simulator.teleport(kidnap[1:])
+            self._kidnapped = True
+            self.get_logger().warning(
+                f"kidnapped at t={simulator.time:.2f} s to ({kidnap[1]:.2f}, {kidnap[2]:.2f}, "
+                f"{kidnap[3]:.2f})")
         pose_before = simulator.pose
         try:
             z_scan, z_v, z_w = simulator.step(v, w)

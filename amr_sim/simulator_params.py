@@ -37,6 +37,9 @@ PARAMETERS: dict[str, tuple[Any, int, str]] = {
                                  "as reached"),
     "enable_localization": (False, _B, "Synchronize /pose (amr_msgs/PoseStamped) with /cmd_vel, "
                                        "log its error and finish at the goal once localized"),
+    "kidnap": ([], _DA, "Kidnapping event [t, x, y, theta] (s, m, m, rad): at simulated time t "
+                        "the robot is teleported to (x, y, theta); encoders and odometry see no "
+                        "motion (tests a localization node's recovery); [] = none"),
     "odom_frame": ("odom", _S, "Frame of the odometry pose"),
     "base_frame": ("base_footprint", _S, "Robot frame (child frame of odometry)"),
     "scan_frame": ("base_scan", _S, "Frame of the LaserScan"),
@@ -91,6 +94,16 @@ def check_parameters(values: dict[str, Any]) -> dict[str, Any]:
         p["goal"] = (float(goal[0]), float(goal[1]))
     else:
         problems.append(f"goal must be [] or [x, y] with finite numbers (got {goal!r})")
+    kidnap = p["kidnap"]
+    if kidnap is None or (hasattr(kidnap, "__len__") and len(kidnap) == 0):
+        p["kidnap"] = None
+    elif isinstance(kidnap, (list, tuple)) and len(kidnap) == 4 and all(
+            isinstance(k, (int, float)) and not isinstance(k, bool) and math.isfinite(k)
+            for k in kidnap) and kidnap[0] >= 0:
+        p["kidnap"] = tuple(float(k) for k in kidnap)
+    else:
+        problems.append(f"kidnap must be [] or [t, x, y, theta] with finite numbers and t >= 0 "
+                        f"(got {kidnap!r})")
     try:
         p["start"] = parse_start(p["start"])
     except ValueError as exc:

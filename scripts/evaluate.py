@@ -12,6 +12,9 @@ Examples:
   .venv/bin/python scripts/evaluate.py --worlds all --starts all --profiles ideal,turtlebot3
   .venv/bin/python scripts/evaluate.py --config evaluations/example.yaml -p kp:=4.0
   .venv/bin/python scripts/evaluate.py --worlds lab02 --controller my_pkg.ctrl:MyController
+  .venv/bin/python scripts/evaluate.py --localize --worlds all --profiles ideal,turtlebot3 \
+      --seeds 0-4 --duration 60                      # the particle filter's figures
+  .venv/bin/python scripts/evaluate.py --localize --worlds twin_maze --seeds 0-9 --kidnap-at 25
 Options given on the command line override the same keys of --config.
 """
 from __future__ import annotations
@@ -85,6 +88,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--out", default=None,
                         help="output folder (default out/evaluate-<UTC time>)")
     parser.add_argument("--no-sheet", action="store_true", help="skip sheet.png")
+    parser.add_argument("--localize", action="store_true", help="localization episodes: the "
+                        "particle filter rides along; columns: time to localized, false "
+                        "localizations, tracking errors, relocalizations")
+    parser.add_argument("--kidnap-at", type=float, default=None, metavar="T",
+                        help="with --localize: teleport the robot at T s to the world's next "
+                        "named start, turned by 90 deg")
+    parser.add_argument("--pf-param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="with --localize: particle filter parameter override")
     return parser.parse_args(join_negative_values(argv, ["--starts"]))
 
 
@@ -133,6 +144,9 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:  # EvaluationError, ControllerSpecError, a bad --out
         print(f"evaluate: {exc}", file=sys.stderr)
         return 2
+    if args.localize:
+        from amr_evaluation.localization_evaluation import evaluate_main
+        return evaluate_main(specs, settings, args, out)
     jobs = settings["jobs"] or os.cpu_count() or 1
     print(f"evaluate: {len(specs)} episodes of {settings['duration']:g} s on "
           f"{min(jobs, len(specs))} process(es), controller {settings['controller']}"

@@ -48,6 +48,14 @@ def make_viewer_nodes(context, args, *, use_sim_time: bool = False) -> list:
     from amr_common.foxglove_bridge import FoxgloveBridgeNode
     return [FoxgloveBridgeNode(context=context, parameter_overrides=overrides_to_parameters({
         "port": args.foxglove_port, "host": args.foxglove_host, "use_sim_time": use_sim_time}))]
+def add_localization_options(parser) -> None:
+    """--localize and the particle filter's --pf-param NAME:=VALUE, shared by the run scripts."""
+    parser.add_argument("--localize", action="store_true", help="also run the particle filter "
+                        "(/pose with localized); the wall follower keeps exploring "
+                        "(stop_when_localized false) unless -p says otherwise")
+    parser.add_argument("--pf-param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="particle filter parameter override (repeatable), e.g. "
+                        "--pf-param beams:=90")
 
 
 def check_common_options(parser, args) -> None:
@@ -71,6 +79,7 @@ def check_common_options(parser, args) -> None:
         parser.error("--foxglove-port must be within 0-65535")
     try:
         args.overrides = parse_overrides(args.param)
+        args.pf_overrides = parse_overrides(getattr(args, "pf_param", []))
         in_file = read_params_file(args.params_file) if args.params_file else {}
         spec = (args.controller or args.overrides.get("controller")
                 or in_file.get("controller") or DEFAULT_CONTROLLER)
@@ -164,12 +173,34 @@ def make_wall_follower(context, *, params_file, overrides: dict[str, Any]):
                             parameter_overrides=overrides_to_parameters(dict(overrides)))
 
 
+def localizing_wall_follower(tuning: dict[str, Any]) -> dict[str, Any]:
+    """Wall follower overrides for a graph with the particle filter.
+
+    Synchronize /pose and keep exploring once localized (no planner to hand over to), unless
+    the caller's tuning says otherwise.
+    """
+    return {"enable_localization": True, "stop_when_localized": False, **tuning}
+
+
+def make_particle_filter(context, *, world: str, lidar_offset_x_m: float,
+                         overrides: dict[str, Any] | None = None, slop: float | None = None):
+    """The particle filter on `world`, told where the LiDAR sits (overrides win)."""
+    from amr_localization.particle_filter_node import ParticleFilterNode
+    values: dict[str, Any] = {"world": str(world), "lidar_offset_x_m": float(lidar_offset_x_m)}
+    if slop is not None:
+        values["slop"] = float(slop)
+    values.update(overrides or {})
+    return ParticleFilterNode(context=context, parameter_overrides=overrides_to_parameters(values))
+
+
 def make_robot_graph(context, *, params_file=ROBOT_PARAMS, dt: float | None = None,
                      cmd_vel_stamped: bool | None = None, controller: str | None = None,
-                     tuning: dict[str, Any] | None = None) -> list:
+                     tuning: dict[str, Any] | None = None, localize_world: str | None = None,
+                     filter_overrides: dict[str, Any] | None = None) -> list:
     """The real-robot graph: /odom -> amr_odometry -> /odometry, wall follower in robot mode.
 
-    Returns the lifecycle nodes in startup order.
+    With `localize_world`, also the particle filter on that map (the Burger's LiDAR position),
+    and the wall follower synchronizes /pose. Returns the lifecycle nodes in startup order.
     """
     from amr_turtlebot3.odometry_node import OdometryNode
     overrides: dict[str, Any] = dict(tuning or {})
@@ -180,6 +211,14 @@ def make_robot_graph(context, *, params_file=ROBOT_PARAMS, dt: float | None = No
         overrides["cmd_vel_stamped"] = cmd_vel_stamped
     if controller is not None:
         overrides["controller"] = controller
+    if localize_world is not None:
+        overrides = localizing_wall_follower(overrides)
     odometry = OdometryNode(context=context)
     wall_follower = make_wall_follower(context, params_file=params_file, overrides=overrides)
-    return [odometry, wall_follower]
+    if localize_world is None:
+        return [odometry, wall_follower]
+    from amr_common.robot import LIDAR_OFFSET_X
+    particle_filter = make_particle_filter(context, world=localize_world,
+                                           lidar_offset_x_m=LIDAR_OFFSET_X,
+                                           overrides=filter_overrides)
+    return [odometry, wall_follower, particle_filter]

@@ -9,6 +9,7 @@ does not change discovery, it prints what it uses.
   .venv/bin/python scripts/run_robot.py --domain-id 30 --cmd-vel stamped   # Jazzy bringup
   .venv/bin/python scripts/run_robot.py --domain-id 30 --cmd-vel twist     # Humble bringup
   .venv/bin/python scripts/run_robot.py --domain-id 30 --foxglove --map course_map.json
+  .venv/bin/python scripts/run_robot.py --domain-id 30 --localize --world lab02  # + localization
 Ctrl-C stops the robot: the wall follower publishes a zero command before exiting.
 """
 from __future__ import annotations
@@ -25,6 +26,7 @@ from launch_common import (  # noqa: E402
     ROBOT_PARAMS,
     add_controller_options,
     add_foxglove_options,
+    add_localization_options,
     check_common_options,
     make_robot_graph,
     make_viewer_nodes,
@@ -47,6 +49,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--map", default=None, metavar="MAP", help="also publish this course "
                         "map JSON / world YAML as /map and /map_markers (amr_map_publisher)")
     add_foxglove_options(parser)
+    add_localization_options(parser)
+    parser.add_argument("--world", default=None, help="with --localize: the map the robot is "
+                        "in (bundled world name or world YAML / course map JSON; default --map)")
     args = parser.parse_args(argv)
     if args.domain_id is None:
         try:
@@ -54,6 +59,16 @@ def parse_args(argv=None) -> argparse.Namespace:
         except ValueError as exc:
             parser.error(str(exc))
     check_common_options(parser, args)
+    if args.localize and args.world is None:
+        args.world = args.map
+    if args.localize and args.world is None:
+        parser.error("--localize needs --world (the map the robot drives in)")
+    if args.world is not None:
+        from amr_common.world import World, WorldError
+        try:
+            World.load(args.world)
+        except WorldError as exc:
+            parser.error(str(exc))
     return args
 
 
@@ -73,7 +88,9 @@ def main(argv=None) -> int:
     stamped = None if args.cmd_vel is None else args.cmd_vel == "stamped"
     nodes = make_robot_graph(None, params_file=args.params_file, dt=args.dt,
                              cmd_vel_stamped=stamped, controller=args.controller,
-                             tuning=args.overrides)
+                             tuning=args.overrides,
+                             localize_world=args.world if args.localize else None,
+                             filter_overrides=args.pf_overrides)
     if args.map:
         from amr_common.map_publisher import MapPublisherNode
         from launch_common import overrides_to_parameters

@@ -5,6 +5,9 @@ Lockstep (default): the simulator advances one dt per /cmd_vel, as fast as the l
 `--realtime`: the simulator runs on a wall-clock timer; with `--profile turtlebot3` this is the
 rehearsal of the real robot: /odom (pose only) + 5 Hz /scan, the amr_odometry node and the wall
 follower in robot (timer) mode with params/turtlebot3.yaml - the graph run_robot.py starts.
+`--localize`: the particle filter joins the graph (/pose with `localized`); the simulator
+synchronizes /cmd_vel with /pose and the report gains the localization figures and the
+estimate at every /pose.
 
 Examples:
   .venv/bin/python scripts/run_sim.py                                  # lab02, outer, ideal
@@ -15,6 +18,8 @@ Examples:
   .venv/bin/python scripts/run_sim.py --record out/run.mcap --duration 60
   .venv/bin/python scripts/run_sim.py --profile turtlebot3 --realtime --foxglove   # live
   .venv/bin/python scripts/run_sim.py --world course_map.json --start -1.0,-1.0,1.57
+  .venv/bin/python scripts/run_sim.py --world twin_maze --localize --plot out/loc.png
+  .venv/bin/python scripts/run_sim.py --world maze_deadends --localize --kidnap 25,1.4,1,0
 Local runs are isolated: loopback discovery and a free ROS_DOMAIN_ID (printed at startup).
 Ctrl-C ends the whole run: the controller commands zero and the partial report is written,
 marked "interrupted": true (exit code 130).
@@ -41,6 +46,7 @@ from launch_common import (  # noqa: E402
     SIM_PARAMS,
     add_controller_options,
     add_foxglove_options,
+    add_localization_options,
     check_common_options,
 )
 
@@ -68,7 +74,13 @@ def parse_args(argv=None) -> argparse.Namespace:
                            "turtlebot3 rehearsal)")
     parser.add_argument("--goal", default=None, help="X,Y goal (needs a localization node "
                         "publishing /pose and --enable-localization)")
-    parser.add_argument("--enable-localization", action="store_true")
+    parser.add_argument("--enable-localization", action="store_true",
+                        help="the simulator synchronizes /cmd_vel with /pose from a "
+                        "localization node of yours (--localize starts the project's)")
+    add_localization_options(parser)
+    parser.add_argument("--kidnap", default=None, metavar="T,X,Y,THETA",
+                        help="teleport the robot at simulated time T (s) to (X, Y, THETA): "
+                        "the encoders see no motion; tests the filter's recovery")
     parser.add_argument("--report", default=None, help="write a JSON report here")
     parser.add_argument("--plot", default=None, help="write a picture of the trajectory here "
                         "(PNG unless the name says .svg, .pdf, ...; one per start with --start "
@@ -80,7 +92,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--domain-id", type=domain_id_argument, default=None,
                         help="ROS_DOMAIN_ID, 0-232 (default: $ROS_DOMAIN_ID if set and not 0, "
                         "else a free one)")
-    args = parser.parse_args(join_negative_values(argv, ["--start", "--goal"]))
+    args = parser.parse_args(join_negative_values(argv, ["--start", "--goal", "--kidnap"]))
     if not (math.isfinite(args.duration) and args.duration > 0):
         parser.error("--duration must be > 0")
     if args.params_file is None:
@@ -102,6 +114,14 @@ def parse_args(argv=None) -> argparse.Namespace:
             args.plot = str(plot_file(args.plot))
     except ValueError as exc:
         parser.error(str(exc))
+    if args.kidnap is not None:
+        try:
+            args.kidnap = [float(v) for v in args.kidnap.split(",")]
+        except ValueError:
+            args.kidnap = []
+        if len(args.kidnap) != 4 or not all(math.isfinite(v) for v in args.kidnap) or \
+                args.kidnap[0] < 0:
+            parser.error("--kidnap must be T,X,Y,THETA (s, m, m, rad) with T >= 0")
     return args
 
 
@@ -139,6 +159,8 @@ def _prepare(args):
         starts = list(world.starts) if args.start == "all" else [args.start]
         for start in starts:
             world.resolve_start(start)  # fail early with the world's own message
+        if args.kidnap is not None:
+            world.resolve_start(args.kidnap[1:])
         starts = [next(iter(world.starts)) if s is None else s for s in starts]
         outputs = _check_outputs(args, [start_label(s) for s in starts])
     except ValueError as exc:  # WorldError, a bad domain id or output path
@@ -198,11 +220,16 @@ def _write_outputs(world, reports, outputs, several_starts: bool) -> None:
     if outputs["plot"]:
         from amr_evaluation.plot import plot_episode
         for report in reports:
-            written = plot_episode(
-                world, report["trajectory"], report["collision_points"],
-                path=str(outputs["plot"][report["start"]]),
-                title=f"{report['world']} / {report['start']} / {report['profile']}"
-                      + (" (interrupted)" if report["interrupted"] else ""))
+            title = f"{report['world']} / {report['start']} / {report['profile']}" + \
+                (" (interrupted)" if report["interrupted"] else "")
+            if "estimate" in report:
+                from amr_evaluation.localization_plot import plot_localization
+                written = plot_localization(world, report,
+                                            path=str(outputs["plot"][report["start"]]),
+                                            title=title)
+            else:
+                written = plot_episode(world, report["trajectory"], report["collision_points"],
+                                       path=str(outputs["plot"][report["start"]]), title=title)
             print(f"run_sim: plot written to {written}")
 
 

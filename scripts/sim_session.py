@@ -22,6 +22,8 @@ from amr_sim.simulator_node import SimulatorNode
 from launch_common import (
     ROBOT_PARAMS,
     SIM_PARAMS,
+    localizing_wall_follower,
+    make_particle_filter,
     make_robot_graph,
     make_viewer_nodes,
     make_wall_follower,
@@ -85,6 +87,26 @@ def report_before_start(args, world, start) -> dict:
                           collision_points=[])
     return _report(args, world, start, sim, [[0.0, x, y, theta]], [], 0.0, True, graph={
         "controller": args.controller_spec, "nodes": [], "controller_mode": None})
+def _localization_line(report: dict) -> str:
+    m = report.get("localization")
+    if m is None:
+        return ""
+    if m["time_to_localized_s"] is None:
+        return f"; not localized, false localizations {m['false_localizations']}"
+    text = (f"; localized after {m['time_to_localized_s']:.1f} s "
+            f"({m['distance_to_localized_m']:.2f} m), false localizations "
+            f"{m['false_localizations']}")
+    if m["tracking_error_mean_m"] is not None:
+        text += (f", error mean {100 * m['tracking_error_mean_m']:.1f} cm, p95 "
+                 f"{100 * m['tracking_error_p95_m']:.1f} cm, max "
+                 f"{100 * m['tracking_error_max_m']:.1f} cm, heading p95 "
+                 f"{m['heading_error_p95_deg']:.1f} deg")
+    if m["relocalization_times_s"]:
+        text += ", relocalized at " + ", ".join(f"{t:.1f}" for t in m["relocalization_times_s"])
+    if m["loss_reported_after_s"] is not None:
+        text += f", loss reported {m['loss_reported_after_s']:.2f} s after the kidnapping"
+    return text
+
 
 
 class SimSession:
@@ -107,32 +129,54 @@ class SimSession:
         rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
         self.executor = make_executor(self.context)
 
+        localize = getattr(args, "localize", False)
         sim_values = {"world": args.world, "start": start_label(self.start),
                       "profile": args.profile, "dt": args.dt, "seed": args.seed,
                       "mode": "realtime" if args.realtime else "lockstep",
-                      "enable_localization": args.enable_localization,
-                      # Viewers get a whole TF tree; a localization node sends its own map -> odom.
+                      "enable_localization": args.enable_localization or localize,
+                      # Viewers get a whole TF tree; a localization node sends its own map -> odom
+                      # (the particle filter does not: the truth stands in for it).
                       "map_to_odom_from_truth": not args.enable_localization}
         if args.goal:
             sim_values["goal"] = list(args.goal)
+        if getattr(args, "kidnap", None):
+            sim_values["kidnap"] = list(args.kidnap)
         self.simulator_node = SimulatorNode(
             context=self.context, parameter_overrides=overrides_to_parameters(sim_values))
 
         tuning = dict(args.overrides)
         if args.controller:
             tuning["controller"] = args.controller
+        filter_overrides = getattr(args, "pf_overrides", {})
         if self.rehearsal:
             self.control_nodes = make_robot_graph(
                 self.context, params_file=args.params_file or ROBOT_PARAMS, dt=args.dt,
-                tuning=tuning)
+                tuning=tuning, localize_world=args.world if localize else None,
+                filter_overrides=filter_overrides)
         else:
-            tuning.update({"simulation": True, "dt": args.dt,
-                           "enable_localization": args.enable_localization})
+            base = {"simulation": True, "dt": args.dt,
+                    "enable_localization": args.enable_localization}
+            if localize:
+                base = localizing_wall_follower(base)
+            tuning = {**base, **tuning}  # -p wins
             params_file = args.params_file or SIM_PARAMS
             tuning = {**_robot_parameters(tuning, params_file, args.profile), **tuning}
             self.control_nodes = [make_wall_follower(
                 self.context, params_file=params_file, overrides=tuning)]
-        self.wall_follower = self.control_nodes[-1]
+            if localize:
+                from amr_sim.profiles import get_profile
+                self.control_nodes.append(make_particle_filter(
+                    self.context, world=args.world,
+                    lidar_offset_x_m=get_profile(args.profile).lidar_offset_x,
+                    overrides=filter_overrides))
+        self.wall_follower = next(n for n in self.control_nodes
+                                  if n.get_name() == "wall_follower")
+        self.particle_filter = next((n for n in self.control_nodes
+                                     if n.get_name() == "particle_filter"), None)
+        self.estimate: list[list[float]] = []
+        self.particles_snapshot: list[list[float]] = []
+        if self.particle_filter is not None:
+            self.particle_filter.on_pose.append(self._on_pose)
         # Viewers (the Foxglove bridge) first: they see the graph from its first message.
         self.viewer_nodes = make_viewer_nodes(self.context, args, use_sim_time=True)
         order = [node.get_name() for node in [*self.viewer_nodes, *self.control_nodes]] + [
@@ -157,6 +201,12 @@ class SimSession:
         if self.view is not None and not self.view.update(sim, sim.last_scan):
             self.stop_requested = True
 
+    def _on_pose(self, stamp_ns: int, pose, localized: bool, node) -> None:
+        self.estimate.append([round(stamp_ns * 1e-9, 6), *pose, float(localized)])
+        if localized and not self.particles_snapshot:
+            particles = node.filter.particles
+            step = max(1, len(particles) // 500)
+            self.particles_snapshot = particles[::step].round(4).tolist()
     def _stop_requested(self) -> bool:
         return self.stop_requested or (self.stop is not None and self.stop.requested)
 
@@ -232,6 +282,12 @@ class SimSession:
         stamped = not self.rehearsal or self.wall_follower.get_parameter(
             "cmd_vel_stamped").value
         topics["/cmd_vel"] = TwistStamped if stamped else Twist
+        if self.particle_filter is not None:
+            from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
+
+            from amr_msgs.msg import PoseStamped
+            topics.update({"/pose": PoseStamped, "/particles": PoseArray,
+                           "/amcl_pose": PoseWithCovarianceStamped})
         recorder_node = rclpy.create_node("mcap_recorder", context=self.context)
         self.executor.add_node(recorder_node)  # destroyed with the others in close()
         # One time base per file, simulated time. In lockstep every message is stamped with it
@@ -246,7 +302,17 @@ class SimSession:
                            "controller": self.wall_follower.get_parameter("controller").value,
                            "nodes": self.manager.node_startup_order,
                            "controller_mode": "simulation" if self.wall_follower.get_parameter(
-                               "simulation").value else "robot (timer)"})
+                               "simulation").value else "robot (timer)"}) \
+            | self._localization_report()
+
+    def _localization_report(self) -> dict:
+        if self.particle_filter is None:
+            return {}
+        from amr_evaluation.localization_episode import metrics_from_rows
+        kidnap = list(self.args.kidnap) if getattr(self.args, "kidnap", None) else None
+        return {"localization": metrics_from_rows(self.trajectory, self.estimate, kidnap),
+                "kidnap": kidnap, "estimate": self.estimate,
+                "particles_snapshot": self.particles_snapshot}
 
     def summary_line(self, report: dict) -> str:
         """One line for the terminal: where, how long, how fast, how safe."""
@@ -260,7 +326,7 @@ class SimSession:
                 f"{report['min_clearance_m'] * 100:.1f} cm, distance {report['distance_m']:.1f} m,"
                 + (" explored n/a" if report["explored_fraction"] is None else
                    f" explored {report['explored_fraction'] * 100:.0f}%")
-                + (f", laps {laps}" if laps else ""))
+                + (f", laps {laps}" if laps else "") + _localization_line(report))
 
     def close(self) -> None:
         """Shut the graph down (controllers first: their zero command goes out), close files."""

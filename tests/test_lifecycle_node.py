@@ -23,6 +23,7 @@ from amr_common.foxglove_bridge import FoxgloveBridgeNode
 from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.map_publisher import MapPublisherNode
 from amr_control.wall_follower_node import WallFollowerNode
+from amr_localization.particle_filter_node import ParticleFilterNode
 from amr_sim.simulator_node import SimulatorNode
 from amr_turtlebot3.odometry_node import OdometryNode
 from tests.processes import terminate, wait_for
@@ -31,11 +32,13 @@ REPO = Path(__file__).resolve().parent.parent
 # Every lifecycle node of the project: (class, parameter overrides) by node name ...
 NODES = {"amr_simulator": (SimulatorNode, {}), "wall_follower": (WallFollowerNode, {}),
          "amr_odometry": (OdometryNode, {}), "map_publisher": (MapPublisherNode, {}),
-         "foxglove_bridge": (FoxgloveBridgeNode, {"port": 0})}  # any free port
+         "foxglove_bridge": (FoxgloveBridgeNode, {"port": 0}),  # any free port
+         "particle_filter": (ParticleFilterNode, {})}
 # ... and its executable with its arguments.
 EXECUTABLES = {"amr_simulator": ["amr_simulator"], "wall_follower": ["amr_wall_follower"],
                "amr_odometry": ["amr_odometry"], "map_publisher": ["amr_map_publisher"],
-               "foxglove_bridge": ["amr_foxglove_bridge", "--ros-args", "-p", "port:=0"]}
+               "foxglove_bridge": ["amr_foxglove_bridge", "--ros-args", "-p", "port:=0"],
+               "particle_filter": ["amr_particle_filter"]}
 
 
 class LifecycleClient:
