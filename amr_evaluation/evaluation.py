@@ -7,14 +7,11 @@ the ROS path.
 from __future__ import annotations
 
 import math
-import multiprocessing
 import os
 import re
-import signal
 import time
 import traceback
 from dataclasses import dataclass
-from multiprocessing.connection import Connection, wait
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
@@ -24,11 +21,19 @@ from amr_common.controller_loader import (
     load_controller_class,
     parse_overrides,
 )
+from amr_evaluation.executors import (
+    Executor,
+    InProcessExecutor,
+    TaskLost,
+    local_executor,
+    run_tasks,
+)
 
 __all__ = [
     "DEFAULT_CONTROLLER", "ControllerSpecError", "EvaluationError", "EpisodeSpec",
     "EpisodeOutcome", "parse_name_list", "parse_start_list", "parse_seeds", "parse_overrides",
-    "expand_grid", "load_config", "load_ros_params_file", "check_controller", "run_episodes",
+    "expand_grid", "load_config", "load_ros_params_file", "check_controller", "run_one",
+    "run_summary", "lost_episode", "run_episodes",
 ]
 
 CONFIG_KEYS = ("worlds", "starts", "profiles", "seeds", "duration", "dt", "controller",
@@ -361,19 +366,17 @@ def check_controller(spec: str, params: Mapping[str, Any] | None, dt: float) -> 
 
 # --- running -------------------------------------------------------------------------------
 
-def _init_worker() -> None:
-    # Ctrl-C goes to the whole process group: only the parent handles it (and ends the pool).
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    # Import once per worker: the simulator's numba kernels load (or compile) here, not per
-    # episode.
-    try:
-        import amr_evaluation.episode  # noqa: F401
-    except Exception:  # noqa: BLE001 - an initializer that raises makes Pool respawn workers forever;
-        pass           # run_one imports it again and reports the error per episode instead
+# Imported once per worker before its first episode: the simulator's numba kernels load (or
+# compile) there, not per episode.
+EPISODE_MODULES = ("amr_evaluation.episode",)
 
 
-def run_one(spec: EpisodeSpec) -> EpisodeOutcome:
-    """Run one episode in this process; an exception becomes the outcome's error text."""
+def run_one(spec: EpisodeSpec, trajectory: bool = True) -> EpisodeOutcome:
+    """Run one episode in this process; an exception becomes the outcome's error text.
+
+    trajectory=False leaves the result's per-step trajectory empty (the metrics are the same):
+    what a sweep sends back is then a summary of a few hundred bytes.
+    """
     from amr_evaluation.episode import robot_parameters, run_episode
     from amr_sim.profiles import get_profile
 
@@ -385,7 +388,8 @@ def run_one(spec: EpisodeSpec) -> EpisodeOutcome:
                   **dict(spec.params)}
         result = run_episode(spec.world, spec.start, profile=spec.profile, seed=spec.seed,
                              duration=spec.duration, dt=spec.dt,
-                             controller_factory=lambda dt: controller_class(dt, **params))
+                             controller_factory=lambda dt: controller_class(dt, **params),
+                             record_trajectory=trajectory)
         return EpisodeOutcome(spec, result=result, wall_time_s=time.perf_counter() - start)
     except Exception as exc:  # one broken episode must not lose the others' results
         detail = traceback.format_exception_only(type(exc), exc)[-1].strip()
@@ -395,144 +399,35 @@ def run_one(spec: EpisodeSpec) -> EpisodeOutcome:
                               wall_time_s=time.perf_counter() - start)
 
 
-def _context() -> multiprocessing.context.BaseContext:
-    # forkserver, else spawn: no fork of a parent that may hold threads. Workers import the
-    # simulator and its numba kernels once (preload / _init_worker) and then run many episodes.
-    methods = multiprocessing.get_all_start_methods()
-    if "forkserver" in methods:
-        ctx = multiprocessing.get_context("forkserver")
-        ctx.set_forkserver_preload(["amr_evaluation.episode"])
-        return ctx
-    return multiprocessing.get_context("spawn")
+def run_summary(spec: EpisodeSpec) -> EpisodeOutcome:
+    """run_one without the per-step trajectory (a picklable task for the executors)."""
+    return run_one(spec, trajectory=False)
+
+
+def lost_episode(spec: EpisodeSpec, lost: TaskLost) -> EpisodeOutcome:
+    """The outcome of an episode whose process or node died."""
+    return EpisodeOutcome(spec, error=lost.error, wall_time_s=lost.wall_time_s)
 
 
 def run_episodes(specs: Sequence[EpisodeSpec], jobs: int | None = None,
-                 progress: Callable[[int, int, EpisodeOutcome], None] | None = None
+                 progress: Callable[[int, int, EpisodeOutcome], None] | None = None,
+                 executor: Executor | None = None, trajectory: bool = True
                  ) -> list[EpisodeOutcome]:
-    """Run all episodes on `jobs` processes (None: all cores; 1: this process), in spec order."""
+    """Run all episodes, outcomes in spec order.
+
+    On `executor` (amr_evaluation.executors; e.g. a RayExecutor), else on `jobs` local
+    processes (None: all cores; 1: this process). trajectory=False: summaries only (see
+    run_one).
+    """
     specs = list(specs)
     if not specs:
         return []
-    jobs = (os.cpu_count() or 1) if jobs is None else int(jobs)
-    if jobs < 1:
-        raise EvaluationError(f"jobs must be >= 1, got {jobs}")
-    outcomes: list[EpisodeOutcome | None] = [None] * len(specs)
-    done = 0
-    if jobs == 1 or len(specs) == 1:
-        for index, spec in enumerate(specs):
-            outcomes[index] = run_one(spec)
-            done += 1
-            if progress:
-                progress(done, len(specs), outcomes[index])
-        return outcomes  # type: ignore[return-value]
-    for index, outcome in _WorkerPool(specs, min(jobs, len(specs))).run():
-        outcomes[index] = outcome
-        done += 1
-        if progress:
-            progress(done, len(specs), outcome)
-    return outcomes  # type: ignore[return-value]
-
-
-def _worker_main(connection: Connection) -> None:
-    """A worker process: runs each (index, spec) it receives until it receives None."""
-    _init_worker()
-    while True:
+    if executor is None:
         try:
-            item = connection.recv()
-        except EOFError:  # the parent went away
-            return
-        if item is None:
-            return
-        index, spec = item
-        outcome = run_one(spec)
-        try:
-            connection.send((index, outcome))
-        except Exception as exc:  # e.g. a result that cannot be pickled
-            connection.send((index, EpisodeOutcome(
-                spec, error=f"the result could not be sent back: {exc!r}",
-                wall_time_s=outcome.wall_time_s)))
-
-
-class _WorkerPool:
-    """Worker processes that each run one episode at a time.
-
-    Unlike multiprocessing.Pool (which waits forever for the task of a worker that died), a
-    worker that ends during an episode (os._exit, a crash, the OOM killer) makes that
-    episode's error; a new worker takes the remaining episodes.
-    """
-
-    def __init__(self, specs: Sequence[EpisodeSpec], workers: int) -> None:
-        self._context = _context()
-        self._pending = list(enumerate(specs))[::-1]  # popped from the end: spec order
-        self._specs = specs
-        self._workers = workers
-        # connection -> [process, index of the episode it runs or None, start time]
-        self._running: dict[Connection, list] = {}
-
-    def run(self):
-        """Yield (index, EpisodeOutcome) as episodes finish; workers are ended on exit."""
-        try:
-            for _ in range(self._workers):
-                self._start_worker()
-            while self._running:
-                by_sentinel = {entry[0].sentinel: conn for conn, entry in self._running.items()}
-                for ready in wait([*self._running, *by_sentinel]):
-                    conn = by_sentinel.get(ready, ready)
-                    if conn in self._running:
-                        yield from self._collect(conn)
-        finally:
-            for conn, (process, _, _) in list(self._running.items()):
-                process.terminate()
-                process.join(timeout=5.0)
-                conn.close()
-            self._running.clear()
-
-    def _start_worker(self) -> None:
-        ours, theirs = self._context.Pipe()
-        process = self._context.Process(target=_worker_main, args=(theirs,), daemon=True)
-        process.start()
-        theirs.close()
-        self._running[ours] = [process, None, 0.0]
-        self._assign(ours)
-
-    def _assign(self, conn: Connection) -> None:
-        entry = self._running[conn]
-        if not self._pending:
-            entry[1] = None
-            try:
-                conn.send(None)  # nothing left: the worker exits
-            except OSError:
-                pass
-            return
-        index, spec = self._pending.pop()
-        entry[1], entry[2] = index, time.perf_counter()
-        conn.send((index, spec))
-
-    def _collect(self, conn: Connection):
-        process, index, started = self._running[conn]
-        try:
-            if conn.poll():
-                result_index, outcome = conn.recv()
-                yield result_index, outcome
-                self._assign(conn)
-                return
-            if process.is_alive():
-                return  # a spurious wake-up
-        except (EOFError, OSError):
-            pass  # its end of the pipe closed: the worker is gone or going
-        process.join(timeout=5.0)
-        if process.is_alive():  # closed its pipe but did not exit
-            process.terminate()
-            process.join(timeout=5.0)
-        del self._running[conn]
-        conn.close()
-        if index is not None:
-            code = process.exitcode
-            how = f"killed by signal {-code}" if code is not None and code < 0 else \
-                f"exit code {code}"
-            yield index, EpisodeOutcome(
-                self._specs[index], wall_time_s=time.perf_counter() - started,
-                error=f"worker process died ({how}) during this episode: the controller or the "
-                      f"simulator ended the process (os._exit, a crash, out of memory)")
-            if self._pending:
-                self._start_worker()
+            executor = local_executor(jobs)
+        except ValueError as exc:
+            raise EvaluationError(str(exc)) from None
+        if len(specs) == 1:
+            executor = InProcessExecutor()
+    return run_tasks(run_one if trajectory else run_summary, specs, executor, lost_episode,
+                     progress, preload=EPISODE_MODULES)

@@ -10,8 +10,6 @@ evaluate.py builds it (its params file, -p overrides, the profile's LiDAR positi
 from __future__ import annotations
 
 import math
-import multiprocessing
-import os
 import time
 import traceback
 from dataclasses import dataclass, field
@@ -93,35 +91,27 @@ def run_one(spec: LocalizationSpec) -> LocalizationOutcome:
         return LocalizationOutcome(spec, error=detail, wall_time_s=time.perf_counter() - started)
 
 
+def lost_localization(spec: LocalizationSpec, lost) -> LocalizationOutcome:
+    """The outcome of an episode whose process or node died (an executors.TaskLost)."""
+    return LocalizationOutcome(spec, error=lost.error, wall_time_s=lost.wall_time_s)
+
+
 def run_localization_specs(specs: Sequence[LocalizationSpec], jobs: int | None = None,
                            progress: Callable[[int, int, LocalizationOutcome], None] | None
-                           = None) -> list[LocalizationOutcome]:
-    """Run every spec on `jobs` processes (None: all cores), results in spec order."""
+                           = None, executor=None) -> list[LocalizationOutcome]:
+    """Run every spec, results in spec order.
+
+    On `executor` (amr_evaluation.executors, e.g. a RayExecutor), else on `jobs` local
+    processes (None: all cores).
+    """
+    from amr_evaluation.executors import InProcessExecutor, local_executor, run_tasks
     specs = list(specs)
-    jobs = (os.cpu_count() or 1) if jobs is None else max(int(jobs), 1)
-    outcomes: list[LocalizationOutcome | None] = [None] * len(specs)
-    if jobs == 1 or len(specs) <= 1:
-        for index, spec in enumerate(specs):
-            outcomes[index] = run_one(spec)
-            if progress:
-                progress(index + 1, len(specs), outcomes[index])
-        return outcomes  # type: ignore[return-value]
-    context = multiprocessing.get_context("forkserver" if "forkserver" in
-                                          multiprocessing.get_all_start_methods() else "spawn")
-    with context.Pool(processes=min(jobs, len(specs))) as pool:
-        done = 0
-        for index, outcome in pool.imap_unordered(_indexed, list(enumerate(specs)),
-                                                  chunksize=1):
-            outcomes[index] = outcome
-            done += 1
-            if progress:
-                progress(done, len(specs), outcome)
-    return outcomes  # type: ignore[return-value]
-
-
-def _indexed(item):
-    index, spec = item
-    return index, run_one(spec)
+    if executor is None:
+        executor = local_executor(max(int(jobs), 1) if jobs is not None else None)
+        if len(specs) <= 1:
+            executor = InProcessExecutor()
+    return run_tasks(run_one, specs, executor, lost_localization, progress,
+                     preload=("amr_evaluation.localization_episode",))
 
 
 def summarize(outcomes: Sequence[LocalizationOutcome], within_s: float = 30.0,
@@ -216,7 +206,7 @@ def format_table(rows: Sequence[dict[str, Any]]) -> str:
                      for line in lines)
 
 
-def evaluate_main(specs, settings: dict[str, Any], args, out: Path) -> int:
+def evaluate_main(specs, settings: dict[str, Any], args, out: Path, executor=None) -> int:
     """evaluate.py --localize: localization episodes for evaluate.py's grid (EpisodeSpecs).
 
     Writes results.json (summary + rows) and results.csv to `out`, prints the table and the
@@ -242,7 +232,8 @@ def evaluate_main(specs, settings: dict[str, Any], args, out: Path) -> int:
             f"{outcome.spec.label}: ERROR {outcome.error}"
         print(f"[{done}/{total}] {text}", flush=True)
 
-    outcomes = run_localization_specs(local, jobs=settings["jobs"], progress=progress)
+    outcomes = run_localization_specs(local, jobs=settings["jobs"], progress=progress,
+                                      executor=executor)
     summary = summarize(outcomes)
     summary["wall_time_s"] = round(time.monotonic() - started, 1)
     rows = [outcome_row(o) for o in outcomes]

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import datetime as dt_module
-import os
 import platform
 import sys
 import textwrap
@@ -84,7 +83,16 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="controller constructor parameter override (repeatable; typed "
                         "bool/int/float/str like ROS)")
     parser.add_argument("--jobs", "-j", type=int, default=None,
-                        help="worker processes (default: all cores)")
+                        help="worker processes (default: all cores); with --ray and no address, "
+                        "the local Ray instance's CPUs")
+    parser.add_argument("--ray", nargs="?", const="", default=None, metavar="ADDRESS",
+                        help="run the episodes as Ray tasks: no ADDRESS starts a local Ray "
+                        "instance (127.0.0.1, stopped at the end); 'auto' joins the cluster "
+                        "this machine is a node of; HOST:PORT the cluster whose head is there "
+                        "(needs the cluster extra: requirements-cluster.lock)")
+    parser.add_argument("--ray-runtime-env", default=None, metavar="JSON|FILE",
+                        help="with --ray: Ray runtime_env for the workers, as JSON text or a "
+                        "JSON/YAML file (e.g. a wheel of the project in py_modules)")
     parser.add_argument("--out", default=None,
                         help="output folder (default out/evaluate-<UTC time>)")
     parser.add_argument("--no-sheet", action="store_true", help="skip sheet.png")
@@ -130,6 +138,41 @@ def resolve_settings(args: argparse.Namespace) -> dict:
     return settings
 
 
+def make_executor(args: argparse.Namespace, jobs: int | None, episodes: int):
+    """The local pool (default), or Ray with --ray; ValueError with a reason for bad options."""
+    from amr_evaluation.executors import InProcessExecutor, local_executor
+    if args.ray is None:
+        if args.ray_runtime_env:
+            raise EvaluationError("--ray-runtime-env needs --ray")
+        return InProcessExecutor() if episodes == 1 else local_executor(jobs)
+    from amr_evaluation.ray_executor import RayExecutor, RaySetupError
+    runtime_env = read_runtime_env(args.ray_runtime_env) if args.ray_runtime_env else None
+    executor = RayExecutor(args.ray or None, num_cpus=jobs, runtime_env=runtime_env)
+    try:
+        executor.connect()
+    except RaySetupError as exc:
+        raise EvaluationError(str(exc)) from None
+    return executor
+
+
+def read_runtime_env(value: str) -> dict:
+    """--ray-runtime-env: JSON text, or a JSON/YAML file holding a mapping."""
+    import json
+
+    import yaml
+    try:
+        path = Path(value)
+        data = yaml.safe_load(path.read_text(encoding="utf-8")) if path.is_file() \
+            else json.loads(value)
+    except (OSError, ValueError, yaml.YAMLError) as exc:
+        raise EvaluationError(f"--ray-runtime-env: neither a readable file nor JSON: "
+                              f"{' '.join(str(exc).split())}") from None
+    if not isinstance(data, dict):
+        raise EvaluationError(f"--ray-runtime-env must be a mapping (e.g. "
+                              f'{{"py_modules": [...]}}), got {data!r}')
+    return data
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     try:
@@ -141,20 +184,32 @@ def main(argv: list[str] | None = None) -> int:
         started = dt_module.datetime.now(dt_module.timezone.utc)
         out = check_output_folder(args.out or Path("out") / f"evaluate-{started:%Y%m%d-%H%M%S}",
                                   "--out")
+        executor = make_executor(args, settings["jobs"], len(specs))
     except ValueError as exc:  # EvaluationError, ControllerSpecError, a bad --out
         print(f"evaluate: {exc}", file=sys.stderr)
         return 2
+    try:
+        return run_and_report(args, settings, specs, executor, out, started)
+    finally:
+        close = getattr(executor, "close", None)
+        if close:
+            close()
+
+
+def run_and_report(args, settings: dict, specs, executor, out: Path, started) -> int:
+    """Run the episodes on the executor; write and print the results; the exit code."""
     if args.localize:
         from amr_evaluation.localization_evaluation import evaluate_main
-        return evaluate_main(specs, settings, args, out)
-    jobs = settings["jobs"] or os.cpu_count() or 1
+        return evaluate_main(specs, settings, args, out, executor=executor)
     print(f"evaluate: {len(specs)} episodes of {settings['duration']:g} s on "
-          f"{min(jobs, len(specs))} process(es), controller {settings['controller']}"
+          f"{executor.describe()}, controller {settings['controller']}"
           + (f" {settings['params']}" if settings["params"] else ""), flush=True)
 
     bar = ProgressBar(len(specs))
     try:
-        outcomes = run_episodes(specs, jobs=jobs, progress=bar)
+        # Trajectories only for the sheet: without it, workers send summaries back.
+        outcomes = run_episodes(specs, progress=bar, executor=executor,
+                                trajectory=not args.no_sheet)
     except KeyboardInterrupt:
         bar.finish()
         print("evaluate: interrupted", file=sys.stderr)
@@ -163,7 +218,8 @@ def main(argv: list[str] | None = None) -> int:
     wall = (dt_module.datetime.now(dt_module.timezone.utc) - started).total_seconds()
 
     meta = {"started_utc": started.isoformat(timespec="seconds"), "wall_time_s": round(wall, 2),
-            "jobs": min(jobs, len(specs)), "controller": settings["controller"],
+            "jobs": executor.workers(len(specs)), "executor": executor.describe(),
+            "controller": settings["controller"],
             "params": settings["params"], "params_file": settings["params_file"],
             "duration_s": settings["duration"], "dt_s": settings["dt"],
             "config": args.config, "command": " ".join(sys.argv),

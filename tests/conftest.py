@@ -2,6 +2,8 @@
 
 Fixtures:
 - `course_map`: a map JSON file as the course gives them (a room with a box, no named starts).
+- `ray_cluster`: a Ray cluster on loopback (head + one worker node), this process its driver;
+  one per test session (tests/ray_cluster.py).
 - `ros`: an initialised rclpy context with an executor; `ros.node(name)` creates a plain node,
   `ros.add(node)` spins an existing one, `ros.spin_until(cond, timeout)` spins until `cond()` is
   true or fails the test, `ros.spin_for(seconds)` spins for a while. Everything is destroyed and
@@ -45,3 +47,14 @@ def course_map(tmp_path):
         "boundary": [[-2, -2], [2, -2], [2, 2], [-2, 2]],
         "holes": [[[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]]]}}))
     return path
+
+
+@pytest.fixture(scope="session")
+def ray_cluster():
+    """A Ray cluster on loopback (tests/ray_cluster.py), one per session: start-up is slow."""
+    from tests.ray_cluster import LoopbackCluster
+    cluster = LoopbackCluster()
+    try:
+        yield cluster
+    finally:
+        cluster.close()

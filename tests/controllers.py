@@ -1,5 +1,7 @@
 """Controllers for node tests: importable as tests.controllers:NAME by the `controller` param."""
 import math
+import os
+import signal
 
 
 class ConstantController:
@@ -33,3 +35,22 @@ class StraightController(ConstantController):
 
     def __init__(self, dt):
         super().__init__(dt, v=0.2, w=0.0)
+
+
+class KillsItsProcessOnce:
+    """Commands zero; SIGKILLs its own process on its 10th step the first time it runs.
+
+    "The first time" for its `marker` file: a worker lost mid-episode (as the OOM killer or a
+    crash would end it); a retry then runs it through.
+    """
+
+    def __init__(self, dt, marker=""):
+        self.marker, self.calls = marker, 0
+
+    def compute_commands(self, z_scan, z_v, z_w):
+        self.calls += 1
+        if self.calls == 10 and self.marker and not os.path.exists(self.marker):
+            with open(self.marker, "w") as stream:
+                stream.write(str(os.getpid()))
+            os.kill(os.getpid(), signal.SIGKILL)
+        return 0.0, 0.0

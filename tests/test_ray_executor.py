@@ -1,0 +1,190 @@
+"""evaluate.py --ray: episodes as Ray tasks give the local pool's results, and survive losses.
+
+On the `ray_cluster` fixture (tests/ray_cluster.py): a head without CPUs and one worker node on
+127.0.0.1, started from this venv (the shared-venv set-up of README "Sweep on a cluster"), this
+process the driver. Every metric of every episode is compared with the local process pool's
+run of the same episodes; a worker process killed mid-episode is retried, a second death and
+a lost node are survived, and a cluster without CPUs ends the sweep with errors, not a hang.
+"""
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import os
+import re
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from amr_evaluation.evaluation import EpisodeSpec, expand_grid, run_episodes
+from amr_evaluation.evaluation_report import outcome_row
+from amr_evaluation.executors import LocalPoolExecutor
+from amr_evaluation.ray_executor import RayExecutor
+
+pytestmark = pytest.mark.slow
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO / "scripts"))
+import evaluate  # noqa: E402
+
+
+class SlowStanding:
+    """Commands zero, 3 ms of wall time per step.
+
+    Announces itself in `folder` on its first step, so a test knows which episodes are running.
+    """
+
+    def __init__(self, dt, folder=""):
+        self.folder, self.calls = folder, 0
+
+    def compute_commands(self, z_scan, z_v, z_w):
+        self.calls += 1
+        if self.calls == 1 and self.folder:
+            Path(self.folder, f"{os.getpid()}-{time.monotonic_ns()}").touch()
+        time.sleep(0.003)
+        return 0.0, 0.0
+
+
+def _without_wall_time(outcome) -> dict:
+    result = dataclasses.asdict(outcome.result) if outcome.result is not None else None
+    if result:
+        result.pop("wall_time_s")
+    row = outcome_row(outcome)
+    row.pop("wall_time_s")
+    return {"spec": outcome.spec, "error": outcome.error, "result": result, "row": row}
+
+
+def _wait_for_files(folder: Path, count: int, timeout: float = 30.0) -> None:
+    deadline = time.monotonic() + timeout
+    while len(list(folder.iterdir())) < count:
+        assert time.monotonic() < deadline, f"fewer than {count} episodes started"
+        time.sleep(0.05)
+
+
+def test_a_sweep_on_the_cluster_gives_the_local_pools_results(ray_cluster):
+    specs = expand_grid("lab02,maze_deadends", "all", "ideal,turtlebot3", "0,1", duration=20.0)
+    assert len(specs) == 20
+    seen = {"local": [], "ray": []}
+    local = run_episodes(specs, executor=LocalPoolExecutor(2),
+                         progress=lambda done, total, o: seen["local"].append((done, total)))
+    executor = RayExecutor(ray_cluster.address)
+    remote = run_episodes(specs, executor=executor,
+                          progress=lambda done, total, o: seen["ray"].append((done, total)))
+    assert seen["ray"] == seen["local"] == [(k, 20) for k in range(1, 21)]
+    assert all(o.error is None for o in remote)
+    assert [_without_wall_time(o) for o in remote] == [_without_wall_time(o) for o in local]
+    assert executor.describe() == f"the Ray cluster at {ray_cluster.address}: 2 CPUs on 2 node(s)"
+    # Summaries only: the same metrics, no per-step trajectory to send back.
+    summaries = run_episodes(specs[:4], executor=executor, trajectory=False)
+    for full, summary in zip(remote, summaries):
+        assert summary.result.trajectory == [] and len(full.result.trajectory) == 401
+        assert outcome_row(summary) | {"wall_time_s": 0} == outcome_row(full) | {"wall_time_s": 0}
+
+
+def _table(stdout: str) -> list[str]:
+    lines = stdout[stdout.index("world "):stdout.index("verdict:")].splitlines()
+    return [re.sub(r"\s+\S+$", "", line) for line in lines]  # without the wall time column
+
+
+def test_evaluate_py_on_the_cluster_writes_the_local_pools_files(ray_cluster, tmp_path, capsys):
+    args = ["--worlds", "lab02,wide_maze", "--profiles", "ideal,turtlebot3", "--seeds", "3",
+            "--duration", "15"]
+    assert evaluate.main([*args, "--jobs", "2", "--out", str(tmp_path / "pool")]) == 0
+    pool_stdout = capsys.readouterr().out
+    # Another driver process, started elsewhere: the workers import the project from the venv.
+    proc = subprocess.run([sys.executable, str(REPO / "scripts" / "evaluate.py"), *args,
+                           "--ray", ray_cluster.address, "--out", str(tmp_path / "ray")],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert f"on the Ray cluster at {ray_cluster.address}: 2 CPUs" in proc.stdout
+    assert _table(proc.stdout) == _table(pool_stdout)
+    assert proc.stdout.splitlines()[-2] == pool_stdout.splitlines()[-2]  # the verdict
+
+    def episodes(name):
+        data = json.loads((tmp_path / name / "results.json").read_text())
+        return [{k: v for k, v in e.items() if k != "wall_time_s"} for e in data["episodes"]]
+
+    def csv_rows(name):
+        with open(tmp_path / name / "results.csv", newline="") as stream:
+            return [{k: v for k, v in r.items() if k != "wall_time_s"}
+                    for r in csv.DictReader(stream)]
+
+    assert len(episodes("ray")) == 10 and episodes("ray") == episodes("pool")
+    assert csv_rows("ray") == csv_rows("pool")
+    assert (tmp_path / "ray" / "sheet.png").read_bytes() == \
+        (tmp_path / "pool" / "sheet.png").read_bytes()
+
+
+def test_a_worker_killed_mid_episode_is_retried_and_a_second_death_reported(ray_cluster,
+                                                                          tmp_path):
+    marker = tmp_path / "killed-once"
+    specs = [EpisodeSpec("lab02", "outer", duration=2.0, controller="tests.controllers:"
+                         "KillsItsProcessOnce", params={"marker": str(marker)}),
+             EpisodeSpec("lab02", "inner", duration=2.0,
+                         controller="tests.test_evaluation:ExitsTheProcess"),
+             EpisodeSpec("lab02", "outer", duration=2.0,
+                         controller="tests.test_evaluation:Standing")]
+    seen = []
+    outcomes = run_episodes(specs, executor=RayExecutor(ray_cluster.address),
+                            progress=lambda done, total, o: seen.append(done))
+    assert seen == [1, 2, 3]
+    killed, exits, standing = outcomes
+    assert marker.exists()  # its first run died with its process; the retry ran it
+    assert killed.error is None and killed.result.steps == 40
+    assert killed.result.distance_m == standing.result.distance_m == 0.0
+    assert exits.result is None
+    assert "Ray worker process died during this episode (tried 2 times)" in exits.error
+    # The local pool does not retry: the same killed episode is its error there.
+    marker.unlink()
+    (local,) = run_episodes(specs[:1], executor=LocalPoolExecutor(2))
+    assert "worker process died (killed by signal 9)" in local.error
+
+
+def test_a_worker_node_lost_mid_sweep_is_survived(ray_cluster, tmp_path):
+    extra = ray_cluster.add_worker(1)
+    started = tmp_path / "started"
+    started.mkdir()
+    specs = [EpisodeSpec("lab02", start, seed=seed, duration=30.0,
+                         controller=f"{__name__}:SlowStanding", params={"folder": str(started)})
+             for start in ("outer", "inner") for seed in range(2)]
+    executor = RayExecutor(ray_cluster.address)
+    assert executor.cluster_cpus() == 3
+    killer = threading.Thread(target=lambda: (_wait_for_files(started, 3),
+                                              ray_cluster.kill_worker(extra)))
+    killer.start()
+    begin = time.monotonic()
+    outcomes = run_episodes(specs, executor=executor, )
+    killer.join()
+    assert [o.error for o in outcomes] == [None] * 4
+    assert all(o.result.steps == 600 for o in outcomes)
+    assert len(list(started.iterdir())) >= 5  # one episode started twice: retried elsewhere
+    assert time.monotonic() - begin < 60
+    assert executor.cluster_cpus() == 2
+
+
+def test_a_cluster_without_cpus_ends_the_sweep_with_errors_not_a_hang(ray_cluster, tmp_path):
+    started = tmp_path / "started"
+    started.mkdir()
+    specs = [EpisodeSpec("lab02", "outer", seed=seed, duration=30.0,
+                         controller=f"{__name__}:SlowStanding", params={"folder": str(started)})
+             for seed in range(3)]
+    (node,) = ray_cluster.workers
+    killer = threading.Thread(target=lambda: (_wait_for_files(started, 2),
+                                              ray_cluster.kill_worker(node)))
+    killer.start()
+    try:
+        begin = time.monotonic()
+        outcomes = run_episodes(specs, executor=RayExecutor(ray_cluster.address,
+                                                            no_worker_timeout_s=3.0))
+        killer.join()
+        elapsed = time.monotonic() - begin
+    finally:
+        ray_cluster.workers.append(ray_cluster.add_worker(2))  # for the tests after this one
+    assert all(o.result is None and "no Ray node with a CPU was alive for 3 s" in o.error
+               for o in outcomes), [o.error for o in outcomes]
+    assert elapsed < 30
