@@ -1,11 +1,14 @@
 # Two commands set everything up and run: `make run` (simulator + wall follower on the default
 # maze) and `make test` (the ruff linter, then pytest). Each creates .venv if missing, installs
 # the pinned dependencies when requirements.lock or pyproject.toml changed, and rebuilds
-# amr_msgs (and tf2_msgs) when their sources changed.
+# amr_msgs (and tf2_msgs) when their sources changed. `make test` also installs the cluster
+# extra (Ray, requirements-cluster.lock: ~600 MB, ~25 s) so the Ray tests run; `make run` does
+# not need it.
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 DEPS_STAMP := $(VENV)/.stamp-deps
+CLUSTER_STAMP := $(VENV)/.stamp-cluster
 MSGS_STAMP := $(VENV)/.stamp-amr_msgs
 MSGS_SOURCES := $(wildcard amr_msgs/msg/*.msg) amr_msgs/CMakeLists.txt amr_msgs/package.xml \
 	tools/cmake/ros_pypi_wheels.cmake tools/build_amr_msgs.py
@@ -26,7 +29,7 @@ LOCAL_ROS := ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 run: $(MSGS_STAMP)
 	$(LOCAL_ROS) $(PY) scripts/run_sim.py $(ARGS)
 
-test: $(MSGS_STAMP)
+test: $(MSGS_STAMP) $(CLUSTER_STAMP)
 	$(PY) -m ruff check .
 	$(LOCAL_ROS) $(PY) -m pytest $(PYTEST_ARGS)
 
@@ -43,6 +46,11 @@ $(DEPS_STAMP): requirements.lock pyproject.toml | $(PY)
 	$(PY) -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation -e .
 	touch $@
 
+$(CLUSTER_STAMP): $(DEPS_STAMP) requirements-cluster.lock
+	$(PY) -m pip install --disable-pip-version-check -q -r requirements-cluster.lock \
+		-c requirements.lock
+	touch $@
+
 $(TF2_STAMP): $(DEPS_STAMP) $(TF2_SOURCES)
 	$(PY) tools/build_amr_msgs.py third_party/tf2_msgs --unless-provided
 	touch $@
@@ -56,6 +64,9 @@ lock: | $(PY)
 	rm -rf build/lock-venv && $(PYTHON) -m venv build/lock-venv
 	build/lock-venv/bin/pip install -q -r requirements.in
 	build/lock-venv/bin/python tools/pin_requirements.py > requirements.lock
+	build/lock-venv/bin/pip install -q -r requirements-cluster.in -c requirements.lock
+	build/lock-venv/bin/python tools/pin_requirements.py --exclude requirements.lock \
+		> requirements-cluster.lock
 	rm -rf build/lock-venv
 
 clean:

@@ -1,0 +1,188 @@
+#!/usr/bin/env python3
+r"""Search a controller's parameters over episodes with Ray Tune; write the best as ROS params.
+
+Each trial (one parameter set) runs every episode of the set headless and is scored by the
+objective; trials run in parallel on a Ray cluster, by default a local Ray instance on this
+machine (127.0.0.1). The episode set takes evaluate.py's options (--worlds, --starts, --profiles,
+--seeds, --duration, --dt, --controller, --params-file, -p, --config, --jobs). Writes to --out:
+best_params.yaml (a ROS 2 params file for the wall_follower node: run_sim.py --params-file and
+--ros-args --params-file take it), trials.csv, best.json and Tune's own logs (ray_results/).
+
+Search space (--space, repeatable): NAME=a,b,c (values), NAME=LOW:HIGH:N (N evenly spaced
+values), NAME=LOW:HIGH (a continuous range: random and optuna only). Objective: safe-exploration
+(default: fewest episodes with a collision, an invalid command or an error; then the most
+explored; then the largest worst clearance) or MODULE:FUNCTION (f(rows, params) -> score).
+Exit code: 0 a best parameter set was written, 2 bad options, 3 every trial failed.
+
+Examples:
+  .venv/bin/python scripts/tune.py --worlds lab02,maze_deadends --profiles turtlebot3 \
+      --duration 120 --space kp=5,10,15 --space wall_distance_m=0.16:0.24:3
+  .venv/bin/python scripts/tune.py --config evaluations/example.yaml --search optuna \
+      --samples 40 --space kp=2:20 --space kd=0:20 --ray auto     # on a running cluster
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import datetime as dt_module
+import json
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+SCRIPTS = Path(__file__).resolve().parent
+for path in (str(REPO), str(SCRIPTS)):
+    if path not in sys.path:  # run from a checkout without installing
+        sys.path.insert(0, path)
+
+import evaluate  # noqa: E402  (the episode-set options and their checks)
+
+from amr_evaluation.evaluation import EvaluationError, check_controller, expand_grid  # noqa: E402
+from amr_evaluation.tuning import (  # noqa: E402
+    DEFAULT_OBJECTIVE,
+    SEARCHES,
+    grid_size,
+    load_objective,
+    parse_space,
+    run_search,
+    write_params_file,
+)
+from cli_checks import check_output_folder  # noqa: E402
+
+
+def parse_args(argv: list[str] | None = None) -> tuple[argparse.Namespace, argparse.Namespace]:
+    """tune.py's own options, and the episode set's as evaluate.py parses them."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter,
+                                     epilog=__doc__.split("\n", 1)[1])
+    parser.add_argument("--space", action="append", default=[], metavar="NAME=SPEC",
+                        help="a searched parameter (repeatable): a,b,c or LOW:HIGH:N or "
+                        "LOW:HIGH")
+    parser.add_argument("--search", choices=SEARCHES, default="grid",
+                        help="grid (every combination; default), random, or optuna (TPE)")
+    parser.add_argument("--samples", type=int, default=20,
+                        help="parameter sets tried by random and optuna (default 20)")
+    parser.add_argument("--search-seed", type=int, default=0,
+                        help="seed of the random and optuna searchers (default 0)")
+    parser.add_argument("--objective", default=DEFAULT_OBJECTIVE,
+                        help=f"{DEFAULT_OBJECTIVE} (default) or MODULE:FUNCTION")
+    parser.add_argument("--ray", nargs="?", const="", default="", metavar="ADDRESS",
+                        help="the Ray cluster: none (default) starts a local instance; 'auto' "
+                        "or HOST:PORT joins a running one")
+    parser.add_argument("--ray-runtime-env", default=None, metavar="JSON|FILE",
+                        help="Ray runtime_env for the workers (see evaluate.py)")
+    parser.add_argument("--out", default=None, help="output folder (default out/tune-<UTC>)")
+    own, rest = parser.parse_known_args(argv)
+    episodes = evaluate.parse_args([*rest, "--no-sheet"])
+    if episodes.localize or episodes.ray is not None:
+        parser.error("--localize and evaluate.py's --ray are not tune.py options (tune.py "
+                     "has its own --ray)")
+    return own, episodes
+
+
+def main(argv: list[str] | None = None) -> int:
+    args, episode_args = parse_args(argv)
+    started = dt_module.datetime.now(dt_module.timezone.utc)
+    try:
+        settings = evaluate.resolve_settings(episode_args)
+        specs = expand_grid(settings["worlds"], settings["starts"], settings["profiles"],
+                            settings["seeds"], duration=settings["duration"], dt=settings["dt"],
+                            controller=settings["controller"], params=settings["params"])
+        check_controller(settings["controller"], settings["params"], settings["dt"])
+        dims = parse_space(args.space, settings["controller"])
+        for dim in dims:  # the controller must take the ends of every searched range
+            for value in (dim.values or (dim.low, dim.high)):
+                check_controller(settings["controller"], {**settings["params"],
+                                                          dim.name: value}, settings["dt"])
+        load_objective(args.objective)
+        if args.search == "grid":
+            grid_size(dims)
+        if args.samples < 1:
+            raise EvaluationError(f"--samples must be >= 1, got {args.samples}")
+        out = check_output_folder(args.out or Path("out") / f"tune-{started:%Y%m%d-%H%M%S}",
+                                  "--out")
+        runtime_env = (evaluate.read_runtime_env(args.ray_runtime_env)
+                       if args.ray_runtime_env else None)
+        from amr_evaluation.ray_executor import RayExecutor, RaySetupError
+        executor = RayExecutor(args.ray or None, num_cpus=settings["jobs"],
+                               runtime_env=runtime_env)
+        try:
+            executor.connect()
+        except RaySetupError as exc:
+            raise EvaluationError(str(exc)) from None
+    except ValueError as exc:  # EvaluationError, ControllerSpecError, a bad --out
+        print(f"tune: {exc}", file=sys.stderr)
+        return 2
+    try:
+        return search_and_write(args, settings, specs, dims, executor, out)
+    finally:
+        executor.close()
+
+
+def search_and_write(args, settings: dict, specs, dims, executor, out: Path) -> int:
+    """Run the search, print the trials, write best_params.yaml, trials.csv, best.json."""
+    print(f"tune: {args.search} search over {', '.join(d.name for d in dims)}; each trial "
+          f"runs {len(specs)} episode(s) of {settings['duration']:g} s; on "
+          f"{executor.describe()}; objective {args.objective}", flush=True)
+
+    def progress(done, total, trial):
+        values = " ".join(f"{k}={_short(v)}" for k, v in trial.params.items())
+        shown = trial.error or ", ".join(f"{k} {_short(v)}" for k, v in trial.metrics.items()
+                                         if k not in ("trial_wall_time_s",))
+        print(f"[{done}/{total}] {values}: {shown}", flush=True)
+
+    try:
+        trials = run_search(specs, dims, args.search, args.samples, args.search_seed,
+                            args.objective, storage=out / "ray_results", progress=progress)
+    except KeyboardInterrupt:
+        print("tune: interrupted", file=sys.stderr)
+        return 130
+    _write_trials(out / "trials.csv", trials)
+    ran = [t for t in trials if t.error is None and t.score > float("-inf")]
+    if not ran:
+        print("tune: every trial failed; see the Tune logs in " + str(out / "ray_results"),
+              file=sys.stderr)
+        return 3
+    best = ran[0]
+    comment = (f"Written by scripts/tune.py ({args.search} search, objective {args.objective})"
+               f": best of {len(trials)} parameter sets over {len(specs)} episode(s) of "
+               f"{settings['duration']:g} s\n(worlds {settings['worlds']}, starts "
+               f"{settings['starts']}, profiles {settings['profiles']}, seeds "
+               f"{settings['seeds']}).\nSearched: {', '.join(args.space)}. Score "
+               f"{best.score:.4f}: {_metrics_text(best)}.")
+    params_file = write_params_file(out / "best_params.yaml", best.params,
+                                    settings["params_file"], settings["controller"],
+                                    settings["params"], comment)
+    (out / "best.json").write_text(json.dumps(
+        {"params": best.params, "metrics": best.metrics, "search": args.search,
+         "objective": args.objective, "space": args.space, "trials": len(trials),
+         "episodes": len(specs)}, indent=1, default=str) + "\n")
+    print("tune: best " + " ".join(f"{k}={v}" for k, v in best.params.items())
+          + f" (score {best.score:.4f}: {_metrics_text(best)})")
+    print(f"tune: wrote {params_file}; try it: .venv/bin/python scripts/run_sim.py "
+          f"--params-file {params_file}")
+    return 0
+
+
+def _short(value):
+    return f"{value:.4g}" if isinstance(value, float) else value
+
+
+def _metrics_text(trial) -> str:
+    return ", ".join(f"{k} {_short(v)}" for k, v in trial.metrics.items()
+                     if k not in ("score", "trial_wall_time_s"))
+
+
+def _write_trials(path: Path, trials) -> None:
+    params = list(dict.fromkeys(k for t in trials for k in t.params))
+    metrics = list(dict.fromkeys(k for t in trials for k in t.metrics))
+    with path.open("w", newline="", encoding="utf-8") as stream:
+        writer = csv.writer(stream)
+        writer.writerow([*params, *metrics, "error"])
+        for t in trials:
+            writer.writerow([t.params.get(k, "") for k in params]
+                            + [t.metrics.get(k, "") for k in metrics] + [t.error or ""])
+
+
+if __name__ == "__main__":
+    sys.exit(main())
