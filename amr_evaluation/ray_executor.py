@@ -110,7 +110,11 @@ class RayExecutor:
                 detail = traceback.format_exception_only(type(exc), exc)[-1].strip()
                 where = "start a local Ray instance" if self.address is None else \
                     f"connect to the Ray cluster at '{self.address}'"
-                raise RaySetupError(f"cannot {where}: {' '.join(detail.split())}") from None
+                hint = "" if self.address is None or os.environ.get("RAY_AUTH_MODE") else (
+                    " (a cluster with token authentication needs RAY_AUTH_MODE=token and its "
+                    "token in ~/.ray/auth_token or RAY_AUTH_TOKEN)")
+                raise RaySetupError(f"cannot {where}: {' '.join(detail.split())}{hint}") \
+                    from None
             self._ray, self._owned = ray, True
         self._remote = self._ray.remote(num_cpus=1, max_retries=RETRIES,
                                         retry_exceptions=False)(_run_task)
@@ -213,6 +217,8 @@ class RayExecutor:
             hint = (" (do the cluster's workers import this project? see README 'Sweep on a "
                     "cluster')") if isinstance(cause, ImportError) else ""
             why = f"the Ray task failed on the worker: {detail}{hint}"
-        except rex.RayError as exc:
-            why = f"Ray could not run the episode: {type(exc).__name__}: {exc}"
+        except rex.RayError as exc:  # RuntimeEnvSetupError, ...: its first and last lines
+            lines = [line.strip() for line in str(exc).splitlines() if line.strip()] or [""]
+            detail = lines[0] if len(lines) == 1 else f"{lines[0]} ... {lines[-1]}"
+            why = f"Ray could not run the episode: {type(exc).__name__}: {detail[:400]}"
         return TaskLost(" ".join(why.split()), wall_time_s)
