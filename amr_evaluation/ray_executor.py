@@ -22,6 +22,7 @@ import logging
 import os
 import time
 import traceback
+from pathlib import Path
 from typing import Any, Callable, Iterator, Mapping, Sequence
 
 from amr_evaluation.executors import TaskLost
@@ -46,6 +47,26 @@ def _run_task(task: Callable[[Any], Any], preload: Sequence[str], spec: Any) -> 
     from amr_evaluation.executors import _preload
     _preload(preload)
     return task(spec)
+
+
+def _on_loopback(address: str) -> bool:
+    """Whether the cluster at `address` ("auto": this machine's) has its head on 127.0.0.1.
+
+    A driver looks for a Ray node of its own IP; on a cluster bound to the loopback address it
+    must take 127.0.0.1 as its IP too, or it waits for a node that never comes.
+    """
+    if address == "auto":
+        address = os.environ.get("RAY_ADDRESS", "")
+        if not address:  # where `ray start` and ray.init note the running cluster
+            import tempfile
+            noted = Path(os.environ.get("RAY_TMPDIR", tempfile.gettempdir()), "ray",
+                         "ray_current_cluster")
+            try:
+                address = noted.read_text(encoding="utf-8").strip()
+            except OSError:
+                return False
+    host = address.split("://")[-1].rsplit(":", 1)[0].strip("[]")
+    return host in ("127.0.0.1", "localhost", "::1")
 
 
 class RayExecutor:
@@ -88,6 +109,8 @@ class RayExecutor:
                 os.environ.setdefault(name, value)
         else:
             os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+            if _on_loopback(self.address):  # this driver's node is 127.0.0.1 too
+                os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
         try:
             import ray
         except ImportError as exc:

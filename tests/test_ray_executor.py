@@ -91,19 +91,24 @@ def _table(stdout: str) -> list[str]:
     return [re.sub(r"\s+\S+$", "", line) for line in lines]  # without the wall time column
 
 
-def test_evaluate_py_on_the_cluster_writes_the_local_pools_files(ray_cluster, tmp_path, capsys):
+def test_evaluate_py_on_ray_writes_the_local_pools_files(ray_cluster, tmp_path, capsys):
     args = ["--worlds", "lab02,wide_maze", "--profiles", "ideal,turtlebot3", "--seeds", "3",
-            "--duration", "15"]
-    assert evaluate.main([*args, "--jobs", "2", "--out", str(tmp_path / "pool")]) == 0
+            "--duration", "15", "--jobs", "2"]
+    assert evaluate.main([*args, "--out", str(tmp_path / "pool")]) == 0
     pool_stdout = capsys.readouterr().out
-    # Another driver process, started elsewhere: the workers import the project from the venv.
-    proc = subprocess.run([sys.executable, str(REPO / "scripts" / "evaluate.py"), *args,
-                           "--ray", ray_cluster.address, "--out", str(tmp_path / "ray")],
-                          cwd=tmp_path, capture_output=True, text=True, timeout=120)
-    assert proc.returncode == 0, proc.stderr
-    assert f"on the Ray cluster at {ray_cluster.address}: 2 CPUs" in proc.stdout
-    assert _table(proc.stdout) == _table(pool_stdout)
-    assert proc.stdout.splitlines()[-2] == pool_stdout.splitlines()[-2]  # the verdict
+    # Other driver processes, started elsewhere: the workers import the project from the venv.
+    # One joins the cluster, one starts (and stops) a Ray instance of its own.
+    runs = {"cluster": ["--ray", ray_cluster.address], "local": ["--ray"]}
+    for name, ray_args in runs.items():
+        proc = subprocess.run([sys.executable, str(REPO / "scripts" / "evaluate.py"), *args,
+                               *ray_args, "--out", str(tmp_path / name)],
+                              cwd=tmp_path, capture_output=True, text=True, timeout=180)
+        assert proc.returncode == 0, proc.stderr
+        where = f"the Ray cluster at {ray_cluster.address}: 2 CPUs on 2 node(s)" \
+            if name == "cluster" else "a local Ray instance: 2 CPUs on 1 node(s)"
+        assert f"on {where}, controller" in proc.stdout
+        assert _table(proc.stdout) == _table(pool_stdout)
+        assert proc.stdout.splitlines()[-2] == pool_stdout.splitlines()[-2]  # the verdict
 
     def episodes(name):
         data = json.loads((tmp_path / name / "results.json").read_text())
@@ -114,10 +119,25 @@ def test_evaluate_py_on_the_cluster_writes_the_local_pools_files(ray_cluster, tm
             return [{k: v for k, v in r.items() if k != "wall_time_s"}
                     for r in csv.DictReader(stream)]
 
-    assert len(episodes("ray")) == 10 and episodes("ray") == episodes("pool")
-    assert csv_rows("ray") == csv_rows("pool")
-    assert (tmp_path / "ray" / "sheet.png").read_bytes() == \
-        (tmp_path / "pool" / "sheet.png").read_bytes()
+    for name in runs:
+        assert len(episodes(name)) == 10 and episodes(name) == episodes("pool")
+        assert csv_rows(name) == csv_rows("pool")
+        assert (tmp_path / name / "sheet.png").read_bytes() == \
+            (tmp_path / "pool" / "sheet.png").read_bytes()
+
+
+def test_a_driver_on_a_loopback_cluster_takes_the_loopback_address(tmp_path, monkeypatch):
+    from amr_evaluation.ray_executor import _on_loopback
+    assert _on_loopback("127.0.0.1:6379") and _on_loopback("localhost:1234")
+    assert not _on_loopback("10.1.2.3:6379") and not _on_loopback("head.lab:6379")
+    monkeypatch.setenv("RAY_TMPDIR", str(tmp_path))
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    assert not _on_loopback("auto")  # no running cluster noted
+    (tmp_path / "ray").mkdir()
+    (tmp_path / "ray" / "ray_current_cluster").write_text("127.0.0.1:6379\n")
+    assert _on_loopback("auto")
+    monkeypatch.setenv("RAY_ADDRESS", "10.1.2.3:6379")
+    assert not _on_loopback("auto")
 
 
 def test_a_worker_killed_mid_episode_is_retried_and_a_second_death_reported(ray_cluster,
