@@ -138,6 +138,15 @@ def resolve_settings(args: argparse.Namespace) -> dict:
     return settings
 
 
+def episode_specs(settings: dict) -> list:
+    """The episodes of resolved settings; the controller built once with its parameters."""
+    specs = expand_grid(settings["worlds"], settings["starts"], settings["profiles"],
+                        settings["seeds"], duration=settings["duration"], dt=settings["dt"],
+                        controller=settings["controller"], params=settings["params"])
+    check_controller(settings["controller"], settings["params"], settings["dt"])
+    return specs
+
+
 def make_executor(args: argparse.Namespace, jobs: int | None, episodes: int):
     """The local pool (default), or Ray with --ray; ValueError with a reason for bad options."""
     from amr_evaluation.executors import InProcessExecutor, local_executor
@@ -145,9 +154,17 @@ def make_executor(args: argparse.Namespace, jobs: int | None, episodes: int):
         if args.ray_runtime_env:
             raise EvaluationError("--ray-runtime-env needs --ray")
         return InProcessExecutor() if episodes == 1 else local_executor(jobs)
+    return ray_executor(args.ray, jobs, args.ray_runtime_env)
+
+
+def ray_executor(address: str | None, jobs: int | None, runtime_env: str | None):
+    """A connected RayExecutor: address ''/None starts a local instance of `jobs` CPUs.
+
+    `runtime_env`: --ray-runtime-env's JSON text or file. EvaluationError with the reason.
+    """
     from amr_evaluation.ray_executor import RayExecutor, RaySetupError
-    runtime_env = read_runtime_env(args.ray_runtime_env) if args.ray_runtime_env else None
-    executor = RayExecutor(args.ray or None, num_cpus=jobs, runtime_env=runtime_env)
+    executor = RayExecutor(address or None, num_cpus=jobs,
+                           runtime_env=read_runtime_env(runtime_env) if runtime_env else None)
     try:
         executor.connect()
     except RaySetupError as exc:
@@ -177,10 +194,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     try:
         settings = resolve_settings(args)
-        specs = expand_grid(settings["worlds"], settings["starts"], settings["profiles"],
-                            settings["seeds"], duration=settings["duration"], dt=settings["dt"],
-                            controller=settings["controller"], params=settings["params"])
-        check_controller(settings["controller"], settings["params"], settings["dt"])
+        specs = episode_specs(settings)
         started = dt_module.datetime.now(dt_module.timezone.utc)
         out = check_output_folder(args.out or Path("out") / f"evaluate-{started:%Y%m%d-%H%M%S}",
                                   "--out")

@@ -37,7 +37,7 @@ for path in (str(REPO), str(SCRIPTS)):
 
 import evaluate  # noqa: E402  (the episode-set options and their checks)
 
-from amr_evaluation.evaluation import EvaluationError, check_controller, expand_grid  # noqa: E402
+from amr_evaluation.evaluation import EvaluationError, check_controller  # noqa: E402
 from amr_evaluation.tuning import (  # noqa: E402
     DEFAULT_OBJECTIVE,
     SEARCHES,
@@ -85,10 +85,7 @@ def main(argv: list[str] | None = None) -> int:
     started = dt_module.datetime.now(dt_module.timezone.utc)
     try:
         settings = evaluate.resolve_settings(episode_args)
-        specs = expand_grid(settings["worlds"], settings["starts"], settings["profiles"],
-                            settings["seeds"], duration=settings["duration"], dt=settings["dt"],
-                            controller=settings["controller"], params=settings["params"])
-        check_controller(settings["controller"], settings["params"], settings["dt"])
+        specs = evaluate.episode_specs(settings)
         dims = parse_space(args.space, settings["controller"])
         for dim in dims:  # the controller must take the ends of every searched range
             for value in (dim.values or (dim.low, dim.high)):
@@ -101,15 +98,7 @@ def main(argv: list[str] | None = None) -> int:
             raise EvaluationError(f"--samples must be >= 1, got {args.samples}")
         out = check_output_folder(args.out or Path("out") / f"tune-{started:%Y%m%d-%H%M%S}",
                                   "--out")
-        runtime_env = (evaluate.read_runtime_env(args.ray_runtime_env)
-                       if args.ray_runtime_env else None)
-        from amr_evaluation.ray_executor import RayExecutor, RaySetupError
-        executor = RayExecutor(args.ray or None, num_cpus=settings["jobs"],
-                               runtime_env=runtime_env)
-        try:
-            executor.connect()
-        except RaySetupError as exc:
-            raise EvaluationError(str(exc)) from None
+        executor = evaluate.ray_executor(args.ray, settings["jobs"], args.ray_runtime_env)
     except ValueError as exc:  # EvaluationError, ControllerSpecError, a bad --out
         print(f"tune: {exc}", file=sys.stderr)
         return 2
