@@ -1,4 +1,4 @@
-"""Worlds for the simulator: walls as 2D line segments, named start poses and an optional goal.
+"""Worlds for the simulator: walls as 2D line segments, named start poses and named goals.
 
 Two file formats load with `World.load(name_or_path)`:
 
@@ -15,7 +15,10 @@ Two file formats load with `World.load(name_or_path)`:
          - [[x, y], ...]
        starts:                          # optional named start poses [x, y, theta]
          outer: [1.0, -1.0, pi/2]       # theta in rad: a number or "pi", "pi/2", "3*pi/2", "-pi/4"
-       goal: [x, y]                     # optional
+       goals:                           # optional named goals [x, y] (navigation targets)
+         far_corner: [-1.0, 1.0]
+       goal: far_corner                 # optional default goal: [x, y] or a name of `goals`;
+                                        # without it the first named goal is the default
 
    Coordinates are metres in the world frame (REP 103: x east, y north, theta CCW from x).
    A closed polyline may repeat its first point at the end; it is closed either way.
@@ -25,8 +28,9 @@ Two file formats load with `World.load(name_or_path)`:
    It has no starts; pass a start pose (x, y, theta) explicitly.
 
 Every problem (missing file, unknown name, bad YAML/JSON, missing keys, non-numeric or non-finite
-coordinates, polylines with too few points, zero-length walls, start poses outside the boundary,
-inside an obstacle or closer to a wall than the robot radius) raises WorldError naming the file.
+coordinates, polylines with too few points, zero-length walls, start poses or goals outside the
+boundary, inside an obstacle or closer to a wall than the robot radius) raises WorldError naming
+the file.
 """
 from __future__ import annotations
 
@@ -61,11 +65,12 @@ class World:
     source: str
     segments: np.ndarray  # (N, 4) float64 rows [x1, y1, x2, y2], metres
     starts: dict[str, tuple[float, float, float]] = field(default_factory=dict)
-    goal: tuple[float, float] | None = None
+    goal: tuple[float, float] | None = None  # the default goal (the `goal` key or the first named)
     cell_size: float = 0.4
     description: str = ""
     boundary: np.ndarray | None = None  # (K, 2) outer closed polyline
     holes: list[np.ndarray] = field(default_factory=list)  # closed obstacle polylines
+    goals: dict[str, tuple[float, float]] = field(default_factory=dict)  # named goals
 
     # ------------------------------------------------------------------ loading
     @classmethod
@@ -101,7 +106,8 @@ class World:
             raise WorldError(f"{path}: invalid YAML: {exc}") from exc
         if not isinstance(data, dict):
             raise WorldError(f"{path}: expected a mapping with keys boundary, holes, walls, starts, ...")
-        known = {"name", "description", "cell_size", "boundary", "holes", "walls", "starts", "goal"}
+        known = {"name", "description", "cell_size", "boundary", "holes", "walls", "starts",
+                 "goal", "goals"}
         unknown = set(data) - known
         if unknown:
             raise WorldError(f"{path}: unknown key(s) {sorted(unknown)}; allowed: {sorted(known)}")
@@ -117,12 +123,21 @@ class World:
         if not isinstance(starts_raw, dict):
             raise WorldError(f"{path}: 'starts' must be a mapping name: [x, y, theta]")
         starts = {str(k): _pose(v, path, f"starts.{k}") for k, v in starts_raw.items()}
-        goal = None
-        if data.get("goal") is not None:
+        goals_raw = data.get("goals", {}) or {}
+        if not isinstance(goals_raw, dict):
+            raise WorldError(f"{path}: 'goals' must be a mapping name: [x, y]")
+        goals = {str(k): _point(v, path, f"goals.{k}") for k, v in goals_raw.items()}
+        goal = next(iter(goals.values()), None)
+        if isinstance(data.get("goal"), str):
+            if data["goal"] not in goals:
+                raise WorldError(f"{path}: goal '{data['goal']}' is not a name of 'goals' "
+                                 f"({', '.join(goals) or 'none'})")
+            goal = goals[data["goal"]]
+        elif data.get("goal") is not None:
             goal = _point(data["goal"], path, "goal")
         name = str(data.get("name") or path.stem)
         world = cls._build(name, path, boundary, holes, walls, starts, goal, cell_size,
-                           str(data.get("description") or ""))
+                           str(data.get("description") or ""), goals)
         return world
 
     @classmethod
@@ -142,7 +157,8 @@ class World:
         return cls._build(path.stem, path, boundary, holes, [], {}, None, 0.4, "course map JSON")
 
     @classmethod
-    def _build(cls, name, path, boundary, holes, walls, starts, goal, cell_size, description) -> "World":
+    def _build(cls, name, path, boundary, holes, walls, starts, goal, cell_size, description,
+               goals=None) -> "World":
         segs = [_closed_segments(boundary)] + [_closed_segments(h) for h in holes]
         segs += [np.hstack([w[:-1], w[1:]]) for w in walls]
         segments = np.ascontiguousarray(np.vstack(segs), dtype=np.float64)
@@ -152,11 +168,14 @@ class World:
             x1, y1 = segments[bad[0], :2]
             raise WorldError(f"{path}: zero-length wall at ({x1:g}, {y1:g}) (repeated point in a polyline)")
         world = cls(name=name, source=str(path), segments=segments, starts=starts, goal=goal,
-                    cell_size=cell_size, description=description, boundary=boundary, holes=holes)
+                    cell_size=cell_size, description=description, boundary=boundary, holes=holes,
+                    goals=dict(goals or {}))
         for start_name, pose in starts.items():
             world._check_pose(pose, f"start '{start_name}'")
-        if goal is not None and not world.contains(*goal):
-            raise WorldError(f"{path}: goal ({goal[0]:g}, {goal[1]:g}) is outside the free space")
+        for goal_name, point in world.goals.items():
+            world._check_pose((*point, 0.0), f"goal '{goal_name}'")
+        if goal is not None:
+            world._check_pose((*goal, 0.0), "goal")
         return world
 
     # ------------------------------------------------------------------ geometry
@@ -186,6 +205,16 @@ class World:
             return False
         return not any(_point_in_polygon(h, x, y) for h in self.holes)
 
+    def contains_points(self, points: np.ndarray) -> np.ndarray:
+        """contains() for each point of a (K, 2) array, vectorised: a (K,) bool array."""
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        inside = np.ones(len(pts), dtype=bool)
+        if self.boundary is not None:
+            inside &= _points_in_polygon(self.boundary, pts[:, 0], pts[:, 1])
+        for hole in self.holes:
+            inside &= ~_points_in_polygon(hole, pts[:, 0], pts[:, 1])
+        return inside
+
     def resolve_start(self, start: str | tuple | list | np.ndarray | None) -> tuple[float, float, float]:
         """A start pose from a name, an (x, y, theta) triple or None (= the first named start)."""
         if start is None:
@@ -200,6 +229,29 @@ class World:
         pose = _pose(list(start) if not isinstance(start, list) else start, self.source, "start")
         self._check_pose(pose, "start")
         return pose
+
+    def resolve_goal(self, goal: str | tuple | list | np.ndarray | None) -> tuple[float, float]:
+        """A goal position from a name of `goals`, "x,y" text, an (x, y) pair, or None (= the
+        world's default goal). Raises WorldError if it is unknown, malformed, outside the free
+        space or closer to a wall than the robot radius."""
+        if goal is None:
+            if self.goal is None:
+                raise WorldError(f"{self.source}: the world has no goal; pass x,y or a name")
+            return self.goal
+        if isinstance(goal, str):
+            if goal in self.goals:
+                return self.goals[goal]
+            parts = goal.split(",")
+            try:
+                goal = [float(p) for p in parts] if len(parts) == 2 else None
+            except ValueError:
+                goal = None
+            if goal is None:
+                raise WorldError(f"{self.source}: goal is neither a named goal ("
+                                 f"{', '.join(self.goals) or 'none'}) nor 'x,y'")
+        point = _point(list(goal), self.source, "goal")
+        self._check_pose((*point, 0.0), "goal")
+        return point
 
     def _check_pose(self, pose: tuple[float, float, float], what: str) -> None:
         x, y, _ = pose
@@ -256,6 +308,18 @@ def _point_in_polygon(poly: np.ndarray, x: float, y: float) -> bool:
     with np.errstate(divide="ignore", invalid="ignore"):
         xint = px + (y - py) * (qx - px) / (qy - py)
     return bool(np.count_nonzero(crosses & (x < xint)) % 2)
+
+
+def _points_in_polygon(poly: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+    """Even-odd ray crossing test for many points: a loop over the polygon's edges."""
+    inside = np.zeros(len(xs), dtype=bool)
+    for (px, py), (qx, qy) in zip(poly, np.roll(poly, -1, axis=0)):
+        if py == qy:
+            continue  # a horizontal edge never crosses the horizontal test ray
+        crosses = (py > ys) != (qy > ys)
+        xint = px + (ys - py) * (qx - px) / (qy - py)
+        inside ^= crosses & (xs < xint)
+    return inside
 
 
 def _closed_segments(poly: np.ndarray) -> np.ndarray:

@@ -1,0 +1,129 @@
+"""An occupancy grid of a World: free/occupied cells and each cell's distance to the nearest wall.
+
+    grid = OccupancyGrid.from_world(World.load("lab02"), resolution=0.02)
+    row, col = grid.cell_of(1.0, -1.0)
+    grid.clearance[row, col]          # 0.2: the centre of a 0.4 m corridor
+    grid.occupancy_values()           # int8, row-major from the lower-left cell (nav_msgs order)
+
+Layout (as nav_msgs/OccupancyGrid): cell (row, col) covers x in origin_x + [col, col + 1) *
+resolution and y in origin_y + [row, row + 1) * resolution; arrays are indexed [row, col], row 0
+at the bottom (smallest y). Cell CENTRES lie on multiples of the resolution, so walls and
+corridor centre lines on a grid of multiples of it (lab02: 0.4 m) pass exactly through cell
+centres: a 0.4 m corridor has a row of cells on its centre line, 0.2 m from both walls.
+
+- `clearance`: exact Euclidean distance (m) from each cell centre to the nearest wall segment,
+  computed from the segments (not a distance transform of the raster, so no staircase error);
+  0 for centres outside the free space (outside the boundary or inside an obstacle).
+- `free`: the centre is in the free space and no wall passes within half a cell of it.
+
+No planner specifics (inflation, costs) and no rclpy: the planner and a /map publisher share it.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from amr_common.jit import HAVE_NUMBA, jit
+from amr_common.raycast import nearest_wall_kernel
+from amr_common.world import World
+
+OCCUPIED = 100  # nav_msgs/OccupancyGrid values
+FREE = 0
+
+
+def _distance_field_python(segments, x0, y0, resolution, out):
+    """out[row, col] = distance from (x0 + col * res, y0 + row * res) to the nearest segment."""
+    for row in range(out.shape[0]):
+        y = y0 + row * resolution
+        for col in range(out.shape[1]):
+            out[row, col] = nearest_wall_kernel(segments, x0 + col * resolution, y)[0]
+
+
+_distance_field = jit(_distance_field_python)
+
+
+def _distance_field_numpy(world: World, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+    gx, gy = np.meshgrid(xs, ys)
+    return world.clearances(np.column_stack([gx.ravel(), gy.ravel()])).reshape(gx.shape)
+
+
+@dataclass(frozen=True)
+class OccupancyGrid:
+    """Cells of a world at one resolution (see the module docstring for the layout)."""
+
+    resolution: float  # m per cell
+    origin: tuple[float, float]  # (x, y) of the lower-left corner of cell (0, 0), m
+    free: np.ndarray  # (height, width) bool
+    clearance: np.ndarray  # (height, width) float64, m; 0 outside the free space
+    frame_id: str = "map"
+
+    @classmethod
+    def from_world(cls, world: World, resolution: float = 0.02) -> "OccupancyGrid":
+        """Rasterize `world`: cells from one cell beyond its walls' bounds on every side."""
+        if not (isinstance(resolution, (int, float)) and math.isfinite(resolution)
+                and resolution > 0):
+            raise ValueError(f"resolution must be a positive number of metres, got {resolution!r}")
+        resolution = float(resolution)
+        xmin, ymin, xmax, ymax = world.bounds
+        # Index of the cell whose centre is at k * resolution; rounding first so that -1.2 / 0.02
+        # (= -60.000000000000014 in floating point) counts as -60.
+        first = [math.floor(round(v / resolution, 6)) - 1 for v in (xmin, ymin)]
+        last = [math.ceil(round(v / resolution, 6)) + 1 for v in (xmax, ymax)]
+        width, height = last[0] - first[0] + 1, last[1] - first[1] + 1
+        xs = (first[0] + np.arange(width)) * resolution
+        ys = (first[1] + np.arange(height)) * resolution
+        if HAVE_NUMBA:
+            distance = np.empty((height, width))
+            _distance_field(world.segments, float(xs[0]), float(ys[0]), resolution, distance)
+        else:
+            distance = _distance_field_numpy(world, xs, ys)
+        gx, gy = np.meshgrid(xs, ys)
+        inside = world.contains_points(np.column_stack([gx.ravel(), gy.ravel()]))
+        inside = inside.reshape(height, width)
+        clearance = np.where(inside, distance, 0.0)
+        free = inside & (distance >= 0.5 * resolution)
+        origin = (float(xs[0] - 0.5 * resolution), float(ys[0] - 0.5 * resolution))
+        return cls(resolution, origin, free, clearance)
+
+    @property
+    def width(self) -> int:
+        """Number of columns (cells along x)."""
+        return int(self.free.shape[1])
+
+    @property
+    def height(self) -> int:
+        """Number of rows (cells along y)."""
+        return int(self.free.shape[0])
+
+    def cell_of(self, x: float, y: float) -> tuple[int, int]:
+        """(row, col) of the cell containing the point; may lie outside the grid."""
+        return (math.floor((y - self.origin[1]) / self.resolution),
+                math.floor((x - self.origin[0]) / self.resolution))
+
+    def contains_cell(self, row: int, col: int) -> bool:
+        """True if (row, col) is a cell of this grid."""
+        return 0 <= row < self.height and 0 <= col < self.width
+
+    def cell_centre(self, row: int, col: int) -> tuple[float, float]:
+        """(x, y) of a cell's centre."""
+        return (self.origin[0] + (col + 0.5) * self.resolution,
+                self.origin[1] + (row + 0.5) * self.resolution)
+
+    def cell_centres(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """(K, 2) centres of the cells (rows[k], cols[k])."""
+        return np.column_stack([self.origin[0] + (np.asarray(cols) + 0.5) * self.resolution,
+                                self.origin[1] + (np.asarray(rows) + 0.5) * self.resolution])
+
+    def clearance_at(self, x: float, y: float) -> float:
+        """Clearance of the cell containing (x, y) (0 outside the grid)."""
+        row, col = self.cell_of(x, y)
+        return float(self.clearance[row, col]) if self.contains_cell(row, col) else 0.0
+
+    def occupancy_values(self) -> np.ndarray:
+        """int8 cell values, row-major from the lower-left cell: 0 free, 100 occupied."""
+        return np.where(self.free, FREE, OCCUPIED).astype(np.int8).ravel()
+
+
+__all__ = ["OccupancyGrid", "OCCUPIED", "FREE"]
