@@ -175,8 +175,9 @@ class PurePursuit:
         self._lengths = np.hypot(seg[:, 0], seg[:, 1])
         self._dirs = seg / self._lengths[:, None]
         self._s = np.concatenate([[0.0], np.cumsum(self._lengths)])
-        turns = np.abs(np.arctan2(np.cross(self._dirs[:-1], self._dirs[1:]),
-                                  np.einsum("ij,ij->i", self._dirs[:-1], self._dirs[1:])))
+        a, b = self._dirs[:-1], self._dirs[1:]
+        turns = np.abs(np.arctan2(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0],
+                                  np.einsum("ij,ij->i", a, b)))
         corners = 1 + np.flatnonzero(turns > self.params["corner_angle_rad"])
         # Section k spans vertices ends[k] .. ends[k + 1].
         self._ends = np.concatenate([[0], corners, [len(pts) - 1]]).astype(int)

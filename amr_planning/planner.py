@@ -233,6 +233,8 @@ class Planner:
             raise PlanningError(f"{what} ({x:.3f}, {y:.3f}) is inside a wall or outside the "
                                 f"map of world '{self.world.name}'")
         clearance = nearest_wall_kernel(self.segments, x, y)[0]
+        if clearance < 1e-9:
+            raise PlanningError(f"{what} ({x:.3f}, {y:.3f}) is on a wall")
         if not may_touch and clearance < self.params["robot_radius_m"]:
             raise PlanningError(
                 f"{what} ({x:.3f}, {y:.3f}) is too close to a wall: clearance {clearance:.3f} m "

@@ -1,0 +1,42 @@
+"""Headless navigation episodes (simulator + pose source + planner + pure pursuit + wall
+follower until localized): the goal is reached and the robot rests on it."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from amr_evaluation.navigation_episode import GroundTruthPose, run_navigation_episode
+
+
+@pytest.mark.parametrize("profile", ["ideal", "turtlebot3"])
+def test_crosses_lab02_to_the_far_goal_and_rests_on_it(profile):
+    result = run_navigation_episode("lab02", "outer", profile=profile, duration=120.0)
+    assert result.goal == [0.6, -0.2] and result.path_length_m > 7.0
+    assert result.goal_reached and result.stopped_time_s > result.goal_reached_time_s
+    assert result.finish_reason == "stopped at the goal"
+    assert result.collisions == 0 and result.min_clearance_m > 0.05
+    assert result.final_position_error_m <= 0.01
+    assert result.path_min_clearance_m >= 0.15
+    assert result.cross_track_mean_m <= 0.01 and result.cross_track_max_m <= 0.03
+    assert result.plans == 1 and result.planning_errors == []
+    assert json.loads(json.dumps(result.to_dict()))["trajectory"][0][0] == 0.0
+
+
+def test_wall_follower_until_localized_then_replanning_after_a_loss():
+    source = GroundTruthPose(localized_after_s=6.0, lost_from_s=15.0, lost_until_s=22.0)
+    result = run_navigation_episode("maze_deadends", "south_west", "north_east",
+                                    pose_source=source, duration=200.0)
+    assert result.localized_time_s == pytest.approx(6.0)
+    assert result.plans == 2, "planned when localized and again when relocalized"
+    assert result.goal_reached and result.collisions == 0
+    assert result.final_position_error_m <= 0.01
+    # The path of the second plan starts where the robot was when relocalized, not at the start.
+    assert result.path[0] != pytest.approx(result.trajectory[0][1:3], abs=0.05)
+
+
+def test_duration_runs_out_before_the_goal():
+    result = run_navigation_episode("maze_deadends", "south_west", duration=5.0)
+    assert not result.goal_reached and result.finish_reason == "duration"
+    assert result.stopped_time_s is None and result.sim_time_s == pytest.approx(5.0)
+    assert "goal reached never" in result.summary()
