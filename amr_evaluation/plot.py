@@ -20,8 +20,10 @@ from amr_common.world import World
 _WALL_COLOUR = "#222222"
 
 
-def draw_world(ax, world: World, show_starts: bool = True, show_grid: bool = False) -> None:
-    """Walls (and optionally named starts and the corridor grid) on a matplotlib Axes."""
+def draw_world(ax, world: World, show_starts: bool = True, show_grid: bool = False,
+               show_goals: bool | None = None) -> None:
+    """Walls (and optionally named starts, named goals (default: with the starts) and the
+    corridor grid) on a matplotlib Axes."""
     segs = world.segments.reshape(-1, 2, 2)
     ax.add_collection(LineCollection(segs, colors=_WALL_COLOUR, linewidths=2.0, capstyle="round", zorder=3))
     for hole in world.holes:
@@ -43,8 +45,18 @@ def draw_world(ax, world: World, show_starts: bool = True, show_grid: bool = Fal
             _draw_robot(ax, x, y, th, colour="tab:green")
             ax.annotate(name, (x, y), xytext=(6, 6), textcoords="offset points", fontsize=8,
                         color="darkgreen", zorder=6)
-    if world.goal is not None:
-        ax.plot(*world.goal, marker="*", markersize=14, color="gold", markeredgecolor="k", zorder=6)
+    if show_starts if show_goals is None else show_goals:
+        for name, (x, y) in world.goals.items():
+            _draw_goal(ax, x, y)
+            ax.annotate(name, (x, y), xytext=(6, -10), textcoords="offset points", fontsize=8,
+                        color="darkgoldenrod", zorder=6)
+        if world.goal is not None and world.goal not in world.goals.values():
+            _draw_goal(ax, *world.goal)
+
+
+def _draw_goal(ax, x: float, y: float, label: str | None = None) -> None:
+    ax.plot(x, y, marker="*", markersize=14, color="gold", markeredgecolor="k", zorder=6,
+            linestyle="none", label=label)
 
 
 def _draw_robot(ax, x: float, y: float, th: float, colour: str, label: str | None = None) -> None:
@@ -90,13 +102,21 @@ def _episode_parts(trajectory: Any, collision_points: Iterable) -> tuple[np.ndar
 
 
 def draw_episode(ax, world: World, trajectory: Any, collision_points: Iterable = (),
-                 colourbar: bool = True, small: bool = False) -> dict[str, float]:
-    """Walls, the trajectory coloured by time, start/end markers and collisions on an Axes.
+                 colourbar: bool = True, small: bool = False, planned_path: Any = None,
+                 goal: Sequence[float] | None = None) -> dict[str, float]:
+    """Walls, the trajectory coloured by time, start/end markers and collisions on an Axes;
+    with navigation, the planned path (dashed) and the goal (a star).
 
     Returns the figures shown (collisions, min clearance, distance)."""
     traj, points, result = _episode_parts(trajectory, collision_points)
     draw_world(ax, world, show_starts=False)
     figures = _figures(world, traj, points, result)
+    if planned_path is not None and len(planned_path):
+        plan = np.asarray(planned_path, dtype=np.float64).reshape(-1, 2)
+        ax.plot(plan[:, 0], plan[:, 1], linestyle="--", color="tab:red", linewidth=1.2,
+                zorder=5, label="planned path")
+    if goal is not None:
+        _draw_goal(ax, goal[0], goal[1], label="goal")
     if len(traj) >= 2:
         xy = traj[:, 1:3]
         lines = LineCollection(np.stack([xy[:-1], xy[1:]], axis=1), cmap="viridis",
@@ -143,8 +163,10 @@ def _title(world: World, result, figures: dict[str, float], title: str | None) -
 
 
 def plot_episode(world: World | str, trajectory: Any, collision_points: Iterable = (),
-                 path: str | Path = "x.png", title: str | None = None) -> Path:
-    """Draw one episode to a PNG: walls, trajectory coloured by time, start, end, collisions.
+                 path: str | Path = "x.png", title: str | None = None,
+                 planned_path: Any = None, goal: Sequence[float] | None = None) -> Path:
+    """Draw one episode to a PNG: walls, trajectory coloured by time, start, end, collisions,
+    and for navigation the planned path and the goal.
 
     `trajectory` is [[t, x, y, theta], ...] or an EpisodeResult (or its to_dict()), whose start,
     profile and figures then go into the title.
@@ -154,7 +176,7 @@ def plot_episode(world: World | str, trajectory: Any, collision_points: Iterable
     FigureCanvasAgg(fig)
     ax = fig.add_subplot(1, 1, 1)
     traj, points, result = _episode_parts(trajectory, collision_points)
-    figures = draw_episode(ax, world, traj, points)
+    figures = draw_episode(ax, world, traj, points, planned_path=planned_path, goal=goal)
     ax.set_title(_title(world, result, figures, title), fontsize=10)
     return _save(fig, path)
 

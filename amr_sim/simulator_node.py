@@ -8,8 +8,10 @@ Thin: commands become `Simulator.step(v, w)` calls and results become messages
   so the loop starts.
 - realtime: a wall-clock timer at dt advances the simulation with the newest command (older than
   `command_timeout` = zero) and each sensor is published at its profile's own rate.
-With `enable_localization`, /pose (amr_msgs/PoseStamped) is compared with the true pose and
-reaching the goal while localized finishes the run (`finished`, `summary()`).
+With `enable_localization`, /pose (amr_msgs/PoseStamped) is compared with the true pose; the goal
+counts as reached when the true position is within goal_tolerance while localized (logged), and
+the run finishes once the robot has then been commanded to rest for goal_rest_time (at once for
+0, as the course template), so the final error is measured where it stops (`summary()`).
 For in-process run scripts: `node.simulator` and `node.on_step` (callables called with the
 simulator after every step) give access without topics; `node.finish(reason)` stops stepping.
 """
@@ -77,6 +79,8 @@ class SimulatorNode(LifecycleNode):
         self.goal: tuple[float, float] | None = None
         self.localized = False
         self.localization_error: tuple[float, float] | None = None  # (m, rad)
+        self.goal_reached_time: float | None = None  # simulated s
+        self._rest_since: float | None = None  # simulated s the zero commands began
         self._outputs: dict[str, Any] = {}
         # One message per output, refilled every step: building Odometry messages dominated
         # the step time (publish copies the message, so reuse is safe).
@@ -276,12 +280,11 @@ class SimulatorNode(LifecycleNode):
             publish_scan = self._due("scan", simulator.profile.scan_period)
         else:
             publish_odom = publish_scan = True
-        goal_reached = self._goal_reached(pose)
-        if goal_reached:
+        done = self._check_goal(pose, (v, w) == (0.0, 0.0))
+        if done:
             publish_odom = publish_scan = False  # the loop stops here, as in the template
         self._publish(z_scan, z_v, z_w, pose_before, pose, publish_odom, publish_scan)
-        if goal_reached:
-            self.get_logger().warning("Congratulations, you reached the goal!")
+        if done:
             self.finish("goal reached")
 
     def _due(self, sensor: str, period: float | None) -> bool:
@@ -345,11 +348,25 @@ class SimulatorNode(LifecycleNode):
         else:
             self.get_logger().info(text, throttle_duration_sec=1.0)
 
-    def _goal_reached(self, pose: tuple) -> bool:
-        if self.goal is None or not self.localized:
-            return False
-        return math.hypot(pose[0] - self.goal[0], pose[1] - self.goal[1]) <= \
-            self.params["goal_tolerance"]
+    def _check_goal(self, pose: tuple, resting: bool) -> bool:
+        """Note the goal as reached (true position within tolerance while localized) and
+        return True once the robot has rested goal_rest_time since: the run is over."""
+        now = self.simulator.time
+        if self.goal_reached_time is None:
+            if self.goal is None or not self.localized or math.hypot(
+                    pose[0] - self.goal[0], pose[1] - self.goal[1]) > \
+                    self.params["goal_tolerance"]:
+                return False
+            self.goal_reached_time = now
+            self.get_logger().warning(
+                f"Congratulations, you reached the goal! (t = {now:.2f} s; the run ends once "
+                f"the robot has rested {self.params['goal_rest_time']:g} s)")
+        if not resting:
+            self._rest_since = None
+        elif self._rest_since is None:
+            self._rest_since = now - self.simulator.dt  # the zero command began this step
+        rest = 0.0 if self._rest_since is None else now - self._rest_since
+        return rest >= self.params["goal_rest_time"] - 1e-9
 
     def finish(self, reason: str) -> None:
         """Stop stepping (commands are ignored from now on) and log the statistics."""
@@ -377,13 +394,17 @@ class SimulatorNode(LifecycleNode):
         x, y, theta = simulator.pose
         return {
             "configured": True, "finished": self.finished, "reason": self.finish_reason,
-            "goal_reached": self.finish_reason == "goal reached",
+            "goal_reached": self.goal_reached_time is not None,
+            "goal_reached_time_s": self.goal_reached_time,
+            "stopped_time_s": self._rest_since if self.finish_reason == "goal reached" else None,
             "world": simulator.world.name, "start": list(self._start_pose),
             "profile": simulator.profile.name,
             "mode": self.params["mode"], "steps": int(simulator.steps),
             "sim_time_s": float(simulator.time), "wall_time_s": float(wall),
             "pose": [float(x), float(y), float(theta)],
             "goal": list(self.goal) if self.goal is not None else None,
+            "final_position_error_m": math.hypot(x - self.goal[0], y - self.goal[1])
+            if self.goal is not None else None,
             "localized": self.localized,
             "localization_error": list(self.localization_error)
             if self.localization_error else None,

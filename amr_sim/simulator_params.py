@@ -29,6 +29,10 @@ PARAMETERS: dict[str, tuple[Any, int, str]] = {
     "command_timeout": (0.5, _D, "Realtime mode: a command older than this (s) counts as zero; "
                                  "0 = never (the real turtlebot3_node keeps the last command)"),
     "goal": ([], _DA, "Goal [x, y] in metres; [] = the world's goal, if it has one"),
+    "goal_rest_time": (0.5, _D, "Once the goal is reached, the run ends when the robot has been "
+                                "commanded to rest (zero) this long (s), so the final error is "
+                                "measured where it stops; 0 = end at once (the course "
+                                "template)"),
     "goal_tolerance": (0.15, _D, "Distance (m) of the true position to the goal that counts "
                                  "as reached"),
     "enable_localization": (False, _B, "Synchronize /pose (amr_msgs/PoseStamped) with /cmd_vel, "
@@ -39,7 +43,8 @@ PARAMETERS: dict[str, tuple[Any, int, str]] = {
     "world_frame": ("map", _S, "Frame of /ground_truth"),
     "publish_ground_truth": (True, _B, "Publish the true pose and velocities on /ground_truth"),
 }
-NUMERIC_PARAMETERS = {"dt", "seed", "command_timeout", "goal", "goal_tolerance"}
+NUMERIC_PARAMETERS = {"dt", "seed", "command_timeout", "goal", "goal_tolerance",
+                      "goal_rest_time"}
 
 
 def parse_start(text: str) -> str | tuple[float, float, float] | None:
@@ -77,6 +82,7 @@ def check_parameters(values: dict[str, Any]) -> dict[str, Any]:
     number("dt", 1e-4, 1.0)
     number("command_timeout", 0.0, 3600.0)
     number("goal_tolerance", 1e-3, 100.0)
+    number("goal_rest_time", 0.0, 3600.0)
     if isinstance(p["seed"], bool) or not isinstance(p["seed"], int) or p["seed"] < 0:
         problems.append(f"seed must be a non-negative integer (got {p['seed']!r})")
     if p["mode"] not in ("lockstep", "realtime"):
