@@ -132,9 +132,12 @@ class Planner:
         cost = 1.0 + p["clearance_weight"] * missing ** 2
         cost[clearance < self.inflation_radius] = np.inf
         self.cost = np.ascontiguousarray(cost.ravel())
+        self._moves = search.allowed_moves(np.isfinite(cost))
+        self._offsets = search.move_offsets(grid.width)
         n = self.cost.shape[0]
         self._came_from = np.empty(n, dtype=np.int64)
         self._g = np.empty(n, dtype=np.float64)
+        self._lists = None  # the grid as Python lists, for the plain-Python reference search
 
     @staticmethod
     def parameter_descriptions() -> dict[str, tuple[Any, str]]:
@@ -201,14 +204,23 @@ class Planner:
         algorithm = algorithm or self.params["algorithm"]
         weight = self.params["heuristic_weight"] if heuristic_weight is None else heuristic_weight
         width = self.grid.width
+        if compiled:
+            grid, came_from, g = (self.cost, self._moves, self._offsets), self._came_from, self._g
+        else:  # plain Python on lists, its natural data (indexing numpy arrays is 3x slower)
+            if self._lists is None:
+                n = len(self.cost)
+                self._lists = ((self.cost.tolist(), self._moves.tolist(), self._offsets.tolist()),
+                               [-1] * n, [0.0] * n)
+            grid, came_from, g = self._lists
         if algorithm == "astar":
             kernel = search.astar if compiled else search.astar_python
-            expanded = kernel(self.cost, width, int(start_cell), int(goal_cell), float(weight),
-                              self._came_from, self._g)
+            expanded = kernel(*grid, width, int(start_cell), int(goal_cell), float(weight),
+                              came_from, g)
         else:
             kernel = search.wavefront if compiled else search.wavefront_python
-            expanded = kernel(self.cost, width, int(start_cell), int(goal_cell),
-                              self._came_from, self._g)
+            expanded = kernel(*grid, int(start_cell), int(goal_cell), came_from, g)
+        if not compiled:
+            self._came_from[:], self._g[:] = came_from, g
         if not math.isfinite(self._g[goal_cell]):
             return None, math.inf, int(expanded)
         cells = search.trace_back(self._came_from, int(start_cell), int(goal_cell))

@@ -1,12 +1,14 @@
 """Grid searches on a cost grid: A* (8-connected, no corner cutting) and the seeds' wavefront.
 
 Plain Python functions, compiled with numba through amr_common.jit (the uncompiled functions are
-the fallback and give the same paths: same arithmetic, same heap order). No rclpy.
+the fallback and the plain-Python reference of scripts/bench_planning.py; they give the same
+paths: same arithmetic, same heap order). No rclpy.
 
 The grid is flattened row-major: cell = row * width + col. `cost[cell]` is the traversal cost
 per cell length (>= 1, inf = not traversable). A move between neighbouring cells a and b costs
 step * (cost[a] + cost[b]) / 2 with step = 1 (side) or sqrt(2) (diagonal), in cell lengths.
-A diagonal move needs both cells it squeezes between to be traversable (no corner cutting).
+`allowed_moves()` precomputes, per cell, which of the 8 moves stay on the grid and on
+traversable cells; a diagonal move also needs both cells it squeezes between (no corner cutting).
 """
 from __future__ import annotations
 
@@ -18,9 +20,37 @@ import numpy as np
 from amr_common.jit import jit
 
 SQRT2 = math.sqrt(2.0)
+# Moves: the 4 side moves first (so the wavefront's descent prefers them on ties), then diagonals.
+MOVE_ROWS = np.array([0, 1, 0, -1, 1, 1, -1, -1], dtype=np.int64)
+MOVE_COLS = np.array([1, 0, -1, 0, 1, -1, -1, 1], dtype=np.int64)
+MOVE_STEPS = (1.0, 1.0, 1.0, 1.0, SQRT2, SQRT2, SQRT2, SQRT2)  # a tuple: fast in both
 
 
-def astar_python(cost, width, start, goal, heuristic_weight, came_from, g):
+def allowed_moves(traversable: np.ndarray) -> np.ndarray:
+    """(height * width,) uint8: bit k set where move k leads from a traversable cell to a
+    traversable cell of the grid (for a diagonal, through two traversable side cells)."""
+    height, width = traversable.shape
+    padded = np.zeros((height + 2, width + 2), dtype=bool)
+    padded[1:-1, 1:-1] = traversable
+
+    def shifted(d_row: int, d_col: int) -> np.ndarray:
+        return padded[1 + d_row:1 + d_row + height, 1 + d_col:1 + d_col + width]
+
+    moves = np.zeros((height, width), dtype=np.uint8)
+    for k, (d_row, d_col) in enumerate(zip(MOVE_ROWS, MOVE_COLS)):
+        ok = traversable & shifted(d_row, d_col)
+        if d_row != 0 and d_col != 0:
+            ok &= shifted(d_row, 0) & shifted(0, d_col)
+        moves |= ok.astype(np.uint8) << k
+    return moves.ravel()
+
+
+def move_offsets(width: int) -> np.ndarray:
+    """Flat index difference of each move on a grid `width` cells wide."""
+    return MOVE_ROWS * width + MOVE_COLS
+
+
+def astar_python(cost, moves, offsets, width, start, goal, heuristic_weight, came_from, g):
     """A* from cell `start` to cell `goal`; returns the number of cells expanded.
 
     heuristic_weight: 1 = A* with the octile distance (admissible: costs are >= 1, so the path is
@@ -28,8 +58,7 @@ def astar_python(cost, width, start, goal, heuristic_weight, came_from, g):
     Fills came_from (predecessor of each reached cell, -1 elsewhere) and g (cost from start, inf
     where not reached); g[goal] is inf if the goal is unreachable.
     """
-    n = cost.shape[0]
-    height = n // width
+    n = len(cost)
     for i in range(n):
         came_from[i] = -1
         g[i] = np.inf
@@ -47,44 +76,29 @@ def astar_python(cost, width, start, goal, heuristic_weight, came_from, g):
         expanded += 1
         if cell == goal:
             break
-        row = cell // width
-        col = cell % width
-        g_cell = g[cell]
-        cost_cell = cost[cell]
-        for d_row in range(-1, 2):
-            r = row + d_row
-            if r < 0 or r >= height:
+        for k in range(8):
+            if not (moves[cell] >> k) & 1:
                 continue
-            for d_col in range(-1, 2):
-                c = col + d_col
-                if (d_row == 0 and d_col == 0) or c < 0 or c >= width:
-                    continue
-                nb = r * width + c
-                if closed[nb] or cost[nb] == np.inf:
-                    continue
-                step = 1.0
-                if d_row != 0 and d_col != 0:
-                    if cost[row * width + c] == np.inf or cost[r * width + col] == np.inf:
-                        continue  # no corner cutting
-                    step = SQRT2
-                g_new = g_cell + step * 0.5 * (cost_cell + cost[nb])
-                if g_new < g[nb]:
-                    g[nb] = g_new
-                    came_from[nb] = cell
-                    dr = abs(goal_row - r)
-                    dc = abs(goal_col - c)
-                    h = float(max(dr, dc) - min(dr, dc)) + SQRT2 * min(dr, dc)
-                    heapq.heappush(heap, (g_new + heuristic_weight * h, nb))
+            nb = cell + offsets[k]
+            if closed[nb]:
+                continue
+            g_new = g[cell] + MOVE_STEPS[k] * 0.5 * (cost[cell] + cost[nb])
+            if g_new < g[nb]:
+                g[nb] = g_new
+                came_from[nb] = cell
+                dr = abs(goal_row - nb // width)
+                dc = abs(goal_col - nb % width)
+                h = float(max(dr, dc) - min(dr, dc)) + SQRT2 * min(dr, dc)
+                heapq.heappush(heap, (g_new + heuristic_weight * h, nb))
     return expanded
 
 
-def wavefront_python(cost, width, start, goal, came_from, g):
-    """The seeds' wavefront: a breadth-first wave of integer steps from the goal over traversable
-    cells (8-connected, no corner cutting), then steepest descent from the start (side moves
-    preferred on ties). Ignores the cost values beyond traversability. Fills came_from as A* does
-    (the path is read from goal back to start); returns the number of cells the wave reached."""
-    n = cost.shape[0]
-    height = n // width
+def wavefront_python(cost, moves, offsets, start, goal, came_from, g):
+    """The seeds' wavefront: a breadth-first wave of integer steps from the goal over the allowed
+    moves, then steepest descent from the start (side moves preferred on ties). Ignores the cost
+    values beyond traversability. Fills came_from and g as A* does; returns the number of cells
+    the wave reached."""
+    n = len(cost)
     wave = np.full(n, -1, dtype=np.int64)
     for i in range(n):
         came_from[i] = -1
@@ -99,57 +113,24 @@ def wavefront_python(cost, width, start, goal, came_from, g):
         head += 1
         if cell == start:
             break
-        row = cell // width
-        col = cell % width
-        for d_row in range(-1, 2):
-            r = row + d_row
-            if r < 0 or r >= height:
-                continue
-            for d_col in range(-1, 2):
-                c = col + d_col
-                if (d_row == 0 and d_col == 0) or c < 0 or c >= width:
-                    continue
-                nb = r * width + c
-                if wave[nb] >= 0 or cost[nb] == np.inf:
-                    continue
-                if d_row != 0 and d_col != 0 and (cost[row * width + c] == np.inf
-                                                  or cost[r * width + col] == np.inf):
-                    continue
+        for k in range(8):  # moves are symmetric: a move out of cell is one into it
+            nb = cell + offsets[k]
+            if (moves[cell] >> k) & 1 and wave[nb] < 0:
                 wave[nb] = wave[cell] + 1
                 queue[tail] = nb
                 tail += 1
     if wave[start] < 0:
         return tail
-    # Descend from the start: each step to a neighbour one wave step closer to the goal.
     cell = start
     g[start] = 0.0
     while cell != goal:
-        row = cell // width
-        col = cell % width
-        best = -1
-        best_step = 0.0
-        for diagonal in range(2):  # side moves first, so ties prefer them
-            for d_row in range(-1, 2):
-                for d_col in range(-1, 2):
-                    if (d_row != 0 and d_col != 0) != (diagonal == 1) or (d_row == 0
-                                                                          and d_col == 0):
-                        continue
-                    r = row + d_row
-                    c = col + d_col
-                    if r < 0 or r >= height or c < 0 or c >= width:
-                        continue
-                    nb = r * width + c
-                    if wave[nb] != wave[cell] - 1 or wave[nb] < 0:
-                        continue
-                    if diagonal == 1 and (cost[row * width + c] == np.inf
-                                          or cost[r * width + col] == np.inf):
-                        continue
-                    if best < 0:
-                        best = nb
-                        best_step = SQRT2 if diagonal == 1 else 1.0
-        came_from[best] = cell  # predecessor links, as A* leaves them
-        g[best] = g[cell] + best_step * 0.5 * (cost[cell] + cost[best])
-        cell = best
+        for k in range(8):
+            nb = cell + offsets[k]
+            if (moves[cell] >> k) & 1 and wave[nb] == wave[cell] - 1:
+                came_from[nb] = cell  # predecessor links, as A* leaves them
+                g[nb] = g[cell] + MOVE_STEPS[k] * 0.5 * (cost[cell] + cost[nb])
+                cell = nb
+                break
     return tail
 
 
@@ -169,4 +150,5 @@ def trace_back(came_from: np.ndarray, start: int, goal: int) -> np.ndarray:
     return np.array(cells[::-1], dtype=np.int64)
 
 
-__all__ = ["astar", "astar_python", "wavefront", "wavefront_python", "trace_back", "SQRT2"]
+__all__ = ["astar", "astar_python", "wavefront", "wavefront_python", "trace_back",
+           "allowed_moves", "move_offsets", "SQRT2"]

@@ -46,12 +46,9 @@ class Graph:
 
 
 def bring_up(ros, node, graph):
-    assert node.trigger_configure().name == "SUCCESS"
-    assert node.trigger_activate().name == "SUCCESS"
-    ros.spin_until(lambda: graph.node.count_subscribers("/pose") >= 1 and
-                   graph.node.count_subscribers("/goal_pose") >= 1 and
-                   node.count_subscribers("/path") >= 1, 10.0, "discovery")
-    ros.spin_for(0.2)
+    ros.bring_up(node, lambda: graph.node.count_subscribers("/pose") >= 1 and
+                 graph.node.count_subscribers("/goal_pose") >= 1 and
+                 node.count_subscribers("/path") >= 1)
 
 
 def test_plans_once_on_the_first_localized_pose_and_latches_the_path(ros):

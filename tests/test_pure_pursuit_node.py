@@ -55,13 +55,18 @@ def command(message):
     return twist(message).linear.x, twist(message).angular.z
 
 
-def bring_up(ros, node, graph):
-    assert node.trigger_configure().name == "SUCCESS"
-    assert node.trigger_activate().name == "SUCCESS"
-    ros.spin_until(lambda: graph.node.count_subscribers("/pose") >= 1 and
-                   graph.node.count_subscribers("/path") >= 1 and
-                   node.count_subscribers("/cmd_vel") >= 1, 10.0, "discovery")
-    ros.spin_for(0.2)
+def bring_up(ros, node, graph, path=None, poses=0):
+    """Activate; then optionally send a path and `poses` localized poses at (0, 0, 0), 50 ms
+    apart, waiting for an answer to each."""
+    ros.bring_up(node, lambda: graph.node.count_subscribers("/pose") >= 1 and
+                 graph.node.count_subscribers("/path") >= 1 and
+                 node.count_subscribers("/cmd_vel") >= 1)
+    if path is not None:
+        graph.send_path(path)
+        ros.spin_until(lambda: node.pursuit.path is not None, 5.0, "the path")
+    for k in range(1, poses + 1):
+        graph.send_pose(0.05 * k)
+        ros.spin_until(lambda: len(graph.commands) == k, 5.0, f"answer {k}")
 
 
 def test_lockstep_answers_every_localized_pose_once_and_no_other(ros):
@@ -103,12 +108,7 @@ def test_stops_with_zero_commands_at_the_end_of_the_path(ros):
 def test_out_of_order_and_unusable_poses_get_a_zero_answer(ros):
     node = make_node(ros)
     graph = Graph(ros)
-    bring_up(ros, node, graph)
-    graph.send_path(L_PATH)
-    ros.spin_until(lambda: node.pursuit.path is not None, 5.0, "the path")
-    for k in range(1, 11):
-        graph.send_pose(0.05 * k)
-    ros.spin_until(lambda: len(graph.commands) == 10, 5.0, "ten answers")
+    bring_up(ros, node, graph, L_PATH, poses=10)
     assert command(graph.commands[-1])[0] > 0.0
     graph.send_pose(0.2)  # older than the last answered pose
     ros.spin_until(lambda: len(graph.commands) == 11, 5.0, "the answer to a late pose")
@@ -128,12 +128,7 @@ def test_out_of_order_and_unusable_poses_get_a_zero_answer(ros):
 def test_deactivate_and_shutdown_send_zero(ros):
     node = make_node(ros)
     graph = Graph(ros)
-    bring_up(ros, node, graph)
-    graph.send_path(L_PATH)
-    ros.spin_until(lambda: node.pursuit.path is not None, 5.0, "the path")
-    for k in range(1, 11):
-        graph.send_pose(0.05 * k)
-    ros.spin_until(lambda: len(graph.commands) == 10, 5.0, "ten answers")
+    bring_up(ros, node, graph, L_PATH, poses=10)
     node.trigger_deactivate()
     ros.spin_until(lambda: len(graph.commands) == 11, 5.0, "the zero on deactivate")
     assert command(graph.commands[-1]) == (0.0, 0.0)
