@@ -1,6 +1,7 @@
 # Two commands set everything up and run: `make run` (simulator + wall follower on the default
-# maze) and `make test`. Each creates .venv if missing, installs the pinned dependencies when
-# requirements.lock or pyproject.toml changed, and rebuilds amr_msgs when its sources changed.
+# maze) and `make test` (the ruff linter, then pytest). Each creates .venv if missing, installs
+# the pinned dependencies when requirements.lock or pyproject.toml changed, and rebuilds
+# amr_msgs when its sources changed.
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
@@ -21,6 +22,7 @@ run: $(MSGS_STAMP)
 	$(LOCAL_ROS) $(PY) scripts/run_sim.py $(ARGS)
 
 test: $(MSGS_STAMP)
+	$(PY) -m ruff check .
 	$(LOCAL_ROS) $(PY) -m pytest $(PYTEST_ARGS)
 
 bench: $(MSGS_STAMP)

@@ -1,6 +1,8 @@
-"""The one switch for the project's compiled loops (the LiDAR and wall contacts of amr_sim, the
-wall follower's perception): numba's njit, cached on disk, where numba is installed (a pinned
-dependency); the plain Python function otherwise. No rclpy import.
+"""The one switch for the project's compiled loops: numba where installed, else plain Python.
+
+The loops are the LiDAR and wall contacts of amr_sim and the wall follower's perception:
+numba's njit, cached on disk, where numba is installed (a pinned dependency); the plain Python
+function otherwise. No rclpy import.
 """
 from __future__ import annotations
 
@@ -13,8 +15,10 @@ except ImportError:  # pragma: no cover - numba is a pinned dependency
 
 
 def jit(function):
-    """numba.njit(cache=True, nogil=True, error_model="numpy") when numba is there, else the
-    function itself. error_model="numpy": x/0 gives inf/nan instead of raising, as numpy does."""
+    """numba.njit(cache=True, nogil=True, error_model="numpy") if numba is there, else `function`.
+
+    error_model="numpy": x/0 gives inf/nan instead of raising, as numpy does.
+    """
     if not HAVE_NUMBA:
         return function
     return numba.njit(cache=True, nogil=True, error_model="numpy")(function)

@@ -40,6 +40,15 @@ class LifecycleStartupError(RuntimeError):
 
 
 class LifecycleManager(Node):
+    """A plain node that configures, then activates, lifecycle nodes in a given order.
+
+    Creates in __init__ its parameters (node_startup_order, service_timeout,
+    transition_timeout); the get_state / change_state clients are created on first use, one
+    pair per managed node. It is not a lifecycle node itself: it has nothing to release on the
+    way down and sends nothing; the nodes it manages run their own shutdown transitions
+    (`run_managed` drives those of in-process nodes, controllers first).
+    """
+
     def __init__(self, node_startup_order: Sequence[str] | None = None,
                  node_name: str = "lifecycle_manager", **kwargs) -> None:
         super().__init__(node_name, **kwargs)

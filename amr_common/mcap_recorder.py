@@ -74,7 +74,8 @@ def _split_type(full_type: str) -> tuple[str, str, str]:
         return parts[0], "msg", parts[1]
     if len(parts) == 3:
         return parts[0], parts[1], parts[2]
-    raise MessageDefinitionError(f"message type name {full_type!r} is not 'pkg/Type' or 'pkg/msg/Type'")
+    raise MessageDefinitionError(f"message type name {full_type!r} is not 'pkg/Type' or "
+                                 f"'pkg/msg/Type'")
 
 
 def _dependencies(text: str, package: str) -> list[str]:
@@ -93,14 +94,16 @@ def full_message_definition(full_type: str) -> str:
 
     def append(type_name: str, depth: int) -> str:
         if depth <= 0:
-            raise MessageDefinitionError(f"definition of {full_type} nests deeper than {_MAX_DEPTH}")
+            raise MessageDefinitionError(f"definition of {full_type} nests deeper than "
+                                         f"{_MAX_DEPTH}")
         package, namespace, name = _split_type(type_name)
         text = _find_msg_file(package, namespace, name).read_text(encoding="utf-8")
         result = text
         for dependency in _dependencies(text, package):
             if dependency not in seen:
                 seen.add(dependency)
-                result += "\n" + _DELIMITER + f"MSG: {dependency}\n" + append(dependency, depth - 1)
+                result += ("\n" + _DELIMITER + f"MSG: {dependency}\n"
+                           + append(dependency, depth - 1))
         return result
 
     return append(full_type, _MAX_DEPTH)
@@ -140,9 +143,11 @@ class McapRecorder:
                  chunk_size: int = 1024 * 1024) -> None:
         self.path = Path(path)
         if self.path.parent and not self.path.parent.exists():
-            raise FileNotFoundError(f"cannot record to {self.path}: folder {self.path.parent} does not exist")
+            raise FileNotFoundError(f"cannot record to {self.path}: folder {self.path.parent} "
+                                    f"does not exist")
         self._stream = open(self.path, "wb")
-        self._writer = Writer(self._stream, chunk_size=chunk_size, compression=_chunk_compression())
+        self._writer = Writer(self._stream, chunk_size=chunk_size,
+                              compression=_chunk_compression())
         self._writer.start(profile="ros2", library="amr_common.mcap_recorder")
         self._lock = threading.Lock()
         self._schemas: dict[str, int] = {}
@@ -205,18 +210,21 @@ class McapRecorder:
         default_qos = QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST,
                                  reliability=ReliabilityPolicy.BEST_EFFORT)
         for topic, msg_type in topics.items():
-            topic_qos = qos.get(topic, default_qos) if isinstance(qos, Mapping) else (qos or default_qos)
+            topic_qos = (qos.get(topic, default_qos) if isinstance(qos, Mapping)
+                         else (qos or default_qos))
             type_name = ros_type_name(msg_type)
             with self._lock:
                 self._check_open()
-                self._channel_for(topic, type_name)  # a missing definition fails now, not in a callback
+                # A missing definition fails now, not in a callback.
+                self._channel_for(topic, type_name)
             fields = iter(msg_type.get_fields_and_field_types().items())
             stamped = next(fields, None) == ("header", "std_msgs/Header")
             callback = self._make_callback(node, topic, type_name, stamped)
             subscription = node.create_subscription(msg_type, topic, callback, topic_qos, raw=True)
             self._subscriptions.append((node, subscription))
 
-    def _make_callback(self, node: Any, topic: str, type_name: str, stamped: bool) -> Callable[[bytes], None]:
+    def _make_callback(self, node: Any, topic: str, type_name: str,
+                       stamped: bool) -> Callable[[bytes], None]:
         def record(data: bytes) -> None:
             if self._closed:
                 return

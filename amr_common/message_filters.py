@@ -76,9 +76,11 @@ class Subscriber(SimpleFilter):
                                             **kwargs)
 
     def callback(self, msg: Any) -> None:
+        """The subscription's callback: pass the message on to the connected filters."""
         self.signalMessage(msg)
 
     def getTopic(self) -> str:  # noqa: N802
+        """The subscribed topic name (reference API)."""
         return self.topic
 
     def close(self) -> None:
@@ -136,6 +138,7 @@ class TimeSynchronizer(SimpleFilter):
 
     @property
     def queue_size(self) -> int:
+        """Messages kept per input."""
         return self._queue_size
 
     @queue_size.setter
@@ -225,8 +228,10 @@ class ApproximateTimeSynchronizer(TimeSynchronizer):
             self._slop_ns = time_matching.validate_slop(value)
 
     def add(self, msg: Any, my_queue: dict, my_queue_index: int | None = None) -> None:
-        """Queue `msg` (arrived on input `my_queue_index`, owning `my_queue`) and emit at most
-        one matched set."""
+        """Queue `msg` and emit at most one matched set.
+
+        `msg` arrived on input `my_queue_index`, which owns `my_queue`.
+        """
         stamp_ns = self._stamp_ns(msg, self.allow_headerless)
         if stamp_ns is None:
             return

@@ -64,6 +64,7 @@ class StopFlag:
         self.requested = False
 
     def install(self) -> "StopFlag":
+        """Make SIGINT and SIGTERM set this flag (replacing their handlers); returns self."""
         signal.signal(signal.SIGINT, self._handle)
         signal.signal(signal.SIGTERM, self._handle)
         return self

@@ -19,7 +19,8 @@ import numpy as np
 from amr_common.jit import HAVE_NUMBA, jit
 
 
-def scan_python(segments, ox, oy, theta, base_cos, base_sin, range_min, range_max, no_return, noise, out):
+def scan_python(segments, ox, oy, theta, base_cos, base_sin, range_min, range_max, no_return,
+                noise, out):
     """Ranges along rays at angles theta + a_i (base_cos/sin = cos/sin a_i), written into out.
 
     noise (same length as out) is added to true ranges; readings outside [range_min, range_max]
@@ -90,7 +91,8 @@ scan_kernel = jit(scan_python)
 nearest_wall_kernel = jit(nearest_wall_python)
 
 
-def scan_numpy(segments, ox, oy, theta, base_cos, base_sin, range_min, range_max, no_return, noise, out):
+def scan_numpy(segments, ox, oy, theta, base_cos, base_sin, range_min, range_max, no_return,
+               noise, out):
     """The same maths as a rays x segments matrix (fallback without numba)."""
     cos_t, sin_t = math.cos(theta), math.sin(theta)
     dx = (cos_t * base_cos - sin_t * base_sin)[:, None]

@@ -26,7 +26,10 @@ _COMMAND_CLIP = 1.0e6
 
 
 def inverse_kinematics(v: float, w: float) -> tuple[float, float]:
-    """Wheel speeds (wL, wR) in rad/s for a body twist (v m/s, w rad/s), saturated at WHEEL_SPEED_MAX."""
+    """Wheel speeds (wL, wR) in rad/s for a body twist (v m/s, w rad/s).
+
+    Saturated at WHEEL_SPEED_MAX.
+    """
     v = min(max(v, -_COMMAND_CLIP), _COMMAND_CLIP)
     w = min(max(w, -_COMMAND_CLIP), _COMMAND_CLIP)
     w_right = (v + w * TRACK / 2.0) / WHEEL_RADIUS
@@ -47,8 +50,10 @@ def forward_kinematics(w_left: float, w_right: float) -> tuple[float, float]:
 
 
 def saturate(v: float, w: float) -> tuple[float, float]:
-    """The twist the robot executes for a command (v m/s, w rad/s): unchanged while both wheels
-    are within WHEEL_SPEED_MAX, else both wheel speeds scaled by one factor (the curvature kept).
+    """The twist the robot executes for a command (v m/s, w rad/s).
+
+    Unchanged while both wheels are within WHEEL_SPEED_MAX, else both wheel speeds scaled by one
+    factor (the curvature kept).
 
     Equal to forward_kinematics(*inverse_kinematics(v, w)) up to rounding; a command within the
     limits comes back bit-for-bit (the simulator runs this every step).
@@ -71,7 +76,8 @@ def sinc_half(angle: float) -> float:
     return math.sin(half) / half
 
 
-def unicycle_step(x: float, y: float, theta: float, v: float, w: float, dt: float) -> tuple[float, float, float]:
+def unicycle_step(x: float, y: float, theta: float, v: float, w: float,
+                  dt: float) -> tuple[float, float, float]:
     """Exact integration of the unicycle model over dt with a constant twist (v, w)."""
     dtheta = w * dt
     chord = v * dt * sinc_half(dtheta)

@@ -70,7 +70,10 @@ def yaw_to_quaternion(yaw: float, quaternion: Quaternion | None = None) -> Quate
 
 
 def quaternion_to_yaw(quaternion: Quaternion) -> float:
-    """Yaw in (-pi, pi] of a geometry_msgs/Quaternion (normalised first; ValueError if unusable)."""
+    """Yaw in (-pi, pi] of a geometry_msgs/Quaternion.
+
+    Normalised first; ValueError if unusable.
+    """
     return geometry.quaternion_to_yaw(quaternion.x, quaternion.y, quaternion.z, quaternion.w)
 
 
@@ -164,8 +167,11 @@ def path_points(message: Path) -> np.ndarray:
 # --- laser scans --------------------------------------------------------------------------
 
 def float32_array(values: Sequence[float] | np.ndarray) -> array.array:
-    """array('f') of values: assigning one to a float32[] message field skips the per-element
-    type checks rclpy runs on lists (~100x faster for a 360-ray scan)."""
+    """array('f') of values, for a float32[] message field.
+
+    Assigning one skips the per-element type checks rclpy runs on lists (~100x faster for a
+    360-ray scan).
+    """
     packed = array.array("f")
     packed.frombytes(np.ascontiguousarray(values, dtype=np.float32).tobytes())
     return packed

@@ -123,9 +123,11 @@ def _whole_ns(value: Any, scale: int, stamp: Any) -> int:
 
 
 def insert_and_evict(queue: Queue, stamp_ns: int, msg: Any, queue_size: int) -> None:
-    """Queue msg under its stamp (a same-stamp message is replaced in place, keeping its slot),
-    then drop the smallest stamps while more than queue_size are held (as the reference does,
-    even if that drops msg itself)."""
+    """Queue msg under its stamp, then drop the smallest stamps beyond queue_size.
+
+    A same-stamp message is replaced in place, keeping its slot. Stamps are dropped while more
+    than queue_size are held, as the reference does, even if that drops msg itself.
+    """
     queue[stamp_ns] = msg
     while len(queue) > queue_size:
         del queue[min(queue)]
@@ -142,8 +144,9 @@ def candidate_stamps(queue: Queue, stamp_ns: int, slop_ns: int) -> list[int]:
 
 def first_valid_tuple(lists: Sequence[Sequence[int]], slop_ns: int,
                       fixed: int | None = None) -> list[int] | None:
-    """First tuple of itertools.product(*lists) whose stamps, with `fixed` added when given,
-    span less than slop_ns (max - min < slop_ns); None when there is none.
+    """First tuple of itertools.product(*lists) spanning less than slop_ns; None if none.
+
+    The span includes `fixed` when given (max - min < slop_ns).
 
     Integer stamps only. Returns one stamp per list (the fixed stamp is not included).
     """
@@ -162,9 +165,12 @@ def first_valid_tuple(lists: Sequence[Sequence[int]], slop_ns: int,
 
 
 class _DepthFirstSearch:
-    """Depth-first walk of the product in itertools order that only enters a branch if an exact
-    test says it can complete, so the first leaf reached is the first valid tuple of the whole
-    product and no branch is abandoned half-way: O(levels * list length * test) per search."""
+    """Depth-first walk of the product in itertools order, entering only completable branches.
+
+    An exact test says whether a branch can complete, so the first leaf reached is the first
+    valid tuple of the whole product and no branch is abandoned half-way:
+    O(levels * list length * test) per search.
+    """
 
     def __init__(self, lists: Sequence[Sequence[int]], width: int) -> None:
         self.lists = lists
@@ -172,8 +178,10 @@ class _DepthFirstSearch:
         self._ascending: dict[int, list[int]] = {}  # list index -> its stamps sorted
 
     def run(self, level: int, low: int, high: int) -> list[int] | None:
-        """The first choice for lists[level:] fitting with [low, high] in a window of `width`,
-        None if there is none."""
+        """The first choice for lists[level:] fitting with [low, high] in a `width` window.
+
+        None if there is none.
+        """
         lists, width = self.lists, self.width
         last = len(lists) - 1
         if level > last:
@@ -199,8 +207,9 @@ class _DepthFirstSearch:
         return None
 
     def completable(self, start: int, low: int, high: int) -> bool:
-        """Whether one stamp from each of lists[start:] fits with [low, high] in a window of
-        `width` (max - min <= width).
+        """Whether one stamp from each of lists[start:] fits with [low, high] in a `width` window.
+
+        Fits: max - min <= width.
 
         A list with a stamp inside [low, high] costs nothing. Otherwise only its nearest stamp
         below low (`under` ns away) and nearest above high (`over` ns away) matter: swapping a
@@ -237,9 +246,12 @@ class _DepthFirstSearch:
 
 def find_approximate_match(queues: Sequence[Queue], stamp_ns: int, slop_ns: int,
                            index: int | None) -> list[int] | None:
-    """Stamps (one per queue, in queue order) of the set the reference emits after stamp_ns
-    arrived on input `index`, or None. With index None the new stamp is not forced into the set
-    and every queue is searched (the reference's behaviour for add(..., my_queue_index=None))."""
+    """Stamps of the set the reference emits after stamp_ns arrived on input `index`, or None.
+
+    One stamp per queue, in queue order. With index None the new stamp is not forced into the
+    set and every queue is searched (the reference's behaviour for
+    add(..., my_queue_index=None)).
+    """
     low, high = stamp_ns - slop_ns, stamp_ns + slop_ns
     if index is None:
         lists = [candidate_stamps(queue, stamp_ns, slop_ns) for queue in queues]
@@ -303,6 +315,7 @@ class ApproximateTimeMatcher:
         self.queues: list[Queue] = [{} for _ in range(num_inputs)]
 
     def add(self, input_index: int, stamp_ns: int, msg: Any) -> list[Any] | None:
+        """Queue `msg` on input `input_index`; the matched set (one per input) or None."""
         stamp_ns = operator.index(stamp_ns)  # float stamps would blur the slop edges
         insert_and_evict(self.queues[input_index], stamp_ns, msg, self.queue_size)
         stamps = find_approximate_match(self.queues, stamp_ns, self.slop_ns, input_index)
@@ -323,6 +336,7 @@ class ExactTimeMatcher:
         self.queues: list[Queue] = [{} for _ in range(num_inputs)]
 
     def add(self, input_index: int, stamp_ns: int, msg: Any) -> list[list[Any]]:
+        """Queue `msg` on input `input_index`; every completed set, oldest first."""
         insert_and_evict(self.queues[input_index], operator.index(stamp_ns), msg,
                          self.queue_size)
         return pop_exact_matches(self.queues)

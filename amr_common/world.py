@@ -2,23 +2,23 @@
 
 Two file formats load with `World.load(name_or_path)`:
 
-1. The project's own YAML world file (bundled ones live in amr_common/worlds/<name>.yaml and load by
-   name, e.g. `World.load("lab02")`; any other file loads by path)::
+1. The project's own YAML world file (bundled ones live in amr_common/worlds/<name>.yaml and
+   load by name, e.g. `World.load("lab02")`; any other file loads by path)::
 
-       name: lab02                      # optional, defaults to the file stem
-       description: free text           # optional
-       cell_size: 0.4                   # m, > 0: grid used by coverage metrics (corridor pitch)
-       boundary: [[x, y], ...]          # REQUIRED closed polyline: the outer walls (>= 3 points)
-       holes:                           # optional closed polylines: obstacles (>= 3 points each)
+       name: lab02               # optional, defaults to the file stem
+       description: free text    # optional
+       cell_size: 0.4            # m, > 0: grid used by coverage metrics (corridor pitch)
+       boundary: [[x, y], ...]   # REQUIRED closed polyline: the outer walls (>= 3 points)
+       holes:                    # optional closed polylines: obstacles (>= 3 points each)
          - [[x, y], ...]
-       walls:                           # optional open polylines: free-standing walls (>= 2 points)
+       walls:                    # optional open polylines: free-standing walls (>= 2 points)
          - [[x, y], ...]
-       starts:                          # optional named start poses [x, y, theta]
-         outer: [1.0, -1.0, pi/2]       # theta in rad: a number or "pi", "pi/2", "3*pi/2", "-pi/4"
-       goals:                           # optional named goals [x, y] (navigation targets)
+       starts:                   # optional named start poses [x, y, theta]
+         outer: [1.0, -1.0, pi/2]  # theta in rad: a number or "pi", "pi/2", "3*pi/2", "-pi/4"
+       goals:                    # optional named goals [x, y] (navigation targets)
          far_corner: [-1.0, 1.0]
-       goal: far_corner                 # optional default goal: [x, y] or a name of `goals`;
-                                        # without it the first named goal is the default
+       goal: far_corner          # optional default goal: [x, y] or a name of `goals`;
+                                 # without it the first named goal is the default
 
    Coordinates are metres in the world frame (REP 103: x east, y north, theta CCW from x).
    A closed polyline may repeat its first point at the end; it is closed either way.
@@ -51,7 +51,10 @@ _PI_EXPR = re.compile(r"^\s*([+-]?)\s*(\d+(?:\.\d*)?)?\s*\*?\s*pi\s*(?:/\s*(\d+(
 
 
 class WorldError(ValueError):
-    """A world file is missing or malformed, or a start pose is invalid. The message names the file."""
+    """A world file is missing or malformed, or a start pose is invalid.
+
+    The message names the file.
+    """
 
 
 def bundled_worlds() -> list[str]:
@@ -61,6 +64,8 @@ def bundled_worlds() -> list[str]:
 
 @dataclass
 class World:
+    """Walls as (N, 4) segments, named starts, an optional goal, and geometric queries."""
+
     name: str
     source: str
     segments: np.ndarray  # (N, 4) float64 rows [x1, y1, x2, y2], metres
@@ -78,7 +83,8 @@ class World:
         """Load a bundled world by name ("lab02") or a .yaml/.yml/.json file by path."""
         text = str(name_or_path)
         path = Path(text).expanduser()
-        looks_like_path = path.suffix.lower() in (".yaml", ".yml", ".json") or "/" in text or path.is_file()
+        looks_like_path = (path.suffix.lower() in (".yaml", ".yml", ".json") or "/" in text
+                           or path.is_file())
         if not looks_like_path:
             bundled = WORLDS_DIR / f"{text}.yaml"
             if not bundled.is_file():
@@ -105,7 +111,8 @@ class World:
         except yaml.YAMLError as exc:
             raise WorldError(f"{path}: invalid YAML: {exc}") from exc
         if not isinstance(data, dict):
-            raise WorldError(f"{path}: expected a mapping with keys boundary, holes, walls, starts, ...")
+            raise WorldError(f"{path}: expected a mapping with keys boundary, holes, walls, "
+                             f"starts, ...")
         known = {"name", "description", "cell_size", "boundary", "holes", "walls", "starts",
                  "goal", "goals"}
         unknown = set(data) - known
@@ -147,7 +154,8 @@ class World:
         except json.JSONDecodeError as exc:
             raise WorldError(f"{path}: invalid JSON: {exc}") from exc
         if not isinstance(data, dict) or not isinstance(data.get("metric"), dict):
-            raise WorldError(f"{path}: missing key 'metric' (expected {{\"metric\": {{\"boundary\": ..., \"holes\": ...}}}})")
+            raise WorldError(f"{path}: missing key 'metric' (expected "
+                             f"{{\"metric\": {{\"boundary\": ..., \"holes\": ...}}}})")
         metric = data["metric"]
         if "boundary" not in metric:
             raise WorldError(f"{path}: missing key 'metric.boundary'")
@@ -157,8 +165,8 @@ class World:
         return cls._build(path.stem, path, boundary, holes, [], {}, None, 0.4, "course map JSON")
 
     @classmethod
-    def _build(cls, name, path, boundary, holes, walls, starts, goal, cell_size, description,
-               goals=None) -> "World":
+    def _build(cls, name, path, boundary, holes, walls, starts, goal, cell_size,
+               description, goals=None) -> "World":
         segs = [_closed_segments(boundary)] + [_closed_segments(h) for h in holes]
         segs += [np.hstack([w[:-1], w[1:]]) for w in walls]
         segments = np.ascontiguousarray(np.vstack(segs), dtype=np.float64)
@@ -166,7 +174,8 @@ class World:
         bad = np.flatnonzero(lengths < 1e-9)
         if bad.size:
             x1, y1 = segments[bad[0], :2]
-            raise WorldError(f"{path}: zero-length wall at ({x1:g}, {y1:g}) (repeated point in a polyline)")
+            raise WorldError(f"{path}: zero-length wall at ({x1:g}, {y1:g}) (repeated point in "
+                             f"a polyline)")
         world = cls(name=name, source=str(path), segments=segments, starts=starts, goal=goal,
                     cell_size=cell_size, description=description, boundary=boundary, holes=holes,
                     goals=dict(goals or {}))
@@ -181,6 +190,7 @@ class World:
     # ------------------------------------------------------------------ geometry
     @property
     def bounds(self) -> tuple[float, float, float, float]:
+        """(xmin, ymin, xmax, ymax) of all walls, metres."""
         s = self.segments
         return (float(min(s[:, 0].min(), s[:, 2].min())), float(min(s[:, 1].min(), s[:, 3].min())),
                 float(max(s[:, 0].max(), s[:, 2].max())), float(max(s[:, 1].max(), s[:, 3].max())))
@@ -215,11 +225,13 @@ class World:
             inside &= ~_points_in_polygon(hole, pts[:, 0], pts[:, 1])
         return inside
 
-    def resolve_start(self, start: str | tuple | list | np.ndarray | None) -> tuple[float, float, float]:
+    def resolve_start(self, start: str | tuple | list | np.ndarray | None
+                      ) -> tuple[float, float, float]:
         """A start pose from a name, an (x, y, theta) triple or None (= the first named start)."""
         if start is None:
             if not self.starts:
-                raise WorldError(f"{self.source}: the world names no start pose; pass (x, y, theta)")
+                raise WorldError(f"{self.source}: the world names no start pose; pass "
+                                 f"(x, y, theta)")
             return next(iter(self.starts.values()))
         if isinstance(start, str):
             if start not in self.starts:
@@ -259,17 +271,18 @@ class World:
             raise WorldError(f"{self.source}: {what} ({x:g}, {y:g}) is outside the boundary")
         for i, hole in enumerate(self.holes):
             if _point_in_polygon(hole, x, y):
-                raise WorldError(f"{self.source}: {what} ({x:g}, {y:g}) is inside obstacle holes[{i}]")
+                raise WorldError(f"{self.source}: {what} ({x:g}, {y:g}) is inside obstacle "
+                                 f"holes[{i}]")
         c = self.clearance(x, y)
         if c < ROBOT_RADIUS:
             raise WorldError(f"{self.source}: {what} ({x:g}, {y:g}) touches a wall: clearance "
                              f"{c:.3f} m < robot radius {ROBOT_RADIUS} m")
 
     def free_cells(self, margin: float = ROBOT_RADIUS) -> np.ndarray:
-        """Centres (K, 2) of the cell_size grid cells inside the free space with clearance > margin.
+        """Centres (K, 2) of the cell_size grid cells in the free space with clearance > margin.
 
-        The grid is aligned with multiples of cell_size (cell centres at (k + 0.5) * cell_size), so it
-        matches corridors whose walls lie on grid lines.
+        The grid is aligned with multiples of cell_size (cell centres at (k + 0.5) * cell_size),
+        so it matches corridors whose walls lie on grid lines.
         """
         xmin, ymin, xmax, ymax = self.bounds
         cs = self.cell_size
@@ -282,6 +295,7 @@ class World:
         return pts[keep]
 
     def free_space_centroid(self) -> tuple[float, float]:
+        """Mean of the free cells (the bounds' centre if there are none)."""
         cells = self.free_cells()
         if len(cells) == 0:
             xmin, ymin, xmax, ymax = self.bounds
@@ -381,12 +395,14 @@ def _pose(value: Any, path, what: str) -> tuple[float, float, float]:
 
 def _polyline(value: Any, path, what: str, closed: bool) -> np.ndarray:
     if not isinstance(value, list):
-        raise WorldError(f"{path}: '{what}' must be a list of [x, y] points, got {type(value).__name__}")
+        raise WorldError(f"{path}: '{what}' must be a list of [x, y] points, got "
+                         f"{type(value).__name__}")
     pts = [_point(p, path, f"{what}[{i}]") for i, p in enumerate(value)]
     if closed and len(pts) >= 2 and pts[0] == pts[-1]:
         pts = pts[:-1]  # explicitly closed: the closing segment is implied
     need = 3 if closed else 2
     if len(pts) < need:
         kind = "closed" if closed else "open"
-        raise WorldError(f"{path}: '{what}' has {len(pts)} point(s); a {kind} polyline needs at least {need}")
+        raise WorldError(f"{path}: '{what}' has {len(pts)} point(s); a {kind} polyline needs "
+                         f"at least {need}")
     return np.array(pts, dtype=np.float64)

@@ -1,5 +1,7 @@
-"""Loop kernels behind LocalPointCloud (scan_sectors.py): moving the points with the odometry,
-merging a new scan, and the per-step queries (sectors, swept path, side walls, line fit).
+"""Loop kernels behind LocalPointCloud (scan_sectors.py).
+
+They move the points with the odometry, merge a new scan, and answer the per-step queries
+(sectors, swept path, side walls, line fit).
 
 Why loops: the wall follower runs these on a few hundred points every control step, and as
 numpy expressions they were ~75 small array operations (~0.3 ms per step, most of it call
@@ -24,8 +26,10 @@ MIN_LATERAL_M = 0.02   # points closer than this to the robot's x axis are on ne
 
 @jit
 def move_points(cloud, distance, rotation, dt):
-    """In place: age every point by dt, then express it in the robot frame after the robot drove
-    `distance` (m) along the chord of an arc and turned `rotation` (rad)."""
+    """In place: age every point by dt and move it into the robot frame after a motion.
+
+    The robot drove `distance` (m) along the chord of an arc and turned `rotation` (rad).
+    """
     px = cloud[0]
     py = cloud[1]
     ages = cloud[2]
@@ -63,8 +67,9 @@ def same_readings(last, ranges):
 @jit
 def merge_scan(cloud, ranges, ray_cos, ray_sin, angle_min, angle_increment,
                range_min, range_max, hold_range, hold_time, lidar_offset_x):
-    """The cloud after a new scan: its valid readings (age 0) followed by the held points (close
-    ones younger than hold_time whose ray in this scan returned nothing).
+    """The cloud after a new scan: its valid readings (age 0) followed by the held points.
+
+    Held: close points younger than hold_time whose ray in this scan returned nothing.
 
     Returns (new cloud, number of valid readings).
     """
@@ -117,9 +122,11 @@ def merge_scan(cloud, ranges, ray_cos, ray_sin, angle_min, angle_increment,
 
 @jit
 def sector_distances(cloud, centre_cos, centre_sin, half_width, percentiles, out):
-    """For each sector (centre direction (centre_cos, centre_sin), +-half_width < pi/2): the
-    closest range in it, or its `percentiles[s]`-th percentile (lowest-rank value) when that is
-    > 0; inf if it is empty."""
+    """For each sector: the closest range in it, or a percentile; inf if it is empty.
+
+    A sector is a centre direction (centre_cos, centre_sin) +-half_width < pi/2; its
+    `percentiles[s]`-th percentile (lowest-rank value) is reported when that is > 0.
+    """
     n = cloud.shape[1]
     ranges = np.empty(n)
     for i in range(n):
@@ -148,7 +155,10 @@ def sector_distances(cloud, centre_cos, centre_sin, half_width, percentiles, out
 
 @jit
 def path_distance(cloud, half_width):
-    """Smallest x > 0 of the points with |y| <= half_width (the swept corridor ahead); inf if none."""
+    """Smallest x > 0 of the points with |y| <= half_width (the swept corridor ahead).
+
+    inf if there is none.
+    """
     px = cloud[0]
     py = cloud[1]
     best = math.inf
@@ -174,8 +184,11 @@ def beside_distance(cloud, side, half_length):
 
 @jit
 def side_gap(cloud, side, max_lateral, lookback, ahead):
-    """Points on one side within max_lateral: the largest x in [-lookback, 0] (NaN if none) and
-    the number of points with x > 0, whose x are written to `ahead` in cloud order."""
+    """Points on one side within max_lateral: the last one behind and those ahead.
+
+    Returns the largest x in [-lookback, 0] (NaN if none) and the number of points with x > 0,
+    whose x are written to `ahead` in cloud order.
+    """
     px = cloud[0]
     py = cloud[1]
     wall_end = math.nan
@@ -195,8 +208,10 @@ def side_gap(cloud, side, max_lateral, lookback, ahead):
 
 @jit
 def _beside_points(cloud, side, max_lateral, half_length):
-    """x, y and lateral distance of the points on one side within max_lateral and |x| <=
-    half_length, in cloud order."""
+    """x, y and lateral distance of the points on one side beside the robot, in cloud order.
+
+    Beside: within max_lateral and |x| <= half_length.
+    """
     px = cloud[0]
     py = cloud[1]
     n = px.shape[0]
@@ -216,10 +231,12 @@ def _beside_points(cloud, side, max_lateral, half_length):
 
 @jit
 def wall_reach(xs, lateral, side, window, fit_distance, fit_angle, beside):
-    """How far ahead (x, m) the wall beside the robot continues without a 4 cm gap, from the
-    beside points (x, lateral distance; see _beside_points); NaN if there is none. Its points
-    are those within 4 cm of the fitted line (fit_distance, fit_angle; NaN = no fit: within 4 cm
-    of the `beside` distance; a fit steeper than 1 rad: all points)."""
+    """How far ahead (x, m) the wall beside the robot continues without a 4 cm gap.
+
+    From the beside points (x, lateral distance; see _beside_points); NaN if there is none. Its
+    points are those within 4 cm of the fitted line (fit_distance, fit_angle; NaN = no fit:
+    within 4 cm of the `beside` distance; a fit steeper than 1 rad: all points).
+    """
     if xs.shape[0] == 0:
         return math.nan
     have_fit = not math.isnan(fit_distance)
@@ -250,8 +267,11 @@ def wall_reach(xs, lateral, side, window, fit_distance, fit_angle, beside):
 
 @jit
 def _fit_line(xs, ys, mask, min_points, min_span):
-    """Total least squares through the masked points: (ok, distance, angle, span, mean x, mean y,
-    normal x, normal y); the line's direction has a non-negative x component."""
+    """Total least squares line through the masked points.
+
+    Returns (ok, distance, angle, span, mean x, mean y, normal x, normal y); the line's
+    direction has a non-negative x component.
+    """
     n = 0
     sum_x = 0.0
     sum_y = 0.0
@@ -293,8 +313,9 @@ def _fit_line(xs, ys, mask, min_points, min_span):
 
 @jit
 def fit_side_wall(xs, ys, lateral, min_points, min_span):
-    """Line through the beside points (see _beside_points) of one side, with outlier
-    rejection: start from the points within 6 cm of the median lateral distance (the wall
+    """Line through the beside points (see _beside_points) of one side, with outlier rejection.
+
+    Start from the points within 6 cm of the median lateral distance (the wall
     alongside, not a wall leaving sideways at a corner), then refit on the points within 3 cm
     of the line until the inlier set stops changing (at most 3 fits).
 
@@ -347,8 +368,9 @@ def fit_side_wall(xs, ys, lateral, min_points, min_span):
 def perceive(cloud, side, sector_cos, sector_sin, sector_half_width, sector_percentiles,
              path_half_width, side_window, side_open, fit_half_length, min_points, min_span,
              sector_out):
-    """Everything the wall follower asks of the cloud in one control step, in one call (each
-    separate call from Python costs ~2 us of dispatch, as much as the work itself):
+    """Everything the wall follower asks of the cloud in one control step, in one call.
+
+    Each separate call from Python costs ~2 us of dispatch, as much as the work itself.
 
     sector_out: sector_distances of the sectors given (closest or percentile range, inf = open).
     Returns (path distance, beside distance on the followed side, beside distance on the other
@@ -376,8 +398,10 @@ CONFIG_FIELDS = ("hold_range", "hold_time", "lidar_offset_x", "side", "sector_ha
 @jit
 def step_cloud(cloud, distance, rotation, dt, ranges, scan_given, last_scan, ray_cos, ray_sin,
                angle_min, angle_increment, range_min, range_max, config, sectors, sector_out):
-    """One control step in one call: move the cloud with the odometry, merge the scan if it
-    differs from `last_scan`, then perceive (see perceive; `sectors` rows: centre cos, centre
+    """One control step in one call: move the cloud, merge the scan, perceive.
+
+    The cloud moves with the odometry; the scan is merged if it differs from `last_scan`; then
+    perceive (see perceive; `sectors` rows: centre cos, centre
     sin, percentile). One call instead of several matters inside a ROS loop: every call wakes
     numba's dispatcher, which costs ~20 us when the caches are cold.
 
@@ -396,8 +420,11 @@ def step_cloud(cloud, distance, rotation, dt, ranges, scan_given, last_scan, ray
 
 
 def warm_up() -> None:
-    """Compile (or load from numba's cache) every kernel now, on tiny inputs, so that the first
-    control step does not pay for it (seconds on a first run, ~0.1 s from the cache)."""
+    """Compile (or load from numba's cache) every kernel now, on tiny inputs.
+
+    So that the first control step does not pay for it (seconds on a first run, ~0.1 s from
+    the cache).
+    """
     cloud = np.array([[0.3, 0.1, -0.2], [0.2, -0.2, 0.25], [0.0, 0.0, 0.0]])
     ranges = np.array([1.0, 0.2, math.nan, 0.0])
     table = np.array([1.0, 0.0, -1.0, 0.0])

@@ -1,5 +1,7 @@
-"""Loop closure for the wall follower's island escape: a trail of odometry poses recorded every
-few centimetres, and the test "am I back at a pose I passed, with the same heading?".
+"""Loop closure for the wall follower's island escape.
+
+A trail of odometry poses recorded every few centimetres, and the test "am I back at a pose I
+passed, with the same heading?".
 
 No rclpy import. The search runs every few control steps over up to 4,000 poses, as one
 numba-compiled loop (as numpy expressions it cost ~20 us per step inside the ROS loop).
@@ -21,9 +23,11 @@ MATCH_HEADING_RAD = 0.5  # ... with a heading closer than this
 
 @jit
 def _closing_pose(trail, count, odometer, x, y, heading):
-    """Index of the first recorded pose (odometer, x, y, heading, winding rows) at least
-    MIN_LOOP_M of travel back, within MATCH_RADIUS_M of (x, y) with a heading within
-    MATCH_HEADING_RAD; -1 if none."""
+    """Index of the first recorded pose that (x, y, heading) closes a loop with; -1 if none.
+
+    Rows are (odometer, x, y, heading, winding). A match is at least MIN_LOOP_M of travel back,
+    within MATCH_RADIUS_M of (x, y), with a heading within MATCH_HEADING_RAD.
+    """
     for i in range(count):
         if odometer - trail[i, 0] < MIN_LOOP_M:
             break                     # odometer order: every later pose is more recent
@@ -50,13 +54,16 @@ class PoseTrail:
         return self._count
 
     def clear(self) -> None:
+        """Forget every recorded pose."""
         self._count = 0
 
     def record_and_close(self, odometer: float, x: float, y: float, heading: float,
                          winding: float) -> float | None:
-        """Record the pose if the robot travelled SPACING_M since the last one, then look for
-        a loop: the winding turned since the matching earlier pose (rad), or None if the pose
-        was not recorded or closes no loop."""
+        """Record the pose if the robot travelled SPACING_M since the last one; find a loop.
+
+        Returns the winding turned since the matching earlier pose (rad), or None if the pose
+        was not recorded or closes no loop.
+        """
         n = self._count
         if n and odometer - self._poses[n - 1, 0] < SPACING_M:
             return None

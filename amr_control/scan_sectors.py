@@ -1,5 +1,7 @@
-"""LiDAR perception for the wall follower: scan geometry, a local obstacle point cloud kept
-between scans, angular sectors, and a straight-line fit of the wall beside the robot.
+"""LiDAR perception for the wall follower.
+
+Scan geometry, a local obstacle point cloud kept between scans, angular sectors, and a
+straight-line fit of the wall beside the robot.
 
 Everything is in the robot frame (REP 103: x forward, y left, angles counter-clockwise from x).
 No rclpy import: the same code runs in the headless simulator, in tests and in the ROS node.
@@ -29,6 +31,7 @@ class ScanGeometry:
     range_max: float
 
     def is_sane(self) -> bool:
+        """Finite values, a ray spacing in (1e-4, pi] rad and 0 <= range_min < range_max."""
         return (all(math.isfinite(v) for v in (self.angle_min, self.angle_increment,
                                                 self.range_min, self.range_max))
                 and 1e-4 < abs(self.angle_increment) <= math.pi
@@ -53,9 +56,11 @@ class WallFit(NamedTuple):
 
 
 class PerceptionSpec:
-    """What the controller wants perceived each step: named angular sectors (centre directions
-    in rad, a common half-width < pi/2, and per sector the percentile of its ranges to report,
-    0 = the closest) and the geometry of the followed side (see Perception)."""
+    """What the controller wants perceived each step: named sectors and the followed side.
+
+    Sectors: centre directions in rad, a common half-width < pi/2, and per sector the percentile
+    of its ranges to report (0 = the closest). The followed side's geometry: see Perception.
+    """
 
     def __init__(self, side_sign: float, sectors: dict[str, float], sector_half_width_rad: float,
                  sector_percentiles: dict[str, float], path_half_width_m: float,
@@ -97,8 +102,9 @@ class Perception(NamedTuple):
 
 
 class LocalPointCloud:
-    """Obstacle points in the robot frame, built from each new scan and carried along with the
-    odometry between scans (the LDS-01 refreshes at 5 Hz while the controller runs at 20 Hz).
+    """Obstacle points in the robot frame, from each new scan, carried along between scans.
+
+    The odometry moves them: the LDS-01 refreshes at 5 Hz while the controller runs at 20 Hz.
 
     A ray that returns nothing right after it saw something close keeps that close point for
     `hold_time_s`: an LDS-01 reports 0.0 below 0.12 m, so "no return" next to a wall must not
@@ -125,18 +131,22 @@ class LocalPointCloud:
 
     @property
     def size(self) -> int:
+        """Number of points in the cloud."""
         return int(self._cloud.shape[1])
 
     def step(self, distance_m: float, rotation_rad: float, dt: float,
              ranges: np.ndarray | None, geometry: ScanGeometry | None
              ) -> tuple[int | None, Perception]:
-        """One control step: the robot drove `distance_m` along the chord of an arc and turned
-        `rotation_rad` (odometry; every point ages by dt); `ranges` (a contiguous float64
+        """One control step: move the cloud with the odometry, merge a new scan, perceive.
+
+        The robot drove `distance_m` along the chord of an arc and turned `rotation_rad`
+        (odometry; every point ages by dt); `ranges` (a contiguous float64
         array the cloud may keep, or None) is the scan, merged when it differs from the last
         merged one (a held LaserScan is not new):
         its valid points replace the cloud, plus the held close points whose ray returned
         nothing. Returns (valid readings of the merged scan, or None if none was merged, and
-        the Perception of the cloud)."""
+        the Perception of the cloud).
+        """
         scan_given = ranges is not None and geometry is not None
         if scan_given:
             key = (geometry, ranges.size)
@@ -163,9 +173,12 @@ class LocalPointCloud:
 
     def side_gap(self, side_sign: float, max_lateral_m: float, lookback_m: float = 0.6
                  ) -> tuple[float | None, np.ndarray]:
-        """For an opening on one side: x of the last wall point behind the robot (None if
-        there is none within lookback_m) and the x of the side points ahead (a view of a
-        buffer the next call overwrites). Asked only at openings, so not part of step()."""
+        """For an opening on one side: the last wall point behind, and the points ahead.
+
+        Returns x of the last wall point behind the robot (None if there is none within
+        lookback_m) and the x of the side points ahead (a view of a buffer the next call
+        overwrites). Asked only at openings, so not part of step().
+        """
         if self._ahead.size < self._cloud.shape[1]:
             self._ahead = np.empty(2 * self._cloud.shape[1])
         wall_end, count = kernels.side_gap(self._cloud, float(side_sign), float(max_lateral_m),

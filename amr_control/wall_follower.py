@@ -51,7 +51,9 @@ class WallFollower:
     """Class to safely explore an environment (without crashing) by following walls."""
 
     def __init__(self, dt: float, **params: Any) -> None:
-        """Args:
+        """Set up the controller for control period `dt`.
+
+        Args:
         dt: control period [s].
         **params: any name of `parameter_descriptions()`; unknown names raise ValueError.
         """
@@ -103,9 +105,12 @@ class WallFollower:
 
     def set_scan_geometry(self, angle_min: float, angle_increment: float,
                           range_min: float, range_max: float) -> None:
-        """Tell where the rays point (angle_i = angle_min + i*angle_increment, rad) and the valid
-        range interval (m). Called per LaserScan by the node, so it may change between scans.
-        Absurd values are ignored with a warning (the course convention is used instead)."""
+        """Tell where the rays point and which ranges are valid.
+
+        angle_i = angle_min + i*angle_increment (rad); valid ranges in [range_min, range_max]
+        (m). Called per LaserScan by the node, so it may change between scans.
+        Absurd values are ignored with a warning (the course convention is used instead).
+        """
         geometry = ScanGeometry(float(angle_min), float(angle_increment),
                                 float(range_min), float(range_max))
         if not geometry.is_sane():
@@ -159,10 +164,12 @@ class WallFollower:
         self.distances["path"] = perception.path_m
 
     def _side_distance(self, followed: bool = True) -> float:
-        """Lateral distance to the closest point right beside the robot (|x| within the side
-        window) on the followed or the other side; inf if open. A box, not an angular sector:
-        at a right-angle outer corner the wall leaving sideways lies just behind the robot and
-        would keep a +-90 deg sector "closed" long after the followed wall has ended."""
+        """Lateral distance to the closest point right beside the robot; inf if open.
+
+        On the followed or the other side, |x| within the side window. A box, not an angular
+        sector: at a right-angle outer corner the wall leaving sideways lies just behind the
+        robot and would keep a +-90 deg sector "closed" long after the followed wall has ended.
+        """
         return self._perception.beside_m if followed else self._perception.beside_other_m
 
     # ---- state machine -------------------------------------------------------------------
@@ -172,8 +179,10 @@ class WallFollower:
         self._travelled = 0.0
 
     def _reference(self) -> float | None:
-        """Heading (odometry frame) the robot should be aligned with: the last well-fitted wall's
-        direction or the goal of the last turn, if recent enough; else None."""
+        """Heading (odometry frame) the robot should be aligned with, or None.
+
+        The last well-fitted wall's direction or the goal of the last turn, if recent enough.
+        """
         if self._odometer - self._reference_odometer <= self.heading_memory_m:
             return self._reference_heading
         return None
@@ -183,8 +192,10 @@ class WallFollower:
         self._reference_odometer = self._odometer
 
     def _start_turn(self, state: str, angle_rad: float) -> None:
-        """Turn in place by angle_rad relative to the reference heading (so that turns snap back
-        to the walls' directions instead of accumulating heading errors)."""
+        """Turn in place by angle_rad relative to the reference heading.
+
+        So that turns snap back to the walls' directions instead of accumulating heading errors.
+        """
         reference = self._reference()
         base = reference if reference is not None else self._heading
         self._enter(state)
@@ -223,10 +234,13 @@ class WallFollower:
         return 0.0, 0.0
 
     def _closed_loop_around_island(self) -> bool:
-        """Record the odometry pose every few cm while following; when the robot is back at a
-        recorded pose with the same heading it has been once around the wall it follows. Seen
+        """Record the odometry pose every few cm while following, and detect a closed loop.
+
+        When the robot is back at a recorded pose with the same heading it has been once around
+        the wall it follows. Seen
         with the wall on the followed side, that loop turned by +2 pi toward that side for an
-        island and by -2 pi for an enclosing boundary (which it keeps lapping)."""
+        island and by -2 pi for an enclosing boundary (which it keeps lapping).
+        """
         if not self.escape_islands:
             return False
         turned = self._trail.record_and_close(self._odometer, self._x, self._y, self._heading,
@@ -243,7 +257,8 @@ class WallFollower:
         if state.startswith("turn_"):
             return self._run_turn()
         if state == "outer_corner":
-            timed_out = self._state_time > 3.0 + self._advance_target / max(self.settle_speed_mps, 0.01)
+            timed_out = (self._state_time
+                         > 3.0 + self._advance_target / max(self.settle_speed_mps, 0.01))
             if front_blocked or self._travelled >= self._advance_target or timed_out:
                 self._start_turn("turn_outer", self._side * 0.5 * math.pi)
                 return None
@@ -277,16 +292,21 @@ class WallFollower:
         remaining = (direction * (self._turn_goal - self._heading)) % (2.0 * math.pi)
         if remaining > 1.5 * math.pi:       # overshot the goal
             remaining = 0.0
-        if remaining <= 0.02 or self._state_time > 2.0 * math.pi / max(self.min_turn_speed_radps, 0.05):
+        turn_time_limit = 2.0 * math.pi / max(self.min_turn_speed_radps, 0.05)
+        if remaining <= 0.02 or self._state_time > turn_time_limit:
             self._set_reference(self._turn_goal)
-            self._enter({"turn_outer": "approach", "turn_escape": "escape"}.get(self.state, "settle"))
+            after_turn = {"turn_outer": "approach", "turn_escape": "escape"}
+            self._enter(after_turn.get(self.state, "settle"))
             return None
         # Slow down over the last part so that the turn ends on target (force control lags).
         speed = min(self.turn_speed_radps, max(self.min_turn_speed_radps, 4.0 * remaining))
         return 0.0, direction * speed
 
     def _decide(self, allow_approach: bool) -> tuple[float, float] | None:
-        """Right-hand rule (mirrored for the left): followed side > straight > other side > back."""
+        """Right-hand rule (mirrored for the left).
+
+        Followed side > straight > other side > back.
+        """
         side = self._side
         front_blocked = self._front_blocked()
         if self._side_distance() > self.side_open_distance_m:
@@ -356,7 +376,8 @@ class WallFollower:
                 self._island_lap_done = self._closed_loop_around_island()
         else:
             distance = self._side_distance()
-            error = (distance if math.isfinite(distance) else self.wall_distance_m) - self.wall_distance_m
+            error = ((distance if math.isfinite(distance) else self.wall_distance_m)
+                     - self.wall_distance_m)
             rate = 0.0
         w = side * (self.kp * error + self.kd * rate)
         limit = self.follow_max_angular_speed_radps

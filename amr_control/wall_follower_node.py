@@ -67,6 +67,15 @@ def _load_controller_spec(node: LifecycleNode) -> str:
 
 
 class WallFollowerNode(LifecycleNode):
+    """The wall follower as a lifecycle node: synchronized /odometry + /scan in, /cmd_vel out.
+
+    __init__ declares the node's parameters and, when the controller class describes them
+    (`parameter_descriptions()`), its tuning values; nothing else exists until configure.
+    Configure creates the controller, the /cmd_vel lifecycle publisher and the synchronized
+    subscriptions; activate starts commanding; deactivate, cleanup and shutdown each send a
+    zero command, because the TurtleBot3 keeps its last command forever.
+    """
+
     def __init__(self, node_name: str = "wall_follower", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
         for name, (default, description) in _NODE_PARAMETERS.items():
@@ -100,6 +109,14 @@ class WallFollowerNode(LifecycleNode):
         self._active = False
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Check the parameters, then create what the node runs on.
+
+        Creates the controller (with its tuning parameters), the /cmd_vel lifecycle publisher
+        (TwistStamped, or Twist in robot mode with cmd_vel_stamped false), the /odometry and
+        /scan subscriptions (+ /pose with enable_localization) and their approximate-time
+        synchronizer. A bad parameter or a controller that cannot be loaded or built returns
+        FAILURE with the reason logged, before anything is created.
+        """
         p = {name: self.get_parameter(name).value for name in _NODE_PARAMETERS}
         problems = []
         if not (isinstance(p["dt"], float) and math.isfinite(p["dt"]) and p["dt"] > 0):
@@ -153,6 +170,11 @@ class WallFollowerNode(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Enable the /cmd_vel publisher and start commanding.
+
+        Forgets any stored measurement; in robot mode creates the control timer (every dt,
+        zero until fresh data arrives). In simulation mode each synchronized set is answered.
+        """
         result = super().on_activate(state)
         self._active = True
         self._latest = None
@@ -161,17 +183,32 @@ class WallFollowerNode(LifecycleNode):
         return result
 
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Stop commanding: destroy the control timer and send a zero command.
+
+        The zero goes out while the publisher is still enabled; then the publisher is
+        disabled. The controller, publisher and subscriptions stay for a later activate.
+        """
         self._stop_timer()
         self._publish_zero("deactivating")  # before the publisher goes quiet
         self._active = False
         return super().on_deactivate(state)
 
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Send a zero command, then release everything configure created.
+
+        The zero is sent even though the publisher is disabled (inactive state). Released:
+        the timer, the subscriptions and synchronizer, the publisher and the controller.
+        """
         self._publish_zero("cleaning up", force=True)
         self._release()
         return TransitionCallbackReturn.SUCCESS
 
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """From any state (Ctrl-C included): stop, send a final zero command, release all.
+
+        The timer is destroyed first so no command follows the zero; then the subscriptions,
+        synchronizer, publisher and controller are released as in cleanup.
+        """
         self._stop_timer()
         self._publish_zero("shutting down", force=True)
         self._release()

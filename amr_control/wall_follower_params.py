@@ -1,5 +1,8 @@
-"""The WallFollower's tuning parameters: name -> (default, description with units), and their
-checking. No rclpy import; the wall_follower node declares each as a ROS parameter."""
+"""The WallFollower's tuning parameters and their checking.
+
+name -> (default, description with units). No rclpy import; the wall_follower node declares
+each as a ROS parameter.
+"""
 from __future__ import annotations
 
 import math
@@ -14,28 +17,32 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     "kp": (10.0, "Proportional gain: angular speed per metre of wall-distance error [rad/s/m]."),
     "kd": (10.0, "Derivative gain: angular speed per m/s of wall-distance rate, the rate being "
                  "estimated from the fitted wall angle at cruise speed [rad/s per m/s]."),
-    "max_linear_speed_mps": (0.20, f"Cruise (maximum) forward speed [m/s]; at most {MAX_LINEAR_SPEED}."),
-    "max_angular_speed_radps": (MAX_ANGULAR_SPEED, "Hard limit on the commanded angular speed [rad/s]."),
+    "max_linear_speed_mps": (0.20, "Cruise (maximum) forward speed [m/s]; at most "
+                                   f"{MAX_LINEAR_SPEED}."),
+    "max_angular_speed_radps": (MAX_ANGULAR_SPEED, "Hard limit on the commanded angular speed "
+                                                   "[rad/s]."),
     "follow_max_angular_speed_radps": (1.5, "Limit on the angular speed while following [rad/s]."),
     "turn_speed_radps": (1.5, "Angular speed of in-place turns [rad/s]."),
     "min_turn_speed_radps": (0.3, "Slowest angular speed at the end of an in-place turn [rad/s]."),
     "front_turn_distance_m": (0.21, "A wall closer than this ahead (from the robot centre) ends "
-                                    "straight driving: turn away, turn around or take the side [m]."),
+                                    "straight driving: turn away, turn around or take the side "
+                                    "[m]."),
     "front_stop_distance_m": (0.15, "Never drive forward with an obstacle closer than this in the "
                                     "robot's path (from the robot centre) [m]."),
-    "front_slowdown_distance_m": (0.15, "Forward speed ramps from 0 at the stop distance to cruise "
-                                        "at stop distance + this [m]."),
+    "front_slowdown_distance_m": (0.15, "Forward speed ramps from 0 at the stop distance to "
+                                        "cruise at stop distance + this [m]."),
     "side_window_half_length_m": (0.03, "Points within +-this along x of the robot centre count "
                                         "as beside it for the side-open tests [m]."),
     "side_open_distance_m": (0.32, "A side with nothing closer than this is open (no wall) [m]."),
-    "min_gap_width_m": (0.30, "Openings in the followed wall narrower than this are not entered [m]."),
+    "min_gap_width_m": (0.30, "Openings in the followed wall narrower than this are not "
+                              "entered [m]."),
     "outer_corner_advance_m": (0.20, "How far past the end of the followed wall the robot drives "
                                      "before turning around the corner [m]."),
     "settle_time_s": (0.3, "Straight driving after an in-place turn before following again [s]."),
     "settle_speed_mps": (0.10, "Forward speed while settling or approaching a wall [m/s]."),
     "sector_half_width_rad": (0.1745, "Half-width of the front/left/right/back sectors [rad]."),
-    "wall_fit_half_length_m": (0.15, "Scan points up to this far ahead/behind the robot centre are "
-                                     "used to fit the followed wall [m]."),
+    "wall_fit_half_length_m": (0.15, "Scan points up to this far ahead/behind the robot centre "
+                                     "are used to fit the followed wall [m]."),
     "heading_gain_per_s": (2.0, "Angular speed per radian of heading error while driving "
                                 "straight between walls (corners, settling) [1/s]."),
     "heading_memory_m": (0.6, "The direction of the last well-fitted wall (or last turn) "
@@ -56,10 +63,12 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
 
 
 def check_parameters(overrides: dict[str, Any]) -> dict[str, Any]:
-    """Every parameter's value (defaults updated with `overrides`), checked: follow_side 'right'
-    or 'left', escape_islands a boolean (or 'true'/'false'), the rest finite numbers >= 0
-    (lidar_offset_x_m may be negative). Speeds above the Burger's limits are clipped to them.
-    Raises ValueError naming the problem, or unknown names."""
+    """Every parameter's value (defaults updated with `overrides`), checked.
+
+    follow_side 'right' or 'left', escape_islands a boolean (or 'true'/'false'), the rest
+    finite numbers >= 0 (lidar_offset_x_m may be negative). Speeds above the Burger's limits
+    are clipped to them. Raises ValueError naming the problem, or unknown names.
+    """
     unknown = sorted(set(overrides) - set(PARAMETERS))
     if unknown:
         raise ValueError(f"WallFollower: unknown parameter(s) {unknown}; "

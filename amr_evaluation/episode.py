@@ -39,6 +39,8 @@ from amr_sim.simulator import Simulator
 
 @dataclass
 class EpisodeResult:
+    """What one headless episode did: its setup, metrics and (optionally) trajectory."""
+
     world: str  # bundled name, or the file path for other worlds
     start: str | list[float]  # start name or [x, y, theta]
     profile: str
@@ -65,38 +67,46 @@ class EpisodeResult:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "EpisodeResult":
+        """The inverse of to_dict()."""
         return cls(**data)
 
     def summary(self) -> str:
+        """One line with the setup and the metrics, for a terminal."""
         rms = "n/a" if self.rms_wall_error_m is None else f"{self.rms_wall_error_m:.3f} m"
-        return (f"{self.world} / {self.start} / {self.profile}: {self.sim_time_s:.1f} s simulated in "
-                f"{self.wall_time_s:.2f} s ({self.steps} steps), collisions {self.collisions}, "
+        return (f"{self.world} / {self.start} / {self.profile}: {self.sim_time_s:.1f} s simulated "
+                f"in {self.wall_time_s:.2f} s ({self.steps} steps), collisions {self.collisions}, "
                 f"min clearance {self.min_clearance_m:.3f} m, distance {self.distance_m:.2f} m, "
-                f"explored {100 * self.explored_fraction:.0f} %, laps {self.laps}, wall error RMS {rms}")
+                f"explored {100 * self.explored_fraction:.0f} %, laps {self.laps}, wall error "
+                f"RMS {rms}")
 
 
 def default_controller(dt: float, profile: SensorProfile | None = None):
-    """The project's wall follower (imported lazily: it lives in amr_control), told where the
-    profile's LiDAR sits."""
+    """The project's wall follower, told where the profile's LiDAR sits.
+
+    Imported lazily: it lives in amr_control.
+    """
     try:
         from amr_control.wall_follower import WallFollower
     except ImportError as exc:
         raise ImportError("run_episode needs a controller: amr_control.wall_follower.WallFollower "
-                          f"is not importable ({exc}); pass controller= or controller_factory=") from exc
+                          f"is not importable ({exc}); pass controller= or "
+                          f"controller_factory=") from exc
     return WallFollower(dt, **(robot_parameters(WallFollower, profile) if profile else {}))
 
 
 def robot_parameters(controller_class: Any, profile: SensorProfile) -> dict[str, Any]:
-    """What the simulated robot fixes for a controller class that has such parameters (listed
-    by its `parameter_descriptions()`): where its LiDAR sits (`lidar_offset_x_m`). The run
-    scripts apply these unless the user set the parameter (-p or a params file)."""
+    """What the simulated robot fixes for a controller class: where its LiDAR sits.
+
+    Only parameters the class lists in `parameter_descriptions()` (`lidar_offset_x_m`). The run
+    scripts apply these unless the user set the parameter (-p or a params file).
+    """
     described = getattr(controller_class, "parameter_descriptions", None)
     names = described() if callable(described) else {}
     return {"lidar_offset_x_m": profile.lidar_offset_x} if "lidar_offset_x_m" in names else {}
 
 
-def run_episode(world: World | str, start=None, profile: str | SensorProfile = "ideal", seed: int = 0,
-                duration: float = 600.0, dt: float = 0.05, controller=None,
+def run_episode(world: World | str, start=None, profile: str | SensorProfile = "ideal",
+                seed: int = 0, duration: float = 600.0, dt: float = 0.05, controller=None,
                 controller_factory: Callable[[float], Any] | None = None,
                 record_trajectory: bool = True) -> EpisodeResult:
     """Run a controller in the simulator for `duration` s of simulated time and measure it.
@@ -114,7 +124,8 @@ def run_episode(world: World | str, start=None, profile: str | SensorProfile = "
         controller = controller_factory(sim.dt) if controller_factory is not None else \
             default_controller(sim.dt, prof)
     if callable(getattr(controller, "set_scan_geometry", None)):
-        controller.set_scan_geometry(prof.angle_min, prof.angle_increment, prof.range_min, prof.range_max)
+        controller.set_scan_geometry(prof.angle_min, prof.angle_increment, prof.range_min,
+                                     prof.range_max)
 
     n_steps = int(round(duration / sim.dt))
     positions = np.empty((n_steps + 1, 2))
@@ -151,7 +162,8 @@ def run_episode(world: World | str, start=None, profile: str | SensorProfile = "
     wall_time = time.perf_counter() - wall_start
 
     start_label = start if isinstance(start, str) else (
-        next(iter(world_obj.starts)) if start is None and world_obj.starts else [float(c) for c in sim.start])
+        next(iter(world_obj.starts)) if start is None and world_obj.starts
+        else [float(c) for c in sim.start])
     bundled_name = world_obj.name if _is_bundled(world_obj) else world_obj.source
     return EpisodeResult(
         world=bundled_name, start=start_label, profile=prof.name, seed=int(seed), steps=sim.steps,
@@ -166,7 +178,7 @@ def run_episode(world: World | str, start=None, profile: str | SensorProfile = "
 
 
 def explored_fraction(world: World, positions: np.ndarray) -> float:
-    """Share of the world's free cells whose centre some position passed within cell_size / 2 of."""
+    """Share of the world's free cells whose centre some position passed within cell_size / 2."""
     cells = world.free_cells()
     if len(cells) == 0 or len(positions) == 0:
         return 0.0

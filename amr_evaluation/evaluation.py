@@ -1,7 +1,8 @@
 """Batch evaluation of a controller, the running side: episode specs, grids, config files, a pool.
 
-scripts/evaluate.py is the command line around it; bench.py and tests use it directly. Each episode
-is amr_evaluation.episode.run_episode with the same Simulator and controller classes as the ROS path.
+scripts/evaluate.py is the command line around it; bench.py and tests use it directly. Each
+episode is amr_evaluation.episode.run_episode with the same Simulator and controller classes as
+the ROS path.
 """
 from __future__ import annotations
 
@@ -24,13 +25,13 @@ from amr_common.controller_loader import (
 )
 
 __all__ = [
-    "DEFAULT_CONTROLLER", "ControllerSpecError", "EvaluationError", "EpisodeSpec", "EpisodeOutcome",
-    "parse_name_list", "parse_seeds", "parse_overrides", "expand_grid", "load_config",
-    "load_ros_params_file", "check_controller", "run_episodes",
+    "DEFAULT_CONTROLLER", "ControllerSpecError", "EvaluationError", "EpisodeSpec",
+    "EpisodeOutcome", "parse_name_list", "parse_seeds", "parse_overrides", "expand_grid",
+    "load_config", "load_ros_params_file", "check_controller", "run_episodes",
 ]
 
-CONFIG_KEYS = ("worlds", "starts", "profiles", "seeds", "duration", "dt", "controller", "params_file",
-               "params", "jobs")
+CONFIG_KEYS = ("worlds", "starts", "profiles", "seeds", "duration", "dt", "controller",
+               "params_file", "params", "jobs")
 MAX_EPISODES = 10_000
 
 
@@ -58,11 +59,13 @@ class EpisodeSpec:
         if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
             raise EvaluationError(f"episode duration must be a positive number of seconds, "
                                   f"got {duration!r}")
-        if not (isinstance(self.dt, (int, float)) and math.isfinite(self.dt) and 0 < self.dt <= 1.0):
+        if not (isinstance(self.dt, (int, float)) and math.isfinite(self.dt)
+                and 0 < self.dt <= 1.0):
             raise EvaluationError(f"dt must be in (0, 1] s, got {self.dt!r}")
 
     @property
     def label(self) -> str:
+        """world/start/profile/seed N, for tables and progress lines."""
         return f"{Path(self.world).stem}/{self.start or '-'}/{self.profile}/seed {self.seed}"
 
 
@@ -101,16 +104,19 @@ def parse_seeds(value: str | int | Sequence[Any] | None) -> list[int]:
     for item in items:
         if isinstance(item, bool) or not isinstance(item, (int, str)):
             raise EvaluationError(f"seed {item!r} is not an integer")
-        parts = [str(item)] if isinstance(item, int) else [p.strip() for p in item.split(",") if p.strip()]
+        parts = ([str(item)] if isinstance(item, int)
+                 else [p.strip() for p in item.split(",") if p.strip()])
         for part in parts:
             single = re.fullmatch(r"\d+", part)
             span = re.fullmatch(r"(\d+)\s*-\s*(\d+)", part)
             if single:
                 new = [int(part)]
-            elif span and int(span.group(1)) <= int(span.group(2)) <= int(span.group(1)) + MAX_EPISODES:
+            elif (span and int(span.group(1)) <= int(span.group(2))
+                  <= int(span.group(1)) + MAX_EPISODES):
                 new = list(range(int(span.group(1)), int(span.group(2)) + 1))
             else:
-                raise EvaluationError(f"seed '{part}' is not a non-negative integer or a range like 0-9")
+                raise EvaluationError(f"seed '{part}' is not a non-negative integer or a range "
+                                      f"like 0-9")
             for seed in new:
                 if seed > 2**32 - 1:
                     raise EvaluationError(f"seed {seed} is out of range 0..2^32-1")
@@ -158,8 +164,9 @@ def expand_grid(worlds: str | Sequence[str], starts: str | Sequence[str] = "all"
         else:
             chosen = [s for s in start_names if s in available]
             if not chosen:
-                raise EvaluationError(f"world '{name}' has none of the starts {', '.join(start_names)} "
-                                      f"(its starts: {', '.join(available) or 'none'})")
+                raise EvaluationError(f"world '{name}' has none of the starts "
+                                      f"{', '.join(start_names)} (its starts: "
+                                      f"{', '.join(available) or 'none'})")
         loaded[name] = chosen
     unused = [s for s in start_names if s != "all" and not any(s in v for v in loaded.values())]
     if unused:
@@ -199,17 +206,19 @@ def load_config(path: str | os.PathLike) -> dict[str, Any]:
         raise EvaluationError(f"{path}: 'worlds' is required (a list of names, or 'all')")
     config = dict(raw)
     for key in ("duration", "dt"):
-        if key in config and (isinstance(config[key], bool) or not isinstance(config[key], (int, float))):
+        if key in config and (isinstance(config[key], bool)
+                              or not isinstance(config[key], (int, float))):
             raise EvaluationError(f"{path}: '{key}' must be a number, got {config[key]!r}")
-    if "jobs" in config and (isinstance(config["jobs"], bool) or not isinstance(config["jobs"], int)
-                             or config["jobs"] < 1):
+    if "jobs" in config and (isinstance(config["jobs"], bool)
+                             or not isinstance(config["jobs"], int) or config["jobs"] < 1):
         raise EvaluationError(f"{path}: 'jobs' must be a positive integer, got {config['jobs']!r}")
     params_file = config.get("params_file")
     if params_file is not None:
         if not isinstance(params_file, str):
             raise EvaluationError(f"{path}: 'params_file' must be a path, got {params_file!r}")
         beside = path.parent / params_file  # relative paths are relative to the config file
-        if params_file.lower() != "none" and not Path(params_file).is_absolute() and beside.exists():
+        if (params_file.lower() != "none" and not Path(params_file).is_absolute()
+                and beside.exists()):
             config["params_file"] = str(beside)
     params = config.get("params") or {}
     if not isinstance(params, dict) or not all(isinstance(k, str) for k in params):
@@ -221,7 +230,8 @@ def load_config(path: str | os.PathLike) -> dict[str, Any]:
     return config
 
 
-def load_ros_params_file(path: str | os.PathLike, controller_class: type | None = None) -> dict[str, Any]:
+def load_ros_params_file(path: str | os.PathLike,
+                         controller_class: type | None = None) -> dict[str, Any]:
     """Controller parameters from a ROS 2 params YAML (the file run_sim.py gives the node).
 
     Every node section's `ros__parameters` is merged in file order. With a controller class that
@@ -261,7 +271,8 @@ def check_controller(spec: str, params: Mapping[str, Any] | None, dt: float) -> 
 def _init_worker() -> None:
     # Ctrl-C goes to the whole process group: only the parent handles it (and ends the pool).
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    # Import once per worker: the simulator's numba kernels load (or compile) here, not per episode.
+    # Import once per worker: the simulator's numba kernels load (or compile) here, not per
+    # episode.
     try:
         import amr_evaluation.episode  # noqa: F401
     except Exception:  # noqa: BLE001 - an initializer that raises makes Pool respawn workers forever;
@@ -294,8 +305,8 @@ def run_one(spec: EpisodeSpec) -> EpisodeOutcome:
 
 
 def _context() -> multiprocessing.context.BaseContext:
-    # forkserver, else spawn: no fork of a parent that may hold threads. Workers import the simulator
-    # and its numba kernels once (preload / _init_worker) and then run many episodes.
+    # forkserver, else spawn: no fork of a parent that may hold threads. Workers import the
+    # simulator and its numba kernels once (preload / _init_worker) and then run many episodes.
     methods = multiprocessing.get_all_start_methods()
     if "forkserver" in methods:
         ctx = multiprocessing.get_context("forkserver")
@@ -305,8 +316,9 @@ def _context() -> multiprocessing.context.BaseContext:
 
 
 def run_episodes(specs: Sequence[EpisodeSpec], jobs: int | None = None,
-                 progress: Callable[[int, int, EpisodeOutcome], None] | None = None) -> list[EpisodeOutcome]:
-    """Run all episodes on `jobs` processes (None: all cores; 1: in this process), in spec order."""
+                 progress: Callable[[int, int, EpisodeOutcome], None] | None = None
+                 ) -> list[EpisodeOutcome]:
+    """Run all episodes on `jobs` processes (None: all cores; 1: this process), in spec order."""
     specs = list(specs)
     if not specs:
         return []

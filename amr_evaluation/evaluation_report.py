@@ -1,7 +1,10 @@
-"""Batch evaluation of a controller, the results side: per-episode rows, results.json/.csv files,
-the aligned text table, the pass/fail verdict with its exit code, and a terminal progress bar.
+"""Batch evaluation of a controller, the results side: rows, files, table, verdict, progress.
 
-Rows come from amr_evaluation.evaluation.EpisodeOutcome; scripts/evaluate.py prints and writes them.
+Per-episode rows, results.json/.csv files, the aligned text table, the pass/fail verdict with
+its exit code, and a terminal progress bar.
+
+Rows come from amr_evaluation.evaluation.EpisodeOutcome; scripts/evaluate.py prints and writes
+them.
 """
 from __future__ import annotations
 
@@ -17,7 +20,8 @@ from typing import Any, Iterable, Mapping, Sequence, TextIO
 from amr_evaluation.evaluation import EpisodeOutcome
 
 __all__ = [
-    "RESULT_COLUMNS", "outcome_row", "write_json", "write_csv", "format_table", "verdict", "ProgressBar",
+    "RESULT_COLUMNS", "outcome_row", "write_json", "write_csv", "format_table", "verdict",
+    "ProgressBar",
 ]
 
 RESULT_COLUMNS = ("world", "start", "profile", "seed", "sim_time_s", "collisions",
@@ -38,8 +42,10 @@ def _finite_or_none(value: Any) -> Any:
 def outcome_row(outcome: EpisodeOutcome) -> dict[str, Any]:
     """The flat per-episode metrics (JSON-safe: non-finite numbers become None)."""
     spec, result = outcome.spec, outcome.result
-    row: dict[str, Any] = {"world": Path(spec.world).stem if spec.world.endswith((".yaml", ".yml", ".json"))
-                           else spec.world, "start": spec.start, "profile": spec.profile, "seed": spec.seed}
+    world = (Path(spec.world).stem if spec.world.endswith((".yaml", ".yml", ".json"))
+             else spec.world)
+    row: dict[str, Any] = {"world": world, "start": spec.start, "profile": spec.profile,
+                           "seed": spec.seed}
     metrics = _result_metrics(result) if result is not None else {}
     for column in RESULT_COLUMNS[4:-2]:
         row[column] = _finite_or_none(metrics.get(column))
@@ -53,7 +59,8 @@ def _result_metrics(result: Any) -> dict[str, Any]:
     return {column: getattr(result, column, None) for column in RESULT_COLUMNS[4:-2]}
 
 
-def write_json(path: str | os.PathLike, outcomes: Sequence[EpisodeOutcome], meta: Mapping[str, Any]) -> Path:
+def write_json(path: str | os.PathLike, outcomes: Sequence[EpisodeOutcome],
+               meta: Mapping[str, Any]) -> Path:
     """results.json: {"meta": {...}, "episodes": [row, ...]} (strict JSON, no NaN)."""
     path = Path(path)
     payload = {"meta": dict(meta), "episodes": [outcome_row(o) for o in outcomes]}
@@ -75,7 +82,8 @@ def write_csv(path: str | os.PathLike, outcomes: Sequence[EpisodeOutcome]) -> Pa
 _TABLE = (  # header, row key, formatter
     ("world", "world", str), ("start", "start", lambda v: v or "-"), ("profile", "profile", str),
     ("seed", "seed", str), ("sim s", "sim_time_s", lambda v: f"{v:.0f}"),
-    ("collisions", "collisions", str), ("1st coll. s", "first_collision_time_s", lambda v: f"{v:.1f}"),
+    ("collisions", "collisions", str),
+    ("1st coll. s", "first_collision_time_s", lambda v: f"{v:.1f}"),
     ("min clear. cm", "min_clearance_m", lambda v: f"{v * 100:.1f}"),
     ("distance m", "distance_m", lambda v: f"{v:.1f}"), ("laps", "laps", str),
     ("explored %", "explored_fraction", lambda v: f"{v * 100:.0f}"),
@@ -97,8 +105,8 @@ def format_table(rows: Iterable[Mapping[str, Any]]) -> str:
             line.append("-" if value is None else fmt(value))
         cells.append(line)
         if row.get("error"):
-            errors.append(f"  {row['world']}/{row['start'] or '-'}/{row['profile']}/seed {row['seed']}: "
-                          f"ERROR {row['error']}")
+            errors.append(f"  {row['world']}/{row['start'] or '-'}/{row['profile']}/seed "
+                          f"{row['seed']}: ERROR {row['error']}")
     widths = [max(len(r[i]) for r in cells) for i in range(len(_TABLE))]
     lines = []
     for r in cells:
@@ -135,7 +143,7 @@ def _short(row: Mapping[str, Any]) -> str:
 
 
 class ProgressBar:
-    """A one-line \\r progress bar, drawn only when the stream is a terminal."""
+    """A one-line progress bar redrawn in place, drawn only when the stream is a terminal."""
 
     def __init__(self, total: int, stream: TextIO | None = None, width: int = 30) -> None:
         self.stream = stream if stream is not None else sys.stderr
@@ -144,17 +152,19 @@ class ProgressBar:
         self.start = time.monotonic()
 
     def __call__(self, done: int, total: int, outcome: EpisodeOutcome | None = None) -> None:
+        """Redraw the bar for `done` of `total` episodes (the run_episodes progress hook)."""
         if not self.enabled:
             return
         fraction = min(done / max(total, 1), 1.0)
         filled = int(round(fraction * self.width))
         elapsed = time.monotonic() - self.start
         eta = elapsed * (total - done) / done if done else 0.0
-        self.stream.write(f"\r[{'#' * filled}{'-' * (self.width - filled)}] {done}/{total} episodes"
-                          f"  {elapsed:5.0f} s elapsed, ~{eta:4.0f} s left ")
+        self.stream.write(f"\r[{'#' * filled}{'-' * (self.width - filled)}] {done}/{total} "
+                          f"episodes  {elapsed:5.0f} s elapsed, ~{eta:4.0f} s left ")
         self.stream.flush()
 
     def finish(self) -> None:
+        """Erase the bar."""
         if self.enabled:
             self.stream.write("\r" + " " * (self.width + 60) + "\r")
             self.stream.flush()

@@ -25,7 +25,8 @@ def draw_world(ax, world: World, show_starts: bool = True, show_grid: bool = Fal
     """Walls (and optionally named starts, named goals (default: with the starts) and the
     corridor grid) on a matplotlib Axes."""
     segs = world.segments.reshape(-1, 2, 2)
-    ax.add_collection(LineCollection(segs, colors=_WALL_COLOUR, linewidths=2.0, capstyle="round", zorder=3))
+    ax.add_collection(LineCollection(segs, colors=_WALL_COLOUR, linewidths=2.0, capstyle="round",
+                                     zorder=3))
     for hole in world.holes:
         ax.fill(hole[:, 0], hole[:, 1], color="#bbbbbb", zorder=2)
     xmin, ymin, xmax, ymax = world.bounds
@@ -85,7 +86,10 @@ def plot_world(world: World | str, path: str | Path) -> Path:
 
 
 def _episode_parts(trajectory: Any, collision_points: Iterable) -> tuple[np.ndarray, list, Any]:
-    """(trajectory array (K, 4), collision points, result or None) from a list or an EpisodeResult."""
+    """(trajectory array (K, 4), collision points, result or None).
+
+    From a list or an EpisodeResult.
+    """
     result = None
     if hasattr(trajectory, "trajectory"):  # an EpisodeResult
         result = trajectory
@@ -107,7 +111,8 @@ def draw_episode(ax, world: World, trajectory: Any, collision_points: Iterable =
     """Walls, the trajectory coloured by time, start/end markers and collisions on an Axes;
     with navigation, the planned path (dashed) and the goal (a star).
 
-    Returns the figures shown (collisions, min clearance, distance)."""
+    Returns the figures shown (collisions, min clearance, distance).
+    """
     traj, points, result = _episode_parts(trajectory, collision_points)
     draw_world(ax, world, show_starts=False)
     figures = _figures(world, traj, points, result)
@@ -131,10 +136,11 @@ def draw_episode(ax, world: World, trajectory: Any, collision_points: Iterable =
         _draw_robot(ax, traj[-1, 1], traj[-1, 2], traj[-1, 3], colour="tab:blue", label="end")
     if points:
         pts = np.asarray(points, dtype=np.float64)
-        ax.scatter(pts[:, 0], pts[:, 1], marker="x", s=30 if small else 70, linewidths=2, color="red",
-                   zorder=7, label=f"collision ({len(pts)})")
+        ax.scatter(pts[:, 0], pts[:, 1], marker="x", s=30 if small else 70, linewidths=2,
+                   color="red", zorder=7, label=f"collision ({len(pts)})")
     if not small:
-        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=3, fontsize=8, frameon=False)
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=3, fontsize=8,
+                  frameon=False)
     return figures
 
 
@@ -158,8 +164,9 @@ def _title(world: World, result, figures: dict[str, float], title: str | None) -
                 "(" + ", ".join(f"{c:.2f}" for c in result.start) + ")"
             head = f"{world.name} / start {start} / profile {result.profile}"
         title = head
-    return (f"{title}\ncollisions {figures['collisions']}, min clearance {figures['min_clearance']:.3f} m, "
-            f"distance {figures['distance']:.2f} m in {figures['time']:.0f} s")
+    return (f"{title}\ncollisions {figures['collisions']}, min clearance "
+            f"{figures['min_clearance']:.3f} m, distance {figures['distance']:.2f} m in "
+            f"{figures['time']:.0f} s")
 
 
 def plot_episode(world: World | str, trajectory: Any, collision_points: Iterable = (),
@@ -197,9 +204,11 @@ def plot_episodes_sheet(results: Sequence[Any], path: str | Path, columns: int |
         ax = fig.add_subplot(rows, columns, i + 1)
         world = worlds.setdefault(res.world, World.load(res.world))
         figures = draw_episode(ax, world, res, colourbar=False, small=True)
-        start = res.start if isinstance(res.start, str) else "(" + ", ".join(f"{c:.1f}" for c in res.start) + ")"
-        ax.set_title(f"{res.world}/{start}/{res.profile} s{res.seed}\ncoll {figures['collisions']}, "
-                     f"clr {figures['min_clearance']:.3f} m, {figures['distance']:.1f} m", fontsize=7)
+        start = (res.start if isinstance(res.start, str)
+                 else "(" + ", ".join(f"{c:.1f}" for c in res.start) + ")")
+        ax.set_title(f"{res.world}/{start}/{res.profile} s{res.seed}\n"
+                     f"coll {figures['collisions']}, clr {figures['min_clearance']:.3f} m, "
+                     f"{figures['distance']:.1f} m", fontsize=7)
         ax.tick_params(labelsize=6)
         ax.set_xlabel("x [m]", fontsize=6)
         ax.set_ylabel("y [m]", fontsize=6)

@@ -19,7 +19,8 @@ class Lidar:
     """
 
     def __init__(self, segments: np.ndarray, rays: int, angle_min: float, angle_increment: float,
-                 range_min: float, range_max: float, no_return: float, use_numba: bool = True) -> None:
+                 range_min: float, range_max: float, no_return: float,
+                 use_numba: bool = True) -> None:
         self.segments = np.ascontiguousarray(segments, dtype=np.float64)
         angles = angle_min + angle_increment * np.arange(rays)
         self.base_cos = np.cos(angles)
@@ -32,9 +33,12 @@ class Lidar:
 
     @property
     def rays(self) -> int:
+        """Number of rays per scan."""
         return self.base_cos.shape[0]
 
-    def scan(self, x: float, y: float, theta: float, noise: np.ndarray | None = None) -> np.ndarray:
+    def scan(self, x: float, y: float, theta: float,
+             noise: np.ndarray | None = None) -> np.ndarray:
+        """Ranges from the pose (x, y, theta), plus `noise` (one value per ray) if given."""
         out = np.empty(self.rays)
         self._kernel(self.segments, float(x), float(y), float(theta), self.base_cos, self.base_sin,
                      self.range_min, self.range_max, self.no_return,

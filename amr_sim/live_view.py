@@ -44,15 +44,18 @@ class LiveView:
                  trail_points: int = 50_000) -> None:
         segments = np.asarray(world.segments, dtype=float).reshape(-1, 4)
         if segments.size == 0 or not np.all(np.isfinite(segments)):
-            raise ValueError(f"world {getattr(world, 'name', '?')!r} has no finite wall segments to draw")
+            raise ValueError(f"world {getattr(world, 'name', '?')!r} has no finite wall "
+                             f"segments to draw")
         if not (math.isfinite(max_fps) and max_fps > 0):
             raise ValueError(f"max_fps must be a positive number, got {max_fps!r}")
         xmin, ymin, xmax, ymax = (float(v) for v in world.bounds)
-        self._origin = (xmin - MARGIN_M, ymax + MARGIN_M)  # world point at the map's top-left pixel
+        # The world point at the map's top-left pixel.
+        self._origin = (xmin - MARGIN_M, ymax + MARGIN_M)
         width_m = xmax - xmin + 2 * MARGIN_M
         height_m = ymax - ymin + 2 * MARGIN_M
         if scale_px_per_m is None:
-            scale_px_per_m = min(max_window_px[0] / width_m, (max_window_px[1] - TEXT_BAR_PX) / height_m)
+            scale_px_per_m = min(max_window_px[0] / width_m,
+                                 (max_window_px[1] - TEXT_BAR_PX) / height_m)
         if not (math.isfinite(scale_px_per_m) and 1.0 <= scale_px_per_m <= 2000.0):
             raise ValueError(f"scale must be 1-2000 px/m, got {scale_px_per_m!r}")
         self.scale = float(scale_px_per_m)
@@ -158,13 +161,15 @@ class LiveView:
         self._pg.draw.rect(surface, TEXT_BAR, (0, 0, self.size[0], TEXT_BAR_PX))
         width = max(2, int(round(0.02 * self.scale)))  # walls drawn ~2 cm thick, at least 2 px
         for x1, y1, x2, y2 in segments:
-            self._pg.draw.line(surface, WALL, self.to_pixels(x1, y1), self.to_pixels(x2, y2), width)
+            self._pg.draw.line(surface, WALL, self.to_pixels(x1, y1), self.to_pixels(x2, y2),
+                               width)
         return surface
 
     def _handle_events(self) -> bool:
         pg = self._pg
         for event in pg.event.get():
-            if event.type == pg.QUIT or (event.type == pg.KEYDOWN and event.key in (pg.K_ESCAPE, pg.K_q)):
+            if event.type == pg.QUIT or (event.type == pg.KEYDOWN
+                                         and event.key in (pg.K_ESCAPE, pg.K_q)):
                 self.close()
                 return False
         return True
@@ -182,7 +187,8 @@ class LiveView:
             centre = self.to_pixels(x, y)
             radius = max(3, int(round(ROBOT_RADIUS * self.scale)))
             pg.draw.circle(screen, ROBOT, centre, radius)
-            tip = self.to_pixels(x + ROBOT_RADIUS * math.cos(theta), y + ROBOT_RADIUS * math.sin(theta))
+            tip = self.to_pixels(x + ROBOT_RADIUS * math.cos(theta),
+                                 y + ROBOT_RADIUS * math.sin(theta))
             pg.draw.line(screen, HEADING, centre, tip, max(2, radius // 4))
         for cx, cy in list(getattr(sim, "collision_points", []) or [])[-200:]:
             px, py = self.to_pixels(cx, cy)
@@ -200,7 +206,8 @@ class LiveView:
         range_min = float(getattr(profile, "range_min", 0.0))
         range_max = float(getattr(profile, "range_max", math.inf))
         with np.errstate(invalid="ignore"):
-            valid = np.isfinite(ranges) & (ranges >= range_min) & (ranges <= range_max) & (ranges > 0)
+            valid = (np.isfinite(ranges) & (ranges >= range_min) & (ranges <= range_max)
+                     & (ranges > 0))
         index = np.nonzero(valid)[0]
         if index.size == 0:
             return
@@ -219,8 +226,8 @@ class LiveView:
         zigzag[0::2] = origin
         zigzag[1::2, 0], zigzag[1::2, 1] = cols[::stride], rows[::stride]
         self._pg.draw.lines(self.screen, RAY, False, zigzag.tolist(), 1)
-        self.screen.blits([(self._hit_dot, (c - 2, r - 2)) for c, r in zip(cols.tolist(), rows.tolist())],
-                          doreturn=False)
+        self.screen.blits([(self._hit_dot, (c - 2, r - 2))
+                           for c, r in zip(cols.tolist(), rows.tolist())], doreturn=False)
 
     def _draw_text(self, sim: Any, now: float) -> None:
         if self._font is None:
@@ -229,8 +236,10 @@ class LiveView:
         sim_elapsed = float(sim.time) - self._sim_start
         factor = f"{sim_elapsed / elapsed:.1f}x" if elapsed > 0.2 else "-"
         clearance = getattr(sim, "min_clearance", None)
-        clearance_text = (f"   min clearance {round(clearance * 100, 1) + 0.0:.1f} cm"  # no "-0.0"
-                          if isinstance(clearance, (int, float)) and math.isfinite(clearance) else "")
+        finite = isinstance(clearance, (int, float)) and math.isfinite(clearance)
+        # + 0.0: no "-0.0"
+        clearance_text = (f"   min clearance {round(clearance * 100, 1) + 0.0:.1f} cm"
+                          if finite else "")
         text = (f"t = {float(sim.time):7.1f} s   real-time factor {factor}   "
                 f"collisions {int(getattr(sim, 'collisions', 0))}{clearance_text}")
         self.screen.blit(self._font.render(text, True, TEXT), (8, 7))

@@ -17,6 +17,8 @@ from amr_common.robot import LIDAR_OFFSET_X, MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED
 
 @dataclass(frozen=True)
 class SensorProfile:
+    """What the simulated robot's sensors and command path look like (ideal or turtlebot3)."""
+
     name: str
     scan_rays: int
     angle_min: float  # rad, relative to the robot heading; rays go counter-clockwise
@@ -40,6 +42,7 @@ class SensorProfile:
 
     @property
     def angle_max(self) -> float:
+        """Angle of the last ray, rad."""
         return self.angle_min + (self.scan_rays - 1) * self.angle_increment
 
 
@@ -54,7 +57,7 @@ TURTLEBOT3 = SensorProfile(
     range_min=0.12, range_max=3.5, no_return=0.0, range_noise_sigma=0.01,
     scan_period=0.2, odom_period=0.05, odom_topic="/odom", command_resolution=0.01,
     max_linear=MAX_LINEAR_SPEED, max_angular=MAX_ANGULAR_SPEED, clamp_commands=True,
-    lidar_offset_x=LIDAR_OFFSET_X)  # base_scan at (-0.032, 0, 0.172) from base_link (turtlebot3.md)
+    lidar_offset_x=LIDAR_OFFSET_X)  # base_scan at (-0.032, 0, 0.172) from base_link
 
 PROFILES: dict[str, SensorProfile] = {p.name: p for p in (IDEAL, TURTLEBOT3)}
 

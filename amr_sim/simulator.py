@@ -106,7 +106,8 @@ class Simulator:
             wall.collision_type = _WALL_TYPE
             wall.friction = 0.0
             space.add(wall)
-        body = pymunk.Body(robot.MASS, pymunk.moment_for_circle(robot.MASS, 0.0, robot.ROBOT_RADIUS))
+        body = pymunk.Body(robot.MASS,
+                           pymunk.moment_for_circle(robot.MASS, 0.0, robot.ROBOT_RADIUS))
         body.position = (x, y)
         body.angle = theta
         shape = pymunk.Circle(body, robot.ROBOT_RADIUS)
@@ -114,7 +115,8 @@ class Simulator:
         shape.friction = 0.0
         shape.elasticity = 0.0
         space.add(body, shape)
-        space.on_collision(_ROBOT_TYPE, _WALL_TYPE, begin=self._on_begin, separate=self._on_separate)
+        space.on_collision(_ROBOT_TYPE, _WALL_TYPE, begin=self._on_begin,
+                           separate=self._on_separate)
         self._space, self._body, self._shape = space, body, shape  # shapes hold weak body refs
 
         p = self._profile
@@ -170,7 +172,8 @@ class Simulator:
         chord_speed = v * robot.sinc_half(w * dt)  # exact unicycle arc: its chord, mid heading
         mid = th0 + 0.5 * w * dt
         vx, vy = _constrain_velocity(self._segments, x0, y0, chord_speed * math.cos(mid),
-                                     chord_speed * math.sin(mid), dt, _ROBOT_RADIUS, ALLOWED_PENETRATION)
+                                     chord_speed * math.sin(mid), dt, _ROBOT_RADIUS,
+                                     ALLOWED_PENETRATION)
         body = self._body
         body.velocity = (vx, vy)
         body.angular_velocity = w
@@ -218,7 +221,8 @@ class Simulator:
 
     def _new_scan(self) -> np.ndarray:
         p = self._profile
-        noise = self._rng.standard_normal(p.scan_rays) * p.range_noise_sigma if p.range_noise_sigma > 0 else None
+        noise = (self._rng.standard_normal(p.scan_rays) * p.range_noise_sigma
+                 if p.range_noise_sigma > 0 else None)
         x, y = self.lidar_position
         return self._lidar.scan(x, y, self._theta, noise)
 
@@ -237,7 +241,8 @@ class Simulator:
             v, w = math.nan, math.nan
         if math.isfinite(v) and math.isfinite(w):
             # Absurd magnitudes are saturated later; clipping keeps v * 100 etc. finite.
-            return min(max(v, -_COMMAND_CLIP), _COMMAND_CLIP), min(max(w, -_COMMAND_CLIP), _COMMAND_CLIP)
+            return (min(max(v, -_COMMAND_CLIP), _COMMAND_CLIP),
+                    min(max(w, -_COMMAND_CLIP), _COMMAND_CLIP))
         self._bad_commands += 1
         now = _time.monotonic()
         if now - self._last_warning >= _WARN_INTERVAL:
@@ -267,7 +272,10 @@ class Simulator:
 
     @property
     def odometry_pose(self) -> tuple[float, float, float]:
-        """Pose dead-reckoned from the wheel encoders in the odom frame (the start pose is (0, 0, 0))."""
+        """Pose dead-reckoned from the wheel encoders in the odom frame.
+
+        The start pose is (0, 0, 0).
+        """
         return (self._odom[0], self._odom[1], wrap_angle(self._odom[2]))
 
     @property
@@ -282,7 +290,10 @@ class Simulator:
 
     @property
     def lidar(self) -> Lidar:
-        """The scanner: any object with scan(x, y, theta, noise) -> ranges (replaceable, e.g. by benchmarks)."""
+        """The scanner: any object with scan(x, y, theta, noise) -> ranges.
+
+        Replaceable, e.g. by benchmarks.
+        """
         return self._lidar
 
     @lidar.setter
@@ -296,10 +307,12 @@ class Simulator:
 
     @property
     def robot_shape(self) -> pymunk.Circle:
+        """The robot's pymunk circle."""
         return self._shape
 
     @property
     def time(self) -> float:
+        """Simulated time, s (steps * dt)."""
         return self._steps * self._dt
 
     @property
@@ -309,22 +322,27 @@ class Simulator:
 
     @property
     def steps(self) -> int:
+        """Steps taken since the start."""
         return self._steps
 
     @property
     def dt(self) -> float:
+        """Step length, s."""
         return self._dt
 
     @property
     def profile(self) -> SensorProfile:
+        """The sensor profile (ideal or turtlebot3)."""
         return self._profile
 
     @property
     def world(self) -> World:
+        """The world being simulated."""
         return self._world
 
     @property
     def start(self) -> tuple[float, float, float]:
+        """The start pose (x, y, theta) in the world frame."""
         return self._start
 
     @property
@@ -344,6 +362,7 @@ class Simulator:
 
     @property
     def in_contact(self) -> bool:
+        """True while the robot touches a wall."""
         return self._active_contacts > 0
 
     @property

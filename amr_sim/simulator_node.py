@@ -61,12 +61,22 @@ def true_velocity(before: tuple, after: tuple, dt: float) -> tuple[float, float]
 
 
 class SimulatorNode(LifecycleNode):
+    """The amr_sim Simulator behind the course's topics, as a lifecycle node.
+
+    __init__ declares the parameters; configure loads the world, builds the Simulator and
+    creates the publishers and the /cmd_vel (+ /pose) inputs; activate publishes a first
+    measurement (the lockstep loop starts) or starts the real-time timer; deactivate pauses;
+    cleanup and shutdown release everything. It commands no robot, so nothing is sent on the
+    way down: the simulated robot just stops being stepped.
+    """
+
     def __init__(self, node_name: str = "amr_simulator", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
         for name, (default, type_, description) in PARAMETERS.items():
             if not self.has_parameter(name):
                 self.declare_parameter(name, default, ParameterDescriptor(
-                    description=description, type=type_, dynamic_typing=name in NUMERIC_PARAMETERS))
+                    description=description, type=type_,
+                    dynamic_typing=name in NUMERIC_PARAMETERS))
         # Run scripts append callables here; each is called with the simulator after a step.
         self.on_step: list[Callable[[Any], None]] = []
         self._reset()
@@ -102,6 +112,14 @@ class SimulatorNode(LifecycleNode):
         return check_parameters({name: self.get_parameter(name).value for name in PARAMETERS})
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Check the parameters, load the world, build the Simulator and create the topics.
+
+        Creates the lifecycle publishers /clock, the odometry topic (/odometry in lockstep,
+        the profile's topic in real time), /scan and, with publish_ground_truth,
+        /ground_truth; and the /cmd_vel subscription (+ /pose with enable_localization,
+        synchronized with the command in lockstep). A bad parameter, world or start returns
+        FAILURE with the reason logged, before any topic is created.
+        """
         self._reset()
         try:
             p = self._read_parameters()
@@ -184,6 +202,11 @@ class SimulatorNode(LifecycleNode):
         self._reset()
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Enable the publishers and start stepping.
+
+        Publishes the current measurement (it starts a lockstep loop); in real time creates
+        the steady-clock timer that steps every dt. A finished run stays finished.
+        """
         result = super().on_activate(state)  # enables the lifecycle publishers
         self._active = True
         if self._wall_start is None:
@@ -209,15 +232,21 @@ class SimulatorNode(LifecycleNode):
             self._timer = None
 
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Pause: destroy the real-time timer, ignore commands, disable the publishers.
+
+        The simulator keeps its state, so a later activate resumes the same run.
+        """
         self._active = False
         self._stop_timer()
         return super().on_deactivate(state)
 
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Release the timer, publishers, subscriptions and the Simulator (the run ends)."""
         self._destroy_all()
         return TransitionCallbackReturn.SUCCESS
 
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """From any state: release everything as in cleanup; sends nothing."""
         self._destroy_all()
         return TransitionCallbackReturn.SUCCESS
 

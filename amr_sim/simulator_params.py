@@ -1,5 +1,7 @@
-"""The `amr_simulator` node's parameters: names, defaults, types, descriptions, and their
-checking (plain Python: rcl_interfaces' ParameterType constants only, no rclpy)."""
+"""The `amr_simulator` node's parameters: names, defaults, types, descriptions and checks.
+
+Plain Python: rcl_interfaces' ParameterType constants only, no rclpy.
+"""
 from __future__ import annotations
 
 import math
@@ -66,8 +68,11 @@ def parse_start(text: str) -> str | tuple[float, float, float] | None:
 
 
 def check_parameters(values: dict[str, Any]) -> dict[str, Any]:
-    """The node's parameter values (name -> value as declared), checked and normalised (floats,
-    goal as a tuple or None, start parsed); raises ValueError naming every bad one."""
+    """The node's parameter values (name -> value as declared), checked and normalised.
+
+    Floats, the goal as a tuple or None, the start parsed; raises ValueError naming every bad
+    one.
+    """
     p = dict(values)
     problems = []
 

@@ -47,6 +47,14 @@ def _as_float(value: Any) -> float | None:
 
 
 class OdometryNode(LifecycleNode):
+    """The real robot's /odom (pose only) in, /odometry (pose + estimated twist) out.
+
+    __init__ declares the parameters; configure creates the VelocityEstimator, the output
+    lifecycle publisher and the input subscription; activate starts republishing;
+    cleanup and shutdown release them. The node commands nothing, so nothing is sent on the
+    way down: /odometry just stops, and the wall follower's data timeout commands zero.
+    """
+
     def __init__(self, node_name: str = "amr_odometry", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
         for name, (default, description) in _PARAMETERS.items():
@@ -62,6 +70,12 @@ class OdometryNode(LifecycleNode):
 
     # --- lifecycle -------------------------------------------------------------------------
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Check the parameters, then create the estimator, publisher and subscription.
+
+        A bad value (max_gap, smoothing_time_constant, empty or equal topic names) or a topic
+        rclpy rejects returns FAILURE with the reason logged; anything already created is
+        released again.
+        """
         p = {name: self.get_parameter(name).value for name in _PARAMETERS}
         problems = []
         max_gap = _as_float(p["max_gap"])
@@ -95,19 +109,23 @@ class OdometryNode(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Reset the estimator and enable the publisher: /odom is republished from now on."""
         self.estimator.reset()  # poses seen before an inactive period are stale
         self._active = True
         return super().on_activate(state)
 
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Ignore /odom and disable the publisher; everything stays for a later activate."""
         self._active = False
         return super().on_deactivate(state)
 
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Release the subscription, the publisher and the estimator."""
         self._release()
         return TransitionCallbackReturn.SUCCESS
 
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """From any state: stop republishing and release as in cleanup; sends nothing."""
         self._active = False
         self._release()
         return TransitionCallbackReturn.SUCCESS

@@ -33,8 +33,9 @@ from dataclasses import dataclass
 from amr_common.geometry import quaternion_to_yaw, wrap_angle
 
 
-# Below this norm a quaternion carries no orientation (all-zero default messages).
 class Status(enum.Enum):
+    """What one update did; the value is the human-readable reason."""
+
     OK = "ok"
     FIRST = "first sample, nothing to differentiate yet"
     DUPLICATE = "duplicate stamp (dt == 0), skipped"
@@ -54,6 +55,7 @@ class VelocityEstimate:
 
     @property
     def ok(self) -> bool:
+        """True when v and w were estimated."""
         return self.status is Status.OK
 
 

@@ -171,8 +171,11 @@ CYCLES, SEGMENT = 12, 500   # the default run: 12 turns of 500 loops per graph
 
 
 def measure(cycles: int = CYCLES, segment: int = SEGMENT, warm_up: int = 300) -> dict:
-    """Loops/s of every graph over `cycles` round-robin segments of `segment` loops each, and
-    each lockstep graph's ratio to the ping-pong (total, and min/max over the cycles)."""
+    """Loops/s of every graph, and each lockstep graph's ratio to the ping-pong.
+
+    Over `cycles` round-robin segments of `segment` loops each; ratios in total and min/max
+    over the cycles.
+    """
     graphs = {name: make() for name, make in GRAPHS.items()}
     try:
         for graph in graphs.values():

@@ -41,7 +41,7 @@ WORLD, START = "lab02", "outer"
 
 
 class PymunkLidar:
-    """The reference scanner: one space.segment_query_first per ray (as a naive pymunk user would)."""
+    """The reference scanner: one space.segment_query_first per ray (a naive pymunk user's)."""
 
     def __init__(self, sim: Simulator) -> None:
         p = sim.profile
@@ -75,7 +75,7 @@ def commands(n: int) -> list[tuple[float, float]]:
 
 
 def time_steps(profile, steps: int, repeats: int, scanner: str = "numba") -> tuple[float, float]:
-    """Best (highest) steps per CPU second and per wall second over `repeats` runs of `steps` steps."""
+    """Best (highest) steps per CPU second and per wall second over `repeats` runs of `steps`."""
     cmds = [(float(v), float(w)) for v, w in commands(steps)]
     best_cpu = best_wall = 0.0
     for _ in range(repeats):
@@ -112,7 +112,8 @@ def main(steps: int = 20_000, repeats: int = 3, verbose: bool = True) -> dict:
     core, core_wall = time_steps(every_step, steps, repeats)
     configured, configured_wall = time_steps(TURTLEBOT3, steps, repeats)
     numpy_ref, numpy_wall = time_steps(every_step, max(200, steps // 20), repeats, scanner="numpy")
-    pymunk_ref, pymunk_wall = time_steps(every_step, max(100, steps // 100), repeats, scanner="pymunk")
+    pymunk_ref, pymunk_wall = time_steps(every_step, max(100, steps // 100), repeats,
+                                         scanner="pymunk")
 
     sim = Simulator(WORLD, start=START, profile=every_step)
     p = sim.profile
@@ -120,7 +121,8 @@ def main(steps: int = 20_000, repeats: int = 3, verbose: bool = True) -> dict:
     numpy_lidar = Lidar(sim.world.segments, p.scan_rays, p.angle_min, p.angle_increment,
                         p.range_min, p.range_max, p.no_return, use_numba=False)
     pymunk_lidar = PymunkLidar(sim)
-    agree = float(np.nanmax(np.abs(pymunk_lidar.scan(1.0, -1.0, 0.3) - numba_lidar.scan(1.0, -1.0, 0.3))))
+    agree = float(np.nanmax(np.abs(pymunk_lidar.scan(1.0, -1.0, 0.3)
+                                   - numba_lidar.scan(1.0, -1.0, 0.3))))
 
     result = {
         "world": WORLD,
@@ -153,21 +155,28 @@ def main(steps: int = 20_000, repeats: int = 3, verbose: bool = True) -> dict:
 
 
 def _print(r: dict) -> None:
-    print(f"amr_sim core step on {r['world']} ({r['segments']} wall segments, {r['rays']}-ray scan "
-          f"every step, dt {r['dt']} s; load average {r['load_average_1min']:.1f} on {os.cpu_count()} CPUs):")
+    print(f"amr_sim core step on {r['world']} ({r['segments']} wall segments, "
+          f"{r['rays']}-ray scan every step, dt {r['dt']} s; load average "
+          f"{r['load_average_1min']:.1f} on {os.cpu_count()} CPUs):")
     print("                            steps/CPU-s  steps/wall-s")
-    print(f"  numba scan (amr_sim)      {r['core_steps_per_s']:>11,.0f} {r['core_steps_per_wall_s']:>12,.0f}"
-          f"   {r['core_us_per_step']:.1f} CPU-us/step = {r['core_real_time_factor']:,.0f}x real time")
-    print(f"  numpy matrix scan         {r['numpy_scan_steps_per_s']:>11,.0f} {r['numpy_scan_steps_per_wall_s']:>12,.0f}"
+    print(f"  numba scan (amr_sim)      {r['core_steps_per_s']:>11,.0f} "
+          f"{r['core_steps_per_wall_s']:>12,.0f}"
+          f"   {r['core_us_per_step']:.1f} CPU-us/step = "
+          f"{r['core_real_time_factor']:,.0f}x real time")
+    print(f"  numpy matrix scan         {r['numpy_scan_steps_per_s']:>11,.0f} "
+          f"{r['numpy_scan_steps_per_wall_s']:>12,.0f}"
           f"   -> amr_sim is {r['speedup_vs_numpy']:.1f}x faster")
-    print(f"  pymunk per-ray queries    {r['pymunk_scan_steps_per_s']:>11,.0f} {r['pymunk_scan_steps_per_wall_s']:>12,.0f}"
+    print(f"  pymunk per-ray queries    {r['pymunk_scan_steps_per_s']:>11,.0f} "
+          f"{r['pymunk_scan_steps_per_wall_s']:>12,.0f}"
           f"   -> amr_sim is {r['speedup_vs_pymunk']:.1f}x faster")
-    print(f"  turtlebot3 profile as configured (scan at 5 Hz): {r['turtlebot3_profile_steps_per_s']:,.0f} "
-          f"steps/CPU-s ({r['turtlebot3_profile_steps_per_wall_s']:,.0f}/wall-s) = "
+    print(f"  turtlebot3 profile as configured (scan at 5 Hz): "
+          f"{r['turtlebot3_profile_steps_per_s']:,.0f} steps/CPU-s "
+          f"({r['turtlebot3_profile_steps_per_wall_s']:,.0f}/wall-s) = "
           f"{r['turtlebot3_profile_real_time_factor']:,.0f}x real time")
     s = r["scan_us"]
-    print(f"  one scan (CPU): numba {s['numba']:.1f} us, numpy {s['numpy']:.0f} us, pymunk {s['pymunk']:.0f} us; "
-          f"pymunk and numba agree to {r['scan_max_abs_difference_pymunk_vs_numba_m']:.1e} m")
+    print(f"  one scan (CPU): numba {s['numba']:.1f} us, numpy {s['numpy']:.0f} us, "
+          f"pymunk {s['pymunk']:.0f} us; pymunk and numba agree to "
+          f"{r['scan_max_abs_difference_pymunk_vs_numba_m']:.1e} m")
     verdict = "meets" if r["meets_target"] else "MISSES"
     print(f"  target {r['target_steps_per_s']:,} steps/s: {verdict}")
 

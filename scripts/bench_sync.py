@@ -12,7 +12,7 @@ Workloads, queue_size 10, slop 50 ms:
             tuples per arrival).
 Rows: ours through the public API (PointStamped messages, header parsing, lock), our pure
 matcher (amr_common.time_matching), and the reference search written out literally (the
-oracle of tests/test_time_matching.py) on the same arrivals, in the same run; ratio = reference /
+oracle of tests/sync_reference.py) on the same arrivals, in the same run; ratio = reference /
 ours (pure matcher against the equally pure reference).
 """
 from __future__ import annotations
@@ -76,7 +76,7 @@ def measure(num_inputs: int, arrivals: list[tuple[int, int]], repeats: int = 5) 
 
     from amr_common import time_matching
     from amr_common.message_filters import ApproximateTimeSynchronizer, SimpleFilter
-    from tests.test_time_matching import ReferenceApproximateSync
+    from tests.sync_reference import ReferenceApproximateSync
 
     messages = []
     for _, stamp in arrivals:

@@ -2,8 +2,8 @@
 """Score a controller on many episodes at once: worlds x starts x profiles x seeds, in parallel.
 
 Each episode runs headless with the same Simulator and controller class as the ROS path
-(amr_evaluation.episode.run_episode). Writes results.json, results.csv and sheet.png (every episode's
-trajectory) to --out, prints a table and a one-line verdict.
+(amr_evaluation.episode.run_episode). Writes results.json, results.csv and sheet.png (every
+episode's trajectory) to --out, prints a table and a one-line verdict.
 Exit code: 0 no collision, 1 some episode collided, 2 bad options, 3 some episode failed to run.
 
 Examples:
@@ -68,7 +68,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         "0,1,2 or 0-9 (default 0)")
     parser.add_argument("--duration", type=float, default=None,
                         help="simulated seconds per episode (default 600)")
-    parser.add_argument("--dt", type=float, default=None, help="control period in s (default 0.05)")
+    parser.add_argument("--dt", type=float, default=None,
+                        help="control period in s (default 0.05)")
     parser.add_argument("--controller", default=None, metavar="MODULE:CLASS",
                         help=f"controller class (default {DEFAULT_CONTROLLER})")
     parser.add_argument("--params-file", default=None,
@@ -79,7 +80,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         "bool/int/float/str like ROS)")
     parser.add_argument("--jobs", "-j", type=int, default=None,
                         help="worker processes (default: all cores)")
-    parser.add_argument("--out", default=None, help="output folder (default out/evaluate-<UTC time>)")
+    parser.add_argument("--out", default=None,
+                        help="output folder (default out/evaluate-<UTC time>)")
     parser.add_argument("--no-sheet", action="store_true", help="skip sheet.png")
     return parser.parse_args(argv)
 
@@ -91,22 +93,25 @@ def resolve_settings(args: argparse.Namespace) -> dict:
                       "params": {}, "jobs": None}
     if args.config:
         settings.update(load_config(args.config))
-    for key in ("worlds", "starts", "profiles", "seeds", "duration", "dt", "controller", "params_file",
-                "jobs"):
+    for key in ("worlds", "starts", "profiles", "seeds", "duration", "dt", "controller",
+                "params_file", "jobs"):
         value = getattr(args, key)
         if value is not None:
             settings[key] = value
     params_file = settings.get("params_file")
-    if params_file is None and SIM_PARAMS.is_file() and settings["controller"] == DEFAULT_CONTROLLER:
+    if (params_file is None and SIM_PARAMS.is_file()
+            and settings["controller"] == DEFAULT_CONTROLLER):
         params_file = SIM_PARAMS
     from_file = {}
     if params_file and str(params_file).lower() != "none":
-        from_file = load_ros_params_file(params_file, load_controller_class(settings["controller"]))
+        from_file = load_ros_params_file(params_file,
+                                         load_controller_class(settings["controller"]))
         settings["params_file"] = str(params_file)
     else:
         settings["params_file"] = None
     # Lowest to highest priority: params file, config `params`, -p overrides.
-    settings["params"] = {**from_file, **(settings.get("params") or {}), **parse_overrides(args.param)}
+    settings["params"] = {**from_file, **(settings.get("params") or {}),
+                          **parse_overrides(args.param)}
     if settings["jobs"] is not None and settings["jobs"] < 1:
         raise EvaluationError(f"--jobs must be >= 1, got {settings['jobs']}")
     return settings
@@ -127,8 +132,8 @@ def main(argv: list[str] | None = None) -> int:
     started = dt_module.datetime.now(dt_module.timezone.utc)
     out = Path(args.out) if args.out else Path("out") / f"evaluate-{started:%Y%m%d-%H%M%S}"
     out.mkdir(parents=True, exist_ok=True)
-    print(f"evaluate: {len(specs)} episodes of {settings['duration']:g} s on {min(jobs, len(specs))} "
-          f"process(es), controller {settings['controller']}"
+    print(f"evaluate: {len(specs)} episodes of {settings['duration']:g} s on "
+          f"{min(jobs, len(specs))} process(es), controller {settings['controller']}"
           + (f" {settings['params']}" if settings["params"] else ""), flush=True)
 
     bar = ProgressBar(len(specs))
@@ -145,8 +150,8 @@ def main(argv: list[str] | None = None) -> int:
             "jobs": min(jobs, len(specs)), "controller": settings["controller"],
             "params": settings["params"], "params_file": settings["params_file"],
             "duration_s": settings["duration"], "dt_s": settings["dt"],
-            "config": args.config, "command": " ".join(sys.argv), "python": platform.python_version(),
-            "host": platform.node()}
+            "config": args.config, "command": " ".join(sys.argv),
+            "python": platform.python_version(), "host": platform.node()}
     write_json(out / "results.json", outcomes, meta)
     write_csv(out / "results.csv", outcomes)
     if not args.no_sheet:

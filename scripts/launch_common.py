@@ -58,9 +58,12 @@ def node_args(params_file: Path | str | None) -> list[str] | None:
 
 
 def make_wall_follower(context, *, params_file, overrides: dict[str, Any]):
-    """The wall follower with a params file and overrides. use_sim_time is left to them: in
-    simulation mode the node stamps each command with its measurement's stamp and needs no
-    clock, so following /clock (one more message per lockstep step) is opt-in."""
+    """The wall follower with a params file and overrides.
+
+    use_sim_time is left to them: in simulation mode the node stamps each command with its
+    measurement's stamp and needs no clock, so following /clock (one more message per lockstep
+    step) is opt-in.
+    """
     from amr_control.wall_follower_node import WallFollowerNode
     return WallFollowerNode(context=context, cli_args=node_args(params_file),
                             parameter_overrides=overrides_to_parameters(dict(overrides)))

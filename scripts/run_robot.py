@@ -1,9 +1,10 @@
 #!/usr/bin/env python3
 """Drive a real TurtleBot3 Burger: amr_odometry + wall follower (robot mode) + lifecycle manager.
 
-Runs on the laptop; the robot runs its own bringup (`ros2 launch turtlebot3_bringup robot.launch.py`).
-Both sides must use the same ROS_DOMAIN_ID, the same RMW and a discovery range that reaches the
-robot (SUBNET, the default): this script does not change discovery, it prints what it uses.
+Runs on the laptop; the robot runs its own bringup
+(`ros2 launch turtlebot3_bringup robot.launch.py`). Both sides must use the same ROS_DOMAIN_ID,
+the same RMW and a discovery range that reaches the robot (SUBNET, the default): this script
+does not change discovery, it prints what it uses.
 
   .venv/bin/python scripts/run_robot.py --domain-id 30 --cmd-vel stamped   # Jazzy bringup
   .venv/bin/python scripts/run_robot.py --domain-id 30 --cmd-vel twist     # Humble bringup

@@ -11,7 +11,8 @@ Examples:
   .venv/bin/python scripts/run_sim.py --world maze_deadends --start all --duration 120
   .venv/bin/python scripts/run_sim.py --profile turtlebot3 --realtime --duration 60
   .venv/bin/python scripts/run_sim.py --controller my_pkg.my_ctrl:MyController -p kp:=5.0
-  .venv/bin/python scripts/run_sim.py --report out/run.json --plot out/run.png --record out/run.mcap
+  .venv/bin/python scripts/run_sim.py --report out/run.json --plot out/run.png
+  .venv/bin/python scripts/run_sim.py --record out/run.mcap --duration 60
 Local runs are isolated: loopback discovery and a free ROS_DOMAIN_ID (printed at startup).
 """
 from __future__ import annotations

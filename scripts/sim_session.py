@@ -28,8 +28,11 @@ STALL_TIMEOUT_S = 10.0  # lockstep: no step for this long (wall clock) means the
 
 
 def _robot_parameters(tuning: dict, params_file, profile_name: str) -> dict:
-    """The simulated robot's values for the controller (where its LiDAR sits) that neither the
-    -p overrides nor the params file set (the rehearsal's turtlebot3.yaml sets them itself)."""
+    """The simulated robot's values for the controller (where its LiDAR sits), unless set.
+
+    Only those neither the -p overrides nor the params file set (the rehearsal's
+    turtlebot3.yaml sets them itself).
+    """
     from amr_common.controller_loader import DEFAULT_CONTROLLER, load_controller_class
     from amr_evaluation.episode import robot_parameters
     from amr_evaluation.evaluation import load_ros_params_file

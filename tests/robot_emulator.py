@@ -183,7 +183,7 @@ class LaserScan(IdlStruct, typename="sensor_msgs::msg::dds_::LaserScan_"):
     intensities: types.sequence[types.float32]
 
 
-# --- the emulated world and robot (plain numpy) ---------------------------------------------------
+# --- the emulated world and robot (plain numpy) -------------------------------------------
 def corridor_walls(width: float, wall_ahead_at: float | None) -> np.ndarray:
     """Wall segments (N x 4: x1, y1, x2, y2) of a corridor along x centred on y = 0."""
     walls = []

@@ -1,4 +1,7 @@
-"""evaluate.py, amr_evaluation.evaluation and evaluation_report: grids, overrides, controllers, result files."""
+"""evaluate.py, amr_evaluation.evaluation and evaluation_report.
+
+Grids, overrides, controllers, result files.
+"""
 from __future__ import annotations
 
 import csv
@@ -18,7 +21,6 @@ from amr_evaluation.evaluation import (
     check_controller,
     expand_grid,
     load_config,
-    parse_overrides,
     parse_seeds,
 )
 from amr_evaluation.evaluation_report import (
@@ -52,7 +54,8 @@ def test_named_starts_apply_to_the_worlds_that_have_them():
     assert [(s.world, s.start) for s in specs] == [("lab02", "outer"), ("corridor_loop", "south")]
     with pytest.raises(EvaluationError, match="nowhere_start.*exist in none"):
         expand_grid("lab02,corridor_loop", "outer,south,nowhere_start", "ideal", [0])
-    with pytest.raises(EvaluationError, match="world 'corridor_loop' has none of the starts outer"):
+    with pytest.raises(EvaluationError,
+                       match="world 'corridor_loop' has none of the starts outer"):
         expand_grid("lab02,corridor_loop", "outer", "ideal", [0])
 
 
@@ -82,23 +85,11 @@ def test_seeds_parse_lists_and_ranges():
             parse_seeds(bad)
 
 
-def test_overrides_are_typed_like_ros_parameters():
-    got = parse_overrides(["kp:=4", "kd:=0.25", "follow_left:=true", "side:=right", "big:=1e3",
-                           "off:=False", "neg:=-2"])
-    assert got == {"kp": 4, "kd": 0.25, "follow_left": True, "side": "right", "big": 1000.0,
-                   "off": False, "neg": -2}
-    assert type(got["kp"]) is int and type(got["kd"]) is float and type(got["follow_left"]) is bool
-    with pytest.raises(ControllerSpecError, match="name:=value"):
-        parse_overrides(["kp=4"])
-    with pytest.raises(ControllerSpecError, match="not finite"):
-        parse_overrides(["kp:=nan"])
-
-
 def test_config_file_is_validated(tmp_path):
     config = load_config(REPO / "evaluations" / "example.yaml")
     specs = expand_grid(config["worlds"], config["starts"], config["profiles"], config["seeds"],
-                        duration=config["duration"], dt=config["dt"], controller=config["controller"],
-                        params=config["params"])
+                        duration=config["duration"], dt=config["dt"],
+                        controller=config["controller"], params=config["params"])
     assert len(specs) == 8 and {s.world for s in specs} == {"lab02", "corridor_loop"}
     bad = tmp_path / "bad.yaml"
     cases = {"worlds: [lab02]\nspeed: 3\n": "unknown key.*speed",
@@ -168,11 +159,13 @@ def _outcomes():
     b = EpisodeSpec("lab02", "inner", "turtlebot3", 1, duration=60.0)
     c = EpisodeSpec("corridor_loop", "south", "ideal", 2, duration=60.0)
     return [
-        EpisodeOutcome(a, _result(a, collisions=0, first_collision_time_s=None, min_clearance_m=0.0421,
-                                  distance_m=11.5, laps=2, explored_fraction=0.5,
+        EpisodeOutcome(a, _result(a, collisions=0, first_collision_time_s=None,
+                                  min_clearance_m=0.0421, distance_m=11.5, laps=2,
+                                  explored_fraction=0.5,
                                   rms_wall_error_m=0.012), wall_time_s=1.234),
-        EpisodeOutcome(b, _result(b, collisions=3, first_collision_time_s=12.5, min_clearance_m=0.0,
-                                  distance_m=4.0, laps=0, explored_fraction=0.2,
+        EpisodeOutcome(b, _result(b, collisions=3, first_collision_time_s=12.5,
+                                  min_clearance_m=0.0, distance_m=4.0, laps=0,
+                                  explored_fraction=0.2,
                                   rms_wall_error_m=math.nan), wall_time_s=2.0),
         EpisodeOutcome(c, error="RuntimeError: controller exploded", wall_time_s=0.1),
     ]
@@ -281,7 +274,8 @@ def test_two_episodes_in_two_processes_write_readable_results(tmp_path):
     assert proc.returncode == (1 if any(e["collisions"] for e in episodes) else 0)
     with open(out / "results.csv", newline="") as stream:
         rows = list(csv.DictReader(stream))
-    assert [float(r["distance_m"]) for r in rows] == pytest.approx([e["distance_m"] for e in episodes])
+    assert ([float(r["distance_m"]) for r in rows]
+            == pytest.approx([e["distance_m"] for e in episodes]))
     assert "verdict:" in proc.stdout and "lab02  outer" in proc.stdout
     assert (out / "sheet.png").stat().st_size > 10_000
     assert "\r[" not in proc.stderr  # no progress bar when not on a terminal
@@ -291,8 +285,8 @@ def test_two_episodes_in_two_processes_write_readable_results(tmp_path):
 def test_a_collision_gives_exit_code_1_and_its_time(tmp_path):
     # Straight north from lab02 "outer" (1, -1): the wall at y = 1.2 is 2.2 - 0.105 m ahead.
     proc, out = _evaluate(tmp_path, "--worlds", "lab02", "--starts", "outer", "--duration", "14",
-                          "--controller", "tests.test_evaluation:DriveStraight", "-p", "speed:=0.2",
-                          "--no-sheet")
+                          "--controller", "tests.test_evaluation:DriveStraight",
+                          "-p", "speed:=0.2", "--no-sheet")
     assert proc.returncode == 1, proc.stdout + proc.stderr
     (episode,) = json.loads((out / "results.json").read_text())["episodes"]
     assert episode["collisions"] >= 1
@@ -302,13 +296,17 @@ def test_a_collision_gives_exit_code_1_and_its_time(tmp_path):
 
 def test_a_failing_controller_is_reported_not_fatal():
     from amr_evaluation.evaluation import run_episodes
-    specs = [EpisodeSpec("lab02", "outer", duration=1.0, controller="tests.test_evaluation:Exploding"),
-             EpisodeSpec("lab02", "outer", duration=1.0, controller="tests.test_evaluation:DriveStraight")]
+    specs = [EpisodeSpec("lab02", "outer", duration=1.0,
+                         controller="tests.test_evaluation:Exploding"),
+             EpisodeSpec("lab02", "outer", duration=1.0,
+                         controller="tests.test_evaluation:DriveStraight")]
     seen = []
-    outcomes = run_episodes(specs, jobs=1, progress=lambda done, total, o: seen.append((done, total)))
+    outcomes = run_episodes(specs, jobs=1,
+                            progress=lambda done, total, o: seen.append((done, total)))
     assert seen == [(1, 2), (2, 2)]
     assert "RuntimeError: controller exploded on call 3" in outcomes[0].error
-    assert outcomes[1].error is None and outcomes[1].result.distance_m == pytest.approx(0.1, abs=0.01)
+    assert outcomes[1].error is None
+    assert outcomes[1].result.distance_m == pytest.approx(0.1, abs=0.01)
     assert verdict(outcomes)[1] == 3
 
 

@@ -1,5 +1,8 @@
-"""The house rules: amr_common below everything, algorithm packages beside each other (never
-importing one another), the evaluation harness and scripts above them."""
+"""The house rules: amr_common at the bottom, algorithm packages beside it, harness on top.
+
+Algorithm packages sit beside each other (never importing one another); the evaluation harness
+and the scripts sit above them.
+"""
 from __future__ import annotations
 
 import ast

@@ -55,7 +55,7 @@ def test_walls_robot_and_heading_are_drawn_where_they_are(headless):
         assert _colour(view, 1.0, 0.6) == live_view.WALL        # inner wall
         assert _colour(view, 1.5, 1.6) == live_view.BACKGROUND  # free space
         assert _colour(view, 1.0, 1.5) == live_view.BACKGROUND  # beyond the inner wall's end
-        assert _colour(view, 0.5, 1.0) == live_view.ROBOT or _colour(view, 0.5, 1.0) == live_view.HEADING
+        assert _colour(view, 0.5, 1.0) in (live_view.ROBOT, live_view.HEADING)
         assert _colour(view, 0.5, 1.07) == live_view.HEADING     # heading line points up
         assert _colour(view, 0.5, 0.93) == live_view.ROBOT       # the back of the robot
         assert _colour(view, 0.57, 1.0) == live_view.ROBOT
@@ -80,7 +80,8 @@ def test_scan_rays_and_hits_skip_invalid_returns(headless):
         assert _colour(view, 1.5 - 0.35, 1.0) == live_view.BACKGROUND   # 0.0 ray skipped
         assert _colour(view, 1.5, 1.0 - 0.35) == live_view.BACKGROUND   # out of range skipped
         diagonal = math.radians(45)
-        assert _colour(view, 1.5 + 0.6 * math.cos(diagonal), 1.0 + 0.6 * math.sin(diagonal)) == live_view.HIT
+        assert _colour(view, 1.5 + 0.6 * math.cos(diagonal),
+                       1.0 + 0.6 * math.sin(diagonal)) == live_view.HIT
 
 
 def test_trail_follows_the_robot(headless):

@@ -72,7 +72,8 @@ def _truth(ns: int, k: int) -> GroundTruthPose:
 def recording(tmp_path: Path) -> tuple[Path, dict[str, list[int]]]:
     """A file with /scan (every 4th step), /odometry, /cmd_vel and /ground_truth every step."""
     path = tmp_path / "run.mcap"
-    stamps: dict[str, list[int]] = {"/scan": [], "/odometry": [], "/cmd_vel": [], "/ground_truth": []}
+    stamps: dict[str, list[int]] = {"/scan": [], "/odometry": [], "/cmd_vel": [],
+                                    "/ground_truth": []}
     metadata = {"world": "lab02", "start": "west", "profile": "turtlebot3", "seed": 3, "dt": 0.05}
     with McapRecorder(path, metadata=metadata) as recorder:
         for k in range(STEPS):
@@ -93,7 +94,8 @@ def test_rosbags_reads_counts_stamps_and_values(recording):
     path, stamps = recording
     with AnyReader([path]) as reader:
         types = {c.topic: c.msgtype for c in reader.connections}
-        assert types == {"/scan": "sensor_msgs/msg/LaserScan", "/odometry": "nav_msgs/msg/Odometry",
+        assert types == {"/scan": "sensor_msgs/msg/LaserScan",
+                         "/odometry": "nav_msgs/msg/Odometry",
                          "/cmd_vel": "geometry_msgs/msg/TwistStamped",
                          "/ground_truth": "amr_msgs/msg/PoseStamped"}
         got: dict[str, list] = {t: [] for t in stamps}
@@ -139,7 +141,8 @@ def test_mcap_ros2_reader_decodes_with_embedded_definitions_and_metadata(recordi
         assert all(s.encoding == "ros2msg" for s in schemas.values())
         assert all(c.message_encoding == "cdr" for c in summary.channels.values())
         scan_definition = schemas["sensor_msgs/msg/LaserScan"].data.decode()
-        assert scan_definition.startswith(full_message_definition("sensor_msgs/msg/LaserScan")[:40])
+        assert scan_definition.startswith(
+            full_message_definition("sensor_msgs/msg/LaserScan")[:40])
         assert "\n" + "=" * 80 + "\nMSG: std_msgs/Header\n" in scan_definition
         assert "MSG: builtin_interfaces/Time\n" in scan_definition
         metadata = {m.name: m.metadata for m in reader.iter_metadata()}

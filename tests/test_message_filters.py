@@ -26,7 +26,7 @@ from amr_common.message_filters import (
     Subscriber,
     TimeSynchronizer,
 )
-from tests.test_time_matching import ReferenceApproximateSync, random_scenario
+from tests.sync_reference import ReferenceApproximateSync, random_scenario
 
 NS = 1_000_000_000
 
@@ -239,8 +239,10 @@ def test_callbacks_run_outside_the_lock_and_may_reenter():
 
 
 def test_concurrent_inputs_emit_every_pair_once():
-    """Two threads feed the two inputs (kept within 10 messages of each other): the lock keeps
-    the queues consistent, so every stamp pairs exactly once."""
+    """Two threads feed the two inputs: the lock keeps the queues consistent.
+
+    The threads stay within 10 messages of each other, so every stamp pairs exactly once.
+    """
     inputs, sync, emitted = make_sync(2, 50, 0.001)
     count = 600
     barrier = threading.Barrier(2)

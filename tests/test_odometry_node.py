@@ -11,7 +11,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from amr_turtlebot3.odometry_node import OdometryNode
-from tests.test_robot_emulator import running_emulator
+from tests.emulator_process import running_emulator
 
 RELIABLE_10 = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                          history=HistoryPolicy.KEEP_LAST)

@@ -6,13 +6,7 @@ TwistStamped (Jazzy bringup) or Twist (--cmd-vel twist).
 """
 from __future__ import annotations
 
-import contextlib
-import json
 import math
-import os
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,6 +15,7 @@ from nav_msgs.msg import Odometry
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan
 
+from tests.emulator_process import commands_in, read_log, running_emulator
 from tests.robot_emulator import (
     FOOTPRINT_RADIUS,
     SCANNER_OFFSET_X,
@@ -29,45 +24,10 @@ from tests.robot_emulator import (
     corridor_walls,
 )
 
-EMULATOR = Path(__file__).with_name("robot_emulator.py")
 RELIABLE_10 = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                          history=HistoryPolicy.KEEP_LAST)
 CORRIDOR_WIDTH = 0.8
 WALL_AHEAD = 1.0
-
-
-@contextlib.contextmanager
-def running_emulator(tmp_path: Path, *options: str):
-    """Start the emulator in this test's ROS domain; always terminate it. Yields (process, log)."""
-    log = tmp_path / "emulator.jsonl"
-    stderr = open(tmp_path / "emulator.stderr", "w")
-    process = subprocess.Popen(
-        [sys.executable, str(EMULATOR), "--domain", os.environ["ROS_DOMAIN_ID"],
-         "--duration", "60", "--log", str(log), *options],
-        stdout=subprocess.DEVNULL, stderr=stderr)
-    try:
-        yield process, log
-    finally:
-        process.terminate()
-        try:
-            process.wait(timeout=5.0)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
-        stderr.close()
-        print((tmp_path / "emulator.stderr").read_text())  # shown if the test failed
-        if log.exists():
-            print(log.read_text().splitlines()[-1])
-
-
-def read_log(log: Path) -> list[dict]:
-    if not log.exists():
-        return []
-    return [json.loads(line) for line in log.read_text().splitlines() if line.endswith("}")]
-
-
-def commands_in(log: Path) -> list[dict]:
-    return [record for record in read_log(log) if record["event"] == "cmd"]
 
 
 def expected_scan(x: float) -> np.ndarray:

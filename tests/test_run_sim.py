@@ -78,7 +78,8 @@ def test_record_writes_an_mcap_that_an_independent_reader_opens(tmp_path):
             stamps.setdefault(connection.topic, []).append(
                 msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec)
     for topic in ("/scan", "/odometry", "/cmd_vel", "/ground_truth"):
-        assert 99 <= counts[topic] <= 101, (topic, counts)  # one per step (+ the first measurement)
+        # One per step (+ the first measurement).
+        assert 99 <= counts[topic] <= 101, (topic, counts)
         steps = sorted(stamps[topic])
         assert all(b - a == 50_000_000 for a, b in zip(steps, steps[1:])), topic
     assert max(stamps["/scan"]) == 5 * 10**9
@@ -93,8 +94,11 @@ def test_gui_runs_headless(tmp_path, monkeypatch):
 
 @pytest.mark.parametrize("profile", ["ideal", "turtlebot3"])
 def test_ros_lockstep_path_and_headless_episode_drive_the_same_trajectory(tmp_path, profile):
-    """evaluate.py's headless episodes stand for the ROS graph: same core, same controller,
-    told the same LiDAR position (the Burger's is 32 mm behind the centre)."""
+    """evaluate.py's headless episodes stand for the ROS graph.
+
+    Same core, same controller, told the same LiDAR position (the Burger's is 32 mm behind the
+    centre).
+    """
     import numpy as np
 
     from amr_evaluation.episode import run_episode

@@ -1,6 +1,8 @@
-"""The wall follower's perception (scan_sectors.LocalPointCloud over point_cloud_kernels):
-points from scans, carried with the odometry, held when an LDS-01 goes blind up close,
-sectors, swept path, side distances and the fitted wall, checked against plain numpy."""
+"""The wall follower's perception (scan_sectors.LocalPointCloud over point_cloud_kernels).
+
+Points from scans, carried with the odometry, held when an LDS-01 goes blind up close,
+sectors, swept path, side distances and the fitted wall, checked against plain numpy.
+"""
 import math
 
 import numpy as np
@@ -9,7 +11,7 @@ import pytest
 from amr_common.jit import HAVE_NUMBA
 from amr_control import point_cloud_kernels as kernels
 from amr_control.scan_sectors import LocalPointCloud, PerceptionSpec, ScanGeometry
-from tests.test_wall_follower import LDS01_360, cast  # the synthetic LiDAR
+from tests.scan_helpers import LDS01_360, cast  # the synthetic LiDAR
 
 SECTORS = {"front": 0.0, "left": 0.5 * math.pi, "right": -0.5 * math.pi, "back": math.pi}
 RAYS_360 = ScanGeometry(0.0, 2.0 * math.pi / 360, 0.12, 3.5)   # LDS-01 convention
@@ -22,8 +24,11 @@ def make_cloud(side=-1.0, hold_time=0.6, hold_range=0.3):
 
 
 def wall_scan(distance, angle=0.0, noise=0.0, seed=0):
-    """LDS-01 ranges (0.0 = no return) of a straight wall on the right at `distance` (m) from
-    the robot, rotated by `angle` (rad) in the robot frame, with Gaussian range noise."""
+    """LDS-01 ranges (0.0 = no return) of a straight wall on the right, with range noise.
+
+    The wall is `distance` (m) from the robot, rotated by `angle` (rad) in the robot frame; the
+    noise is Gaussian.
+    """
     normal = (math.sin(angle), -math.cos(angle))        # from the robot to the wall
     along = (math.cos(angle), math.sin(angle))
     foot = (distance * normal[0], distance * normal[1])

@@ -44,7 +44,8 @@ class Probe:
         self.node = ros.node("probe")
         self.received: dict[str, list] = {name: [] for name in
                                           ("odometry", "odom", "scan", "clock", "ground_truth")}
-        for topic, msg_type, qos in (("odometry", Odometry, RELIABLE), ("odom", Odometry, RELIABLE),
+        for topic, msg_type, qos in (("odometry", Odometry, RELIABLE),
+                                     ("odom", Odometry, RELIABLE),
                                      ("scan", LaserScan, BEST_EFFORT), ("clock", Clock, RELIABLE),
                                      ("ground_truth", Odometry, RELIABLE)):
             self.node.create_subscription(msg_type, "/" + topic, self.received[topic].append, qos)

@@ -115,7 +115,8 @@ def test_duplicate_stamp_skipped():
     assert estimator.update(0.01, 0.0, *quaternion(0.0), ODOM_PERIOD_NS).v == pytest.approx(0.2)
     duplicate = estimator.update(0.5, 0.0, *quaternion(1.0), ODOM_PERIOD_NS)
     assert duplicate.status is Status.DUPLICATE and duplicate.v is None
-    # The duplicate's pose is ignored: the next sample is compared with the first one at that stamp.
+    # The duplicate's pose is ignored: the next sample is compared with the first one at that
+    # stamp.
     nxt = estimator.update(0.02, 0.0, *quaternion(0.0), 2 * ODOM_PERIOD_NS)
     assert nxt.v == pytest.approx(0.2, abs=EXACT) and nxt.w == pytest.approx(0.0, abs=EXACT)
 

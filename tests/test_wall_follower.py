@@ -9,33 +9,10 @@ import pytest
 import yaml
 
 from amr_control.wall_follower import WallFollower
+from tests.scan_helpers import COURSE_240, LDS01_360, LDS02_ODD, cast
 
 DT = 0.05
 REPO = Path(__file__).resolve().parent.parent
-
-# Scan layouts: (rays, angle_min, range_min, range_max, no_return)
-COURSE_240 = (240, 0.0, 0.016, 8.0, math.nan)
-LDS01_360 = (360, 0.0, 0.12, 3.5, 0.0)
-LDS02_ODD = (452, -3.05, 0.0, 100.0, math.nan)   # count and start angle unlike the others
-
-
-def cast(segments, layout, pose=(0.0, 0.0, 0.0), rays=None):
-    """Ranges a LiDAR at `pose` reads from wall segments [[x1, y1, x2, y2], ...]."""
-    n, angle_min, range_min, range_max, no_return = layout
-    n = rays or n
-    x, y, th = pose
-    angles = th + angle_min + 2.0 * math.pi / n * np.arange(n)
-    dx, dy = np.cos(angles)[:, None], np.sin(angles)[:, None]
-    seg = np.asarray(segments, dtype=float)
-    ax, ay = seg[:, 0] - x, seg[:, 1] - y
-    ex, ey = seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1]
-    denom = dx * ey - dy * ex
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (ax * ey - ay * ex) / denom
-        u = (ax * dy - ay * dx) / denom
-    t = np.where((np.abs(denom) > 1e-12) & (t > 0) & (u >= 0) & (u <= 1), t, np.inf)
-    r = t.min(axis=1)
-    return np.where((r >= range_min) & (r <= range_max), r, no_return)
 
 
 def make(layout=COURSE_240, **params):

@@ -142,7 +142,8 @@ def test_episode_records_collisions_and_sheet(tmp_path):
 
     result = run_episode("lab02", "outer", duration=12.0, controller_factory=lambda dt: Rammer(),
                          record_trajectory=False)
-    assert result.collisions == 1 and result.collision_points[0] == pytest.approx([1.0, 1.2], abs=1e-3)
+    assert result.collisions == 1
+    assert result.collision_points[0] == pytest.approx([1.0, 1.2], abs=1e-3)
     assert result.first_collision_time_s == pytest.approx((2.2 - 0.105) / 0.22, abs=0.06)
     assert result.trajectory == [] and result.rms_wall_error_m is None and result.laps == 0
     assert result.world == "lab02" and result.start == "outer"

@@ -27,7 +27,8 @@ def test_bundled_world_loads_closed_with_valid_starts(name):
         assert world.contains(x, y), start_name
         assert world.clearance(x, y) >= ROBOT_RADIUS, start_name
         assert world.resolve_start(start_name) == (x, y, theta)
-    # Closed: a point just outside the boundary polygon is outside; the boundary polyline has no gap
+    # Closed: a point just outside the boundary polygon is outside; the boundary polyline has no
+    # gap
     xmin, ymin, xmax, ymax = world.bounds
     assert not world.contains(xmax + 0.01, 0.5 * (ymin + ymax))
     # Corridors no narrower than 0.4 m: every free cell centre keeps the robot off the walls.
@@ -62,7 +63,8 @@ def test_course_map_json_loads(tmp_path):
 def test_yaml_world_with_pi_angles_open_walls_and_goal(tmp_path):
     path = tmp_path / "w.yaml"
     path.write_text("boundary: [[0, 0], [2, 0], [2, 2], [0, 2], [0, 0]]\n"
-                    "walls: [[[1, 0], [1, 1.2]]]\nstarts: {a: [0.5, 0.5, 3*pi/2], b: [1.5, 0.5, -pi/4]}\n"
+                    "walls: [[[1, 0], [1, 1.2]]]\n"
+                    "starts: {a: [0.5, 0.5, 3*pi/2], b: [1.5, 0.5, -pi/4]}\n"
                     "goal: [1.5, 1.5]\n")
     world = World.load(path)
     assert world.name == "w" and len(world.segments) == 5  # the repeated closing point is dropped

@@ -39,7 +39,8 @@ def room_distance(x, y, angle):
     return min(tx, ty)
 
 
-@pytest.mark.parametrize("pose", [(1.0, 1.0, 0.0), (1.0, 1.0, 0.3), (3.1, 2.2, -2.0), (2.0, 1.5, math.pi)])
+@pytest.mark.parametrize("pose", [(1.0, 1.0, 0.0), (1.0, 1.0, 0.3), (3.1, 2.2, -2.0),
+                                  (2.0, 1.5, math.pi)])
 def test_ideal_ranges_equal_analytic_distances(room, pose):
     sim = Simulator(room, start=pose, profile="ideal")
     z_scan, _, _ = sim.measure()
@@ -61,7 +62,8 @@ def test_known_values_front_left_back_right(room):
     assert z[60] == pytest.approx(1.0)  # left: west wall at x = 0
     assert z[120] == pytest.approx(1.0)  # behind: south wall at y = 0
     assert z[180] == pytest.approx(3.0)  # right: east wall at x = 4
-    assert z[30] == pytest.approx(math.sqrt(2.0))  # 45 deg left of north: reaches x = 0 after sqrt(2) m
+    # 45 deg left of north: reaches x = 0 after sqrt(2) m
+    assert z[30] == pytest.approx(math.sqrt(2.0))
 
 
 def test_ideal_no_return_is_nan_beyond_8_m(long_corridor):
@@ -121,7 +123,8 @@ def test_turtlebot3_scans_from_base_scan_32_mm_behind_the_centre(room, theta):
     noiseless = dataclasses.replace(TURTLEBOT3, range_noise_sigma=0.0)
     sim = Simulator(room, start=(2.0, 1.5, theta), profile=noiseless)
     lx, ly = sim.lidar_position
-    assert (lx, ly) == pytest.approx((2.0 - 0.032 * math.cos(theta), 1.5 - 0.032 * math.sin(theta)))
+    assert (lx, ly) == pytest.approx((2.0 - 0.032 * math.cos(theta),
+                                      1.5 - 0.032 * math.sin(theta)))
     z = sim.measure()[0]
     expected = [room_distance(lx, ly, theta + math.radians(i)) for i in range(360)]
     np.testing.assert_allclose(z, expected, atol=1e-9)

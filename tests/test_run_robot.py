@@ -15,7 +15,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.test_robot_emulator import commands_in, read_log, running_emulator
+from tests.emulator_process import commands_in, read_log, running_emulator
+from tests.processes import terminate, wait_for
 
 RUN_ROBOT = Path(__file__).resolve().parent.parent / "scripts" / "run_robot.py"
 pytestmark = pytest.mark.slow
@@ -31,23 +32,9 @@ def run_robot_process(tmp_path: Path):
 
 
 def stop(process, output, tmp_path) -> str:
-    if process.poll() is None:
-        process.terminate()
-        try:
-            process.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
+    terminate(process, timeout=10)
     output.close()
     return (tmp_path / "run_robot.log").read_text()
-
-
-def wait_for(condition, timeout: float, what: str) -> None:
-    deadline = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > deadline:
-            pytest.fail(f"timed out after {timeout} s waiting for {what}")
-        time.sleep(0.1)
 
 
 def test_robot_graph_drives_the_emulated_robot_and_stops_when_scans_stop(ros, tmp_path):

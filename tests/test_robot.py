@@ -59,7 +59,8 @@ def test_saturation_keeps_turning_direction_and_curvature(v, w):
     assert max(abs(w_left), abs(w_right)) <= robot.WHEEL_SPEED_MAX * (1 + 1e-12)
     v_out, w_out = robot.forward_kinematics(w_left, w_right)
     assert math.isfinite(v_out) and math.isfinite(w_out)
-    assert math.copysign(1, w_out) == math.copysign(1, w) and math.copysign(1, v_out) == math.copysign(1, v) or v == 0
+    assert (math.copysign(1, w_out) == math.copysign(1, w)
+            and math.copysign(1, v_out) == math.copysign(1, v)) or v == 0
     if v != 0:
         assert w_out / v_out == pytest.approx(w / v, rel=1e-9)  # same curvature, same path
     assert max(abs(w_left), abs(w_right)) == pytest.approx(robot.WHEEL_SPEED_MAX)
@@ -136,8 +137,8 @@ def test_velocity_constraint_kernel_matches_python_version():
     from amr_sim.simulator import _constrain_velocity, _constrain_velocity_python
 
     segments = np.array([[0.0, 0.0, 2.0, 0.0], [0.0, 0.0, 0.0, 2.0]])  # a corner at the origin
-    for px, py, vx, vy in [(1.0, 0.106, 0.0, -0.3), (0.106, 0.106, -0.2, -0.2), (1.0, 1.0, 0.2, 0.1),
-                           (0.5, 0.104, 0.3, -0.3)]:
+    for px, py, vx, vy in [(1.0, 0.106, 0.0, -0.3), (0.106, 0.106, -0.2, -0.2),
+                           (1.0, 1.0, 0.2, 0.1), (0.5, 0.104, 0.3, -0.3)]:
         fast = _constrain_velocity(segments, px, py, vx, vy, 0.05, 0.105, 0.0005)
         slow = _constrain_velocity_python(segments, px, py, vx, vy, 0.05, 0.105, 0.0005)
         assert fast == pytest.approx(slow, abs=1e-12)
