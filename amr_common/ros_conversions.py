@@ -139,8 +139,10 @@ def pose_from_message(pose) -> tuple[float, float, float]:
 
 def path_message(points: Sequence[Sequence[float]] | np.ndarray, stamp: Time,
                  frame_id: str = "map") -> Path:
-    """nav_msgs/Path through the (K, 2) points; each pose faces the next point (the last one
-    keeps the previous heading). No points: an empty path ("no path")."""
+    """nav_msgs/Path through the (K, 2) points, each pose facing the next point.
+
+    The last pose keeps the previous heading. No points: an empty path ("no path").
+    """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     message = Path()
     message.header.stamp = stamp

@@ -243,9 +243,11 @@ class World:
         return pose
 
     def resolve_goal(self, goal: str | tuple | list | np.ndarray | None) -> tuple[float, float]:
-        """A goal position from a name of `goals`, "x,y" text, an (x, y) pair, or None (= the
-        world's default goal). Raises WorldError if it is unknown, malformed, outside the free
-        space or closer to a wall than the robot radius."""
+        """A goal position from a name of `goals`, "x,y" text, an (x, y) pair or None.
+
+        None is the world's default goal. Raises WorldError if the goal is unknown, malformed,
+        outside the free space or closer to a wall than the robot radius.
+        """
         if goal is None:
             if self.goal is None:
                 raise WorldError(f"{self.source}: the world has no goal; pass x,y or a name")

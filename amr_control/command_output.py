@@ -1,6 +1,7 @@
-"""The /cmd_vel end of the controller nodes (wall follower, pure pursuit): one publisher, one
-reused message, the node parameters every commanding node checks the same way, and the forced
-final zero a robot without a command timeout needs.
+"""The /cmd_vel end of the controller nodes (wall follower, pure pursuit).
+
+One publisher, one reused message, the node parameters every commanding node checks the same
+way, and the forced final zero a robot without a command timeout needs.
 """
 from __future__ import annotations
 
@@ -55,8 +56,11 @@ class CommandOutput:
             TwistStamped if stamped else Twist, topic, RELIABLE_10)
 
     def publish(self, v: float, w: float, stamp, force: bool = False) -> None:
-        """Send (v, w); `force`: even while the lifecycle publisher is deactivated (a final
-        zero on the way down)."""
+        """Send (v, w).
+
+        `force`: even while the lifecycle publisher is deactivated (a final zero on the way
+        down).
+        """
         if self._publisher is None:
             return
         msg = self._message

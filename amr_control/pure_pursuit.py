@@ -75,9 +75,11 @@ _PROJECTION_WINDOW_M = 0.5  # how far along the path the robot's projection may 
 
 
 def check_parameters(overrides: dict[str, Any]) -> dict[str, float]:
-    """Every parameter's value (defaults updated with `overrides`), checked: finite numbers,
-    >= 0 (lidar_offset_x_m any sign), speeds clipped to the Burger's limits. ValueError names
-    the problem or unknown names."""
+    """Every parameter's value (defaults updated with `overrides`), checked.
+
+    Finite numbers, >= 0 (lidar_offset_x_m any sign), speeds clipped to the Burger's limits.
+    ValueError names the problem or unknown names.
+    """
     unknown = sorted(set(overrides) - set(PARAMETERS))
     if unknown:
         raise ValueError(f"PurePursuit: unknown parameter(s) {unknown}; known: "
@@ -111,8 +113,11 @@ def check_parameters(overrides: dict[str, Any]) -> dict[str, float]:
 def scan_clearance(ranges: np.ndarray, angle_min: float, angle_increment: float,
                    range_min: float, range_max: float, lidar_offset_x: float,
                    robot_radius: float) -> float | None:
-    """Smallest distance from the robot's footprint to a scan point (m), None without a valid
-    reading. Readings outside [range_min, range_max], NaN and inf are no returns."""
+    """Smallest distance from the robot's footprint to a scan point (m).
+
+    None without a valid reading. Readings outside [range_min, range_max], NaN and inf are no
+    returns.
+    """
     r = np.asarray(ranges, dtype=np.float64)
     with np.errstate(invalid="ignore"):
         valid = np.isfinite(r) & (r >= range_min) & (r <= range_max)
@@ -153,7 +158,9 @@ class PurePursuit:
 
     def set_path(self, points) -> None:
         """Follow a new path (K, 2) from its start; ValueError for non-finite or empty input.
-        Repeated points are dropped; a single point is driven to in a straight line."""
+
+        Repeated points are dropped; a single point is driven to in a straight line.
+        """
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
         if len(pts) == 0 or not np.isfinite(pts).all():
             raise ValueError("PurePursuit: a path needs at least one point, all finite")
@@ -187,8 +194,11 @@ class PurePursuit:
     # --- control -------------------------------------------------------------------------
     def compute_commands(self, x: float, y: float, theta: float,
                          obstacle_clearance_m: float | None = None) -> tuple[float, float]:
-        """(v, w) for the robot at pose (x, y, theta) in the path's frame; obstacle_clearance_m:
-        footprint clearance from the newest scan (None = unknown, no proximity slow-down)."""
+        """(v, w) for the robot at pose (x, y, theta) in the path's frame.
+
+        obstacle_clearance_m: footprint clearance from the newest scan (None = unknown, no
+        proximity slow-down).
+        """
         if self._points is None or self.arrived:
             return 0.0, 0.0
         if not all(math.isfinite(v) for v in (x, y, theta)):
@@ -258,9 +268,12 @@ class PurePursuit:
         return v, w
 
     def _locate(self, x: float, y: float):
-        """Project the robot on the current section (moving forward only, within a window):
-        (arc length of the projection, direction and point of the section's end, distance left
-        along the path to it, whether the robot is past it). Sets cross_track_error."""
+        """Project the robot on the current section (moving forward only, within a window).
+
+        Returns (arc length of the projection, direction and point of the section's end,
+        distance left along the path to it, whether the robot is past it). Sets
+        cross_track_error.
+        """
         first = self._segment
         last = int(self._ends[self._section + 1]) - 1
         window_end = np.searchsorted(self._s, self._s[first] + _PROJECTION_WINDOW_M, "right")

@@ -88,8 +88,11 @@ class PurePursuitNode(LifecycleNode):
 
     # --- lifecycle -------------------------------------------------------------------------
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Check the parameters, build the PurePursuit, create /cmd_vel and the /pose, /path
-        and /scan subscriptions. FAILURE with a logged reason on bad parameters."""
+        """Check the parameters, then create what the node runs on.
+
+        Builds the PurePursuit, the /cmd_vel lifecycle publisher and the /pose, /path and /scan
+        subscriptions. FAILURE with a logged reason on bad parameters.
+        """
         p = {name: self.get_parameter(name).value for name in _NODE_PARAMETERS}
         problems = command_parameter_problems(p)
         tuning = {name: self.get_parameter(name).value for name in self._tuning_names}

@@ -1,5 +1,7 @@
-"""Headless navigation episodes: simulator + pose source + planner + pure pursuit (+ wall follower
-while not localized), in the lockstep order of the ROS graph, with the figures of issue 12.
+"""Headless navigation episodes: simulator, pose source, planner, pure pursuit, wall follower.
+
+The nodes' lockstep order (the wall follower while not localized), with the figures of
+issue 12.
 
     result = run_navigation_episode("lab02", "outer", goal="inner_far")
     print(result.summary())
@@ -39,8 +41,11 @@ GOAL_TOLERANCE_M = SIMULATOR_PARAMETERS["goal_tolerance"][0]
 
 
 class GroundTruthPose:
-    """The simulator's true pose as the estimate; localized from `localized_after_s` on (the
-    wall follower explores before that), lost again during [lost_from_s, lost_until_s)."""
+    """The simulator's true pose as the estimate.
+
+    Localized from `localized_after_s` on (the wall follower explores before that), lost again
+    during [lost_from_s, lost_until_s).
+    """
 
     def __init__(self, localized_after_s: float = 0.0, lost_from_s: float | None = None,
                  lost_until_s: float | None = None) -> None:
@@ -57,8 +62,7 @@ class GroundTruthPose:
 
 @dataclass
 class NavigationResult:
-    """What a navigation episode measured (times in simulated seconds, None if it never
-    happened)."""
+    """What a navigation episode measured (simulated seconds; None if it never happened)."""
 
     world: str
     start: str | list[float]
@@ -134,9 +138,12 @@ def run_navigation_episode(
         pursuit_params: dict | None = None, wall_follower: Any = None,
         goal_tolerance: float = GOAL_TOLERANCE_M,
         record_trajectory: bool = True) -> NavigationResult:
-    """Drive from `start` (a name, (x, y, theta) or None = the first start) to `goal` (a name,
-    "x,y", (x, y) or None = the world's goal) and measure it; see the module docstring.
-    `planner` may be passed prebuilt (its grid costs are built once per world)."""
+    """Drive from `start` to `goal` and measure it; see the module docstring.
+
+    start: a name, (x, y, theta) or None (the first start); goal: a name, "x,y", (x, y) or None
+    (the world's goal). `planner` may be passed prebuilt (its grid costs are built once per
+    world).
+    """
     duration = float(duration)
     if not (math.isfinite(duration) and duration >= 0.0):
         raise ValueError(f"duration must be a finite number of seconds >= 0, got {duration}")

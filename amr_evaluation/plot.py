@@ -22,8 +22,10 @@ _WALL_COLOUR = "#222222"
 
 def draw_world(ax, world: World, show_starts: bool = True, show_grid: bool = False,
                show_goals: bool | None = None) -> None:
-    """Walls (and optionally named starts, named goals (default: with the starts) and the
-    corridor grid) on a matplotlib Axes."""
+    """Walls and optionally named starts, named goals and the corridor grid on an Axes.
+
+    Goals are shown with the starts unless show_goals says otherwise.
+    """
     segs = world.segments.reshape(-1, 2, 2)
     ax.add_collection(LineCollection(segs, colors=_WALL_COLOUR, linewidths=2.0, capstyle="round",
                                      zorder=3))
@@ -108,10 +110,10 @@ def _episode_parts(trajectory: Any, collision_points: Iterable) -> tuple[np.ndar
 def draw_episode(ax, world: World, trajectory: Any, collision_points: Iterable = (),
                  colourbar: bool = True, small: bool = False, planned_path: Any = None,
                  goal: Sequence[float] | None = None) -> dict[str, float]:
-    """Walls, the trajectory coloured by time, start/end markers and collisions on an Axes;
-    with navigation, the planned path (dashed) and the goal (a star).
+    """Walls, the trajectory coloured by time, start/end markers and collisions on an Axes.
 
-    Returns the figures shown (collisions, min clearance, distance).
+    With navigation also the planned path (dashed) and the goal (a star). Returns the figures
+    shown (collisions, min clearance, distance).
     """
     traj, points, result = _episode_parts(trajectory, collision_points)
     draw_world(ax, world, show_starts=False)
@@ -172,9 +174,9 @@ def _title(world: World, result, figures: dict[str, float], title: str | None) -
 def plot_episode(world: World | str, trajectory: Any, collision_points: Iterable = (),
                  path: str | Path = "x.png", title: str | None = None,
                  planned_path: Any = None, goal: Sequence[float] | None = None) -> Path:
-    """Draw one episode to a PNG: walls, trajectory coloured by time, start, end, collisions,
-    and for navigation the planned path and the goal.
+    """Draw one episode to a PNG: walls, trajectory coloured by time, start, end, collisions.
 
+    For navigation also the planned path and the goal.
     `trajectory` is [[t, x, y, theta], ...] or an EpisodeResult (or its to_dict()), whose start,
     profile and figures then go into the title.
     """

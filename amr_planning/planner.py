@@ -1,5 +1,7 @@
-"""Path planning on a world's occupancy grid: inflated walls, a clearance cost, A* or wavefront,
-and a smoothed path that keeps its clearance. No rclpy (the `planner` node wraps it).
+"""Path planning on a world's occupancy grid, keeping clearance from the walls.
+
+Inflated walls, a clearance cost, A* or wavefront, and a smoothed path that keeps its
+clearance. No rclpy (the `planner` node wraps it).
 
     planner = Planner(World.load("lab02"))               # 2 cm grid, A*
     plan = planner.plan((1.0, -1.0), (0.6, -0.6))       # PlanningError if impossible
@@ -61,8 +63,10 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
 
 
 class PlanningError(ValueError):
-    """No path: the start or goal is outside the map, in a wall or too close to one, or the goal
-    cannot be reached. The message says which, with coordinates."""
+    """No path: the start or goal is outside the map, in or too close to a wall, or unreachable.
+
+    The message says which, with coordinates.
+    """
 
 
 @dataclass
@@ -81,8 +85,10 @@ class Plan:
 
 
 def check_parameters(overrides: dict[str, Any]) -> dict[str, Any]:
-    """All parameter values (defaults updated with `overrides`), checked; ValueError names the
-    problem (unknown names, non-numbers, out-of-range values)."""
+    """All parameter values (defaults updated with `overrides`), checked.
+
+    ValueError names the problem (unknown names, non-numbers, out-of-range values).
+    """
     unknown = sorted(set(overrides) - set(PARAMETERS))
     if unknown:
         raise ValueError(f"Planner: unknown parameter(s) {unknown}; known: {sorted(PARAMETERS)}")
@@ -116,8 +122,11 @@ class Planner:
     """Plans paths on one world; the grid and its costs are built once, in the constructor."""
 
     def __init__(self, world: World, grid: OccupancyGrid | None = None, **params: Any) -> None:
-        """world: the map; grid: a prebuilt OccupancyGrid of it at resolution_m (else built);
-        params: names of `parameter_descriptions()`."""
+        """Build the grid costs of `world`.
+
+        grid: a prebuilt OccupancyGrid of it at resolution_m (else built); params: names of
+        `parameter_descriptions()`.
+        """
         p = check_parameters(params)
         self.params = p
         self.world = world
@@ -150,8 +159,11 @@ class Planner:
         return np.isfinite(self.cost).reshape(self.grid.free.shape)
 
     def warm_up(self) -> None:
-        """Run every compiled kernel once on tiny inputs: numba compiles (or loads from its
-        cache) on the first call, which must not happen inside a lockstep loop."""
+        """Run every compiled kernel once on tiny inputs.
+
+        numba compiles (or loads from its cache) on the first call, which must not happen inside
+        a lockstep loop.
+        """
         cell = int(np.argmax(self.cost < np.inf))
         for algorithm in ALGORITHMS:
             self.search(cell, cell, algorithm=algorithm)
@@ -198,9 +210,11 @@ class Planner:
 
     def search(self, start_cell: int, goal_cell: int, algorithm: str | None = None,
                heuristic_weight: float | None = None, compiled: bool = True):
-        """Grid search between two traversable cells (flat indices). Returns (cells from start
-        to goal or None if unreachable, path cost in metres, cells expanded). `compiled=False`
-        runs the plain-Python functions (the reference)."""
+        """Grid search between two traversable cells (flat indices).
+
+        Returns (cells from start to goal or None if unreachable, path cost in metres, cells
+        expanded). `compiled=False` runs the plain-Python functions (the reference).
+        """
         algorithm = algorithm or self.params["algorithm"]
         weight = self.params["heuristic_weight"] if heuristic_weight is None else heuristic_weight
         width = self.grid.width
@@ -254,8 +268,11 @@ class Planner:
         return x, y
 
     def _entry_cell(self, point: tuple[float, float], what: str) -> int:
-        """The point's own cell if traversable, else the nearest traversable cell that a straight
-        piece from the point reaches without touching a wall (within the inflation radius)."""
+        """The point's own cell if traversable, else the nearest traversable cell in reach.
+
+        In reach: a straight piece from the point gets there without touching a wall, within
+        the inflation radius.
+        """
         x, y = point
         cell = self.cell_index(x, y)
         if math.isfinite(self.cost[cell]):

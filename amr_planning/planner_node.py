@@ -1,5 +1,6 @@
-"""The `planner` lifecycle node: plans a path on the world map from the localized /pose to a goal
-and publishes it on /path (nav_msgs/Path, frame map, transient local: late subscribers get it).
+"""The `planner` lifecycle node: a path on the map from the localized /pose to a goal, on /path.
+
+/path is a nav_msgs/Path in frame map, transient local: late subscribers get it.
 
 - Plans once, on the first localized /pose, toward the `goal` parameter ([x, y]), the world's
   named goal `goal_name`, or else the world's default goal.
@@ -77,9 +78,12 @@ class PlannerNode(LifecycleNode):
 
     # --- lifecycle -------------------------------------------------------------------------
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Load the world, build the grid and its costs, compile the search (so the first plan
-        does not stall a lockstep loop), create /path and the /pose and /goal_pose
-        subscriptions. FAILURE with a logged reason on a bad world or parameter."""
+        """Load the world and build the planner, then create /path and the subscriptions.
+
+        The grid and its costs are built and the search compiled here (so the first plan does
+        not stall a lockstep loop); then the /path lifecycle publisher and the /pose and
+        /goal_pose subscriptions. FAILURE with a logged reason on a bad world or parameter.
+        """
         self._reset_runtime()
         p = {name: self.get_parameter(name).value for name in _NODE_PARAMETERS}
         tuning = {name: self.get_parameter(name).value for name in self._tuning_names}
@@ -214,8 +218,10 @@ class PlannerNode(LifecycleNode):
 
 
 def _configured_goal(world: World, goal: Any, goal_name: str) -> tuple[float, float] | None:
-    """The goal the parameters ask for (not checked against the walls here: a goal in a wall is
-    reported when planning). ValueError for a malformed `goal` or an unknown `goal_name`."""
+    """The goal the parameters ask for; ValueError for a malformed goal or an unknown name.
+
+    Not checked against the walls here: a goal in a wall is reported when planning.
+    """
     if goal is not None and len(goal) > 0:
         if len(goal) != 2 or not all(isinstance(v, (int, float)) and math.isfinite(v)
                                      for v in goal):

@@ -27,8 +27,11 @@ MOVE_STEPS = (1.0, 1.0, 1.0, 1.0, SQRT2, SQRT2, SQRT2, SQRT2)  # a tuple: fast i
 
 
 def allowed_moves(traversable: np.ndarray) -> np.ndarray:
-    """(height * width,) uint8: bit k set where move k leads from a traversable cell to a
-    traversable cell of the grid (for a diagonal, through two traversable side cells)."""
+    """(height * width,) uint8: bit k set where move k is allowed.
+
+    Allowed: from a traversable cell to a traversable cell of the grid (for a diagonal, also
+    through two traversable side cells).
+    """
     height, width = traversable.shape
     padded = np.zeros((height + 2, width + 2), dtype=bool)
     padded[1:-1, 1:-1] = traversable
@@ -94,10 +97,12 @@ def astar_python(cost, moves, offsets, width, start, goal, heuristic_weight, cam
 
 
 def wavefront_python(cost, moves, offsets, start, goal, came_from, g):
-    """The seeds' wavefront: a breadth-first wave of integer steps from the goal over the allowed
-    moves, then steepest descent from the start (side moves preferred on ties). Ignores the cost
-    values beyond traversability. Fills came_from and g as A* does; returns the number of cells
-    the wave reached."""
+    """The seeds' wavefront: a breadth-first wave from the goal, then descent from the start.
+
+    The wave counts integer steps over the allowed moves; the descent takes side moves on ties.
+    Ignores the cost values beyond traversability. Fills came_from and g as A* does; returns the
+    number of cells the wave reached.
+    """
     n = len(cost)
     wave = np.full(n, -1, dtype=np.int64)
     for i in range(n):

@@ -83,8 +83,7 @@ _simplify = jit(_simplify_python)
 
 
 def _arc_clearance_python(segments, cx, cy, radius, angle0, sweep, ds):
-    """Smallest wall distance of points every <= ds along an arc (centre, radius, start angle,
-    signed sweep)."""
+    """Smallest wall distance of points every <= ds along an arc (centre, radius, angles)."""
     n = int(math.ceil(abs(sweep) * radius / ds)) + 1
     best = np.inf
     for i in range(n):
@@ -100,8 +99,10 @@ _arc_clearance = jit(_arc_clearance_python)
 
 def _fillet_python(segments, p0, p1, p2, t_in_max, t_out_max, min_radius, max_radius, cap, floor,
                    tolerance, ds):
-    """Largest radius of an arc rounding corner p1 of p0-p1-p2 that keeps the clearance rule;
-    0 if none of at least min_radius does (the corner stays sharp)."""
+    """Largest radius of an arc rounding corner p1 of p0-p1-p2 that keeps the clearance rule.
+
+    0 if none of at least min_radius does (the corner stays sharp).
+    """
     ux, uy = p1[0] - p0[0], p1[1] - p0[1]
     vx, vy = p2[0] - p1[0], p2[1] - p1[1]
     lu, lv = math.hypot(ux, uy), math.hypot(vx, vy)
@@ -145,8 +146,10 @@ def simplify(segments: np.ndarray, points: np.ndarray, cap: float, floor: float,
 def fillet_and_sample(segments: np.ndarray, corners: np.ndarray, spacing: float,
                       min_radius: float, max_radius: float, cap: float, floor: float,
                       tolerance: float, ds: float) -> np.ndarray:
-    """Round the corners of a polyline with arcs (see the module docstring) and sample it every
-    `spacing` metres; (K, 2) with the first and last corner as the ends."""
+    """Round the corners of a polyline with arcs and sample it every `spacing` metres.
+
+    See the module docstring. Returns (K, 2) with the first and last corner as the ends.
+    """
     corners = np.ascontiguousarray(corners, dtype=np.float64)
     n = len(corners)
     if n < 2:

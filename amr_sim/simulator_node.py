@@ -378,8 +378,11 @@ class SimulatorNode(LifecycleNode):
             self.get_logger().info(text, throttle_duration_sec=1.0)
 
     def _check_goal(self, pose: tuple, resting: bool) -> bool:
-        """Note the goal as reached (true position within tolerance while localized) and
-        return True once the robot has rested goal_rest_time since: the run is over."""
+        """Note the goal as reached and say whether the run is over.
+
+        Reached: true position within tolerance while localized. Over: the robot has rested
+        goal_rest_time since.
+        """
         now = self.simulator.time
         if self.goal_reached_time is None:
             if self.goal is None or not self.localized or math.hypot(

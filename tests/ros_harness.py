@@ -44,8 +44,10 @@ class RosHarness:
         return time.monotonic() - start
 
     def bring_up(self, node, discovered: Callable[[], bool], timeout: float = 10.0) -> None:
-        """Configure and activate a lifecycle node, then spin until `discovered()` (the test's
-        publishers and subscribers matched) and a little longer."""
+        """Configure and activate a lifecycle node, then spin until `discovered()` and a bit.
+
+        `discovered()`: the test's publishers and subscribers matched.
+        """
         assert node.trigger_configure().name == "SUCCESS"
         assert node.trigger_activate().name == "SUCCESS"
         self.spin_until(discovered, timeout, "discovery")

@@ -1,5 +1,4 @@
-"""Headless navigation episodes (simulator + pose source + planner + pure pursuit + wall
-follower until localized): the goal is reached and the robot rests on it."""
+"""Headless navigation episodes: the goal is reached and the robot rests on it."""
 from __future__ import annotations
 
 import json

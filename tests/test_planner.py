@@ -1,5 +1,8 @@
-"""The planner: clearance-keeping paths on every bundled world, optimality against Dijkstra on
-the same grid, compiled and Python searches agreeing, and clear errors for impossible goals."""
+"""The planner: clearance, optimality, compiled = Python, clear errors.
+
+Clearance-keeping paths on every bundled world, optimality against Dijkstra on the same grid,
+compiled and Python searches agreeing, and clear errors for impossible goals.
+"""
 from __future__ import annotations
 
 import itertools

@@ -1,5 +1,8 @@
-"""The planner node with a fake /pose publisher: plans on the first localized pose, on
-/goal_pose and after relocalization; a latched /path for late subscribers; bad goals."""
+"""The planner node with a fake /pose publisher.
+
+It plans on the first localized pose, on /goal_pose and after relocalization; a latched /path
+for late subscribers; bad goals.
+"""
 from __future__ import annotations
 
 import pytest

@@ -1,5 +1,8 @@
-"""The regulated pure pursuit on a perfect pose: tracking precision on an L-shaped and a
-zig-zag path, a clean stop, the Burger's limits, and its safety rules."""
+"""The regulated pure pursuit on a perfect pose.
+
+Tracking precision on an L-shaped and a zig-zag path, a clean stop, the Burger's limits, and
+its safety rules.
+"""
 from __future__ import annotations
 
 import math

@@ -1,5 +1,8 @@
-"""The pure_pursuit node with a fake /pose and /path publisher: the lockstep handover rule (one
-/cmd_vel per localized /pose, none otherwise), robot-mode timer and staleness, and the zeros."""
+"""The pure_pursuit node with a fake /pose and /path publisher.
+
+The lockstep handover rule (one /cmd_vel per localized /pose, none otherwise), robot-mode timer
+and staleness, and the zeros.
+"""
 from __future__ import annotations
 
 import math
@@ -56,8 +59,10 @@ def command(message):
 
 
 def bring_up(ros, node, graph, path=None, poses=0):
-    """Activate; then optionally send a path and `poses` localized poses at (0, 0, 0), 50 ms
-    apart, waiting for an answer to each."""
+    """Activate; then optionally send a path and `poses` localized poses, one by one.
+
+    The poses are at (0, 0, 0), 50 ms apart; each waits for its answer.
+    """
     ros.bring_up(node, lambda: graph.node.count_subscribers("/pose") >= 1 and
                  graph.node.count_subscribers("/path") >= 1 and
                  node.count_subscribers("/cmd_vel") >= 1)
