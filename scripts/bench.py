@@ -9,6 +9,8 @@
   synchronizer       per-add cost (bench_sync.py), vs the reference's exhaustive search
   controller         WallFollower.compute_commands cost, vs the control period dt
   evaluate.py        episode throughput on 1 process vs all cores
+  planning           A* compiled vs the same search in plain Python; navigation episodes in
+                     real-time factors (bench_planning.py)
 Usage: .venv/bin/python scripts/bench.py [--quick] [--only NAME ...] [--json FILE]
 """
 from __future__ import annotations
@@ -72,11 +74,11 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="fewer repetitions")
     parser.add_argument("--only", nargs="*", default=None,
-                        choices=["sim", "ros", "sync", "controller", "evaluate"])
+                        choices=["sim", "ros", "sync", "controller", "evaluate", "planning"])
     parser.add_argument("--json", default=None, help="also write the figures to this file")
     args = parser.parse_args(argv)
     isolate_local_graph()
-    chosen = args.only or ["sim", "ros", "sync", "controller", "evaluate"]
+    chosen = args.only or ["sim", "ros", "sync", "controller", "evaluate", "planning"]
     figures: dict[str, dict] = {}
     if "sim" in chosen:
         import bench_sim
@@ -99,6 +101,10 @@ def main(argv=None) -> int:
         figures["evaluate"] = bench_evaluate(*((6, 120.0) if args.quick else (12, 300.0)))
         e = figures["evaluate"]
         print("evaluate.py: " + ", ".join(f"{k} {v:.2f}" for k, v in e.items()))
+    if "planning" in chosen:
+        import bench_planning
+        figures["planning"] = bench_planning.measure(args.quick)
+        print(bench_planning.report(figures["planning"]))
     if args.json:
         Path(args.json).write_text(json.dumps(figures, indent=1, default=float))
     return 0
