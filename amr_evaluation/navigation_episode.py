@@ -15,17 +15,18 @@ when the TRUE position is within goal_tolerance while localized (as the course s
 the episode runs on until the pursuit has stopped the robot, so the final position error is
 measured where the robot rests.
 
-Pose sources (`pose_source`): any object with `update(sim, z_scan, z_v, z_w) -> ((x, y, theta),
-localized)`; `GroundTruthPose` (the true pose, localized from a given time on) stands in until the
-particle filter plugs in behind the same interface (`pose_source_factory(world, sim)` builds one
-per episode).
+Pose sources (`pose_source`): "filter" (the particle filter of amr_localization, as the ROS
+graph runs it: predicted with every odometry twist, corrected with every new scan), "truth"
+(`GroundTruthPose`: the true pose, localized from the start), or any object with
+`update(sim, z_scan, z_v, z_w) -> ((x, y, theta), localized)` called once per step with the
+newest measurement and odometry twist.
 """
 from __future__ import annotations
 
 import math
 import time
 from dataclasses import asdict, dataclass, field
-from typing import Any, Callable
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -60,6 +61,35 @@ class GroundTruthPose:
         return sim.pose, t >= self.localized_after_s - 1e-9 and not lost
 
 
+class ParticleFilterPose:
+    """The particle filter (amr_localization) as the pose source, fed as its node feeds it.
+
+    Every step: predict with the odometry twist over dt; a new scan (the turtlebot3 profile
+    refreshes it every 0.2 s) is weighed. The first measurement is weighed at once.
+    """
+
+    def __init__(self, world: World, sim: Simulator, seed: int = 0, **filter_params) -> None:
+        """A filter on `world` for the profile of `sim` (its LiDAR position and scan)."""
+        from amr_localization.particle_filter import ParticleFilter  # the heavy part: lazily
+        prof = sim.profile
+        params = {"seed": seed, "lidar_offset_x_m": prof.lidar_offset_x, **filter_params}
+        self.filter = ParticleFilter(world, **params)
+        self.filter.set_scan_geometry(prof.angle_min, prof.angle_increment, prof.scan_rays,
+                                      prof.range_min, prof.range_max)
+        self._scan_time: float | None = None
+        self._time = sim.time
+
+    def update(self, sim: Simulator, z_scan, z_v: float, z_w: float):
+        """((x, y, theta), localized) after taking in the newest measurement."""
+        if sim.time > self._time:
+            self.filter.predict(z_v, z_w, sim.time - self._time)
+            self._time = sim.time
+        if sim.scan_time != self._scan_time:
+            self.filter.correct(z_scan, force=self._scan_time is None)
+            self._scan_time = sim.scan_time
+        return tuple(self.filter.estimate), bool(self.filter.localized)
+
+
 @dataclass
 class NavigationResult:
     """What a navigation episode measured (simulated seconds; None if it never happened)."""
@@ -73,6 +103,7 @@ class NavigationResult:
     sim_time_s: float
     wall_time_s: float
     real_time_factor: float | None
+    pose_source: str
     localized_time_s: float | None  # first localized step
     goal_reached_time_s: float | None  # true position within goal_tolerance while localized
     stopped_time_s: float | None  # the pursuit stopped at the path's end
@@ -88,6 +119,8 @@ class NavigationResult:
     cross_track_mean_m: float | None  # true position to the followed path while pursuing
     cross_track_max_m: float | None
     finish_reason: str
+    kidnap: list[float] | None = None  # [t, x, y, theta]
+    stalled: bool = False  # localized with zero commands for stall_timeout_s before the goal
     dt: float = 0.05
     trajectory: list[list[float]] = field(default_factory=list)  # [[t, x, y, theta], ...]
     path: list[list[float]] = field(default_factory=list)  # the last planned path [[x, y], ...]
@@ -130,19 +163,34 @@ def distances_to_polyline(points: np.ndarray, path: np.ndarray) -> np.ndarray:
     return out
 
 
+def make_pose_source(kind: Any, world: World, sim: Simulator, seed: int,
+                     filter_params: dict | None = None):
+    """The pose source named by `kind` ("truth", "filter") or `kind` itself (an object)."""
+    if kind == "truth":
+        return GroundTruthPose()
+    if kind == "filter":
+        return ParticleFilterPose(world, sim, seed, **(filter_params or {}))
+    if isinstance(kind, str) or not callable(getattr(kind, "update", None)):
+        raise ValueError(f"pose_source must be 'truth', 'filter' or an object with update(), "
+                         f"got {kind!r}")
+    return kind
+
+
 def run_navigation_episode(
         world: World | str, start=None, goal=None, profile: str = "ideal", seed: int = 0,
-        duration: float = 300.0, dt: float = 0.05, pose_source: Any = None,
-        pose_source_factory: Callable[[World, Simulator], Any] | None = None,
+        duration: float = 300.0, dt: float = 0.05, pose_source: Any = "truth",
+        filter_params: dict | None = None, kidnap: Sequence[float] | None = None,
         planner: Planner | None = None, planner_params: dict | None = None,
         pursuit_params: dict | None = None, wall_follower: Any = None,
-        goal_tolerance: float = GOAL_TOLERANCE_M,
+        goal_tolerance: float = GOAL_TOLERANCE_M, stall_timeout_s: float = 30.0,
         record_trajectory: bool = True) -> NavigationResult:
     """Drive from `start` to `goal` and measure it; see the module docstring.
 
     start: a name, (x, y, theta) or None (the first start); goal: a name, "x,y", (x, y) or None
     (the world's goal). `planner` may be passed prebuilt (its grid costs are built once per
-    world).
+    world). kidnap (t, x, y, theta): the robot is teleported at simulated time t (the filter
+    must notice and relocalize). Stalled: localized and commanded zero for stall_timeout_s
+    before reaching the goal (the episode then ends).
     """
     duration = float(duration)
     if not (math.isfinite(duration) and duration >= 0.0):
@@ -151,9 +199,8 @@ def run_navigation_episode(
     goal_xy = world_obj.resolve_goal(goal)
     prof = get_profile(profile)
     sim = Simulator(world_obj, start=start, dt=dt, profile=prof, seed=seed)
-    if pose_source is None:
-        pose_source = pose_source_factory(world_obj, sim) if pose_source_factory else \
-            GroundTruthPose()
+    source_name = pose_source if isinstance(pose_source, str) else type(pose_source).__name__
+    pose_source = make_pose_source(pose_source, world_obj, sim, seed, filter_params)
     planner = planner if planner is not None else Planner(world_obj, **(planner_params or {}))
     params = {"lidar_offset_x_m": prof.lidar_offset_x, **(pursuit_params or {})}
     pursuit = PurePursuit(sim.dt, **params)
@@ -169,14 +216,15 @@ def run_navigation_episode(
     events: dict[str, float | None] = {"localized": None, "reached": None, "stopped": None}
     plans, errors, plan_ms, path = 0, [], None, None
     pursued: list[tuple[float, float]] = []  # true positions while the pursuit drives
-    was_localized = False
-    held_v = held_w = 0.0
+    was_localized = stalled = False
+    idle_steps = 0  # consecutive localized zero commands before the goal
+    kidnapped = kidnap is None
     next_odom = 0.0
     z_scan, z_v, z_w = sim.measure()
     held_v, held_w = z_v, z_w
     wall_start = time.perf_counter()
     for _ in range(n_steps):
-        estimate, localized = pose_source.update(sim, z_scan, z_v, z_w)
+        estimate, localized = pose_source.update(sim, z_scan, held_v, held_w)
         if localized:
             if events["localized"] is None:
                 events["localized"] = sim.time
@@ -207,6 +255,13 @@ def run_navigation_episode(
         if localized and pursuit.arrived:
             events["stopped"] = sim.time
             break
+        idle_steps = idle_steps + 1 if localized and (v, w) == (0.0, 0.0) else 0
+        if idle_steps * sim.dt >= stall_timeout_s:
+            stalled = True
+            break
+        if not kidnapped and sim.time >= kidnap[0] - 1e-9:
+            sim.teleport(kidnap[1:])
+            kidnapped = True
         z_scan, z_v, z_w = sim.step(v, w)
         if prof.odom_period is None or sim.time >= next_odom - 1e-9:
             held_v, held_w = z_v, z_w  # the real robot's twist only changes with each /odom
@@ -225,7 +280,8 @@ def run_navigation_episode(
         else [float(c) for c in sim.start])
     return NavigationResult(
         world=world_obj.name, start=start_label, goal=[float(goal_xy[0]), float(goal_xy[1])],
-        profile=prof.name, seed=int(seed), steps=sim.steps, sim_time_s=sim.time,
+        profile=prof.name, seed=int(seed), pose_source=source_name, steps=sim.steps,
+        sim_time_s=sim.time,
         wall_time_s=wall_time,
         real_time_factor=sim.time / wall_time if wall_time > 0 else None,
         localized_time_s=events["localized"], goal_reached_time_s=events["reached"],
@@ -238,10 +294,13 @@ def run_navigation_episode(
         planning_errors=errors, plan_time_ms=plan_ms,
         cross_track_mean_m=float(cross.mean()) if cross is not None else None,
         cross_track_max_m=float(cross.max()) if cross is not None else None,
-        finish_reason="stopped at the goal" if events["stopped"] is not None else "duration",
+        finish_reason="stopped at the goal" if events["stopped"] is not None else
+        "stalled" if stalled else "duration",
+        kidnap=[float(k) for k in kidnap] if kidnap is not None else None, stalled=stalled,
         dt=sim.dt, trajectory=trajectory,
         path=path.points.tolist() if path is not None else [])
 
 
 __all__ = ["run_navigation_episode", "NavigationResult", "GroundTruthPose",
+           "ParticleFilterPose", "make_pose_source",
            "distances_to_polyline", "GOAL_TOLERANCE_M"]

@@ -69,6 +69,53 @@ def make_wall_follower(context, *, params_file, overrides: dict[str, Any]):
                             parameter_overrides=overrides_to_parameters(dict(overrides)))
 
 
+def goal_value_joined(argv: list[str]) -> list[str]:
+    """The command line with `--goal -1,0.6` turned into `--goal=-1,0.6`.
+
+    argparse takes a value starting with '-' for an option; goals are typed with their signs.
+    """
+    out: list[str] = []
+    args = list(argv)
+    while args:
+        arg = args.pop(0)
+        if arg == "--goal" and args and args[0].startswith("-"):
+            arg = f"--goal={args.pop(0)}"
+        out.append(arg)
+    return out
+
+
+def make_navigation_nodes(context, *, world: str, goal: tuple[float, float], simulation: bool,
+                          params_file=None, lidar_offset_x: float | None = None,
+                          dt: float | None = None, cmd_vel_stamped: bool | None = None,
+                          angular_sign: int | None = None) -> list:
+    """The nodes that navigate once localized: particle filter, planner, pure pursuit.
+
+    They follow the wall follower in the startup order (the simulator, if any, comes last).
+    Each reads its own section of `params_file`; the values given here win over it.
+    """
+    try:
+        from amr_localization.particle_filter_node import ParticleFilterNode
+    except ImportError as exc:
+        raise SystemExit(f"navigation needs the particle filter (amr_localization): {exc}")
+    from amr_control.pure_pursuit_node import PurePursuitNode
+    from amr_planning.planner_node import PlannerNode
+    located = {"lidar_offset_x_m": lidar_offset_x} if lidar_offset_x is not None else {}
+    pursuit = {"simulation": simulation, **located}
+    for name, value in (("dt", dt), ("cmd_vel_stamped", cmd_vel_stamped),
+                        ("angular_sign", angular_sign)):
+        if value is not None:
+            pursuit[name] = value
+    cli = node_args(params_file)
+    return [
+        ParticleFilterNode(context=context, cli_args=cli, parameter_overrides=(
+            overrides_to_parameters({"world": world, **located}))),
+        PlannerNode(context=context, cli_args=cli, parameter_overrides=overrides_to_parameters(
+            {"world": world, "goal": [float(goal[0]), float(goal[1])]})),
+        PurePursuitNode(context=context, cli_args=cli,
+                        parameter_overrides=overrides_to_parameters(pursuit)),
+    ]
+
+
 def make_robot_graph(context, *, params_file=ROBOT_PARAMS, dt: float | None = None,
                      cmd_vel_stamped: bool | None = None, controller: str | None = None,
                      tuning: dict[str, Any] | None = None) -> list:

@@ -8,7 +8,10 @@ does not change discovery, it prints what it uses.
 
   .venv/bin/python scripts/run_robot.py --domain-id 30 --cmd-vel stamped   # Jazzy bringup
   .venv/bin/python scripts/run_robot.py --domain-id 30 --cmd-vel twist     # Humble bringup
-Ctrl-C stops the robot: the wall follower publishes a zero command before exiting.
+  .venv/bin/python scripts/run_robot.py --domain-id 30 --world lab02 --goal -1.0,0.6
+With --world and --goal: also the particle filter, the planner and the pure pursuit (robot
+mode) - explore until localized, then drive to the goal and stop there.
+Ctrl-C stops the robot: the controllers publish a zero command before exiting.
 """
 from __future__ import annotations
 
@@ -19,11 +22,13 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from amr_common.ros_env import describe_graph_settings  # noqa: E402
-from launch_common import (
+from launch_common import (  # noqa: E402
     ROBOT_PARAMS,
     add_controller_options,
     check_common_options,
-    make_robot_graph,  # noqa: E402
+    goal_value_joined,
+    make_navigation_nodes,
+    make_robot_graph,
 )
 
 
@@ -39,10 +44,22 @@ def parse_args(argv=None) -> argparse.Namespace:
     add_controller_options(parser, str(ROBOT_PARAMS), "wall follower ROS params YAML "
                            "(default params/turtlebot3.yaml)")
     parser.add_argument("--dt", type=float, default=None, help="control period in seconds")
-    args = parser.parse_args(argv)
+    parser.add_argument("--world", default=None, help="the map the robot drives in (bundled "
+                        "world name or a world YAML / course map JSON); needed by --goal")
+    parser.add_argument("--goal", default=None, help="navigate to X,Y (metres, negative numbers "
+                        "typed as is) or a named goal of --world")
+    args = parser.parse_args(goal_value_joined(sys.argv[1:] if argv is None else argv))
     if args.domain_id is not None and not 0 <= args.domain_id <= 232:
         parser.error("--domain-id must be within 0-232")
     check_common_options(parser, args)
+    if args.goal is not None:
+        from amr_common.world import World, WorldError
+        if args.world is None:
+            parser.error("--goal needs --world (the map to plan and localize on)")
+        try:
+            args.goal = World.load(args.world).resolve_goal(args.goal)
+        except WorldError as exc:
+            parser.error(str(exc))
     return args
 
 
@@ -60,9 +77,17 @@ def main(argv=None) -> int:
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     stop = StopFlag().install()
     stamped = None if args.cmd_vel is None else args.cmd_vel == "stamped"
+    tuning = dict(args.overrides)
+    if args.goal is not None:
+        tuning["enable_localization"] = True
     nodes = make_robot_graph(None, params_file=args.params_file, dt=args.dt,
                              cmd_vel_stamped=stamped, controller=args.controller,
-                             tuning=args.overrides)
+                             tuning=tuning)
+    if args.goal is not None:
+        nodes += make_navigation_nodes(
+            None, world=args.world, goal=args.goal, simulation=False,
+            params_file=args.params_file, dt=args.dt, cmd_vel_stamped=stamped,
+            angular_sign=tuning.get("angular_sign"))
     manager = LifecycleManager([node.get_name() for node in nodes])
     manager.get_logger().info(f"run_robot: {describe_graph_settings()}; Ctrl-C stops the robot")
     return run_managed(manager, stop, nodes)

@@ -1,6 +1,9 @@
 #!/usr/bin/env python3
 """Run the simulator and the wall follower on a maze (stands in for the course's launch file).
 
+With `--goal`, also the particle filter, the planner and the pure pursuit: explore until
+localized, plan, follow the path and stop at the goal.
+
 Lockstep (default): the simulator advances one dt per /cmd_vel, as fast as the loop turns.
 `--realtime`: the simulator runs on a wall-clock timer; with `--profile turtlebot3` this is the
 rehearsal of the real robot: /odom (pose only) + 5 Hz /scan, the amr_odometry node and the wall
@@ -13,6 +16,8 @@ Examples:
   .venv/bin/python scripts/run_sim.py --controller my_pkg.my_ctrl:MyController -p kp:=5.0
   .venv/bin/python scripts/run_sim.py --report out/run.json --plot out/run.png
   .venv/bin/python scripts/run_sim.py --record out/run.mcap --duration 60
+  .venv/bin/python scripts/run_sim.py --world lab02 --goal inner_far --plot out/nav.png
+  .venv/bin/python scripts/run_sim.py --world lab02 --goal -1.0,0.6   # walls + filter + planner
 Local runs are isolated: loopback discovery and a free ROS_DOMAIN_ID (printed at startup).
 """
 from __future__ import annotations
@@ -25,7 +30,11 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from amr_common.ros_env import describe_graph_settings, isolate_local_graph  # noqa: E402
-from launch_common import add_controller_options, check_common_options  # noqa: E402
+from launch_common import (  # noqa: E402
+    add_controller_options,
+    check_common_options,
+    goal_value_joined,
+)
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -46,8 +55,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     add_controller_options(parser, None, "wall follower ROS params YAML (default "
                            "params/sim.yaml, or params/turtlebot3.yaml for the realtime "
                            "turtlebot3 rehearsal)")
-    parser.add_argument("--goal", default=None, help="X,Y goal (needs a localization node "
-                        "publishing /pose and --enable-localization)")
+    parser.add_argument("--goal", default=None, help="navigate to X,Y (metres, negative "
+                        "numbers typed as is) or a named goal of the world: adds the particle "
+                        "filter, planner and pure pursuit; the run ends when the robot rests "
+                        "at the goal")
     parser.add_argument("--enable-localization", action="store_true")
     parser.add_argument("--report", default=None, help="write a JSON report here")
     parser.add_argument("--plot", default=None, help="write a PNG of the trajectory here")
@@ -55,17 +66,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--gui", action="store_true", help="live view window (pygame)")
     parser.add_argument("--domain-id", type=int, default=None,
                         help="ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID if set, else a free one)")
-    args = parser.parse_args(argv)
+    args = parser.parse_args(goal_value_joined(sys.argv[1:] if argv is None else argv))
     if not (math.isfinite(args.duration) and args.duration > 0):
         parser.error("--duration must be > 0")
     check_common_options(parser, args)
-    if args.goal is not None:
-        try:
-            args.goal = [float(v) for v in args.goal.split(",")]
-        except ValueError:
-            args.goal = []
-        if len(args.goal) != 2 or not all(math.isfinite(v) for v in args.goal):
-            parser.error("--goal must be X,Y in metres")
     return args
 
 
@@ -78,6 +82,8 @@ def main(argv=None) -> int:
         starts = list(world.starts) if args.start == "all" else [args.start]
         for start in starts:
             world.resolve_start(start)  # fail early with the world's own message
+        if args.goal is not None:  # a name or X,Y, checked against the walls
+            args.goal = world.resolve_goal(args.goal)
     except WorldError as exc:
         print(f"run_sim: {exc}", file=sys.stderr)
         return 2
@@ -113,7 +119,8 @@ def _write_outputs(args, world, reports) -> None:
             target = path if len(reports) == 1 else path.with_name(
                 f"{path.stem}-{report['start']}{path.suffix}")
             plot_episode(world, report["trajectory"], report["collision_points"], path=str(target),
-                         title=f"{report['world']} / {report['start']} / {report['profile']}")
+                         title=f"{report['world']} / {report['start']} / {report['profile']}",
+                         planned_path=report.get("path"), goal=report.get("goal"))
             print(f"run_sim: plot written to {target}")
 
 

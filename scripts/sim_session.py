@@ -4,6 +4,9 @@ Lockstep: simulator (lockstep, /odometry with the encoder twist in both profiles
 follower (simulation mode, params/sim.yaml).
 Rehearsal (`--realtime --profile turtlebot3`): simulator (real time) + the robot graph of
 run_robot.py (amr_odometry + wall follower in robot mode, params/turtlebot3.yaml).
+With a goal (`--goal`), both add the navigation nodes: particle filter, planner and pure
+pursuit; the wall follower explores until /pose is localized, the simulator ends the run once
+the robot rests at the goal.
 """
 from __future__ import annotations
 
@@ -19,6 +22,7 @@ from amr_common.node_runner import make_executor, shutdown_node
 from launch_common import (
     ROBOT_PARAMS,
     SIM_PARAMS,
+    make_navigation_nodes,
     make_robot_graph,
     make_wall_follower,
     overrides_to_parameters,
@@ -62,10 +66,12 @@ class SimSession:
         rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
         self.executor = make_executor(self.context)
 
+        self.navigating = args.goal is not None
+        localizing = args.enable_localization or self.navigating
         sim_values = {"world": args.world, "start": _start_label(self.start),
                       "profile": args.profile, "dt": args.dt, "seed": args.seed,
                       "mode": "realtime" if args.realtime else "lockstep",
-                      "enable_localization": args.enable_localization}
+                      "enable_localization": localizing}
         if args.goal:
             sim_values["goal"] = list(args.goal)
         self.simulator_node = SimulatorNode(
@@ -75,17 +81,28 @@ class SimSession:
         if args.controller:
             tuning["controller"] = args.controller
         if self.rehearsal:
+            params_file = args.params_file or ROBOT_PARAMS
+            tuning.setdefault("enable_localization", localizing)
             self.control_nodes = make_robot_graph(
-                self.context, params_file=args.params_file or ROBOT_PARAMS, dt=args.dt,
-                tuning=tuning)
+                self.context, params_file=params_file, dt=args.dt, tuning=tuning)
         else:
             tuning.update({"simulation": True, "dt": args.dt,
-                           "enable_localization": args.enable_localization})
+                           "enable_localization": localizing})
             params_file = args.params_file or SIM_PARAMS
             tuning = {**_robot_parameters(tuning, params_file, args.profile), **tuning}
             self.control_nodes = [make_wall_follower(
                 self.context, params_file=params_file, overrides=tuning)]
         self.wall_follower = self.control_nodes[-1]
+        self.planner_node = None
+        if self.navigating:
+            from amr_sim.profiles import get_profile
+            self.control_nodes += make_navigation_nodes(
+                self.context, world=args.world, goal=args.goal, simulation=not args.realtime,
+                params_file=params_file, dt=args.dt,
+                lidar_offset_x=None if self.rehearsal else get_profile(
+                    args.profile).lidar_offset_x)
+            self.planner_node = self.control_nodes[-2]
+        self.localized_time: float | None = None
         order = [node.get_name() for node in self.control_nodes] + [
             self.simulator_node.get_name()]
         self.manager = LifecycleManager(order, context=self.context)
@@ -100,6 +117,8 @@ class SimSession:
     def _on_step(self, sim) -> None:
         x, y, theta = sim.pose
         self.trajectory.append([round(sim.time, 6), x, y, theta])
+        if self.localized_time is None and self.simulator_node.localized:
+            self.localized_time = round(sim.time, 6)
         controller = getattr(self.wall_follower, "controller", None)
         error = getattr(controller, "wall_distance_error", None)
         if error is not None and math.isfinite(error):
@@ -191,12 +210,28 @@ class SimSession:
             "explored_fraction": explored_fraction(self.world, positions),
             "laps": count_laps(self.world, positions),
             "rms_wall_error_m": rms,
+            **(self._navigation_report() if self.navigating else {}),
             "trajectory": self.trajectory,
             "collision_points": [list(p) for p in sim.collision_points],
         }
 
+    def _navigation_report(self) -> dict:
+        """Goal, time to localize, goal reached and stopped times, path, final error."""
+        summary = self.simulator_node.summary()
+        plan = self.planner_node.last_plan if self.planner_node is not None else None
+        return {
+            "goal": summary["goal"], "localized_time_s": self.localized_time,
+            "goal_reached_time_s": summary["goal_reached_time_s"],
+            "stopped_time_s": summary["stopped_time_s"],
+            "final_position_error_m": summary["final_position_error_m"],
+            "path_length_m": plan.length_m if plan is not None else None,
+            "path": plan.points.tolist() if plan is not None else [],
+        }
+
     def summary_line(self, report: dict) -> str:
         laps = report["laps"]
+        if self.navigating:
+            return self._navigation_line(report)
         return (f"run_sim: {report['world']} / {report['start']} / {report['profile']} "
                 f"({report['mode']}): {report['sim_time_s']:.1f} s simulated in "
                 f"{report['wall_time_s']:.1f} s ({report['real_time_factor']}x real time), "
@@ -204,6 +239,21 @@ class SimSession:
                 f"{report['min_clearance_m'] * 100:.1f} cm, distance {report['distance_m']:.1f} m,"
                 f" explored {report['explored_fraction'] * 100:.0f}%"
                 + (f", laps {laps}" if laps else ""))
+
+    @staticmethod
+    def _navigation_line(report: dict) -> str:
+        def when(key: str) -> str:
+            return "never" if report[key] is None else f"{report[key]:.1f} s"
+        path = "no path" if report["path_length_m"] is None else \
+            f"path {report['path_length_m']:.2f} m"
+        return (f"run_sim: {report['world']} / {report['start']} -> goal "
+                f"({report['goal'][0]:g}, {report['goal'][1]:g}) / {report['profile']} "
+                f"({report['mode']}): localized {when('localized_time_s')}, goal reached "
+                f"{when('goal_reached_time_s')}, stopped {when('stopped_time_s')}, {path}, "
+                f"final error {report['final_position_error_m'] * 100:.1f} cm, collisions "
+                f"{report['collisions']}, min clearance {report['min_clearance_m'] * 100:.1f} "
+                f"cm; {report['sim_time_s']:.1f} s simulated in {report['wall_time_s']:.1f} s "
+                f"({report['real_time_factor']}x real time)")
 
     def close(self) -> None:
         # Controllers first: they publish their final zero command while the graph still runs.

@@ -26,6 +26,7 @@ def test_wall_follower_until_localized_then_replanning_after_a_loss():
     source = GroundTruthPose(localized_after_s=6.0, lost_from_s=15.0, lost_until_s=22.0)
     result = run_navigation_episode("maze_deadends", "south_west", "north_east",
                                     pose_source=source, duration=200.0)
+    assert result.pose_source == "GroundTruthPose"
     assert result.localized_time_s == pytest.approx(6.0)
     assert result.plans == 2, "planned when localized and again when relocalized"
     assert result.goal_reached and result.collisions == 0
@@ -39,3 +40,21 @@ def test_duration_runs_out_before_the_goal():
     assert not result.goal_reached and result.finish_reason == "duration"
     assert result.stopped_time_s is None and result.sim_time_s == pytest.approx(5.0)
     assert "goal reached never" in result.summary()
+
+
+def test_no_path_means_a_stall_reported_with_the_planning_error():
+    class OnAWall:
+        def update(self, sim, z_scan, z_v, z_w):
+            return (0.0, -0.8, 0.0), True  # an estimate on lab02's wall: no plan from there
+
+    result = run_navigation_episode("lab02", "outer", pose_source=OnAWall(), duration=60.0,
+                                    stall_timeout_s=2.0)
+    assert result.stalled and result.finish_reason == "stalled"
+    assert result.sim_time_s == pytest.approx(2.0, abs=0.1) and result.distance_m == 0.0
+    assert len(result.planning_errors) == 1 and "start (0.000, -0.800) is on a wall" in \
+        result.planning_errors[0]
+
+
+def test_bad_pose_source_is_a_clear_error():
+    with pytest.raises(ValueError, match="pose_source must be 'truth', 'filter'"):
+        run_navigation_episode("lab02", "outer", pose_source="oracle", duration=1.0)
