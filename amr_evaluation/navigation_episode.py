@@ -124,6 +124,7 @@ class NavigationResult:
     dt: float = 0.05
     trajectory: list[list[float]] = field(default_factory=list)  # [[t, x, y, theta], ...]
     path: list[list[float]] = field(default_factory=list)  # the last planned path [[x, y], ...]
+    collision_points: list[list[float]] = field(default_factory=list)  # [[x, y], ...]
 
     @property
     def goal_reached(self) -> bool:
@@ -298,7 +299,8 @@ def run_navigation_episode(
         "stalled" if stalled else "duration",
         kidnap=[float(k) for k in kidnap] if kidnap is not None else None, stalled=stalled,
         dt=sim.dt, trajectory=trajectory,
-        path=path.points.tolist() if path is not None else [])
+        path=path.points.tolist() if path is not None else [],
+        collision_points=[[float(px), float(py)] for px, py in sim.collision_points])
 
 
 __all__ = ["run_navigation_episode", "NavigationResult", "GroundTruthPose",

@@ -192,10 +192,10 @@ def plot_episode(world: World | str, trajectory: Any, collision_points: Iterable
 
 def plot_episodes_sheet(results: Sequence[Any], path: str | Path, columns: int | None = None,
                         title: str | None = None) -> Path:
-    """A grid of episodes (EpisodeResults or their dicts), one small subplot each."""
+    """A grid of episodes (EpisodeResults or their dicts, NavigationResults), one subplot each."""
     from .episode import EpisodeResult
 
-    items = [r if isinstance(r, EpisodeResult) else EpisodeResult.from_dict(r) for r in results]
+    items = [r if hasattr(r, "trajectory") else EpisodeResult.from_dict(r) for r in results]
     n = max(1, len(items))
     columns = columns or min(4, math.ceil(math.sqrt(n)))
     rows = math.ceil(n / columns)
@@ -205,7 +205,9 @@ def plot_episodes_sheet(results: Sequence[Any], path: str | Path, columns: int |
     for i, res in enumerate(items):
         ax = fig.add_subplot(rows, columns, i + 1)
         world = worlds.setdefault(res.world, World.load(res.world))
-        figures = draw_episode(ax, world, res, colourbar=False, small=True)
+        figures = draw_episode(ax, world, res, colourbar=False, small=True,
+                               planned_path=getattr(res, "path", None),
+                               goal=getattr(res, "goal", None))
         start = (res.start if isinstance(res.start, str)
                  else "(" + ", ".join(f"{c:.1f}" for c in res.start) + ")")
         ax.set_title(f"{res.world}/{start}/{res.profile} s{res.seed}\n"

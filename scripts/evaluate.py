@@ -2,15 +2,21 @@
 """Score a controller on many episodes at once: worlds x starts x profiles x seeds, in parallel.
 
 Each episode runs headless with the same Simulator and controller class as the ROS path
-(amr_evaluation.episode.run_episode). Writes results.json, results.csv and sheet.png (every
-episode's trajectory) to --out, prints a table and a one-line verdict.
-Exit code: 0 no collision, 1 some episode collided, 2 bad options, 3 some episode failed to run.
+(amr_evaluation.episode.run_episode). With --goals, navigation episodes (worlds x starts x goals
+x profiles x seeds): the controller explores until the particle filter is localized, then the
+planner and the pure pursuit drive to the goal (amr_evaluation.navigation_episode). Writes
+results.json, results.csv and sheet.png (every episode's trajectory) to --out, prints a table and
+a one-line verdict.
+Exit code: 0 no collision (and every goal reached), 1 some episode collided or missed its goal,
+2 bad options, 3 some episode failed to run.
 
 Examples:
   .venv/bin/python scripts/evaluate.py --worlds lab02 --seeds 0,1,2 --duration 120
   .venv/bin/python scripts/evaluate.py --worlds all --starts all --profiles ideal,turtlebot3
   .venv/bin/python scripts/evaluate.py --config evaluations/example.yaml -p kp:=4.0
   .venv/bin/python scripts/evaluate.py --worlds lab02 --controller my_pkg.ctrl:MyController
+  .venv/bin/python scripts/evaluate.py --worlds lab02,maze_deadends --goals all \
+      --profiles ideal,turtlebot3 --seeds 0-2 --duration 300
 Options given on the command line override the same keys of --config.
 """
 from __future__ import annotations
@@ -62,6 +68,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         "or 'all' (default lab02)")
     parser.add_argument("--starts", default=None, help="'all' or comma-separated start names "
                         "(default all)")
+    parser.add_argument("--goals", default=None, help="navigation episodes: 'all' or "
+                        "comma-separated named goals of the worlds (default: none, wall "
+                        "following)")
+    parser.add_argument("--pose-source", default=None, choices=["filter", "truth"],
+                        help="navigation: the particle filter (default) or the true pose")
     parser.add_argument("--profiles", default=None, help="comma-separated sensor profiles: ideal, "
                         "turtlebot3 (default ideal)")
     parser.add_argument("--seeds", default=None, help="comma-separated seeds or ranges, e.g. "
@@ -88,13 +99,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 def resolve_settings(args: argparse.Namespace) -> dict:
     """Config-file values, overridden by the command-line options that were given."""
-    settings: dict = {"worlds": "lab02", "starts": "all", "profiles": "ideal", "seeds": "0",
+    settings: dict = {"worlds": "lab02", "starts": "all", "goals": None,
+                      "pose_source": "filter", "profiles": "ideal", "seeds": "0",
                       "duration": 600.0, "dt": 0.05, "controller": DEFAULT_CONTROLLER,
                       "params": {}, "jobs": None}
     if args.config:
         settings.update(load_config(args.config))
-    for key in ("worlds", "starts", "profiles", "seeds", "duration", "dt", "controller",
-                "params_file", "jobs"):
+    for key in ("worlds", "starts", "goals", "pose_source", "profiles", "seeds", "duration",
+                "dt", "controller", "params_file", "jobs"):
         value = getattr(args, key)
         if value is not None:
             settings[key] = value
@@ -123,7 +135,8 @@ def main(argv: list[str] | None = None) -> int:
         settings = resolve_settings(args)
         specs = expand_grid(settings["worlds"], settings["starts"], settings["profiles"],
                             settings["seeds"], duration=settings["duration"], dt=settings["dt"],
-                            controller=settings["controller"], params=settings["params"])
+                            controller=settings["controller"], params=settings["params"],
+                            goals=settings["goals"], pose_source=settings["pose_source"])
         check_controller(settings["controller"], settings["params"], settings["dt"])
     except (EvaluationError, ControllerSpecError) as exc:
         print(f"evaluate: {exc}", file=sys.stderr)
@@ -150,6 +163,7 @@ def main(argv: list[str] | None = None) -> int:
             "jobs": min(jobs, len(specs)), "controller": settings["controller"],
             "params": settings["params"], "params_file": settings["params_file"],
             "duration_s": settings["duration"], "dt_s": settings["dt"],
+            "goals": settings["goals"], "pose_source": settings["pose_source"],
             "config": args.config, "command": " ".join(sys.argv),
             "python": platform.python_version(), "host": platform.node()}
     write_json(out / "results.json", outcomes, meta)

@@ -118,9 +118,15 @@ def _write_outputs(args, world, reports) -> None:
         for index, report in enumerate(reports):
             target = path if len(reports) == 1 else path.with_name(
                 f"{path.stem}-{report['start']}{path.suffix}")
+            title = f"{report['world']} / {report['start']} / {report['profile']}"
+            if report.get("goal") is not None:
+                reached = report["goal_reached_time_s"]
+                title += (f" -> goal ({report['goal'][0]:g}, {report['goal'][1]:g}): "
+                          + ("not reached" if reached is None else
+                             f"reached {reached:.1f} s, final error "
+                             f"{report['final_position_error_m'] * 100:.1f} cm"))
             plot_episode(world, report["trajectory"], report["collision_points"], path=str(target),
-                         title=f"{report['world']} / {report['start']} / {report['profile']}",
-                         planned_path=report.get("path"), goal=report.get("goal"))
+                         title=title, planned_path=report.get("path"), goal=report.get("goal"))
             print(f"run_sim: plot written to {target}")
 
 

@@ -5,7 +5,9 @@ import json
 
 import pytest
 
+from amr_common.world import World, bundled_worlds
 from amr_evaluation.navigation_episode import GroundTruthPose, run_navigation_episode
+from amr_planning.planner import Planner
 
 
 @pytest.mark.parametrize("profile", ["ideal", "turtlebot3"])
@@ -58,3 +60,53 @@ def test_no_path_means_a_stall_reported_with_the_planning_error():
 def test_bad_pose_source_is_a_clear_error():
     with pytest.raises(ValueError, match="pose_source must be 'truth', 'filter'"):
         run_navigation_episode("lab02", "outer", pose_source="oracle", duration=1.0)
+
+
+# --- end to end with the particle filter (amr_localization) ------------------------------------
+
+COURSE_STYLE = [w for w in ("lab02", "maze_deadends", "twin_maze", "twin_maze_small")
+                if w in bundled_worlds()]  # 0.4 m corridors on a 0.4 m grid
+
+
+def course_episodes(name: str) -> list[tuple[str, str, int]]:
+    """(start, goal, seed): first start to the default goal, last start to another goal.
+
+    Each episode has its own seed.
+    """
+    world = World.load(name)
+    starts, goals = list(world.starts), list(world.goals)
+    default = next(g for g in goals if world.goals[g] == world.goal)
+    other = next((g for g in goals if g != default), default)
+    return [(starts[0], default, 0), (starts[-1], other, 1)]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("profile", ["ideal", "turtlebot3"])
+@pytest.mark.parametrize("name", COURSE_STYLE)
+def test_explore_localize_plan_and_stop_on_the_goal_with_the_particle_filter(name, profile):
+    pytest.importorskip("amr_localization")
+    world = World.load(name)
+    planner = Planner(world)
+    for start, goal, seed in course_episodes(name):
+        result = run_navigation_episode(world, start, goal, profile=profile, seed=seed,
+                                        pose_source="filter", planner=planner, duration=300.0,
+                                        record_trajectory=False)
+        label = f"{name}/{start}->{goal}/{profile}/seed {seed}: {result.summary()}"
+        assert result.goal_reached and result.finish_reason == "stopped at the goal", label
+        assert result.collisions == 0 and not result.stalled, label
+        assert result.final_position_error_m <= 0.05, label
+        assert result.planning_errors == [], label
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("profile, kidnap", [("ideal", (35.0, -1.0, -1.0, 0.0)),
+                                             ("turtlebot3", (60.0, 0.2, 1.0, 3.14159))])
+def test_a_robot_kidnapped_on_the_way_relocalizes_replans_and_reaches_the_goal(profile, kidnap):
+    pytest.importorskip("amr_localization")
+    result = run_navigation_episode("lab02", "outer", "inner_far", profile=profile,
+                                    pose_source="filter", kidnap=kidnap, duration=300.0,
+                                    record_trajectory=False)
+    assert result.localized_time_s < kidnap[0], "kidnapped while following the path"
+    assert result.plans >= 2, "replanned from the relocalized pose"
+    assert result.goal_reached and result.collisions == 0, result.summary()
+    assert result.final_position_error_m <= 0.05
