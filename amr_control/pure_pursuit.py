@@ -29,6 +29,7 @@ Policy (after Nav2's Regulated Pure Pursuit, tightened for 0.4 m corridors):
 """
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any
 
@@ -123,10 +124,17 @@ def scan_clearance(ranges: np.ndarray, angle_min: float, angle_increment: float,
         valid = np.isfinite(r) & (r >= range_min) & (r <= range_max)
     if not valid.any():
         return None
-    angles = angle_min + angle_increment * np.flatnonzero(valid)
+    cos_a, sin_a = _ray_directions(float(angle_min), float(angle_increment), len(r))
     r = r[valid]
-    distance = np.hypot(lidar_offset_x + r * np.cos(angles), r * np.sin(angles))
+    distance = np.hypot(lidar_offset_x + r * cos_a[valid], r * sin_a[valid])
     return float(distance.min() - robot_radius)
+
+
+@functools.lru_cache(maxsize=8)
+def _ray_directions(angle_min: float, angle_increment: float, rays: int):
+    """The cosine and sine of every ray's angle (cached: a scan's geometry rarely changes)."""
+    angles = angle_min + angle_increment * np.arange(rays)
+    return np.cos(angles), np.sin(angles)
 
 
 class PurePursuit:

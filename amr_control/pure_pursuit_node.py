@@ -84,7 +84,7 @@ class PurePursuitNode(LifecycleNode):
         self._latest = None  # robot mode: (pose, stamp ns, arrival Time) of the newest /pose
         self._last_stamp = None  # newest answered /pose stamp (lockstep)
         self._path_stamp_ns = -1
-        self._clearance: tuple[float | None, Any] = (None, None)  # (m, arrival Time)
+        self._scan: tuple[LaserScan | None, Any] = (None, None)  # (newest, arrival Time)
 
     # --- lifecycle -------------------------------------------------------------------------
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -189,17 +189,22 @@ class PurePursuitNode(LifecycleNode):
         self.get_logger().info(f"following a new path: {len(points)} poses, {length:.2f} m")
 
     def _on_scan(self, message: LaserScan) -> None:
-        if self.pursuit is None:
-            return
+        # Kept as is: the clearance is worked out only when the pursuit commands.
+        self._scan = (message, self.get_clock().now())
+
+    def _scan_clearance(self) -> float | None:
+        """Footprint clearance from the newest /scan; None if none, stale or unusable."""
+        message, arrival = self._scan
+        if message is None or (not self.simulation and (
+                self.get_clock().now() - arrival).nanoseconds * 1e-9 > self.data_timeout):
+            return None  # a stale scan says nothing about the obstacles now
         geometry = (message.angle_min, message.angle_increment, message.range_min,
                     message.range_max)
         if len(message.ranges) == 0 or not all(math.isfinite(v) for v in geometry):
-            self._clearance = (None, None)
-            return
+            return None
         p = self.pursuit.params
-        self._clearance = (scan_clearance(scan_ranges(message), *geometry,
-                                          p["lidar_offset_x_m"], p["robot_radius_m"]),
-                           self.get_clock().now())
+        return scan_clearance(scan_ranges(message), *geometry, p["lidar_offset_x_m"],
+                              p["robot_radius_m"])
 
     def _on_pose(self, message) -> None:
         if not self._active or self.pursuit is None:
@@ -259,12 +264,9 @@ class PurePursuitNode(LifecycleNode):
         self._output.publish(v, w, now.to_msg())
 
     def _compute(self, pose: tuple[float, float, float]) -> tuple[float, float]:
-        clearance, arrival = self._clearance
-        if arrival is not None and not self.simulation and \
-                (self.get_clock().now() - arrival).nanoseconds * 1e-9 > self.data_timeout:
-            clearance = None  # a stale scan says nothing about the obstacles now
         state = self.pursuit.state
         try:
+            clearance = self._scan_clearance() if self.pursuit.path is not None else None
             v, w = self.pursuit.compute_commands(*pose, clearance)
         except Exception as exc:  # never take the node down: stop instead
             self.get_logger().error(f"pure pursuit raised {exc!r}: commanding zero",

@@ -26,7 +26,7 @@ from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackRet
 
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.qos import LATCHED, RELIABLE_10
-from amr_common.ros_conversions import path_message, pose_from_message
+from amr_common.ros_conversions import path_message
 from amr_common.world import World
 from amr_planning.planner import Planner, PlanningError
 
@@ -149,11 +149,7 @@ class PlannerNode(LifecycleNode):
                 self._plan_pending = True
             self._localized = False
             return
-        try:
-            x, y, _ = pose_from_message(message.pose)
-        except ValueError as exc:
-            self.get_logger().warning(f"/pose ignored: {exc}", throttle_duration_sec=2.0)
-            return
+        x, y = message.pose.position.x, message.pose.position.y  # the heading is not needed
         if not (math.isfinite(x) and math.isfinite(y)):
             self.get_logger().warning("/pose ignored: not finite", throttle_duration_sec=2.0)
             return

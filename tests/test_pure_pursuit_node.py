@@ -198,3 +198,32 @@ def test_integer_values_are_accepted_for_float_parameters(ros):
     assert node.trigger_configure().name == "SUCCESS"
     assert node.pursuit.params["max_linear_speed_mps"] == pytest.approx(0.22)
     assert math.isclose(node.dt, 1.0)
+
+
+def test_a_close_obstacle_on_the_scan_slows_the_robot(ros):
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import LaserScan
+
+    from amr_common.ros_conversions import laser_scan
+    fast = make_node(ros, scan_topic="/no_scan")  # sees no scan: no slow-down
+    slow = make_node(ros, "pure_pursuit_slow", cmd_vel_topic="/cmd_slow")
+    graph = Graph(ros)
+    slowed = []
+    graph.node.create_subscription(TwistStamped, "/cmd_slow", slowed.append, 10)
+    scans = graph.node.create_publisher(LaserScan, "/scan", QoSProfile(
+        depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
+    bring_up(ros, fast, graph, L_PATH)
+    ros.bring_up(slow, lambda: slow.count_publishers("/scan") >= 1)
+    ros.spin_until(lambda: slow.pursuit.path is not None, 5.0, "the latched path")
+    # 12.5 cm to a wall on the left: 2 cm footprint clearance for the second node only.
+    scans.publish(laser_scan([3.0] * 89 + [0.125] + [3.0] * 270, stamp=seconds_to_time(0.0),
+                             frame_id="base_scan", angle_min=0.0,
+                             angle_increment=2 * math.pi / 360, range_min=0.12, range_max=3.5,
+                             scan_time=0.2))
+    ros.spin_until(lambda: slow._scan[0] is not None, 5.0, "the scan")
+    for k in range(1, 21):
+        graph.send_pose(0.05 * k)
+        ros.spin_until(lambda: len(graph.commands) == k and len(slowed) == k, 5.0, f"answer {k}")
+    v_fast, v_slow = command(graph.commands[-1])[0], command(slowed[-1])[0]
+    assert v_fast == pytest.approx(0.22)
+    assert v_slow == pytest.approx(0.22 * 0.02 / 0.06, rel=0.05)
