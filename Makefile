@@ -1,7 +1,7 @@
 # Two commands set everything up and run: `make run` (simulator + wall follower on the default
 # maze) and `make test` (the ruff linter, then pytest). Each creates .venv if missing, installs
 # the pinned dependencies when requirements.lock or pyproject.toml changed, and rebuilds
-# amr_msgs when its sources changed.
+# amr_msgs (and tf2_msgs) when their sources changed.
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
@@ -9,6 +9,11 @@ DEPS_STAMP := $(VENV)/.stamp-deps
 MSGS_STAMP := $(VENV)/.stamp-amr_msgs
 MSGS_SOURCES := $(wildcard amr_msgs/msg/*.msg) amr_msgs/CMakeLists.txt amr_msgs/package.xml \
 	tools/cmake/ros_pypi_wheels.cmake tools/build_amr_msgs.py
+# tf2_msgs (TFMessage for /tf) is not among the PyPI wheels: built into the venv unless an apt ROS
+# install provides it. The amr_msgs stamp depends on it, so every target gets both.
+TF2_STAMP := $(VENV)/.stamp-tf2_msgs
+TF2_SOURCES := $(wildcard third_party/tf2_msgs/msg/*.msg) third_party/tf2_msgs/CMakeLists.txt \
+	third_party/tf2_msgs/package.xml tools/cmake/ros_pypi_wheels.cmake tools/build_amr_msgs.py
 
 ARGS ?=
 PYTEST_ARGS ?=
@@ -38,7 +43,11 @@ $(DEPS_STAMP): requirements.lock pyproject.toml | $(PY)
 	$(PY) -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation -e .
 	touch $@
 
-$(MSGS_STAMP): $(DEPS_STAMP) $(MSGS_SOURCES)
+$(TF2_STAMP): $(DEPS_STAMP) $(TF2_SOURCES)
+	$(PY) tools/build_amr_msgs.py third_party/tf2_msgs --unless-provided
+	touch $@
+
+$(MSGS_STAMP): $(DEPS_STAMP) $(TF2_STAMP) $(MSGS_SOURCES)
 	$(PY) tools/build_amr_msgs.py
 	touch $@
 

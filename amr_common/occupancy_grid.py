@@ -1,4 +1,4 @@
-"""An occupancy grid of a World: free/occupied cells and each cell's distance to the nearest wall.
+"""An occupancy grid of a World: free/occupied cells and each cell's distance to the walls.
 
     grid = OccupancyGrid.from_world(World.load("lab02"), resolution=0.02)
     row, col = grid.cell_of(1.0, -1.0)
@@ -14,9 +14,13 @@ centres: a 0.4 m corridor has a row of cells on its centre line, 0.2 m from both
 - `clearance`: exact Euclidean distance (m) from each cell centre to the nearest wall segment,
   computed from the segments (not a distance transform of the raster, so no staircase error);
   0 for centres outside the free space (outside the boundary or inside an obstacle).
-- `free`: the centre is in the free space and no wall passes within half a cell of it.
+- `in_boundary`: the centre is inside the boundary (beyond its walls: "unknown" on /map).
+- `walls`: a wall passes through the cell (each wall is walked in quarter-cell steps, so every
+  point of every wall lies in such a cell).
+- `free`: the centre is in the free space and no wall passes through the cell.
 
-No planner specifics (inflation, costs) and no rclpy: the planner and a /map publisher share it.
+No planner specifics (inflation, costs) and no rclpy: the planner and the /map raster
+(amr_common.map_raster) share it.
 """
 from __future__ import annotations
 
@@ -25,12 +29,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from amr_common.geometry import points_in_polygon
 from amr_common.jit import HAVE_NUMBA, jit
 from amr_common.raycast import nearest_wall_kernel
 from amr_common.world import World
 
-OCCUPIED = 100  # nav_msgs/OccupancyGrid values
-FREE = 0
+FREE, OCCUPIED, UNKNOWN = 0, 100, -1  # nav_msgs/OccupancyGrid values
 
 
 def _distance_field_python(segments, x0, y0, resolution, out):
@@ -57,20 +61,24 @@ class OccupancyGrid:
     origin: tuple[float, float]  # (x, y) of the lower-left corner of cell (0, 0), m
     free: np.ndarray  # (height, width) bool
     clearance: np.ndarray  # (height, width) float64, m; 0 outside the free space
-    frame_id: str = "map"
+    in_boundary: np.ndarray  # (height, width) bool
+    walls: np.ndarray  # (height, width) bool: a wall passes through the cell
 
     @classmethod
-    def from_world(cls, world: World, resolution: float = 0.02) -> "OccupancyGrid":
-        """Rasterize `world`: cells from one cell beyond its walls' bounds on every side."""
-        if not (isinstance(resolution, (int, float)) and math.isfinite(resolution)
-                and resolution > 0):
+    def from_world(cls, world: World, resolution: float = 0.02,
+                   padding_m: float | None = None) -> "OccupancyGrid":
+        """Rasterize `world`: cells from `padding_m` (default one cell) beyond its walls."""
+        if isinstance(resolution, bool) or not (isinstance(resolution, (int, float))
+                                                and math.isfinite(resolution)
+                                                and resolution > 0):
             raise ValueError(f"resolution must be a positive number of metres, got {resolution!r}")
         resolution = float(resolution)
+        pad = 1 if padding_m is None else max(0, math.ceil(round(padding_m / resolution, 6)))
         xmin, ymin, xmax, ymax = world.bounds
         # Index of the cell whose centre is at k * resolution; rounding first so that -1.2 / 0.02
         # (= -60.000000000000014 in floating point) counts as -60.
-        first = [math.floor(round(v / resolution, 6)) - 1 for v in (xmin, ymin)]
-        last = [math.ceil(round(v / resolution, 6)) + 1 for v in (xmax, ymax)]
+        first = [math.floor(round(v / resolution, 6)) - pad for v in (xmin, ymin)]
+        last = [math.ceil(round(v / resolution, 6)) + pad for v in (xmax, ymax)]
         width, height = last[0] - first[0] + 1, last[1] - first[1] + 1
         xs = (first[0] + np.arange(width)) * resolution
         ys = (first[1] + np.arange(height)) * resolution
@@ -80,12 +88,14 @@ class OccupancyGrid:
         else:
             distance = _distance_field_numpy(world, xs, ys)
         gx, gy = np.meshgrid(xs, ys)
+        in_boundary = np.ones((height, width), dtype=bool) if world.boundary is None else \
+            points_in_polygon(world.boundary, gx, gy)
         inside = world.contains_points(np.column_stack([gx.ravel(), gy.ravel()]))
         inside = inside.reshape(height, width)
-        clearance = np.where(inside, distance, 0.0)
-        free = inside & (distance >= 0.5 * resolution)
         origin = (float(xs[0] - 0.5 * resolution), float(ys[0] - 0.5 * resolution))
-        return cls(resolution, origin, free, clearance)
+        walls = _wall_cells(world.segments, origin, resolution, (height, width))
+        return cls(resolution, origin, inside & ~walls, np.where(inside, distance, 0.0),
+                   in_boundary, walls)
 
     @property
     def width(self) -> int:
@@ -122,8 +132,27 @@ class OccupancyGrid:
         return float(self.clearance[row, col]) if self.contains_cell(row, col) else 0.0
 
     def occupancy_values(self) -> np.ndarray:
-        """int8 cell values, row-major from the lower-left cell: 0 free, 100 occupied."""
-        return np.where(self.free, FREE, OCCUPIED).astype(np.int8).ravel()
+        """Int8 (height, width) cell values: free 0, occupied 100, unknown -1.
+
+        Occupied: walls and obstacles; unknown: beyond the boundary walls.
+        """
+        values = np.where(self.free, FREE, OCCUPIED).astype(np.int8)
+        values[~self.in_boundary & ~self.walls] = UNKNOWN
+        return values
 
 
-__all__ = ["OccupancyGrid", "OCCUPIED", "FREE"]
+def _wall_cells(segments: np.ndarray, origin: tuple[float, float], resolution: float,
+                shape: tuple[int, int]) -> np.ndarray:
+    """(height, width) bool: the cells some wall passes through (walked in quarter cells)."""
+    cells = np.zeros(shape, dtype=bool)
+    for x1, y1, x2, y2 in segments:
+        n = max(2, math.ceil(math.hypot(x2 - x1, y2 - y1) / (0.25 * resolution)) + 1)
+        t = np.linspace(0.0, 1.0, n)
+        rows = np.floor((y1 + t * (y2 - y1) - origin[1]) / resolution).astype(int)
+        cols = np.floor((x1 + t * (x2 - x1) - origin[0]) / resolution).astype(int)
+        keep = (rows >= 0) & (rows < shape[0]) & (cols >= 0) & (cols < shape[1])
+        cells[rows[keep], cols[keep]] = True
+    return cells
+
+
+__all__ = ["OccupancyGrid", "FREE", "OCCUPIED", "UNKNOWN"]

@@ -18,6 +18,7 @@ MAX_ANGULAR_SPEED = 2.84  # rad/s, official limit
 LINEAR_SPEED_MAX = MAX_LINEAR_SPEED  # the course template's name
 WHEEL_SPEED_MAX = LINEAR_SPEED_MAX / WHEEL_RADIUS  # rad/s
 LIDAR_OFFSET_X = -0.032  # m, base_scan from base_link along x (LDS-01 on the Burger)
+LIDAR_HEIGHT = 0.182  # m, base_scan above base_footprint (base_link 0.010 + base_scan 0.172)
 MASS = 1.0  # kg, Burger (affects only contact impulses; the drive reaches commands within a step)
 
 _HALF_TRACK = TRACK / 2.0

@@ -43,6 +43,7 @@ from typing import Any
 
 import numpy as np
 
+from .geometry import points_in_polygon
 from .robot import ROBOT_RADIUS
 
 WORLDS_DIR = Path(__file__).resolve().parent / "worlds"
@@ -220,9 +221,9 @@ class World:
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
         inside = np.ones(len(pts), dtype=bool)
         if self.boundary is not None:
-            inside &= _points_in_polygon(self.boundary, pts[:, 0], pts[:, 1])
+            inside &= points_in_polygon(self.boundary, pts[:, 0], pts[:, 1])
         for hole in self.holes:
-            inside &= ~_points_in_polygon(hole, pts[:, 0], pts[:, 1])
+            inside &= ~points_in_polygon(hole, pts[:, 0], pts[:, 1])
         return inside
 
     def resolve_start(self, start: str | tuple | list | np.ndarray | None
@@ -324,18 +325,6 @@ def _point_in_polygon(poly: np.ndarray, x: float, y: float) -> bool:
     with np.errstate(divide="ignore", invalid="ignore"):
         xint = px + (y - py) * (qx - px) / (qy - py)
     return bool(np.count_nonzero(crosses & (x < xint)) % 2)
-
-
-def _points_in_polygon(poly: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
-    """Even-odd ray crossing test for many points: a loop over the polygon's edges."""
-    inside = np.zeros(len(xs), dtype=bool)
-    for (px, py), (qx, qy) in zip(poly, np.roll(poly, -1, axis=0)):
-        if py == qy:
-            continue  # a horizontal edge never crosses the horizontal test ray
-        crosses = (py > ys) != (qy > ys)
-        xint = px + (ys - py) * (qx - px) / (qy - py)
-        inside ^= crosses & (xs < xint)
-    return inside
 
 
 def _closed_segments(poly: np.ndarray) -> np.ndarray:

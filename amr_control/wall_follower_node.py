@@ -7,6 +7,10 @@ amr_control.wall_follower.WallFollower) and results become commands.
 - Robot mode (`simulation: false`): stores the newest synchronized set and computes on a timer
   every dt (real time does not wait); /cmd_vel is TwistStamped (Jazzy bringup) or Twist (Humble)
   by `cmd_vel_stamped`; if the newest data is older than `data_timeout` it commands zero.
+The LiDAR position (the controller's `lidar_offset_x_m`) is read from /tf_static (base_frame ->
+scan_frame, through chains such as the Burger's base_footprint -> base_link -> base_scan) when a
+node publishes it; the parameter is the fallback. A position that arrives after the controller
+computed its first command applies from the next configure (the controller is rebuilt).
 Safety: the TurtleBot3 keeps its last command forever, so the node sends a zero command on
 deactivate, cleanup and shutdown (Ctrl-C included), and never publishes a non-finite value.
 """
@@ -33,6 +37,7 @@ from amr_common.controller_loader import (
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.qos import RELIABLE_10, scan_qos
 from amr_common.robot import MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED
+from amr_common.tf import StaticTransformListener
 
 _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
     "simulation": (True, "true: compute on each synchronized set (lockstep with the simulator);"
@@ -55,6 +60,10 @@ _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
     "scan_topic": ("/scan", "sensor_msgs/LaserScan input (subscribed best effort)"),
     "pose_topic": ("/pose", "amr_msgs/PoseStamped input when enable_localization is true"),
     "cmd_vel_topic": ("/cmd_vel", "Velocity command output"),
+    "base_frame": ("base_footprint", "Robot frame: the LiDAR position is read from /tf_static "
+                                     "as base_frame -> scan_frame"),
+    "scan_frame": ("base_scan", "LiDAR frame (see base_frame); without it on /tf_static, "
+                                "lidar_offset_x_m is used"),
 }
 
 
@@ -93,6 +102,7 @@ class WallFollowerNode(LifecycleNode):
                 self._tuning_names.append(name)
         except ControllerSpecError as exc:
             self.get_logger().error(f"{exc} (configure will fail)")
+        self._lidar_offset_from_tf: float | None = None  # kept across configures
         self._reset_runtime()
 
     # --- lifecycle -------------------------------------------------------------------------
@@ -107,6 +117,8 @@ class WallFollowerNode(LifecycleNode):
         self._scan_geometry: tuple | None = None
         self._last_stamp = None  # newest measurement's stamp (simulated time in lockstep)
         self._active = False
+        self._computed = False  # the controller has computed a command since it was built
+        self._static_listener: StaticTransformListener | None = None
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Check the parameters, then create what the node runs on.
@@ -133,9 +145,12 @@ class WallFollowerNode(LifecycleNode):
             self.get_logger().error("configure failed: " + "; ".join(problems))
             return TransitionCallbackReturn.FAILURE
         tuning = {name: self.get_parameter(name).value for name in self._tuning_names}
+        if "lidar_offset_x_m" in tuning and self._lidar_offset_from_tf is not None:
+            tuning["lidar_offset_x_m"] = self._lidar_offset_from_tf
         try:
             controller_class = load_controller_class(p["controller"])
             self.controller = controller_class(p["dt"], **tuning)
+            self._controller_factory = (controller_class, p["dt"], tuning)
         except Exception as exc:  # a user's controller may raise anything
             self.get_logger().error(f"configure failed: controller '{p['controller']}': {exc}")
             return TransitionCallbackReturn.FAILURE
@@ -163,6 +178,9 @@ class WallFollowerNode(LifecycleNode):
         self._synchronizer = message_filters.ApproximateTimeSynchronizer(
             self._subscribers, p["queue_size"], slop)
         self._synchronizer.registerCallback(self._on_synchronized)
+        if "lidar_offset_x_m" in tuning:
+            self._lidar_frames = (p["base_frame"], p["scan_frame"])
+            self._static_listener = StaticTransformListener(self, self._on_static_transforms)
         mode = "simulation (lockstep)" if self.simulation else f"robot (timer every {self.dt} s)"
         self.get_logger().info(
             f"configured: {mode}, controller {p['controller']}, slop {slop} s, /cmd_vel as "
@@ -223,11 +241,39 @@ class WallFollowerNode(LifecycleNode):
         self._stop_timer()
         for subscriber in self._subscribers:
             subscriber.close()
+        if self._static_listener is not None:
+            self._static_listener.close()
         if self._cmd_publisher is not None:
             self.destroy_lifecycle_publisher(self._cmd_publisher)
         self._reset_runtime()
 
     # --- data path -------------------------------------------------------------------------
+    def _on_static_transforms(self, tree) -> None:
+        """Use the LiDAR position of /tf_static; rebuild the controller if it has not run yet."""
+        offset = tree.offset(*self._lidar_frames)
+        controller_class, dt, tuning = self._controller_factory
+        if offset is None or offset.x == tuning["lidar_offset_x_m"]:
+            return
+        if abs(offset.y) > 1e-3 or abs(offset.yaw) > 1e-3:
+            self.get_logger().warning(
+                f"{'->'.join(self._lidar_frames)} has y {offset.y:.3f} m, yaw {offset.yaw:.3f} "
+                f"rad on /tf_static: only its x is used", throttle_duration_sec=10.0)
+        self._lidar_offset_from_tf = offset.x
+        if self._computed:
+            self.get_logger().warning(
+                f"LiDAR at x = {offset.x:.3f} m on /tf_static differs from the "
+                f"{tuning['lidar_offset_x_m']:.3f} m in use: it applies from the next configure")
+            return
+        try:
+            tuning = {**tuning, "lidar_offset_x_m": offset.x}
+            self.controller = controller_class(dt, **tuning)
+        except Exception as exc:  # keep the working controller
+            self.get_logger().error(f"LiDAR position from /tf_static refused: {exc}")
+            return
+        self._controller_factory = (controller_class, dt, tuning)
+        self._scan_geometry = None  # the new controller needs the scan geometry again
+        self.get_logger().info(f"LiDAR position from /tf_static: x = {offset.x:.3f} m")
+
     def _on_synchronized(self, odometry: Odometry, scan: LaserScan, pose=None) -> None:
         if not self._active or self._stopped_localized:
             return
@@ -279,6 +325,7 @@ class WallFollowerNode(LifecycleNode):
         self._publish(v, w, now.to_msg())
 
     def _compute(self, z_scan, z_v: float, z_w: float) -> tuple[float, float]:
+        self._computed = True
         try:
             v, w = self.controller.compute_commands(z_scan, z_v, z_w)
             v, w = float(v), float(w)

@@ -8,6 +8,10 @@ Thin: commands become `Simulator.step(v, w)` calls and results become messages
   so the loop starts.
 - realtime: a wall-clock timer at dt advances the simulation with the newest command (older than
   `command_timeout` = zero) and each sensor is published at its profile's own rate.
+TF (REP 105) as the robot's bringup: /tf_static base_footprint -> base_scan at the profile's LiDAR
+position; /tf with each odometry message (while anyone subscribes): odom -> base_footprint, map
+-> base_footprint_truth (the true pose) and, with `map_to_odom_from_truth`, map -> odom. /map and
+/map_markers: the world, latched, published on activation.
 With `enable_localization`, /pose (amr_msgs/PoseStamped) is compared with the true pose; the goal
 counts as reached when the true position is within goal_tolerance while localized (logged), and
 the run finishes once the robot has then been commanded to rest for goal_rest_time (at once for
@@ -49,6 +53,7 @@ from amr_sim.simulator_params import (
     PARAMETERS,
     check_parameters,
 )
+from amr_sim.simulator_tf import SimulatorTf
 
 
 def true_velocity(before: tuple, after: tuple, dt: float) -> tuple[float, float]:
@@ -106,6 +111,7 @@ class SimulatorNode(LifecycleNode):
         self._command = (0.0, 0.0)
         self._command_received: float | None = None  # monotonic time of the newest command
         self._next_publish = {"odom": 0.0, "scan": 0.0}
+        self._tf: SimulatorTf | None = None
 
     def _read_parameters(self) -> dict[str, Any]:
         """Parameter values, checked; raises ValueError naming every bad one."""
@@ -156,6 +162,12 @@ class SimulatorNode(LifecycleNode):
             self._outputs["truth"] = self.create_lifecycle_publisher(
                 Odometry, "/ground_truth", RELIABLE_10)
         self._create_inputs(p)
+        try:
+            self._tf = SimulatorTf(self, self.simulator, p)
+        except Exception as exc:  # a map that cannot be built: the user's resolution
+            self.get_logger().error(f"configure failed: {exc}")
+            self._destroy_all()
+            return TransitionCallbackReturn.FAILURE
         scan_time = profile.scan_period if self.realtime and profile.scan_period else p["dt"]
         laser_scan_from_profile(self.simulator.last_scan, profile, stamp=Time(),
                                 frame_id=p["scan_frame"], scan_time=scan_time,
@@ -199,6 +211,8 @@ class SimulatorNode(LifecycleNode):
             self.destroy_subscription(subscription)
         for message_filter in self._filters:
             message_filter.close()
+        if self._tf is not None:
+            self._tf.destroy()
         self._reset()
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -214,6 +228,7 @@ class SimulatorNode(LifecycleNode):
         if self.finished:
             return result
         simulator = self.simulator
+        self._tf.publish_static(seconds_to_time(simulator.time))  # before the first measurement
         z_scan, z_v, z_w = simulator.measure()  # first measurement: starts a lockstep loop
         self._publish(z_scan, z_v, z_w, simulator.pose, simulator.pose, True, True)
         if self.realtime:
@@ -343,6 +358,7 @@ class SimulatorNode(LifecycleNode):
             self._outputs["truth"].publish(odometry_message(
                 stamp, p["world_frame"], p["base_frame"], pose, velocity, messages["truth"]))
         if publish_odom:
+            self._tf.publish(stamp, pose)
             # The real robot's /odom carries a pose only; /odometry also the twist.
             twist = (z_v, z_w) if self.odometry_topic == "/odometry" else None
             self._outputs["odom"].publish(odometry_message(

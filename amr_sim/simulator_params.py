@@ -42,11 +42,19 @@ PARAMETERS: dict[str, tuple[Any, int, str]] = {
     "odom_frame": ("odom", _S, "Frame of the odometry pose"),
     "base_frame": ("base_footprint", _S, "Robot frame (child frame of odometry)"),
     "scan_frame": ("base_scan", _S, "Frame of the LaserScan"),
-    "world_frame": ("map", _S, "Frame of /ground_truth"),
+    "world_frame": ("map", _S, "Frame of /ground_truth and /map"),
     "publish_ground_truth": (True, _B, "Publish the true pose and velocities on /ground_truth"),
+    "truth_frame": ("base_footprint_truth", _S, "Frame of the true robot pose on /tf "
+                                                "(world_frame -> truth_frame, for comparison)"),
+    "map_to_odom_from_truth": (False, _B, "Publish world_frame -> odom_frame on /tf from the "
+                                          "true pose (perfect localization, for viewers when "
+                                          "no localization node sends it)"),
+    "publish_map": (True, _B, "Publish the world as /map (nav_msgs/OccupancyGrid) and "
+                              "/map_markers (walls) once, latched"),
+    "map_resolution": (0.05, _D, "Cell size of /map in metres (0.005 to 1)"),
 }
 NUMERIC_PARAMETERS = {"dt", "seed", "command_timeout", "goal", "goal_tolerance",
-                      "goal_rest_time"}
+                      "goal_rest_time", "map_resolution"}
 
 
 def parse_start(text: str) -> str | tuple[float, float, float] | None:
@@ -88,6 +96,7 @@ def check_parameters(values: dict[str, Any]) -> dict[str, Any]:
     number("command_timeout", 0.0, 3600.0)
     number("goal_tolerance", 1e-3, 100.0)
     number("goal_rest_time", 0.0, 3600.0)
+    number("map_resolution", 0.005, 1.0)
     if isinstance(p["seed"], bool) or not isinstance(p["seed"], int) or p["seed"] < 0:
         problems.append(f"seed must be a non-negative integer (got {p['seed']!r})")
     if p["mode"] not in ("lockstep", "realtime"):

@@ -28,6 +28,28 @@ def add_controller_options(parser, params_file_default, params_file_help: str) -
     parser.add_argument("--params-file", default=params_file_default, help=params_file_help)
 
 
+def add_foxglove_options(parser) -> None:
+    """--foxglove, --foxglove-port, --foxglove-host: a live Foxglove view (amr_foxglove_bridge)."""
+    parser.add_argument("--foxglove", action="store_true", help="serve the graph's topics to "
+                        "Foxglove (Open connection -> Foxglove WebSocket -> ws://HOST:PORT)")
+    parser.add_argument("--foxglove-port", type=int, default=8765,
+                        help="Foxglove WebSocket port (default 8765, as foxglove_bridge)")
+    parser.add_argument("--foxglove-host", default="127.0.0.1", help="address to listen on "
+                        "(default 127.0.0.1: this machine only; 0.0.0.0 for other machines)")
+
+
+def make_viewer_nodes(context, args, *, use_sim_time: bool = False) -> list:
+    """The Foxglove bridge node when args.foxglove, else nothing.
+
+    Lifecycle nodes to start before the rest of the graph.
+    """
+    if not getattr(args, "foxglove", False):
+        return []
+    from amr_common.foxglove_bridge import FoxgloveBridgeNode
+    return [FoxgloveBridgeNode(context=context, parameter_overrides=overrides_to_parameters({
+        "port": args.foxglove_port, "host": args.foxglove_host, "use_sim_time": use_sim_time}))]
+
+
 def check_common_options(parser, args) -> None:
     """Validate dt and parse the -p overrides into args.overrides (argparse errors on failure)."""
     import math
@@ -35,6 +57,9 @@ def check_common_options(parser, args) -> None:
     from amr_common.controller_loader import ControllerSpecError, parse_overrides
     if args.dt is not None and not (math.isfinite(args.dt) and args.dt > 0):
         parser.error("--dt must be > 0")
+    if getattr(args, "foxglove_port", 0) is not None and \
+            not 0 <= getattr(args, "foxglove_port", 0) <= 65535:
+        parser.error("--foxglove-port must be within 0-65535")
     try:
         args.overrides = parse_overrides(args.param)
     except ControllerSpecError as exc:

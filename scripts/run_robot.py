@@ -8,6 +8,7 @@ does not change discovery, it prints what it uses.
 
   .venv/bin/python scripts/run_robot.py --domain-id 30 --cmd-vel stamped   # Jazzy bringup
   .venv/bin/python scripts/run_robot.py --domain-id 30 --cmd-vel twist     # Humble bringup
+  .venv/bin/python scripts/run_robot.py --domain-id 30 --foxglove --map course_map.json
   .venv/bin/python scripts/run_robot.py --domain-id 30 --world lab02 --goal -1.0,0.6
 With --world and --goal: also the particle filter, the planner and the pure pursuit (robot
 mode) - explore until localized, then drive to the goal and stop there.
@@ -25,10 +26,12 @@ from amr_common.ros_env import describe_graph_settings  # noqa: E402
 from launch_common import (  # noqa: E402
     ROBOT_PARAMS,
     add_controller_options,
+    add_foxglove_options,
     check_common_options,
     goal_value_joined,
     make_navigation_nodes,
     make_robot_graph,
+    make_viewer_nodes,
 )
 
 
@@ -44,6 +47,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     add_controller_options(parser, str(ROBOT_PARAMS), "wall follower ROS params YAML "
                            "(default params/turtlebot3.yaml)")
     parser.add_argument("--dt", type=float, default=None, help="control period in seconds")
+    parser.add_argument("--map", default=None, metavar="MAP", help="also publish this course "
+                        "map JSON / world YAML as /map and /map_markers (amr_map_publisher)")
+    add_foxglove_options(parser)
     parser.add_argument("--world", default=None, help="the map the robot drives in (bundled "
                         "world name or a world YAML / course map JSON); needed by --goal")
     parser.add_argument("--goal", default=None, help="navigate to X,Y (metres, negative numbers "
@@ -88,6 +94,12 @@ def main(argv=None) -> int:
             None, world=args.world, goal=args.goal, simulation=False,
             params_file=args.params_file, dt=args.dt, cmd_vel_stamped=stamped,
             angular_sign=tuning.get("angular_sign"))
+    if args.map:
+        from amr_common.map_publisher import MapPublisherNode
+        from launch_common import overrides_to_parameters
+        nodes.insert(0, MapPublisherNode(parameter_overrides=overrides_to_parameters(
+            {"world": args.map})))
+    nodes = make_viewer_nodes(None, args) + nodes  # shut down last (reverse order)
     manager = LifecycleManager([node.get_name() for node in nodes])
     manager.get_logger().info(f"run_robot: {describe_graph_settings()}; Ctrl-C stops the robot")
     return run_managed(manager, stop, nodes)

@@ -16,6 +16,7 @@ Examples:
   .venv/bin/python scripts/run_sim.py --controller my_pkg.my_ctrl:MyController -p kp:=5.0
   .venv/bin/python scripts/run_sim.py --report out/run.json --plot out/run.png
   .venv/bin/python scripts/run_sim.py --record out/run.mcap --duration 60
+  .venv/bin/python scripts/run_sim.py --profile turtlebot3 --realtime --foxglove   # live
   .venv/bin/python scripts/run_sim.py --world lab02 --goal inner_far --plot out/nav.png
   .venv/bin/python scripts/run_sim.py --world lab02 --goal -1.0,0.6   # walls + filter + planner
 Local runs are isolated: loopback discovery and a free ROS_DOMAIN_ID (printed at startup).
@@ -32,6 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from amr_common.ros_env import describe_graph_settings, isolate_local_graph  # noqa: E402
 from launch_common import (  # noqa: E402
     add_controller_options,
+    add_foxglove_options,
     check_common_options,
     goal_value_joined,
 )
@@ -64,6 +66,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--plot", default=None, help="write a PNG of the trajectory here")
     parser.add_argument("--record", default=None, help="record topics to this .mcap file")
     parser.add_argument("--gui", action="store_true", help="live view window (pygame)")
+    add_foxglove_options(parser)
     parser.add_argument("--domain-id", type=int, default=None,
                         help="ROS_DOMAIN_ID (default: $ROS_DOMAIN_ID if set, else a free one)")
     args = parser.parse_args(goal_value_joined(sys.argv[1:] if argv is None else argv))

@@ -24,6 +24,7 @@ from launch_common import (
     SIM_PARAMS,
     make_navigation_nodes,
     make_robot_graph,
+    make_viewer_nodes,
     make_wall_follower,
     overrides_to_parameters,
 )
@@ -71,7 +72,9 @@ class SimSession:
         sim_values = {"world": args.world, "start": _start_label(self.start),
                       "profile": args.profile, "dt": args.dt, "seed": args.seed,
                       "mode": "realtime" if args.realtime else "lockstep",
-                      "enable_localization": localizing}
+                      "enable_localization": localizing,
+                      # Viewers get a whole TF tree; a localization node sends its own map -> odom.
+                      "map_to_odom_from_truth": not localizing}
         if args.goal:
             sim_values["goal"] = list(args.goal)
         self.simulator_node = SimulatorNode(
@@ -103,10 +106,12 @@ class SimSession:
                     args.profile).lidar_offset_x)
             self.planner_node = self.control_nodes[-2]
         self.localized_time: float | None = None
-        order = [node.get_name() for node in self.control_nodes] + [
+        # Viewers (the Foxglove bridge) first: they see the graph from its first message.
+        self.viewer_nodes = make_viewer_nodes(self.context, args, use_sim_time=True)
+        order = [node.get_name() for node in [*self.viewer_nodes, *self.control_nodes]] + [
             self.simulator_node.get_name()]
         self.manager = LifecycleManager(order, context=self.context)
-        for node in [*self.control_nodes, self.simulator_node, self.manager]:
+        for node in [*self.viewer_nodes, *self.control_nodes, self.simulator_node, self.manager]:
             self.executor.add_node(node)
         self.trajectory: list[list[float]] = []
         self.wall_errors: list[float] = []
@@ -174,17 +179,29 @@ class SimSession:
 
     def _attach_recorder(self) -> None:
         from geometry_msgs.msg import Twist, TwistStamped
-        from nav_msgs.msg import Odometry
+        from nav_msgs.msg import OccupancyGrid, Odometry
+        from rclpy.parameter import Parameter
         from sensor_msgs.msg import LaserScan
-        topics = {"/scan": LaserScan, "/ground_truth": Odometry, "/odometry": Odometry}
+        from tf2_msgs.msg import TFMessage
+        from visualization_msgs.msg import MarkerArray
+
+        from amr_common.tf import TF_STATIC_LISTENER_QOS
+        topics = {"/scan": LaserScan, "/ground_truth": Odometry, "/odometry": Odometry,
+                  "/tf": TFMessage, "/tf_static": TFMessage, "/map": OccupancyGrid,
+                  "/map_markers": MarkerArray}
+        latched = {topic: TF_STATIC_LISTENER_QOS for topic in ("/tf_static", "/map",
+                                                                "/map_markers")}
         if self.rehearsal:  # the simulated robot's pose-only /odom, before amr_odometry
             topics["/odom"] = Odometry
         stamped = not self.rehearsal or self.wall_follower.get_parameter(
             "cmd_vel_stamped").value
         topics["/cmd_vel"] = TwistStamped if stamped else Twist
-        recorder_node = rclpy.create_node("mcap_recorder", context=self.context)
+        # Simulated time: messages without a header (/tf) are logged at the /clock time.
+        recorder_node = rclpy.create_node("mcap_recorder", context=self.context,
+                                          parameter_overrides=[Parameter("use_sim_time",
+                                                                         value=True)])
         self.executor.add_node(recorder_node)  # destroyed with the others in close()
-        self.recorder.attach(recorder_node, topics)
+        self.recorder.attach(recorder_node, topics, qos=latched)
 
     def _report(self, sim, wall_time: float) -> dict:
         import numpy as np
@@ -257,7 +274,7 @@ class SimSession:
 
     def close(self) -> None:
         # Controllers first: they publish their final zero command while the graph still runs.
-        for node in [*self.control_nodes, self.simulator_node]:
+        for node in [*self.control_nodes, self.simulator_node, *self.viewer_nodes]:
             shutdown_node(node)
         if self.recorder is not None:
             self.recorder.close()

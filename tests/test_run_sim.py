@@ -72,17 +72,28 @@ def test_record_writes_an_mcap_that_an_independent_reader_opens(tmp_path):
     # rosbags reads ROS 2 bags as folders: give it one holding just the MCAP file.
     with AnyReader([record], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
-        stamps = {}
+        stamps, log_times, frames = {}, {}, set()
         for connection, timestamp, raw in reader.messages():
             msg = reader.deserialize(raw, connection.msgtype)
-            stamps.setdefault(connection.topic, []).append(
-                msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec)
-    for topic in ("/scan", "/odometry", "/cmd_vel", "/ground_truth"):
+            log_times.setdefault(connection.topic, []).append(timestamp)
+            header = msg.transforms[0].header if connection.topic == "/tf" else \
+                getattr(msg, "header", None)
+            if header is not None:
+                stamps.setdefault(connection.topic, []).append(
+                    header.stamp.sec * 10**9 + header.stamp.nanosec)
+            for transform in getattr(msg, "transforms", []):
+                frames.add((transform.header.frame_id, transform.child_frame_id))
+    for topic in ("/scan", "/odometry", "/cmd_vel", "/ground_truth", "/tf"):
         # One per step (+ the first measurement).
         assert 99 <= counts[topic] <= 101, (topic, counts)
         steps = sorted(stamps[topic])
         assert all(b - a == 50_000_000 for a, b in zip(steps, steps[1:])), topic
     assert max(stamps["/scan"]) == 5 * 10**9
+    # The recording opens placed in Foxglove: map, the whole TF tree, all on simulated time.
+    assert counts["/tf_static"] == counts["/map"] == counts["/map_markers"] == 1
+    assert frames == {("base_footprint", "base_scan"), ("odom", "base_footprint"),
+                      ("map", "base_footprint_truth"), ("map", "odom")}
+    assert max(max(times) for times in log_times.values()) <= 5 * 10**9
 
 
 def test_gui_runs_headless(tmp_path, monkeypatch):

@@ -1,0 +1,96 @@
+"""A world as ROS map messages: /map and /map_markers.
+
+nav_msgs/OccupancyGrid (/map) and visualization_msgs/MarkerArray of its walls (/map_markers).
+Message building only (no node); the raster comes from
+amr_common.map_raster (values in the OccupancyGrid convention, row 0 southmost).
+"""
+from __future__ import annotations
+
+import array
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Point
+from nav_msgs.msg import OccupancyGrid
+from std_msgs.msg import ColorRGBA
+from visualization_msgs.msg import Marker, MarkerArray
+
+MAP_TOPIC = "/map"
+MAP_MARKERS_TOPIC = "/map_markers"
+WALL_HEIGHT_M = 0.2  # drawn height of the walls: the LDS scans at 0.18 m
+WALL_COLOR = ColorRGBA(r=0.45, g=0.45, b=0.5, a=1.0)
+GOAL_COLOR = ColorRGBA(r=0.1, g=0.7, b=0.2, a=0.8)
+
+
+def occupancy_grid(values: np.ndarray, resolution: float, origin: tuple[float, float],
+                   frame_id: str = "map", stamp: Time | None = None) -> OccupancyGrid:
+    """OccupancyGrid of an int8 (rows, cols) array.
+
+    Cell (0, 0) has its lower-left corner at `origin` (x, y); rows run along +y, columns along +x.
+    """
+    grid = np.ascontiguousarray(values, dtype=np.int8)
+    if grid.ndim != 2 or grid.size == 0:
+        raise ValueError(f"an occupancy grid needs a non-empty 2D array, got shape {grid.shape}")
+    message = OccupancyGrid()
+    if stamp is not None:
+        message.header.stamp = stamp
+        message.info.map_load_time = stamp
+    message.header.frame_id = frame_id
+    message.info.resolution = float(resolution)
+    message.info.height, message.info.width = (int(n) for n in grid.shape)
+    message.info.origin.position.x = float(origin[0])
+    message.info.origin.position.y = float(origin[1])
+    message.info.origin.orientation.w = 1.0
+    message.data = array.array("b", grid.tobytes())  # skips rclpy's per-element checks
+    return message
+
+
+def grid_values(message: OccupancyGrid) -> np.ndarray:
+    """The (rows, cols) int8 array of an OccupancyGrid (the inverse of occupancy_grid)."""
+    return np.asarray(message.data, dtype=np.int8).reshape(message.info.height,
+                                                           message.info.width)
+
+
+def wall_markers(segments: np.ndarray, frame_id: str = "map", stamp: Time | None = None,
+                 goal: tuple[float, float] | None = None) -> MarkerArray:
+    """MarkerArray of the walls (upright quads) and of the goal.
+
+    The walls are a TRIANGLE_LIST (ns "walls"), the goal a sphere (ns "goal") when given.
+    `segments`: (N, 4) rows x1, y1, x2, y2 in metres.
+    """
+    walls = Marker(ns="walls", id=0, type=Marker.TRIANGLE_LIST, action=Marker.ADD)
+    walls.header.frame_id = frame_id
+    if stamp is not None:
+        walls.header.stamp = stamp
+    walls.pose.orientation.w = 1.0
+    walls.scale.x = walls.scale.y = walls.scale.z = 1.0
+    walls.color = WALL_COLOR
+    points = []
+    for x1, y1, x2, y2 in np.asarray(segments, dtype=float).reshape(-1, 4):
+        a0, b0 = Point(x=x1, y=y1, z=0.0), Point(x=x2, y=y2, z=0.0)
+        a1, b1 = Point(x=x1, y=y1, z=WALL_HEIGHT_M), Point(x=x2, y=y2, z=WALL_HEIGHT_M)
+        points += [a0, b0, b1, a0, b1, a1]
+    walls.points = points
+    markers = [walls]
+    if goal is not None:
+        sphere = Marker(ns="goal", id=0, type=Marker.SPHERE, action=Marker.ADD)
+        sphere.header = walls.header
+        sphere.pose.position.x, sphere.pose.position.y = float(goal[0]), float(goal[1])
+        sphere.pose.orientation.w = 1.0
+        sphere.scale.x = sphere.scale.y = sphere.scale.z = 0.15
+        sphere.color = GOAL_COLOR
+        markers.append(sphere)
+    return MarkerArray(markers=markers)
+
+
+def world_map_messages(world, resolution: float, frame_id: str = "map",
+                       stamp: Time | None = None) -> tuple[OccupancyGrid, MarkerArray]:
+    """/map and /map_markers of an amr_common.world.World."""
+    from amr_common.map_raster import rasterize_world
+    raster = rasterize_world(world, resolution)
+    return (occupancy_grid(raster.values, raster.resolution, raster.origin, frame_id, stamp),
+            wall_markers(world.segments, frame_id, stamp, world.goal))
+
+
+__all__ = ["MAP_TOPIC", "MAP_MARKERS_TOPIC", "occupancy_grid", "grid_values", "wall_markers",
+           "world_map_messages"]

@@ -1,0 +1,97 @@
+"""The `amr_map_publisher` lifecycle node: a world file as /map and /map_markers, latched.
+
+For the real robot (the simulator publishes its own): give it the course's map JSON or a world
+YAML by path (or a bundled world by name) and viewers such as Foxglove draw the walls, and a
+localization node gets its map as a nav_msgs/OccupancyGrid:
+
+    .venv/bin/amr_map_publisher --ros-args -p world:=/path/to/map.json -p autostart:=true
+"""
+from __future__ import annotations
+
+import sys
+
+from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+
+from amr_common.map_messages import MAP_MARKERS_TOPIC, MAP_TOPIC, world_map_messages
+from amr_common.node_runner import run_lifecycle_node
+from amr_common.qos import LATCHED
+from amr_common.world import World
+
+_PARAMETERS = {
+    "world": ("lab02", ParameterType.PARAMETER_STRING,
+              "Bundled world name or path to a world .yaml / the course's map .json"),
+    "resolution": (0.05, ParameterType.PARAMETER_DOUBLE, "Cell size of /map in metres"),
+    "frame_id": ("map", ParameterType.PARAMETER_STRING, "Frame of the map"),
+}
+
+
+class MapPublisherNode(LifecycleNode):
+    """Publishes a world's OccupancyGrid on /map and its walls on /map_markers (latched)."""
+
+    def __init__(self, node_name: str = "map_publisher", **kwargs) -> None:
+        super().__init__(node_name, **kwargs)
+        for name, (default, type_, description) in _PARAMETERS.items():
+            if not self.has_parameter(name):
+                self.declare_parameter(name, default, ParameterDescriptor(
+                    description=description, type=type_,
+                    dynamic_typing=name == "resolution"))  # -p resolution:=1 is fine
+        self._outputs: dict = {}
+        self._messages = None
+
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Load the world and build the messages; create the two latched publishers."""
+        p = {name: self.get_parameter(name).value for name in _PARAMETERS}
+        resolution = p["resolution"]
+        if isinstance(resolution, bool) or not isinstance(resolution, (int, float)) or \
+                not 0.005 <= resolution <= 1.0:
+            self.get_logger().error(f"configure failed: resolution must be a number in "
+                                    f"[0.005, 1] m (got {resolution!r})")
+            return TransitionCallbackReturn.FAILURE
+        try:
+            world = World.load(p["world"])
+            stamp = self.get_clock().now().to_msg()
+            self._messages = world_map_messages(world, float(resolution), p["frame_id"], stamp)
+        except Exception as exc:  # WorldError and friends: a user's file
+            self.get_logger().error(f"configure failed: {exc}")
+            return TransitionCallbackReturn.FAILURE
+        grid = self._messages[0]
+        self._outputs = {
+            "map": self.create_lifecycle_publisher(type(grid), MAP_TOPIC, LATCHED),
+            "markers": self.create_lifecycle_publisher(type(self._messages[1]),
+                                                       MAP_MARKERS_TOPIC, LATCHED)}
+        self.get_logger().info(f"configured: world '{world.name}' ({world.source}) as a "
+                               f"{grid.info.width} x {grid.info.height} map at "
+                               f"{grid.info.resolution} m in frame '{p['frame_id']}'")
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Enable the publishers and publish the map and the markers once (they stay latched)."""
+        result = super().on_activate(state)
+        self._outputs["map"].publish(self._messages[0])
+        self._outputs["markers"].publish(self._messages[1])
+        return result
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Destroy the publishers (late subscribers get no map from now on)."""
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Destroy the publishers; nothing to send on the way down."""
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def _release(self) -> None:
+        for publisher in self._outputs.values():
+            self.destroy_lifecycle_publisher(publisher)
+        self._outputs = {}
+        self._messages = None
+
+
+def main(args: list[str] | None = None) -> int:
+    return run_lifecycle_node(MapPublisherNode, args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
