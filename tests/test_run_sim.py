@@ -154,7 +154,7 @@ def test_a_goal_in_a_wall_is_a_clear_error(capsys):
     ("maze_deadends", "south_west", "3.0,2.2", "turtlebot3"),
 ])
 def test_navigate_to_a_goal_with_the_five_node_graph(tmp_path, world, start, goal, profile):
-    pytest.importorskip("amr_localization")
+    pytest.importorskip("amr_localization.particle_filter")
     report_path, plot_path = tmp_path / "nav.json", tmp_path / "nav.png"
     exit_code = run_sim.main(["--world", world, "--start", start, "--goal", goal, "--profile",
                               profile, "--duration", "300", "--report", str(report_path),
