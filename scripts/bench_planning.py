@@ -8,15 +8,20 @@
                  <= 1 ms.
   plan()         the whole plan (search + simplification + rounded corners + sampling), and the
                  seeds' wavefront for comparison.
-  navigation     headless navigation episodes (simulator + ground-truth pose + planner + pure
-                 pursuit; amr_evaluation.navigation_episode): simulated seconds per wall-clock
-                 second. Target: >= 100x real time.
+  navigation     headless navigation episodes (simulator + planner + pure pursuit, on the true
+                 pose and, with amr_localization installed, on the particle filter's;
+                 amr_evaluation.navigation_episode): simulated seconds per wall-clock second.
+                 Target: >= 100x real time.
+  ROS loop       with amr_localization: run_sim.py --goal, the five lifecycle nodes in lockstep
+                 in one process (simulator, wall follower, particle filter, planner, pure
+                 pursuit). Target: >= 15x real time.
 Usage: .venv/bin/python scripts/bench_planning.py [--quick] [--json FILE]
 `measure()` returns the figures as a dict.
 """
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import statistics
 import sys
@@ -64,14 +69,16 @@ def measure(quick: bool = False) -> dict:
     t_plan = _timed(lambda: planner.plan(start, goal), repeats[2])
     t_wave = _timed(lambda: planner.search(*cells, algorithm="wavefront"), repeats[2])
     from amr_evaluation.navigation_episode import run_navigation_episode
+    sources = ["truth"] + (["filter"] if _have_filter() else [])
     episodes = {}
-    for profile in ("ideal", "turtlebot3"):
+    for source, profile in itertools.product(sources, ("ideal", "turtlebot3")):
         runs = [run_navigation_episode(world, "outer", "inner_far", profile=profile,
-                                       planner=planner, duration=120.0,
+                                       pose_source=source, planner=planner, duration=300.0,
                                        record_trajectory=False) for _ in range(repeats[3])]
-        episodes[profile] = {
+        episodes[f"{profile}, {source} pose"] = {
             "real_time_factor": statistics.median(r.real_time_factor for r in runs),
             "sim_time_s": runs[0].sim_time_s, "goal_reached": runs[0].goal_reached}
+    ros_loop = _ros_loop() if "filter" in sources else None
     return {
         "grid_cells": int(planner.cost.size), "grid_shape": [planner.grid.height,
                                                              planner.grid.width],
@@ -83,7 +90,31 @@ def measure(quick: bool = False) -> dict:
         "plan_ms_median": statistics.median(t_plan) * 1e3,
         "wavefront_ms_median": statistics.median(t_wave) * 1e3,
         "navigation": episodes,
+        "ros_loop": ros_loop,
     }
+
+
+def _have_filter() -> bool:
+    try:
+        import amr_localization.particle_filter  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def _ros_loop() -> dict:
+    """run_sim.py --goal on lab02 (lockstep, ideal): the five-node graph's real-time factor."""
+    import tempfile
+
+    sys.path.insert(0, str(REPO / "scripts"))
+    import run_sim
+    with tempfile.TemporaryDirectory() as folder:
+        report_path = Path(folder) / "run.json"
+        run_sim.main(["--world", "lab02", "--start", "outer", "--goal", "inner_far",
+                      "--duration", "300", "--report", str(report_path)])
+        report = json.loads(report_path.read_text())
+    return {"real_time_factor": report["real_time_factor"], "sim_time_s": report["sim_time_s"],
+            "steps": report["steps"], "goal_reached": report["goal_reached_time_s"] is not None}
 
 
 def report(f: dict) -> str:
@@ -95,10 +126,15 @@ def report(f: dict) -> str:
         f"plan() with smoothing {f['plan_ms_median']:.2f} ms median; wavefront search "
         f"{f['wavefront_ms_median']:.3f} ms",
     ]
-    for profile, e in f["navigation"].items():
-        lines.append(f"navigation episode lab02 outer -> inner_far ({profile}, "
+    for case, e in f["navigation"].items():
+        lines.append(f"navigation episode lab02 outer -> inner_far ({case}, "
                      f"{e['sim_time_s']:.1f} s simulated, reached {e['goal_reached']}): "
                      f"{e['real_time_factor']:.0f}x real time (target >= 100x)")
+    if f["ros_loop"] is not None:
+        r = f["ros_loop"]
+        lines.append(f"ROS lockstep loop, five nodes (run_sim.py --goal, lab02, "
+                     f"{r['steps']} steps, reached {r['goal_reached']}): "
+                     f"{r['real_time_factor']:.1f}x real time (target >= 15x)")
     return "\n".join(lines)
 
 
