@@ -24,9 +24,9 @@ def load_controller_class(spec: str) -> type:
                                   f"e.g. '{DEFAULT_CONTROLLER}'")
     try:
         module = importlib.import_module(module_name)
-    except ImportError as exc:
+    except Exception as exc:  # ImportError, or whatever the module raises (SyntaxError, ...)
         raise ControllerSpecError(f"controller '{spec}': cannot import module "
-                                  f"'{module_name}': {exc}") from exc
+                                  f"'{module_name}': {_one_line(exc)}") from exc
     cls = getattr(module, class_name, None)
     if cls is None:
         raise ControllerSpecError(f"controller '{spec}': module '{module_name}' has no "
@@ -35,6 +35,14 @@ def load_controller_class(spec: str) -> type:
         raise ControllerSpecError(f"controller '{spec}' has no compute_commands(z_scan, z_v, "
                                   f"z_w) method")
     return cls
+
+
+def _one_line(exc: BaseException) -> str:
+    """'SyntaxError: invalid syntax (ctrl.py, line 3)': the exception's type and message."""
+    text = " ".join(str(exc).split())
+    if isinstance(exc, ImportError):
+        return text
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
 def parse_value(text: str) -> Any:

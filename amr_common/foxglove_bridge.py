@@ -21,7 +21,7 @@ import queue
 import sys
 from typing import Any
 
-from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+from rcl_interfaces.msg import ParameterType
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
 from amr_common.introspection import UnknownTypeError, matched_qos, message_class
@@ -31,6 +31,7 @@ from amr_common.mcap_recorder import (
     full_message_definition,
 )
 from amr_common.node_runner import run_lifecycle_node
+from amr_common.parameters import declare_parameters
 from amr_common.qos import RELIABLE_10
 
 _S, _I, _D, _B, _SA = (ParameterType.PARAMETER_STRING, ParameterType.PARAMETER_INTEGER,
@@ -52,11 +53,10 @@ class FoxgloveBridgeNode(LifecycleNode):
 
     def __init__(self, node_name: str = "foxglove_bridge", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
-        for name, (default, type_, description) in PARAMETERS.items():
-            if not self.has_parameter(name):
-                self.declare_parameter(name, default, ParameterDescriptor(
-                    description=description, type=type_,
-                    dynamic_typing=name == "discovery_period"))
+        # Numbers take ints for doubles (-p discovery_period:=2): amr_common.parameters.
+        declare_parameters(self, {name: (default, description) for name, (default, _, description)
+                                  in PARAMETERS.items()},
+                           types={name: type_ for name, (_, type_, _) in PARAMETERS.items()})
         self.server = None
         self._requests: queue.SimpleQueue = queue.SimpleQueue()
         self._reset()
@@ -74,7 +74,8 @@ class FoxgloveBridgeNode(LifecycleNode):
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Start the WebSocket server (FAILURE if the port is taken or the SDK is missing)."""
         p = {name: self.get_parameter(name).value for name in PARAMETERS}
-        if not (isinstance(p["port"], int) and 0 <= p["port"] <= 65535):
+        port = p["port"]
+        if isinstance(port, bool) or not (isinstance(port, int) and 0 <= port <= 65535):
             self.get_logger().error(f"configure failed: port must be 0-65535 (got {p['port']})")
             return TransitionCallbackReturn.FAILURE
         period = p["discovery_period"]

@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import sys
 
-from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+from rcl_interfaces.msg import ParameterType
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
 from amr_common.map_messages import MAP_MARKERS_TOPIC, MAP_TOPIC, world_map_messages
 from amr_common.node_runner import run_lifecycle_node
+from amr_common.parameters import declare_parameters
 from amr_common.qos import LATCHED
 from amr_common.world import World
 
@@ -31,11 +32,10 @@ class MapPublisherNode(LifecycleNode):
 
     def __init__(self, node_name: str = "map_publisher", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
-        for name, (default, type_, description) in _PARAMETERS.items():
-            if not self.has_parameter(name):
-                self.declare_parameter(name, default, ParameterDescriptor(
-                    description=description, type=type_,
-                    dynamic_typing=name == "resolution"))  # -p resolution:=1 is fine
+        # -p resolution:=1 is fine: numbers take ints for doubles (amr_common.parameters).
+        declare_parameters(self, {name: (default, description) for name, (default, _, description)
+                                  in _PARAMETERS.items()},
+                           types={name: type_ for name, (_, type_, _) in _PARAMETERS.items()})
         self._outputs: dict = {}
         self._messages = None
 

@@ -118,17 +118,45 @@ def ros_type_name(msg_or_type: Any) -> str:
     return f"{parts[0]}/{parts[1]}/{cls.__name__}"
 
 
-def cdr_header_stamp_ns(data: bytes) -> int | None:
+def cdr_header_stamp_ns(data: bytes, in_sequence: bool = False,
+                        zero_is_unset: bool = True) -> int | None:
     """header.stamp (ns) of a serialized message whose first field is a std_msgs/Header.
 
     CDR starts with a 4-byte encapsulation header (0x0001 little endian, 0x0000 big endian), then
-    the stamp's int32 sec and uint32 nanosec. None for a zero stamp or too short data.
+    the stamp's int32 sec and uint32 nanosec. With `in_sequence`, the message starts with a
+    sequence of stamped messages (tf2_msgs/TFMessage): a uint32 length, then the first element's
+    stamp. None for an empty sequence, data too short to hold a stamp, a negative stamp, and a
+    zero stamp unless `zero_is_unset` is false (in a simulation, t = 0 is a real instant).
     """
-    if len(data) < 12 or data[0] != 0 or data[1] not in (0, 1):
+    offset = 8 if in_sequence else 4
+    if len(data) < offset + 8 or data[0] != 0 or data[1] not in (0, 1):
         return None
-    sec, nanosec = struct.unpack_from("<iI" if data[1] == 1 else ">iI", data, 4)
+    order = "<" if data[1] == 1 else ">"
+    if in_sequence and struct.unpack_from(order + "I", data, 4)[0] == 0:
+        return None
+    sec, nanosec = struct.unpack_from(order + "iI", data, offset)
     ns = sec * 1_000_000_000 + nanosec
-    return ns if ns > 0 else None
+    return ns if ns > 0 or (ns == 0 and not zero_is_unset) else None
+
+
+def _stamp_layout(msg_type: type) -> bool | None:
+    """Where a message type's first header is; None if it has none.
+
+    False: its own (its first field); True: the first element's of its first field, a sequence
+    of stamped messages (tf2_msgs/TFMessage, visualization_msgs/MarkerArray).
+    """
+    first = next(iter(msg_type.get_fields_and_field_types().items()), None)
+    if first is None:
+        return None
+    if first[1] == "std_msgs/Header":
+        return False
+    element = re.fullmatch(r"sequence<(\w+)/(\w+)>", first[1])
+    if element is None:
+        return None
+    import importlib
+    element_type = getattr(importlib.import_module(f"{element[1]}.msg"), element[2], None)
+    fields = element_type.get_fields_and_field_types() if element_type else {}
+    return True if next(iter(fields.values()), None) == "std_msgs/Header" else None
 
 
 class McapRecorder:
@@ -196,17 +224,29 @@ class McapRecorder:
                                      publish_time=log_time_ns, sequence=sequence)
             self._message_counts[topic] += 1
 
-    def attach(self, node: Any, topics: Mapping[str, type], qos: Any = None) -> None:
+    def attach(self, node: Any, topics: Mapping[str, type], qos: Any = None, *,
+               log_time: str = "receive", clock: Callable[[], int] | None = None) -> None:
         """Subscribe `node` to `topics` ({name: message class}) and record every message.
 
         Messages arrive serialized (raw subscriptions) and are written as they are: no Python
-        deserialization, so recording barely slows the graph. The log time is the message's header
-        stamp when it has a non-zero one, else the node's clock (simulated time with use_sim_time).
+        deserialization, so recording barely slows the graph. Every message of a file is logged on
+        one time base:
+        - log_time "receive" (default, as `ros2 bag record`): when it arrived, on `clock`;
+        - log_time "header": its header stamp (a zero stamp included; for /tf the first
+          transform's), `clock` for types without a header. For graphs whose every publisher
+          stamps on `clock`'s time base, e.g. a lockstep simulation stamping with simulated
+          time: the log time is then exact.
+        `clock` returns nanoseconds; default the node's clock (simulated time with use_sim_time).
         The default QoS is best effort, depth 100: it matches reliable and best-effort publishers
         alike. `qos` may be one QoSProfile or a {topic: QoSProfile} dict.
         """
         from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+        if log_time not in ("receive", "header"):
+            raise ValueError(f"log_time must be 'receive' or 'header', got {log_time!r}")
+        if clock is None:
+            def clock() -> int:
+                return node.get_clock().now().nanoseconds
         default_qos = QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST,
                                  reliability=ReliabilityPolicy.BEST_EFFORT)
         for topic, msg_type in topics.items():
@@ -217,21 +257,19 @@ class McapRecorder:
                 self._check_open()
                 # A missing definition fails now, not in a callback.
                 self._channel_for(topic, type_name)
-            fields = iter(msg_type.get_fields_and_field_types().items())
-            stamped = next(fields, None) == ("header", "std_msgs/Header")
-            callback = self._make_callback(node, topic, type_name, stamped)
+            layout = _stamp_layout(msg_type) if log_time == "header" else None
+            callback = self._make_callback(topic, type_name, layout, clock)
             subscription = node.create_subscription(msg_type, topic, callback, topic_qos, raw=True)
             self._subscriptions.append((node, subscription))
 
-    def _make_callback(self, node: Any, topic: str, type_name: str,
-                       stamped: bool) -> Callable[[bytes], None]:
+    def _make_callback(self, topic: str, type_name: str, layout: bool | None,
+                       clock: Callable[[], int]) -> Callable[[bytes], None]:
         def record(data: bytes) -> None:
             if self._closed:
                 return
-            stamp = cdr_header_stamp_ns(data) if stamped else None
-            if stamp is None:
-                stamp = node.get_clock().now().nanoseconds
-            self.write_serialized(topic, type_name, data, stamp)
+            stamp = None if layout is None else \
+                cdr_header_stamp_ns(data, in_sequence=layout, zero_is_unset=False)
+            self.write_serialized(topic, type_name, data, clock() if stamp is None else stamp)
         return record
 
     def _channel_for(self, topic: str, type_name: str) -> int:

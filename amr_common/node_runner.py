@@ -62,12 +62,19 @@ class StopFlag:
 
     def __init__(self) -> None:
         self.requested = False
+        self._previous: dict[int, object] = {}
 
     def install(self) -> "StopFlag":
-        """Make SIGINT and SIGTERM set this flag (replacing their handlers); returns self."""
-        signal.signal(signal.SIGINT, self._handle)
-        signal.signal(signal.SIGTERM, self._handle)
+        """Make SIGINT and SIGTERM set this flag; uninstall() restores their handlers."""
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            self._previous[signum] = signal.signal(signum, self._handle)
         return self
+
+    def uninstall(self) -> None:
+        """Give SIGINT and SIGTERM back to the handlers they had before install()."""
+        for signum, handler in self._previous.items():
+            signal.signal(signum, handler)
+        self._previous.clear()
 
     def _handle(self, signum, frame) -> None:
         self.requested = True

@@ -15,6 +15,8 @@ from pathlib import Path
 # Domain ids usable without port clashes on Linux are 0-101 (0 is everyone's default).
 FIRST_DOMAIN_ID = 1
 LAST_DOMAIN_ID = 101
+# The largest id DDS accepts: higher ones give ports above 65535 (Fast DDS fails at startup).
+MAX_DOMAIN_ID = 232
 _LOCK_DIR = Path(tempfile.gettempdir()) / "amr-ros-domains"
 _held_locks: list = []  # open lock files: closing one releases its domain
 
@@ -46,15 +48,36 @@ def claim_free_domain_id(preferred: int | None = None) -> int:
                        f"every lock in {_LOCK_DIR} is held by a running process")
 
 
+def check_domain_id(value: int | str, where: str = "ROS_DOMAIN_ID") -> int:
+    """`value` as a domain id; ValueError naming `where` unless it is an integer in 0-232."""
+    try:
+        domain_id = int(str(value).strip())
+    except ValueError:
+        raise ValueError(f"{where} must be an integer in 0-{MAX_DOMAIN_ID}, got "
+                         f"'{value}'") from None
+    if not 0 <= domain_id <= MAX_DOMAIN_ID:
+        raise ValueError(f"{where} must be within 0-{MAX_DOMAIN_ID} (DDS has no other "
+                         f"domains), got {domain_id}")
+    return domain_id
+
+
+def environment_domain_id() -> int | None:
+    """ROS_DOMAIN_ID from the environment (None if unset or empty); ValueError if invalid."""
+    current = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    return check_domain_id(current, "ROS_DOMAIN_ID in the environment") if current else None
+
+
 def isolate_local_graph(domain_id: int | None = None, log_dir: str | None = None) -> int:
     """Set the environment for a loopback-only ROS graph on a private domain; return its id.
 
     With `domain_id` None: keep a non-zero ROS_DOMAIN_ID already set by the user, else claim a
-    free one. Discovery is restricted to localhost. Call before rclpy.init().
+    free one. Discovery is restricted to localhost. Call before rclpy.init(). ValueError if
+    `domain_id` or the environment's ROS_DOMAIN_ID is not an id DDS accepts (0-232).
     """
-    if domain_id is None:
-        current = os.environ.get("ROS_DOMAIN_ID", "").strip()
-        domain_id = int(current) if current.isdigit() and int(current) != 0 else None
+    if domain_id is not None:
+        domain_id = check_domain_id(domain_id, "the domain id")
+    else:
+        domain_id = environment_domain_id() or None  # 0 is everyone's: claim a private one
     if domain_id is None:
         domain_id = claim_free_domain_id()
     os.environ["ROS_DOMAIN_ID"] = str(domain_id)

@@ -308,6 +308,34 @@ class World:
 
 
 # ---------------------------------------------------------------------- helpers
+def parse_start(text: str) -> str | tuple[float, float, float] | None:
+    """A start as a user types it: a name, 'x,y,theta' or '' (the world's first start).
+
+    'name' -> name, 'x,y,theta' -> three floats (m, m, rad), '' -> None. ValueError for a
+    malformed pose.
+    """
+    text = text.strip()
+    if not text:
+        return None
+    if "," not in text:
+        return text
+    try:
+        values = tuple(float(part) for part in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 3 or not all(math.isfinite(v) for v in values):
+        raise ValueError(f"start '{text}' is neither a start name nor 'x,y,theta' "
+                         "with three finite numbers")
+    return values
+
+
+def start_label(start: str | tuple | list | None) -> str:
+    """How a start is named in reports and file names: 'outer', or '1,-1,1.57' for a pose."""
+    if start is None or isinstance(start, str):
+        return start or ""
+    return ",".join(f"{float(v):g}" for v in start)
+
+
 def _squared_distances(seg: np.ndarray, px, py) -> np.ndarray:
     """Squared point-segment distances; px, py scalars or (K, 1) columns -> (N,) or (K, N)."""
     x1, y1, x2, y2 = seg[:, 0], seg[:, 1], seg[:, 2], seg[:, 3]

@@ -13,6 +13,12 @@ node publishes it; the parameter is the fallback. A position that arrives after 
 computed its first command applies from the next configure (the controller is rebuilt).
 Safety: the TurtleBot3 keeps its last command forever, so the node sends a zero command on
 deactivate, cleanup and shutdown (Ctrl-C included), and never publishes a non-finite value.
+Handover with localization (`enable_localization`): for each synchronized (/odometry, /scan,
+/pose) set the node is in charge iff the pose is NOT localized or `stop_when_localized` is false.
+Out of charge it publishes nothing (the pure pursuit answers every localized /pose); in robot
+mode the step out of charge sends one zero command (the robot keeps its last one). It takes
+over again as soon as a set is not localized (localization lost). The controller still sees
+every set, so its perception is current when it takes over.
 """
 from __future__ import annotations
 
@@ -23,7 +29,6 @@ from typing import Any
 import numpy as np
 from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.publisher import Publisher
 from sensor_msgs.msg import LaserScan
@@ -35,6 +40,7 @@ from amr_common.controller_loader import (
     load_controller_class,
 )
 from amr_common.node_runner import run_lifecycle_node
+from amr_common.parameters import declare_parameters, read_parameters
 from amr_common.qos import RELIABLE_10, scan_qos
 from amr_common.robot import MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED
 from amr_common.tf import StaticTransformListener
@@ -46,8 +52,12 @@ _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
     "queue_size": (10, "Synchronizer queue size per input"),
     "slop": (-1.0, "Synchronizer slop in seconds; negative = 10 s in simulation, 0.15 s in "
                    "robot mode"),
-    "enable_localization": (False, "Also synchronize /pose (amr_msgs/PoseStamped) and stop "
-                                   "commanding once it reports localized"),
+    "enable_localization": (False, "Also synchronize /pose (amr_msgs/PoseStamped): with "
+                                   "stop_when_localized, command only while it is not "
+                                   "localized"),
+    "stop_when_localized": (True, "With enable_localization: publish nothing while /pose is "
+                                  "localized (the planner's controller is in charge), resume "
+                                  "when it is not; false = keep exploring"),
     "cmd_vel_stamped": (True, "Publish geometry_msgs/TwistStamped (Jazzy) instead of Twist "
                               "(Humble); simulation mode always uses TwistStamped"),
     "angular_sign": (1, "+1 for REP 103 (counter-clockwise positive), -1 for setups with the "
@@ -69,10 +79,24 @@ _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
 
 def _load_controller_spec(node: LifecycleNode) -> str:
     """The `controller` parameter, declared early so its tuning parameters can be declared."""
-    if not node.has_parameter("controller"):
-        default, description = _NODE_PARAMETERS["controller"]
-        node.declare_parameter("controller", default, ParameterDescriptor(description=description))
+    declare_parameters(node, {"controller": _NODE_PARAMETERS["controller"]})
     return str(node.get_parameter("controller").value)
+
+
+def tuning_table(controller_class: type) -> dict[str, tuple[Any, str]]:
+    """The controller's tuning parameters the node declares: name -> (default, description).
+
+    From the class's `parameter_descriptions()`, if it has one.
+    """
+    described = getattr(controller_class, "parameter_descriptions", None)
+    table = described() if callable(described) else {}
+    return {name: spec for name, spec in table.items()
+            if name not in _NODE_PARAMETERS and name != "use_sim_time"}
+
+
+def parameter_names(controller_class: type) -> list[str]:
+    """Every parameter the node declares with this controller class (run scripts check -p)."""
+    return sorted({*_NODE_PARAMETERS, *tuning_table(controller_class), "use_sim_time"})
 
 
 class WallFollowerNode(LifecycleNode):
@@ -87,19 +111,13 @@ class WallFollowerNode(LifecycleNode):
 
     def __init__(self, node_name: str = "wall_follower", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
-        for name, (default, description) in _NODE_PARAMETERS.items():
-            if not self.has_parameter(name):
-                self.declare_parameter(name, default, ParameterDescriptor(description=description))
+        # Numbers take ints for doubles (`-p kp:=5`): amr_common.parameters.
+        declare_parameters(self, _NODE_PARAMETERS)
         # The controller's tuning values become ROS parameters when the class describes them.
-        self._tuning_names: list[str] = []
+        self._tuning: dict[str, tuple[Any, str]] = {}
         try:
-            controller_class = load_controller_class(_load_controller_spec(self))
-            described = getattr(controller_class, "parameter_descriptions", None)
-            for name, (default, description) in (described() if described else {}).items():
-                if name in _NODE_PARAMETERS or self.has_parameter(name):
-                    continue
-                self.declare_parameter(name, default, ParameterDescriptor(description=description))
-                self._tuning_names.append(name)
+            self._tuning = tuning_table(load_controller_class(_load_controller_spec(self)))
+            declare_parameters(self, self._tuning)
         except ControllerSpecError as exc:
             self.get_logger().error(f"{exc} (configure will fail)")
         self._lidar_offset_from_tf: float | None = None  # kept across configures
@@ -113,7 +131,8 @@ class WallFollowerNode(LifecycleNode):
         self._synchronizer = None
         self._timer = None
         self._latest: tuple | None = None  # (z_scan, z_v, z_w, arrival Time) in robot mode
-        self._stopped_localized = False
+        self._in_charge = True  # of the robot: see the module docstring (handover)
+        self._latest_in_charge = True  # robot mode: the newest set's verdict
         self._scan_geometry: tuple | None = None
         self._last_stamp = None  # newest measurement's stamp (simulated time in lockstep)
         self._active = False
@@ -129,9 +148,13 @@ class WallFollowerNode(LifecycleNode):
         synchronizer. A bad parameter or a controller that cannot be loaded or built returns
         FAILURE with the reason logged, before anything is created.
         """
-        p = {name: self.get_parameter(name).value for name in _NODE_PARAMETERS}
-        problems = []
-        if not (isinstance(p["dt"], float) and math.isfinite(p["dt"]) and p["dt"] > 0):
+        p, problems = read_parameters(self, _NODE_PARAMETERS)
+        tuning, tuning_problems = read_parameters(self, self._tuning)
+        problems += tuning_problems
+        if problems:
+            self.get_logger().error("configure failed: " + "; ".join(problems))
+            return TransitionCallbackReturn.FAILURE
+        if not (math.isfinite(p["dt"]) and p["dt"] > 0):
             problems.append(f"dt must be a positive number of seconds (got {p['dt']})")
         if p["queue_size"] < 1:
             problems.append(f"queue_size must be >= 1 (got {p['queue_size']})")
@@ -144,7 +167,6 @@ class WallFollowerNode(LifecycleNode):
         if problems:
             self.get_logger().error("configure failed: " + "; ".join(problems))
             return TransitionCallbackReturn.FAILURE
-        tuning = {name: self.get_parameter(name).value for name in self._tuning_names}
         if "lidar_offset_x_m" in tuning and self._lidar_offset_from_tf is not None:
             tuning["lidar_offset_x_m"] = self._lidar_offset_from_tf
         try:
@@ -159,6 +181,7 @@ class WallFollowerNode(LifecycleNode):
         self.angular_sign = int(p["angular_sign"])
         self.data_timeout = float(p["data_timeout"])
         self.stamped = self.simulation or bool(p["cmd_vel_stamped"])
+        self.stop_when_localized = bool(p["stop_when_localized"])
         slop = p["slop"] if p["slop"] >= 0 else (10.0 if self.simulation else 0.15)
 
         self._cmd_message = TwistStamped() if self.stamped else Twist()
@@ -275,22 +298,30 @@ class WallFollowerNode(LifecycleNode):
         self.get_logger().info(f"LiDAR position from /tf_static: x = {offset.x:.3f} m")
 
     def _on_synchronized(self, odometry: Odometry, scan: LaserScan, pose=None) -> None:
-        if not self._active or self._stopped_localized:
+        if not self._active:
             return
-        if pose is not None and pose.localized:
-            self._stopped_localized = True
-            self.get_logger().info("localized: stopping the robot and no longer commanding")
-            self._publish(0.0, 0.0, odometry.header.stamp)
-            return
+        in_charge = pose is None or not pose.localized or not self.stop_when_localized
         measurement = self._measurement(odometry, scan)
         if self.simulation:
+            self._hand_over(in_charge)
             # Lockstep: the simulator waits for this answer, so always answer (zero if bad).
             # The command carries the measurement's (simulated) stamp: no clock needed.
             v, w = self._compute(*measurement) if measurement else (0.0, 0.0)
             self._last_stamp = scan.header.stamp
-            self._publish(v, w, self._last_stamp)
+            if in_charge:
+                self._publish(v, w, self._last_stamp)
         elif measurement is not None:
             self._latest = (*measurement, self.get_clock().now())
+            self._latest_in_charge = in_charge
+
+    def _hand_over(self, in_charge: bool) -> bool:
+        """Record who is in charge; True if the node just stepped out of charge."""
+        was, self._in_charge = self._in_charge, in_charge
+        if was and not in_charge:
+            self.get_logger().info("localized: handing over (no more commands while localized)")
+        elif in_charge and not was:
+            self.get_logger().warning("localization lost: wall following again")
+        return was and not in_charge
 
     def _measurement(self, odometry: Odometry, scan: LaserScan):
         z_v, z_w = odometry.twist.twist.linear.x, odometry.twist.twist.angular.z
@@ -311,10 +342,19 @@ class WallFollowerNode(LifecycleNode):
         return np.asarray(scan.ranges, dtype=float), float(z_v), float(z_w)
 
     def _on_timer(self) -> None:
-        if not self._active or self._stopped_localized:
+        if not self._active:
             return
         now = self.get_clock().now()
-        if self._latest is None or (now - self._latest[3]).nanoseconds * 1e-9 > self.data_timeout:
+        fresh = self._latest is not None and \
+            (now - self._latest[3]).nanoseconds * 1e-9 <= self.data_timeout
+        if fresh and not self._latest_in_charge:
+            self._compute(*self._latest[:3])  # keeps the controller's perception current
+            if self._hand_over(False):
+                self._publish(0.0, 0.0, now.to_msg())  # the robot keeps its last command
+            return
+        if fresh:
+            self._hand_over(True)
+        if not fresh:
             age = "no data yet" if self._latest is None else \
                 f"newest data {(now - self._latest[3]).nanoseconds * 1e-9:.2f} s old"
             self.get_logger().warning(f"{age} (data_timeout {self.data_timeout} s): commanding "

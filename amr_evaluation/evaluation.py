@@ -28,8 +28,9 @@ from amr_common.controller_loader import (
 
 __all__ = [
     "DEFAULT_CONTROLLER", "ControllerSpecError", "EvaluationError", "EpisodeSpec",
-    "EpisodeOutcome", "parse_name_list", "parse_seeds", "parse_overrides", "expand_grid",
-    "load_config", "load_ros_params_file", "check_controller", "run_episodes", "POSE_SOURCES",
+    "EpisodeOutcome", "parse_name_list", "parse_start_list", "parse_seeds", "parse_overrides",
+    "expand_grid", "load_config", "load_ros_params_file", "check_controller", "run_episodes",
+    "POSE_SOURCES",
 ]
 
 CONFIG_KEYS = ("worlds", "starts", "goals", "pose_source", "profiles", "seeds", "duration", "dt",
@@ -47,7 +48,7 @@ class EpisodeSpec:
     """One episode to run: picklable, so it can be sent to a worker process."""
 
     world: str
-    start: str | None = None
+    start: str | tuple[float, float, float] | None = None  # a name, a pose, None: the first
     profile: str = "ideal"
     seed: int = 0
     duration: float = 600.0
@@ -60,6 +61,8 @@ class EpisodeSpec:
     def __post_init__(self) -> None:
         if isinstance(self.params, Mapping):
             object.__setattr__(self, "params", tuple(sorted(self.params.items())))
+        if self.start is not None and not isinstance(self.start, str):
+            object.__setattr__(self, "start", tuple(float(v) for v in self.start))
         duration = self.duration
         if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
             raise EvaluationError(f"episode duration must be a positive number of seconds, "
@@ -71,9 +74,10 @@ class EpisodeSpec:
     @property
     def label(self) -> str:
         """world/start[->goal]/profile/seed N, for tables and progress lines."""
+        from amr_common.world import start_label
         goal = f"->{self.goal}" if self.goal else ""
-        return (f"{Path(self.world).stem}/{self.start or '-'}{goal}/{self.profile}/seed "
-                f"{self.seed}")
+        return (f"{Path(self.world).stem}/{start_label(self.start) or '-'}{goal}/{self.profile}/"
+                f"seed {self.seed}")
 
 
 @dataclass
@@ -92,6 +96,8 @@ def parse_name_list(value: str | Sequence[str] | None) -> list[str]:
     """"a,b, c" or ["a", "b,c"] -> ["a", "b", "c"] (order kept, duplicates dropped)."""
     if value is None:
         return []
+    if not isinstance(value, (str, list, tuple)):
+        raise EvaluationError(f"expected a name or a list of names, got {value!r}")
     items = [value] if isinstance(value, str) else list(value)
     names: list[str] = []
     for item in items:
@@ -100,6 +106,64 @@ def parse_name_list(value: str | Sequence[str] | None) -> list[str]:
             if name and name not in names:
                 names.append(name)
     return names
+
+
+def parse_start_list(value: Any) -> list[str | tuple[float, float, float]]:
+    """Start names and x, y, theta poses from a command line or a config file.
+
+    "outer,-1,-1,1.57", ["outer", -1, -1, 1.57] and ["outer", [-1, -1, 1.57]] all give
+    ["outer", (-1.0, -1.0, 1.57)] (order kept, duplicates dropped): three numbers in a row are
+    one pose (m, m, rad), anything else is a name.
+    """
+    if value is None:
+        return []
+    items = [value] if isinstance(value, (str, int, float)) else value
+    if not isinstance(items, (list, tuple)):
+        raise EvaluationError(f"starts must be 'all', names or x,y,theta poses, got {value!r}")
+    tokens: list[Any] = []  # names, numbers and explicit poses, in order
+    for item in items:
+        if isinstance(item, str):
+            tokens += [_number_or_name(part.strip()) for part in item.split(",") if part.strip()]
+        elif isinstance(item, (int, float)) and not isinstance(item, bool):
+            tokens.append(float(item))
+        elif isinstance(item, (list, tuple)):
+            tokens.append(_explicit_pose(item))
+        else:
+            raise EvaluationError(f"start {item!r} is neither a name nor an x,y,theta pose")
+    starts: list[str | tuple[float, float, float]] = []
+    numbers: list[float] = []
+    for token in [*tokens, None]:  # None flushes the last run of numbers
+        if isinstance(token, float):
+            numbers.append(token)
+            continue
+        if numbers:
+            if len(numbers) % 3 or not all(math.isfinite(n) for n in numbers):
+                raise EvaluationError(f"start pose numbers {numbers} are not x,y,theta triples "
+                                      "of finite numbers")
+            starts += [tuple(numbers[i:i + 3]) for i in range(0, len(numbers), 3)]
+            numbers = []
+        if token is not None:
+            starts.append(token)
+    unique: list[str | tuple[float, float, float]] = []
+    for start in starts:
+        if start not in unique:
+            unique.append(start)
+    return unique
+
+
+def _number_or_name(text: str) -> str | float:
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def _explicit_pose(item: Sequence[Any]) -> tuple[float, float, float]:
+    if len(item) != 3 or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                 and math.isfinite(v) for v in item):
+        raise EvaluationError(f"start pose {list(item)!r} is not [x, y, theta] with finite "
+                              "numbers")
+    return (float(item[0]), float(item[1]), float(item[2]))
 
 
 def parse_seeds(value: str | int | Sequence[Any] | None) -> list[int]:
@@ -143,9 +207,11 @@ def expand_grid(worlds: str | Sequence[str], starts: str | Sequence[str] = "all"
     """Every combination of world x start [x goal] x profile x seed, in that nesting order.
 
     `worlds` "all" means every bundled world; `starts` "all" means every named start of each world.
-    A start name applies to the worlds that have it; a name no chosen world has is an error.
-    `goals` (navigation episodes): "all" = every named goal of each world, or names, applied
-    like the start names; None or empty: wall-following episodes.
+    A start name applies to the worlds that have it; a name no chosen world has is an error. A pose
+    (x, y, theta; see parse_start_list) applies to every world. A world without named starts
+    (the course's map JSON) needs poses. `goals` (navigation episodes): "all" = every named goal
+    of each world, or names, applied like the start names; None or empty: wall-following
+    episodes.
     """
     from amr_common.world import World, WorldError, bundled_worlds
     from amr_sim.profiles import get_profile
@@ -162,22 +228,28 @@ def expand_grid(worlds: str | Sequence[str], starts: str | Sequence[str] = "all"
         except (KeyError, ValueError) as exc:
             raise EvaluationError(f"profile '{name}': {exc}") from None
     seed_list = parse_seeds(seeds)
-    start_names = parse_name_list(starts) or ["all"]
-    loaded: dict[str, list[str | None]] = {}
+    start_list = parse_start_list(starts) or ["all"]
+    poses = [s for s in start_list if not isinstance(s, str)]
+    start_names = [s for s in start_list if isinstance(s, str)]
+    loaded: dict[str, list[str | tuple[float, float, float]]] = {}
     for name in world_names:
         try:
             world = World.load(name)
+            for pose in poses:  # a pose applies to every world: it must be free in each
+                world.resolve_start(pose)
         except WorldError as exc:
             raise EvaluationError(str(exc)) from None
         available = list(world.starts)
-        if start_names == ["all"]:
-            chosen: list[str | None] = list(available) or [None]
-        else:
-            chosen = [s for s in start_names if s in available]
-            if not chosen:
-                raise EvaluationError(f"world '{name}' has none of the starts "
-                                      f"{', '.join(start_names)} (its starts: "
-                                      f"{', '.join(available) or 'none'})")
+        everything = "all" in start_names
+        named = available if everything else [s for s in start_names if s in available]
+        if everything and not named and not poses:
+            raise EvaluationError(f"world '{name}' names no start poses, so 'all' is none: "
+                                  "give poses, e.g. --starts X,Y,THETA")
+        chosen: list[str | tuple[float, float, float]] = [*named, *poses]
+        if not chosen:
+            raise EvaluationError(f"world '{name}' has none of the starts "
+                                  f"{', '.join(start_names)} (its starts: "
+                                  f"{', '.join(available) or 'none'})")
         loaded[name] = chosen
     unused = [s for s in start_names if s != "all" and not any(s in v for v in loaded.values())]
     if unused:
@@ -224,9 +296,15 @@ def _read_yaml(path: Path, what: str) -> Any:
     try:
         return yaml.safe_load(path.read_text(encoding="utf-8"))
     except OSError as exc:
-        raise EvaluationError(f"{path}: cannot read {what}: {exc}") from None
-    except yaml.YAMLError as exc:
-        raise EvaluationError(f"{path}: not valid YAML: {exc}") from None
+        raise EvaluationError(f"{path}: cannot read {what}: {exc.strerror or exc}") from None
+    except UnicodeDecodeError:
+        raise EvaluationError(f"{path}: not a text file (a YAML {what} was expected)") from None
+    except yaml.YAMLError as exc:  # one line: the problem and where
+        problem = getattr(exc, "problem", None) or str(exc)
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        raise EvaluationError(f"{path}: not valid YAML: {' '.join(problem.split())}{where}") \
+            from None
 
 
 def load_config(path: str | os.PathLike) -> dict[str, Any]:
@@ -242,6 +320,20 @@ def load_config(path: str | os.PathLike) -> dict[str, Any]:
     if "worlds" not in raw:
         raise EvaluationError(f"{path}: 'worlds' is required (a list of names, or 'all')")
     config = dict(raw)
+    for key in ("worlds", "profiles"):
+        value = config.get(key)
+        if key in config and not (isinstance(value, str) or (
+                isinstance(value, list) and all(isinstance(v, str) for v in value))):
+            raise EvaluationError(f"{path}: '{key}' must be a name, a list of names or 'all', "
+                                  f"got {value!r}")
+    if "starts" in config:
+        try:
+            parse_start_list(config["starts"])
+        except EvaluationError as exc:
+            raise EvaluationError(f"{path}: 'starts': {exc}") from None
+    if "controller" in config and not isinstance(config["controller"], str):
+        raise EvaluationError(f"{path}: 'controller' must be MODULE:CLASS, got "
+                              f"{config['controller']!r}")
     for key in ("duration", "dt"):
         if key in config and (isinstance(config[key], bool)
                               or not isinstance(config[key], (int, float))):

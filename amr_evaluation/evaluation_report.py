@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence, TextIO
 
+from amr_common.world import start_label
 from amr_evaluation.evaluation import EpisodeOutcome
 
 __all__ = [
@@ -55,8 +56,8 @@ def outcome_row(outcome: EpisodeOutcome) -> dict[str, Any]:
     spec, result = outcome.spec, outcome.result
     world = (Path(spec.world).stem if spec.world.endswith((".yaml", ".yml", ".json"))
              else spec.world)
-    row: dict[str, Any] = {"world": world, "start": spec.start, "profile": spec.profile,
-                           "seed": spec.seed}
+    row: dict[str, Any] = {"world": world, "start": start_label(spec.start) or None,
+                           "profile": spec.profile, "seed": spec.seed}
     columns = NAVIGATION_COLUMNS if spec.goal else RESULT_COLUMNS
     if spec.goal:
         row["goal"] = spec.goal

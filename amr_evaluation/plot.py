@@ -57,6 +57,16 @@ def draw_world(ax, world: World, show_starts: bool = True, show_grid: bool = Fal
             _draw_goal(ax, *world.goal)
 
 
+def draw_navigation(ax, planned_path: Any = None, goal: Sequence[float] | None = None) -> None:
+    """The planned path (dashed) and the goal (a star) on an Axes, where given."""
+    if planned_path is not None and len(planned_path):
+        plan = np.asarray(planned_path, dtype=np.float64).reshape(-1, 2)
+        ax.plot(plan[:, 0], plan[:, 1], linestyle="--", color="tab:red", linewidth=1.2,
+                zorder=5, label="planned path")
+    if goal is not None:
+        _draw_goal(ax, goal[0], goal[1], label="goal")
+
+
 def _draw_goal(ax, x: float, y: float, label: str | None = None) -> None:
     ax.plot(x, y, marker="*", markersize=14, color="gold", markeredgecolor="k", zorder=6,
             linestyle="none", label=label)
@@ -118,12 +128,7 @@ def draw_episode(ax, world: World, trajectory: Any, collision_points: Iterable =
     traj, points, result = _episode_parts(trajectory, collision_points)
     draw_world(ax, world, show_starts=False)
     figures = _figures(world, traj, points, result)
-    if planned_path is not None and len(planned_path):
-        plan = np.asarray(planned_path, dtype=np.float64).reshape(-1, 2)
-        ax.plot(plan[:, 0], plan[:, 1], linestyle="--", color="tab:red", linewidth=1.2,
-                zorder=5, label="planned path")
-    if goal is not None:
-        _draw_goal(ax, goal[0], goal[1], label="goal")
+    draw_navigation(ax, planned_path, goal)
     if len(traj) >= 2:
         xy = traj[:, 1:3]
         lines = LineCollection(np.stack([xy[:-1], xy[1:]], axis=1), cmap="viridis",
@@ -224,6 +229,8 @@ def plot_episodes_sheet(results: Sequence[Any], path: str | Path, columns: int |
 
 def _save(fig: Figure, path: str | Path, tight: bool = True) -> Path:
     path = Path(path)
+    if not path.suffix:  # what matplotlib would write: return the real file name
+        path = path.with_name(path.name + ".png")
     path.parent.mkdir(parents=True, exist_ok=True)
     if tight:
         fig.tight_layout()

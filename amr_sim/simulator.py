@@ -219,6 +219,23 @@ class Simulator:
                 self._next_scan_time += p.scan_period
         return self._scan, self._z_v, self._z_w
 
+    def teleport(self, pose) -> None:
+        """Teleport the robot to `pose` (x, y, theta), as if kidnapped.
+
+        Move the robot to `pose` (x, y, theta) at once, as if kidnapped: no time passes, the
+        encoders and the dead-reckoned odometry see no motion, the distance does not grow, and
+        the LiDAR reads the new place from its next scan on (every step with `ideal`, the next
+        0.2 s slot with `turtlebot3`). Raises WorldError for a pose inside or touching a wall.
+        """
+        x, y, theta = self._world.resolve_start(tuple(float(v) for v in pose))
+        body = self._body
+        body.position = (x, y)
+        body.angle = theta
+        body.velocity = (0.0, 0.0)
+        body.angular_velocity = 0.0
+        self._space.reindex_shapes_for_body(body)
+        self._x, self._y, self._theta = x, y, theta
+
     def _new_scan(self) -> np.ndarray:
         p = self._profile
         noise = (self._rng.standard_normal(p.scan_rays) * p.range_noise_sigma

@@ -28,7 +28,6 @@ from typing import Any, Callable
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.clock import Clock, ClockType
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rosgraph_msgs.msg import Clock as ClockMessage
@@ -36,6 +35,7 @@ from sensor_msgs.msg import LaserScan
 
 from amr_common.geometry import angle_difference
 from amr_common.node_runner import run_lifecycle_node
+from amr_common.parameters import declare_parameters, read_parameters
 from amr_common.qos import RELIABLE_10, scan_qos
 from amr_common.ros_conversions import (
     command_from_twist,
@@ -49,8 +49,8 @@ from amr_common.world import World
 from amr_sim.simulator import Simulator
 from amr_sim.simulator_params import (
     DEFAULT_START,
-    NUMERIC_PARAMETERS,
-    PARAMETERS,
+    PARAMETER_TABLE,
+    PARAMETER_TYPES,
     check_parameters,
 )
 from amr_sim.simulator_tf import SimulatorTf
@@ -77,11 +77,8 @@ class SimulatorNode(LifecycleNode):
 
     def __init__(self, node_name: str = "amr_simulator", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
-        for name, (default, type_, description) in PARAMETERS.items():
-            if not self.has_parameter(name):
-                self.declare_parameter(name, default, ParameterDescriptor(
-                    description=description, type=type_,
-                    dynamic_typing=name in NUMERIC_PARAMETERS))
+        # Numbers take ints for doubles (`-p dt:=1`): amr_common.parameters.
+        declare_parameters(self, PARAMETER_TABLE, types=PARAMETER_TYPES)
         # Run scripts append callables here; each is called with the simulator after a step.
         self.on_step: list[Callable[[Any], None]] = []
         self._reset()
@@ -111,11 +108,15 @@ class SimulatorNode(LifecycleNode):
         self._command = (0.0, 0.0)
         self._command_received: float | None = None  # monotonic time of the newest command
         self._next_publish = {"odom": 0.0, "scan": 0.0}
+        self._kidnapped = False
         self._tf: SimulatorTf | None = None
 
     def _read_parameters(self) -> dict[str, Any]:
         """Parameter values, checked; raises ValueError naming every bad one."""
-        return check_parameters({name: self.get_parameter(name).value for name in PARAMETERS})
+        values, problems = read_parameters(self, PARAMETER_TABLE, types=PARAMETER_TYPES)
+        if problems:
+            raise ValueError("; ".join(problems))
+        return check_parameters(values)
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Check the parameters, load the world, build the Simulator and create the topics.
@@ -137,6 +138,8 @@ class SimulatorNode(LifecycleNode):
                 self.get_logger().info(f"world '{world.name}' has no start '{DEFAULT_START}' "
                                        f"(the default): starting at '{start}'")
             self._start_pose = world.resolve_start(start)
+            if p["kidnap"] is not None:  # a pose in a wall fails here, not mid-run
+                world.resolve_start(p["kidnap"][1:])
             self.simulator = Simulator(world, start=self._start_pose,
                                        dt=p["dt"], profile=p["profile"], seed=p["seed"])
         except Exception as exc:  # WorldError, unknown profile, bad values: all user errors
@@ -303,6 +306,13 @@ class SimulatorNode(LifecycleNode):
     # --- stepping and publishing -----------------------------------------------------------
     def _advance(self, v: float, w: float) -> None:
         simulator = self.simulator
+        kidnap = self.params["kidnap"]
+        if kidnap is not None and not self._kidnapped and simulator.time >= kidnap[0] - 1e-9:
+            simulator.teleport(kidnap[1:])
+            self._kidnapped = True
+            self.get_logger().warning(
+                f"kidnapped at t={simulator.time:.2f} s to ({kidnap[1]:.2f}, {kidnap[2]:.2f}, "
+                f"{kidnap[3]:.2f})")
         pose_before = simulator.pose
         try:
             z_scan, z_v, z_w = simulator.step(v, w)

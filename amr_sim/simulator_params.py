@@ -9,12 +9,14 @@ from typing import Any
 
 from rcl_interfaces.msg import ParameterType
 
+from amr_common.world import parse_start
+
 DEFAULT_START = "outer"  # the course's "outer corridor" start in lab02
 _S, _B, _D, _DA, _I = (ParameterType.PARAMETER_STRING, ParameterType.PARAMETER_BOOL,
                        ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_DOUBLE_ARRAY,
                        ParameterType.PARAMETER_INTEGER)
 # name: (default, type, description). Numbers accept ints or doubles (`-p dt:=1` must not kill
-# the process): they are declared with dynamic typing and checked in on_configure.
+# the process): amr_common.parameters declares them with dynamic typing, on_configure checks.
 PARAMETERS: dict[str, tuple[Any, int, str]] = {
     "world": ("lab02", _S, "Bundled world name or path to a world .yaml / course map .json"),
     "start": (DEFAULT_START, _S, "Start pose: a name from the world file or 'x,y,theta' "
@@ -39,6 +41,9 @@ PARAMETERS: dict[str, tuple[Any, int, str]] = {
                                  "as reached"),
     "enable_localization": (False, _B, "Synchronize /pose (amr_msgs/PoseStamped) with /cmd_vel, "
                                        "log its error and finish at the goal once localized"),
+    "kidnap": ([], _DA, "Kidnapping event [t, x, y, theta] (s, m, m, rad): at simulated time t "
+                        "the robot is teleported to (x, y, theta); encoders and odometry see no "
+                        "motion (tests a localization node's recovery); [] = none"),
     "odom_frame": ("odom", _S, "Frame of the odometry pose"),
     "base_frame": ("base_footprint", _S, "Robot frame (child frame of odometry)"),
     "scan_frame": ("base_scan", _S, "Frame of the LaserScan"),
@@ -53,26 +58,10 @@ PARAMETERS: dict[str, tuple[Any, int, str]] = {
                               "/map_markers (walls) once, latched"),
     "map_resolution": (0.05, _D, "Cell size of /map in metres (0.005 to 1)"),
 }
-NUMERIC_PARAMETERS = {"dt", "seed", "command_timeout", "goal", "goal_tolerance",
-                      "goal_rest_time", "map_resolution"}
-
-
-def parse_start(text: str) -> str | tuple[float, float, float] | None:
-    """'name' -> name, 'x,y,theta' -> floats, '' -> None (the world's first start)."""
-    text = text.strip()
-    if not text:
-        return None
-    if "," not in text:
-        return text
-    parts = text.split(",")
-    try:
-        values = tuple(float(p) for p in parts)
-    except ValueError:
-        values = ()
-    if len(values) != 3 or not all(math.isfinite(v) for v in values):
-        raise ValueError(f"start '{text}' is neither a start name nor 'x,y,theta' "
-                         "with three finite numbers")
-    return values
+# The forms amr_common.parameters declares and reads.
+PARAMETER_TABLE = {name: (default, description)
+                   for name, (default, _, description) in PARAMETERS.items()}
+PARAMETER_TYPES = {name: type_ for name, (_, type_, _) in PARAMETERS.items()}
 
 
 def check_parameters(values: dict[str, Any]) -> dict[str, Any]:
@@ -110,6 +99,16 @@ def check_parameters(values: dict[str, Any]) -> dict[str, Any]:
         p["goal"] = (float(goal[0]), float(goal[1]))
     else:
         problems.append(f"goal must be [] or [x, y] with finite numbers (got {goal!r})")
+    kidnap = p["kidnap"]
+    if kidnap is None or (hasattr(kidnap, "__len__") and len(kidnap) == 0):
+        p["kidnap"] = None
+    elif isinstance(kidnap, (list, tuple)) and len(kidnap) == 4 and all(
+            isinstance(k, (int, float)) and not isinstance(k, bool) and math.isfinite(k)
+            for k in kidnap) and kidnap[0] >= 0:
+        p["kidnap"] = tuple(float(k) for k in kidnap)
+    else:
+        problems.append(f"kidnap must be [] or [t, x, y, theta] with finite numbers and t >= 0 "
+                        f"(got {kidnap!r})")
     try:
         p["start"] = parse_start(p["start"])
     except ValueError as exc:

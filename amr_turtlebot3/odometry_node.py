@@ -19,10 +19,10 @@ import math
 from typing import Any
 
 from nav_msgs.msg import Odometry
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
 from amr_common.node_runner import run_lifecycle_node
+from amr_common.parameters import declare_parameters, read_parameters
 from amr_common.qos import RELIABLE_10
 from amr_turtlebot3.velocity_estimator import Status, VelocityEstimator
 
@@ -39,13 +39,6 @@ _PARAMETERS: dict[str, tuple[Any, str]] = {
 }
 
 
-def _as_float(value: Any) -> float | None:
-    """A real number parameter value (ints accepted), else None."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        return None
-    return float(value)
-
-
 class OdometryNode(LifecycleNode):
     """The real robot's /odom (pose only) in, /odometry (pose + estimated twist) out.
 
@@ -57,12 +50,9 @@ class OdometryNode(LifecycleNode):
 
     def __init__(self, node_name: str = "amr_odometry", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
-        for name, (default, description) in _PARAMETERS.items():
-            if not self.has_parameter(name):
-                # Numbers are dynamically typed so `-p max_gap:=1` is accepted, and a wrong
-                # value fails configure with a reason instead of raising in the constructor.
-                self.declare_parameter(name, default, ParameterDescriptor(
-                    description=description, dynamic_typing=isinstance(default, float)))
+        # Numbers take ints for doubles (`-p max_gap:=1`), and a wrong value fails configure
+        # with a reason instead of raising in the constructor: amr_common.parameters.
+        declare_parameters(self, _PARAMETERS)
         self.estimator: VelocityEstimator | None = None
         self._publisher = None
         self._subscription = None
@@ -76,13 +66,11 @@ class OdometryNode(LifecycleNode):
         rclpy rejects returns FAILURE with the reason logged; anything already created is
         released again.
         """
-        p = {name: self.get_parameter(name).value for name in _PARAMETERS}
-        problems = []
-        max_gap = _as_float(p["max_gap"])
-        tau = _as_float(p["smoothing_time_constant"])
-        if max_gap is None or not (math.isfinite(max_gap) and max_gap > 0.0):
+        p, problems = read_parameters(self, _PARAMETERS)
+        max_gap, tau = p["max_gap"], p["smoothing_time_constant"]
+        if isinstance(max_gap, float) and not (math.isfinite(max_gap) and max_gap > 0.0):
             problems.append(f"max_gap must be a number of seconds > 0 (got {p['max_gap']!r})")
-        if tau is None or not (math.isfinite(tau) and tau >= 0.0):
+        if isinstance(tau, float) and not (math.isfinite(tau) and tau >= 0.0):
             problems.append("smoothing_time_constant must be a number of seconds >= 0 "
                             f"(got {p['smoothing_time_constant']!r})")
         for name in ("input_topic", "output_topic"):

@@ -11,6 +11,8 @@
   evaluate.py        episode throughput on 1 process vs all cores
   planning           A* compiled vs the same search in plain Python; navigation episodes in
                      real-time factors (bench_planning.py)
+  localization       particle filter: measurement update rate vs numpy, one full update at
+                     2,000 particles, headless localization episode (bench_localization.py)
 Usage: .venv/bin/python scripts/bench.py [--quick] [--only NAME ...] [--json FILE]
 """
 from __future__ import annotations
@@ -74,11 +76,13 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="fewer repetitions")
     parser.add_argument("--only", nargs="*", default=None,
-                        choices=["sim", "ros", "sync", "controller", "evaluate", "planning"])
+                        choices=["sim", "ros", "sync", "controller", "evaluate",
+                                 "localization", "planning"])
     parser.add_argument("--json", default=None, help="also write the figures to this file")
     args = parser.parse_args(argv)
     isolate_local_graph()
-    chosen = args.only or ["sim", "ros", "sync", "controller", "evaluate", "planning"]
+    chosen = args.only or ["sim", "ros", "sync", "controller", "evaluate", "localization",
+                           "planning"]
     figures: dict[str, dict] = {}
     if "sim" in chosen:
         import bench_sim
@@ -101,6 +105,9 @@ def main(argv=None) -> int:
         figures["evaluate"] = bench_evaluate(*((6, 120.0) if args.quick else (12, 300.0)))
         e = figures["evaluate"]
         print("evaluate.py: " + ", ".join(f"{k} {v:.2f}" for k, v in e.items()))
+    if "localization" in chosen:
+        import bench_localization
+        figures["localization"] = bench_localization.main(["--quick"] if args.quick else [])
     if "planning" in chosen:
         import bench_planning
         figures["planning"] = bench_planning.measure(args.quick)

@@ -15,8 +15,11 @@ Examples:
   .venv/bin/python scripts/evaluate.py --worlds all --starts all --profiles ideal,turtlebot3
   .venv/bin/python scripts/evaluate.py --config evaluations/example.yaml -p kp:=4.0
   .venv/bin/python scripts/evaluate.py --worlds lab02 --controller my_pkg.ctrl:MyController
+  .venv/bin/python scripts/evaluate.py --localize --worlds all --profiles ideal,turtlebot3 \
+      --seeds 0-4 --duration 60                      # the particle filter's figures
+  .venv/bin/python scripts/evaluate.py --localize --worlds twin_maze --seeds 0-9 --kidnap-at 25
   .venv/bin/python scripts/evaluate.py --worlds lab02,maze_deadends --goals all \
-      --profiles ideal,turtlebot3 --seeds 0-2 --duration 300
+      --profiles ideal,turtlebot3 --seeds 0-2 --duration 300   # navigation to named goals
 Options given on the command line override the same keys of --config.
 """
 from __future__ import annotations
@@ -36,7 +39,6 @@ if str(REPO) not in sys.path:  # run from a checkout without installing
 from amr_common.controller_loader import load_controller_class  # noqa: E402
 from amr_evaluation.evaluation import (  # noqa: E402
     DEFAULT_CONTROLLER,
-    ControllerSpecError,
     EvaluationError,
     check_controller,
     expand_grid,
@@ -53,6 +55,7 @@ from amr_evaluation.evaluation_report import (  # noqa: E402
     write_csv,
     write_json,
 )
+from cli_checks import check_output_folder, join_negative_values  # noqa: E402
 
 # run_sim.py gives the wall follower node this file: the same gains here keep both paths equal.
 SIM_PARAMS = REPO / "amr_control" / "params" / "sim.yaml"
@@ -66,8 +69,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         "profiles, seeds, duration, dt, controller, params_file, params, jobs)")
     parser.add_argument("--worlds", default=None, help="comma-separated world names or paths, "
                         "or 'all' (default lab02)")
-    parser.add_argument("--starts", default=None, help="'all' or comma-separated start names "
-                        "(default all)")
+    parser.add_argument("--starts", default=None, help="'all', or comma-separated start names "
+                        "and X,Y,THETA poses (m, m, rad; a pose applies to every world; default "
+                        "all)")
     parser.add_argument("--goals", default=None, help="navigation episodes: 'all' or "
                         "comma-separated named goals of the worlds (default: none, wall "
                         "following)")
@@ -94,7 +98,15 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--out", default=None,
                         help="output folder (default out/evaluate-<UTC time>)")
     parser.add_argument("--no-sheet", action="store_true", help="skip sheet.png")
-    return parser.parse_args(argv)
+    parser.add_argument("--localize", action="store_true", help="localization episodes: the "
+                        "particle filter rides along; columns: time to localized, false "
+                        "localizations, tracking errors, relocalizations")
+    parser.add_argument("--kidnap-at", type=float, default=None, metavar="T",
+                        help="with --localize: teleport the robot at T s to the world's next "
+                        "named start, turned by 90 deg")
+    parser.add_argument("--pf-param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="with --localize: particle filter parameter override")
+    return parser.parse_args(join_negative_values(argv, ["--starts"]))
 
 
 def resolve_settings(args: argparse.Namespace) -> dict:
@@ -133,18 +145,23 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     try:
         settings = resolve_settings(args)
+        if args.localize and settings["goals"]:
+            raise EvaluationError("--goals (navigation) and --localize exclude each other")
         specs = expand_grid(settings["worlds"], settings["starts"], settings["profiles"],
                             settings["seeds"], duration=settings["duration"], dt=settings["dt"],
                             controller=settings["controller"], params=settings["params"],
                             goals=settings["goals"], pose_source=settings["pose_source"])
         check_controller(settings["controller"], settings["params"], settings["dt"])
-    except (EvaluationError, ControllerSpecError) as exc:
+        started = dt_module.datetime.now(dt_module.timezone.utc)
+        out = check_output_folder(args.out or Path("out") / f"evaluate-{started:%Y%m%d-%H%M%S}",
+                                  "--out")
+    except ValueError as exc:  # EvaluationError, ControllerSpecError, a bad --out
         print(f"evaluate: {exc}", file=sys.stderr)
         return 2
+    if args.localize:
+        from amr_evaluation.localization_evaluation import evaluate_main
+        return evaluate_main(specs, settings, args, out)
     jobs = settings["jobs"] or os.cpu_count() or 1
-    started = dt_module.datetime.now(dt_module.timezone.utc)
-    out = Path(args.out) if args.out else Path("out") / f"evaluate-{started:%Y%m%d-%H%M%S}"
-    out.mkdir(parents=True, exist_ok=True)
     print(f"evaluate: {len(specs)} episodes of {settings['duration']:g} s on "
           f"{min(jobs, len(specs))} process(es), controller {settings['controller']}"
           + (f" {settings['params']}" if settings["params"] else ""), flush=True)
@@ -174,9 +191,9 @@ def main(argv: list[str] | None = None) -> int:
             from amr_evaluation.plot import plot_episodes_sheet
             # Title: the controller and what differs from its params file (all would not fit).
             changed = " ".join(f"{k}={v}" for k, v in parse_overrides(args.param).items())
-            plot_episodes_sheet(ran, out / "sheet.png",
-                                title=textwrap.shorten(f"{settings['controller']} {changed}",
-                                                       width=150, placeholder=" ..."))
+            sheet = plot_episodes_sheet(ran, out / "sheet.png", title=textwrap.shorten(
+                f"{settings['controller']} {changed}", width=150, placeholder=" ..."))
+            print(f"evaluate: trajectories drawn in {sheet}")
 
     print(format_table(outcome_row(o) for o in outcomes))
     line, code = verdict(outcomes)

@@ -48,13 +48,30 @@ def make_viewer_nodes(context, args, *, use_sim_time: bool = False) -> list:
     from amr_common.foxglove_bridge import FoxgloveBridgeNode
     return [FoxgloveBridgeNode(context=context, parameter_overrides=overrides_to_parameters({
         "port": args.foxglove_port, "host": args.foxglove_host, "use_sim_time": use_sim_time}))]
+def add_localization_options(parser) -> None:
+    """--localize and the particle filter's --pf-param NAME:=VALUE, shared by the run scripts."""
+    parser.add_argument("--localize", action="store_true", help="also run the particle filter "
+                        "(/pose with localized); the wall follower keeps exploring "
+                        "(stop_when_localized false) unless -p says otherwise")
+    parser.add_argument("--pf-param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="particle filter parameter override (repeatable), e.g. "
+                        "--pf-param beams:=90")
 
 
 def check_common_options(parser, args) -> None:
-    """Validate dt and parse the -p overrides into args.overrides (argparse errors on failure)."""
+    """Check dt, the -p overrides, the params file and the controller before anything runs.
+
+    Sets args.overrides (typed -p values) and args.controller_spec (the MODULE:CLASS the wall
+    follower will run); argparse errors (exit 2, one line) on failure,
+    including a -p name the wall follower does not have (the node would ignore it).
+    """
     import math
 
-    from amr_common.controller_loader import ControllerSpecError, parse_overrides
+    from amr_common.controller_loader import (
+        DEFAULT_CONTROLLER,
+        load_controller_class,
+        parse_overrides,
+    )
     if args.dt is not None and not (math.isfinite(args.dt) and args.dt > 0):
         parser.error("--dt must be > 0")
     if getattr(args, "foxglove_port", 0) is not None and \
@@ -62,8 +79,70 @@ def check_common_options(parser, args) -> None:
         parser.error("--foxglove-port must be within 0-65535")
     try:
         args.overrides = parse_overrides(args.param)
-    except ControllerSpecError as exc:
+        args.pf_overrides = parse_overrides(getattr(args, "pf_param", []))
+        in_file = read_params_file(args.params_file) if args.params_file else {}
+        spec = (args.controller or args.overrides.get("controller")
+                or in_file.get("controller") or DEFAULT_CONTROLLER)
+        args.controller_spec = str(spec)
+        controller_class = load_controller_class(args.controller_spec)
+    except ValueError as exc:  # ControllerSpecError, EvaluationError: one-line messages
         parser.error(str(exc))
+    from amr_control.wall_follower_node import parameter_names, tuning_table
+    known = parameter_names(controller_class)
+    unknown = [name for name in args.overrides if name not in known]
+    if unknown:
+        parser.error(f"-p {', '.join(unknown)}: no such wall follower parameter with controller "
+                     f"{spec}; known: {', '.join(known)}")
+    # Build the controller once with what the node will give it: a bad value fails now, before
+    # any node exists (and its compiled kernels load here, not while the graph starts).
+    values = {**in_file, **args.overrides}
+    tuning = {name: values[name] for name in tuning_table(controller_class) if name in values}
+    try:
+        dt = float(args.dt if args.dt is not None else values.get("dt", 0.05))
+    except (TypeError, ValueError):
+        return  # the node reports a bad dt when it configures
+    try:
+        controller_class(dt, **tuning)
+    except Exception as exc:  # a user's controller may raise anything
+        parser.error(f"controller {spec} rejects its parameters: {exc}")
+
+
+def read_params_file(path: Path | str) -> dict[str, Any]:
+    """Every parameter of a ROS 2 params file, after rcl (the nodes' own parser) has read it.
+
+    ValueError with a one-line reason for a missing, binary, malformed or unusable file.
+    """
+    from amr_evaluation.evaluation import load_ros_params_file
+    target = Path(path)
+    if not target.is_file():
+        raise ValueError(f"--params-file '{path}': no such file")
+    _parse_with_rcl(target)
+    return load_ros_params_file(target)
+
+
+def _parse_with_rcl(path: Path) -> None:
+    """Have rcl parse the params file now, instead of a node's constructor failing later."""
+    import os
+    import re
+
+    import rclpy
+    context = rclpy.Context()
+    sys.stderr.flush()
+    saved_stderr = os.dup(2)  # rcl logs a second, less clear line: keep the message one line
+    try:
+        with open(os.devnull, "w") as devnull:
+            os.dup2(devnull.fileno(), 2)
+            rclpy.init(args=["params_check", "--ros-args", "--params-file", str(path)],
+                       context=context, domain_id=0)
+    except Exception as exc:  # rclpy's RCLError carries rcl's message
+        detail = str(exc).split("Error: ", 1)[-1]
+        detail = re.sub(r",? at /\S+:\d+", "", detail).strip()
+        raise ValueError(f"--params-file '{path}': not a ROS 2 params file the nodes can read: "
+                         f"{detail}") from None
+    finally:
+        os.dup2(saved_stderr, 2)
+        os.close(saved_stderr)
+    rclpy.shutdown(context=context)
 
 
 def overrides_to_parameters(values: dict[str, Any]) -> list:
@@ -94,59 +173,64 @@ def make_wall_follower(context, *, params_file, overrides: dict[str, Any]):
                             parameter_overrides=overrides_to_parameters(dict(overrides)))
 
 
-def goal_value_joined(argv: list[str]) -> list[str]:
-    """The command line with `--goal -1,0.6` turned into `--goal=-1,0.6`.
+def localizing_wall_follower(tuning: dict[str, Any]) -> dict[str, Any]:
+    """Wall follower overrides for a graph with the particle filter.
 
-    argparse takes a value starting with '-' for an option; goals are typed with their signs.
+    Synchronize /pose and keep exploring once localized (no planner to hand over to), unless
+    the caller's tuning says otherwise.
     """
-    out: list[str] = []
-    args = list(argv)
-    while args:
-        arg = args.pop(0)
-        if arg == "--goal" and args and args[0].startswith("-"):
-            arg = f"--goal={args.pop(0)}"
-        out.append(arg)
-    return out
+    return {"enable_localization": True, "stop_when_localized": False, **tuning}
 
 
-def make_navigation_nodes(context, *, world: str, goal: tuple[float, float], simulation: bool,
-                          params_file=None, lidar_offset_x: float | None = None,
-                          dt: float | None = None, cmd_vel_stamped: bool | None = None,
-                          angular_sign: int | None = None) -> list:
-    """The nodes that navigate once localized: particle filter, planner, pure pursuit.
+def make_particle_filter(context, *, world: str, lidar_offset_x_m: float,
+                         overrides: dict[str, Any] | None = None, slop: float | None = None):
+    """The particle filter on `world`, told where the LiDAR sits (overrides win)."""
+    from amr_localization.particle_filter_node import ParticleFilterNode
+    values: dict[str, Any] = {"world": str(world), "lidar_offset_x_m": float(lidar_offset_x_m)}
+    if slop is not None:
+        values["slop"] = float(slop)
+    values.update(overrides or {})
+    return ParticleFilterNode(context=context, parameter_overrides=overrides_to_parameters(values))
 
-    They follow the wall follower in the startup order (the simulator, if any, comes last).
-    Each reads its own section of `params_file`; the values given here win over it.
+
+def navigating_wall_follower(tuning: dict[str, Any]) -> dict[str, Any]:
+    """Wall follower overrides for a graph that navigates: hand over to the pure pursuit.
+
+    Synchronize /pose and command only while it is not localized (stop_when_localized), unless
+    the caller's tuning says otherwise.
     """
-    try:
-        from amr_localization.particle_filter_node import ParticleFilterNode
-    except ImportError as exc:
-        raise SystemExit(f"navigation needs the particle filter (amr_localization): {exc}")
+    return {"enable_localization": True, "stop_when_localized": True, **tuning}
+
+
+def make_navigators(context, *, world: str, goal: tuple[float, float], wall_follower,
+                    lidar_offset_x_m: float) -> list:
+    """The planner and the pure pursuit, after the wall follower and the particle filter.
+
+    The pursuit commands like the wall follower (simulation or robot mode, dt, data_timeout,
+    /cmd_vel type and angular sign): it takes those from the wall follower node.
+    """
     from amr_control.pure_pursuit_node import PurePursuitNode
     from amr_planning.planner_node import PlannerNode
-    located = {"lidar_offset_x_m": lidar_offset_x} if lidar_offset_x is not None else {}
-    pursuit = {"simulation": simulation, **located}
-    for name, value in (("dt", dt), ("cmd_vel_stamped", cmd_vel_stamped),
-                        ("angular_sign", angular_sign)):
-        if value is not None:
-            pursuit[name] = value
-    cli = node_args(params_file)
+    same = {name: wall_follower.get_parameter(name).value
+            for name in ("simulation", "dt", "data_timeout", "cmd_vel_stamped", "angular_sign")}
     return [
-        ParticleFilterNode(context=context, cli_args=cli, parameter_overrides=(
-            overrides_to_parameters({"world": world, **located}))),
-        PlannerNode(context=context, cli_args=cli, parameter_overrides=overrides_to_parameters(
-            {"world": world, "goal": [float(goal[0]), float(goal[1])]})),
-        PurePursuitNode(context=context, cli_args=cli,
-                        parameter_overrides=overrides_to_parameters(pursuit)),
+        PlannerNode(context=context, parameter_overrides=overrides_to_parameters(
+            {"world": str(world), "goal": [float(goal[0]), float(goal[1])]})),
+        PurePursuitNode(context=context, parameter_overrides=overrides_to_parameters(
+            {**same, "lidar_offset_x_m": float(lidar_offset_x_m)})),
     ]
 
 
 def make_robot_graph(context, *, params_file=ROBOT_PARAMS, dt: float | None = None,
                      cmd_vel_stamped: bool | None = None, controller: str | None = None,
-                     tuning: dict[str, Any] | None = None) -> list:
+                     tuning: dict[str, Any] | None = None, localize_world: str | None = None,
+                     filter_overrides: dict[str, Any] | None = None,
+                     goal: tuple[float, float] | None = None) -> list:
     """The real-robot graph: /odom -> amr_odometry -> /odometry, wall follower in robot mode.
 
-    Returns the lifecycle nodes in startup order.
+    With `localize_world`, also the particle filter on that map (the Burger's LiDAR position),
+    and the wall follower synchronizes /pose; with a `goal` too, the planner and the pure
+    pursuit, which drive once localized. Returns the lifecycle nodes in startup order.
     """
     from amr_turtlebot3.odometry_node import OdometryNode
     overrides: dict[str, Any] = dict(tuning or {})
@@ -157,6 +241,18 @@ def make_robot_graph(context, *, params_file=ROBOT_PARAMS, dt: float | None = No
         overrides["cmd_vel_stamped"] = cmd_vel_stamped
     if controller is not None:
         overrides["controller"] = controller
+    if localize_world is not None:
+        overrides = (navigating_wall_follower if goal is not None else
+                     localizing_wall_follower)(overrides)
     odometry = OdometryNode(context=context)
     wall_follower = make_wall_follower(context, params_file=params_file, overrides=overrides)
-    return [odometry, wall_follower]
+    if localize_world is None:
+        return [odometry, wall_follower]
+    from amr_common.robot import LIDAR_OFFSET_X
+    particle_filter = make_particle_filter(context, world=localize_world,
+                                           lidar_offset_x_m=LIDAR_OFFSET_X,
+                                           overrides=filter_overrides)
+    navigators = [] if goal is None else make_navigators(
+        context, world=localize_world, goal=goal, wall_follower=wall_follower,
+        lidar_offset_x_m=LIDAR_OFFSET_X)
+    return [odometry, wall_follower, particle_filter, *navigators]

@@ -9,9 +9,10 @@ does not change discovery, it prints what it uses.
   .venv/bin/python scripts/run_robot.py --domain-id 30 --cmd-vel stamped   # Jazzy bringup
   .venv/bin/python scripts/run_robot.py --domain-id 30 --cmd-vel twist     # Humble bringup
   .venv/bin/python scripts/run_robot.py --domain-id 30 --foxglove --map course_map.json
+  .venv/bin/python scripts/run_robot.py --domain-id 30 --localize --world lab02  # + localization
   .venv/bin/python scripts/run_robot.py --domain-id 30 --world lab02 --goal -1.0,0.6
 With --world and --goal: also the particle filter, the planner and the pure pursuit (robot
-mode) - explore until localized, then drive to the goal and stop there.
+mode): explore until localized, then drive to the goal and stop there.
 Ctrl-C stops the robot: the controllers publish a zero command before exiting.
 """
 from __future__ import annotations
@@ -22,14 +23,14 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from amr_common.ros_env import describe_graph_settings  # noqa: E402
+from amr_common.ros_env import describe_graph_settings, environment_domain_id  # noqa: E402
+from cli_checks import domain_id_argument, join_negative_values  # noqa: E402
 from launch_common import (  # noqa: E402
     ROBOT_PARAMS,
     add_controller_options,
     add_foxglove_options,
+    add_localization_options,
     check_common_options,
-    goal_value_joined,
-    make_navigation_nodes,
     make_robot_graph,
     make_viewer_nodes,
 )
@@ -39,8 +40,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter,
                                      epilog=__doc__.split("\n\n", 1)[1])
-    parser.add_argument("--domain-id", type=int, default=None,
-                        help="ROS_DOMAIN_ID shared with the robot (default: $ROS_DOMAIN_ID)")
+    parser.add_argument("--domain-id", type=domain_id_argument, default=None,
+                        help="ROS_DOMAIN_ID shared with the robot, 0-232 (default: "
+                        "$ROS_DOMAIN_ID)")
     parser.add_argument("--cmd-vel", choices=["stamped", "twist"], default=None,
                         help="/cmd_vel type: stamped = TwistStamped (Jazzy bringup), twist = "
                         "Twist (Humble); default from the params file")
@@ -50,20 +52,32 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--map", default=None, metavar="MAP", help="also publish this course "
                         "map JSON / world YAML as /map and /map_markers (amr_map_publisher)")
     add_foxglove_options(parser)
-    parser.add_argument("--world", default=None, help="the map the robot drives in (bundled "
-                        "world name or a world YAML / course map JSON); needed by --goal")
+    add_localization_options(parser)
+    parser.add_argument("--world", default=None, help="with --localize or --goal: the map the "
+                        "robot is in (bundled world name or world YAML / course map JSON; "
+                        "default --map)")
     parser.add_argument("--goal", default=None, help="navigate to X,Y (metres, negative numbers "
-                        "typed as is) or a named goal of --world")
-    args = parser.parse_args(goal_value_joined(sys.argv[1:] if argv is None else argv))
-    if args.domain_id is not None and not 0 <= args.domain_id <= 232:
-        parser.error("--domain-id must be within 0-232")
-    check_common_options(parser, args)
-    if args.goal is not None:
-        from amr_common.world import World, WorldError
-        if args.world is None:
-            parser.error("--goal needs --world (the map to plan and localize on)")
+                        "typed as is) or a named goal of --world: also the particle filter, the "
+                        "planner and the pure pursuit")
+    args = parser.parse_args(join_negative_values(argv, ["--goal"]))
+    if args.domain_id is None:
         try:
-            args.goal = World.load(args.world).resolve_goal(args.goal)
+            environment_domain_id()
+        except ValueError as exc:
+            parser.error(str(exc))
+    check_common_options(parser, args)
+    args.localize = args.localize or args.goal is not None  # navigation needs the filter
+    if args.localize and args.world is None:
+        args.world = args.map
+    if args.localize and args.world is None:
+        parser.error(f"{'--goal' if args.goal else '--localize'} needs --world (the map the "
+                     f"robot drives in)")
+    if args.world is not None:
+        from amr_common.world import World, WorldError
+        try:
+            world = World.load(args.world)
+            if args.goal is not None:
+                args.goal = world.resolve_goal(args.goal)
         except WorldError as exc:
             parser.error(str(exc))
     return args
@@ -83,17 +97,11 @@ def main(argv=None) -> int:
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     stop = StopFlag().install()
     stamped = None if args.cmd_vel is None else args.cmd_vel == "stamped"
-    tuning = dict(args.overrides)
-    if args.goal is not None:
-        tuning["enable_localization"] = True
     nodes = make_robot_graph(None, params_file=args.params_file, dt=args.dt,
                              cmd_vel_stamped=stamped, controller=args.controller,
-                             tuning=tuning)
-    if args.goal is not None:
-        nodes += make_navigation_nodes(
-            None, world=args.world, goal=args.goal, simulation=False,
-            params_file=args.params_file, dt=args.dt, cmd_vel_stamped=stamped,
-            angular_sign=tuning.get("angular_sign"))
+                             tuning=args.overrides,
+                             localize_world=args.world if args.localize else None,
+                             filter_overrides=args.pf_overrides, goal=args.goal)
     if args.map:
         from amr_common.map_publisher import MapPublisherNode
         from launch_common import overrides_to_parameters

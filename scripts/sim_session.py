@@ -4,28 +4,34 @@ Lockstep: simulator (lockstep, /odometry with the encoder twist in both profiles
 follower (simulation mode, params/sim.yaml).
 Rehearsal (`--realtime --profile turtlebot3`): simulator (real time) + the robot graph of
 run_robot.py (amr_odometry + wall follower in robot mode, params/turtlebot3.yaml).
-With a goal (`--goal`), both add the navigation nodes: particle filter, planner and pure
-pursuit; the wall follower explores until /pose is localized, the simulator ends the run once
-the robot rests at the goal.
+With a goal (`--goal`), both add the particle filter, the planner and the pure pursuit: the wall
+follower explores until /pose is localized, the simulator ends the run once the robot rests at
+the goal.
 """
 from __future__ import annotations
 
 import math
 import time
-from pathlib import Path
 
+import numpy as np
 import rclpy
 from rclpy.signals import SignalHandlerOptions
 
 from amr_common.lifecycle_manager import LifecycleManager, LifecycleStartupError
 from amr_common.node_runner import make_executor, shutdown_node
+from amr_common.world import start_label
+from amr_evaluation.episode import count_laps, explored_fraction
+from amr_sim.simulator_node import SimulatorNode
 from launch_common import (
     ROBOT_PARAMS,
     SIM_PARAMS,
-    make_navigation_nodes,
+    localizing_wall_follower,
+    make_navigators,
+    make_particle_filter,
     make_robot_graph,
     make_viewer_nodes,
     make_wall_follower,
+    navigating_wall_follower,
     overrides_to_parameters,
 )
 
@@ -52,60 +58,157 @@ def _robot_parameters(tuning: dict, params_file, profile_name: str) -> dict:
     return {k: v for k, v in defaults.items() if k not in in_file and k not in tuning}
 
 
-def _start_label(start) -> str:
-    return start if isinstance(start, str) else ",".join(f"{v:g}" for v in start)
+def _report(args, world, start, sim, trajectory, wall_errors, wall_time: float,
+            interrupted: bool, graph: dict) -> dict:
+    """The JSON report of one start; `sim` is the Simulator (or its figures before any step)."""
+    positions = np.array([row[1:3] for row in trajectory])
+    rms = (math.sqrt(sum(e * e for e in wall_errors) / len(wall_errors))
+           if wall_errors else None)
+    return {
+        "world": world.name, "start": start_label(start), "interrupted": interrupted,
+        "profile": args.profile, "mode": "realtime" if args.realtime else "lockstep",
+        "seed": args.seed, "dt": args.dt, **graph,
+        "steps": sim.steps, "sim_time_s": round(sim.time, 6),
+        "wall_time_s": round(wall_time, 3),
+        "real_time_factor": round(sim.time / wall_time, 2) if wall_time > 0 else None,
+        "collisions": sim.collisions,
+        "first_collision_time_s": sim.first_collision_time,
+        "min_clearance_m": sim.min_clearance, "distance_m": sim.distance,
+        "explored_fraction": explored_fraction(world, positions),
+        "laps": count_laps(world, positions),
+        "rms_wall_error_m": rms,
+        "trajectory": trajectory,
+        "collision_points": [list(p) for p in sim.collision_points],
+    }
+
+
+def report_before_start(args, world, start) -> dict:
+    """The report of a run stopped before its graph existed: nothing simulated, interrupted."""
+    from types import SimpleNamespace
+
+    from amr_common.robot import ROBOT_RADIUS
+    x, y, theta = world.resolve_start(start)
+    sim = SimpleNamespace(steps=0, time=0.0, collisions=0, first_collision_time=None,
+                          min_clearance=world.clearance(x, y) - ROBOT_RADIUS, distance=0.0,
+                          collision_points=[])
+    return _report(args, world, start, sim, [[0.0, x, y, theta]], [], 0.0, True, graph={
+        "controller": args.controller_spec, "nodes": [], "controller_mode": None})
+def _localization_line(report: dict) -> str:
+    m = report.get("localization")
+    if m is None:
+        return ""
+    if m["time_to_localized_s"] is None:
+        return f"; not localized, false localizations {m['false_localizations']}"
+    text = (f"; localized after {m['time_to_localized_s']:.1f} s "
+            f"({m['distance_to_localized_m']:.2f} m), false localizations "
+            f"{m['false_localizations']}")
+    if m["tracking_error_mean_m"] is not None:
+        text += (f", error mean {100 * m['tracking_error_mean_m']:.1f} cm, p95 "
+                 f"{100 * m['tracking_error_p95_m']:.1f} cm, max "
+                 f"{100 * m['tracking_error_max_m']:.1f} cm, heading p95 "
+                 f"{m['heading_error_p95_deg']:.1f} deg")
+    if m["relocalization_times_s"]:
+        text += ", relocalized at " + ", ".join(f"{t:.1f}" for t in m["relocalization_times_s"])
+    if m["loss_reported_after_s"] is not None:
+        text += f", loss reported {m['loss_reported_after_s']:.2f} s after the kidnapping"
+    return text
+
+
+
+def _navigation_line(report: dict) -> str:
+    def when(key: str) -> str:
+        return "never" if report[key] is None else f"{report[key]:.1f} s"
+    path = "no path" if report["path_length_m"] is None else \
+        f"path {report['path_length_m']:.2f} m"
+    factor = report["real_time_factor"]
+    return (f"run_sim: {report['world']} / {report['start']} -> goal "
+            f"({report['goal'][0]:g}, {report['goal'][1]:g}) / {report['profile']} "
+            f"({report['mode']}): localized {when('localized_time_s')}, goal reached "
+            f"{when('goal_reached_time_s')}, stopped {when('stopped_time_s')}, {path}, "
+            f"final error {report['final_position_error_m'] * 100:.1f} cm, collisions "
+            f"{report['collisions']}, min clearance {report['min_clearance_m'] * 100:.1f} "
+            f"cm; {report['sim_time_s']:.1f} s simulated in {report['wall_time_s']:.1f} s "
+            f"({f'{factor}x' if factor else 'n/a'} real time)")
 
 
 class SimSession:
-    def __init__(self, args, world, start) -> None:
-        from amr_sim.simulator_node import SimulatorNode
+    """One start of a run_sim.py run: the graph in one process, its report and outputs.
+
+    `stop` (an amr_common.node_runner.StopFlag) ends the run early: the report is then marked
+    interrupted. `record_path`: an MCAP file for this start's topics.
+    """
+
+    def __init__(self, args, world, start, stop=None, record_path=None) -> None:
         self.args = args
         self.world = world
         self.start = start if start is not None else next(iter(world.starts))
+        self.stop = stop
+        self.record_path = record_path
+        self.interrupted = False
+        self._sim_time_ns = 0  # the recorder's clock in real time: the newest simulated time
         self.rehearsal = args.realtime and args.profile == "turtlebot3"
         self.context = rclpy.Context()
         rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
         self.executor = make_executor(self.context)
 
-        self.navigating = args.goal is not None
-        localizing = args.enable_localization or self.navigating
-        sim_values = {"world": args.world, "start": _start_label(self.start),
+        self.navigating = getattr(args, "goal", None) is not None
+        localize = getattr(args, "localize", False) or self.navigating
+        sim_values = {"world": args.world, "start": start_label(self.start),
                       "profile": args.profile, "dt": args.dt, "seed": args.seed,
                       "mode": "realtime" if args.realtime else "lockstep",
-                      "enable_localization": localizing,
-                      # Viewers get a whole TF tree; a localization node sends its own map -> odom.
-                      "map_to_odom_from_truth": not localizing}
+                      "enable_localization": args.enable_localization or localize,
+                      # Viewers get a whole TF tree; a localization node sends its own map -> odom
+                      # (the particle filter does not: the truth stands in for it).
+                      "map_to_odom_from_truth": not args.enable_localization}
         if args.goal:
             sim_values["goal"] = list(args.goal)
+        if getattr(args, "kidnap", None):
+            sim_values["kidnap"] = list(args.kidnap)
         self.simulator_node = SimulatorNode(
             context=self.context, parameter_overrides=overrides_to_parameters(sim_values))
 
         tuning = dict(args.overrides)
         if args.controller:
             tuning["controller"] = args.controller
+        filter_overrides = getattr(args, "pf_overrides", {})
         if self.rehearsal:
-            params_file = args.params_file or ROBOT_PARAMS
-            tuning.setdefault("enable_localization", localizing)
             self.control_nodes = make_robot_graph(
-                self.context, params_file=params_file, dt=args.dt, tuning=tuning)
+                self.context, params_file=args.params_file or ROBOT_PARAMS, dt=args.dt,
+                tuning=tuning, localize_world=args.world if localize else None,
+                filter_overrides=filter_overrides,
+                goal=args.goal if self.navigating else None)
         else:
-            tuning.update({"simulation": True, "dt": args.dt,
-                           "enable_localization": localizing})
+            base = {"simulation": True, "dt": args.dt,
+                    "enable_localization": args.enable_localization}
+            if self.navigating:
+                base = navigating_wall_follower(base)
+            elif localize:
+                base = localizing_wall_follower(base)
+            tuning = {**base, **tuning}  # -p wins
             params_file = args.params_file or SIM_PARAMS
             tuning = {**_robot_parameters(tuning, params_file, args.profile), **tuning}
             self.control_nodes = [make_wall_follower(
                 self.context, params_file=params_file, overrides=tuning)]
-        self.wall_follower = self.control_nodes[-1]
-        self.planner_node = None
-        if self.navigating:
-            from amr_sim.profiles import get_profile
-            self.control_nodes += make_navigation_nodes(
-                self.context, world=args.world, goal=args.goal, simulation=not args.realtime,
-                params_file=params_file, dt=args.dt,
-                lidar_offset_x=None if self.rehearsal else get_profile(
-                    args.profile).lidar_offset_x)
-            self.planner_node = self.control_nodes[-2]
-        self.localized_time: float | None = None
+            if localize:
+                from amr_sim.profiles import get_profile
+                lidar_offset_x = get_profile(args.profile).lidar_offset_x
+                self.control_nodes.append(make_particle_filter(
+                    self.context, world=args.world, lidar_offset_x_m=lidar_offset_x,
+                    overrides=filter_overrides))
+            if self.navigating:
+                self.control_nodes += make_navigators(
+                    self.context, world=args.world, goal=args.goal,
+                    wall_follower=self.control_nodes[0], lidar_offset_x_m=lidar_offset_x)
+        self.wall_follower = next(n for n in self.control_nodes
+                                  if n.get_name() == "wall_follower")
+        self.particle_filter = next((n for n in self.control_nodes
+                                     if n.get_name() == "particle_filter"), None)
+        self.planner_node = next((n for n in self.control_nodes if n.get_name() == "planner"),
+                                 None)
+        self.estimate: list[list[float]] = []
+        self.particles_snapshot: list[list[float]] = []
+        if self.particle_filter is not None:
+            self.particle_filter.on_pose.append(self._on_pose)
         # Viewers (the Foxglove bridge) first: they see the graph from its first message.
         self.viewer_nodes = make_viewer_nodes(self.context, args, use_sim_time=True)
         order = [node.get_name() for node in [*self.viewer_nodes, *self.control_nodes]] + [
@@ -122,8 +225,7 @@ class SimSession:
     def _on_step(self, sim) -> None:
         x, y, theta = sim.pose
         self.trajectory.append([round(sim.time, 6), x, y, theta])
-        if self.localized_time is None and self.simulator_node.localized:
-            self.localized_time = round(sim.time, 6)
+        self._sim_time_ns = sim.steps * round(sim.dt * 1e9)
         controller = getattr(self.wall_follower, "controller", None)
         error = getattr(controller, "wall_distance_error", None)
         if error is not None and math.isfinite(error):
@@ -131,22 +233,33 @@ class SimSession:
         if self.view is not None and not self.view.update(sim, sim.last_scan):
             self.stop_requested = True
 
+    def _on_pose(self, stamp_ns: int, pose, localized: bool, node) -> None:
+        self.estimate.append([round(stamp_ns * 1e-9, 6), *pose, float(localized)])
+        if localized and not self.particles_snapshot:
+            particles = node.filter.particles
+            step = max(1, len(particles) // 500)
+            self.particles_snapshot = particles[::step].round(4).tolist()
+    def _stop_requested(self) -> bool:
+        return self.stop_requested or (self.stop is not None and self.stop.requested)
+
     def run(self) -> dict:
+        """Bring the graph up, step until the duration, the goal or a stop; return the report."""
         args = self.args
         if args.gui:
             from amr_sim.live_view import LiveView
             self.view = LiveView(self.world, title=f"amr_sim: {args.world} / "
-                                                   f"{_start_label(self.start)}")
-        if args.record:
+                                                   f"{start_label(self.start)}")
+        if self.record_path:
             from amr_common.mcap_recorder import McapRecorder
-            Path(args.record).parent.mkdir(parents=True, exist_ok=True)
-            self.recorder = McapRecorder(args.record, metadata={
-                "world": self.world.name, "start": _start_label(self.start),
+            self.recorder = McapRecorder(self.record_path, metadata={
+                "world": self.world.name, "start": start_label(self.start),
                 "profile": args.profile, "seed": str(args.seed), "dt": str(args.dt),
                 "mode": "realtime" if args.realtime else "lockstep"})
             self._attach_recorder()
         self.simulator_node.on_step.append(self._on_step)
         self.stop_requested = False
+        if self._stop_requested():  # stopped while the nodes were being built: none started
+            return report_before_start(args, self.world, self.start)
         try:
             self.manager.startup(self.executor)
         except LifecycleStartupError as exc:
@@ -158,29 +271,34 @@ class SimSession:
         last_steps, last_progress = sim.steps, wall_start
         try:
             while (sim.time < args.duration - 1e-9 and not self.simulator_node.finished
-                   and not self.stop_requested):
+                   and not self._stop_requested()):
                 self.executor.spin_once(timeout_sec=0.1)
                 if sim.steps != last_steps:
                     last_steps, last_progress = sim.steps, time.monotonic()
                 elif time.monotonic() - last_progress > STALL_TIMEOUT_S:
                     raise SystemExit(f"run_sim: the loop stalled: no simulation step for "
                                      f"{STALL_TIMEOUT_S:.0f} s at t={sim.time:.2f} s")
-        except KeyboardInterrupt:
-            print("run_sim: interrupted")
+        except KeyboardInterrupt:  # only without a StopFlag (run_sim.py installs one)
+            self.interrupted = True
+        self.interrupted = self.interrupted or (self.stop is not None and self.stop.requested)
+        if self.interrupted:
+            print(f"run_sim: interrupted at t={sim.time:.2f} s")
         wall_time = time.monotonic() - wall_start
         if self.recorder is not None:
             # Stop stepping, then let the recorder take the last step's messages.
             if self.simulator_node._state_machine.current_state[1] == "active":
                 self.simulator_node.trigger_deactivate()
-            drain_end = time.monotonic() + 0.3
-            while time.monotonic() < drain_end:
-                self.executor.spin_once(timeout_sec=0.05)
+            self._spin_for(0.15)
         return self._report(sim, wall_time)
+
+    def _spin_for(self, seconds: float) -> None:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.executor.spin_once(timeout_sec=0.05)
 
     def _attach_recorder(self) -> None:
         from geometry_msgs.msg import Twist, TwistStamped
         from nav_msgs.msg import OccupancyGrid, Odometry
-        from rclpy.parameter import Parameter
         from sensor_msgs.msg import LaserScan
         from tf2_msgs.msg import TFMessage
         from visualization_msgs.msg import MarkerArray
@@ -196,48 +314,47 @@ class SimSession:
         stamped = not self.rehearsal or self.wall_follower.get_parameter(
             "cmd_vel_stamped").value
         topics["/cmd_vel"] = TwistStamped if stamped else Twist
-        # Simulated time: messages without a header (/tf) are logged at the /clock time.
-        recorder_node = rclpy.create_node("mcap_recorder", context=self.context,
-                                          parameter_overrides=[Parameter("use_sim_time",
-                                                                         value=True)])
+        if self.particle_filter is not None:
+            from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
+
+            from amr_msgs.msg import PoseStamped
+            topics.update({"/pose": PoseStamped, "/particles": PoseArray,
+                           "/amcl_pose": PoseWithCovarianceStamped})
+        recorder_node = rclpy.create_node("mcap_recorder", context=self.context)
         self.executor.add_node(recorder_node)  # destroyed with the others in close()
-        self.recorder.attach(recorder_node, topics, qos=latched)
+        # One time base per file, simulated time. In lockstep every message is stamped with it
+        # (exact log times; /tf by its first transform); in real time the controller stamps
+        # with the wall clock, so each message is logged when it arrives, on the simulated clock.
+        self.recorder.attach(recorder_node, topics, qos=latched, clock=lambda: self._sim_time_ns,
+                             log_time="receive" if self.args.realtime else "header")
 
     def _report(self, sim, wall_time: float) -> dict:
-        import numpy as np
+        return _report(self.args, self.world, self.start, sim, self.trajectory, self.wall_errors,
+                       wall_time, self.interrupted, graph={
+                           "controller": self.wall_follower.get_parameter("controller").value,
+                           "nodes": self.manager.node_startup_order,
+                           "controller_mode": "simulation" if self.wall_follower.get_parameter(
+                               "simulation").value else "robot (timer)"}) \
+            | self._localization_report() | self._navigation_report()
 
-        from amr_evaluation.episode import count_laps, explored_fraction
-        positions = np.array([row[1:3] for row in self.trajectory])
-        rms = (math.sqrt(sum(e * e for e in self.wall_errors) / len(self.wall_errors))
-               if self.wall_errors else None)
-        return {
-            "world": self.world.name, "start": _start_label(self.start),
-            "profile": self.args.profile, "mode": "realtime" if self.args.realtime else "lockstep",
-            "seed": self.args.seed, "dt": self.args.dt,
-            "controller": self.wall_follower.get_parameter("controller").value,
-            "nodes": self.manager.node_startup_order,
-            "controller_mode": "simulation" if self.wall_follower.get_parameter(
-                "simulation").value else "robot (timer)",
-            "steps": sim.steps, "sim_time_s": round(sim.time, 6),
-            "wall_time_s": round(wall_time, 3),
-            "real_time_factor": round(sim.time / wall_time, 2) if wall_time > 0 else None,
-            "collisions": sim.collisions,
-            "first_collision_time_s": sim.first_collision_time,
-            "min_clearance_m": sim.min_clearance, "distance_m": sim.distance,
-            "explored_fraction": explored_fraction(self.world, positions),
-            "laps": count_laps(self.world, positions),
-            "rms_wall_error_m": rms,
-            **(self._navigation_report() if self.navigating else {}),
-            "trajectory": self.trajectory,
-            "collision_points": [list(p) for p in sim.collision_points],
-        }
+    def _localization_report(self) -> dict:
+        if self.particle_filter is None:
+            return {}
+        from amr_evaluation.localization_episode import metrics_from_rows
+        kidnap = list(self.args.kidnap) if getattr(self.args, "kidnap", None) else None
+        return {"localization": metrics_from_rows(self.trajectory, self.estimate, kidnap),
+                "kidnap": kidnap, "estimate": self.estimate,
+                "particles_snapshot": self.particles_snapshot}
 
     def _navigation_report(self) -> dict:
-        """Goal, time to localize, goal reached and stopped times, path, final error."""
+        """Goal, time localized, goal reached and stopped times, planned path, final error."""
+        if not self.navigating:
+            return {}
         summary = self.simulator_node.summary()
         plan = self.planner_node.last_plan if self.planner_node is not None else None
+        localized = next((row[0] for row in self.estimate if row[4] > 0.5), None)
         return {
-            "goal": summary["goal"], "localized_time_s": self.localized_time,
+            "goal": summary["goal"], "localized_time_s": localized,
             "goal_reached_time_s": summary["goal_reached_time_s"],
             "stopped_time_s": summary["stopped_time_s"],
             "final_position_error_m": summary["final_position_error_m"],
@@ -246,35 +363,28 @@ class SimSession:
         }
 
     def summary_line(self, report: dict) -> str:
-        laps = report["laps"]
+        """One line for the terminal: where, how long, how fast, how safe."""
         if self.navigating:
-            return self._navigation_line(report)
+            return _navigation_line(report)
+        laps = report["laps"]
+        factor = report["real_time_factor"]
         return (f"run_sim: {report['world']} / {report['start']} / {report['profile']} "
                 f"({report['mode']}): {report['sim_time_s']:.1f} s simulated in "
-                f"{report['wall_time_s']:.1f} s ({report['real_time_factor']}x real time), "
+                f"{report['wall_time_s']:.1f} s ({f'{factor}x' if factor else 'n/a'} real "
+                f"time), "
                 f"{report['steps']} steps, collisions {report['collisions']}, min clearance "
                 f"{report['min_clearance_m'] * 100:.1f} cm, distance {report['distance_m']:.1f} m,"
                 f" explored {report['explored_fraction'] * 100:.0f}%"
-                + (f", laps {laps}" if laps else ""))
-
-    @staticmethod
-    def _navigation_line(report: dict) -> str:
-        def when(key: str) -> str:
-            return "never" if report[key] is None else f"{report[key]:.1f} s"
-        path = "no path" if report["path_length_m"] is None else \
-            f"path {report['path_length_m']:.2f} m"
-        return (f"run_sim: {report['world']} / {report['start']} -> goal "
-                f"({report['goal'][0]:g}, {report['goal'][1]:g}) / {report['profile']} "
-                f"({report['mode']}): localized {when('localized_time_s')}, goal reached "
-                f"{when('goal_reached_time_s')}, stopped {when('stopped_time_s')}, {path}, "
-                f"final error {report['final_position_error_m'] * 100:.1f} cm, collisions "
-                f"{report['collisions']}, min clearance {report['min_clearance_m'] * 100:.1f} "
-                f"cm; {report['sim_time_s']:.1f} s simulated in {report['wall_time_s']:.1f} s "
-                f"({report['real_time_factor']}x real time)")
+                + (f", laps {laps}" if laps else "") + _localization_line(report))
 
     def close(self) -> None:
+        """Shut the graph down (controllers first: their zero command goes out), close files."""
         # Controllers first: they publish their final zero command while the graph still runs.
-        for node in [*self.control_nodes, self.simulator_node, *self.viewer_nodes]:
+        for node in self.control_nodes:
+            shutdown_node(node)
+        if self.recorder is not None:
+            self._spin_for(0.1)  # the recording ends with that zero command
+        for node in [self.simulator_node, *self.viewer_nodes]:
             shutdown_node(node)
         if self.recorder is not None:
             self.recorder.close()

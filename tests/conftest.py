@@ -1,6 +1,7 @@
 """Test harness: every test process gets its own ROS domain on loopback and its own log folder.
 
 Fixtures:
+- `course_map`: a map JSON file as the course gives them (a room with a box, no named starts).
 - `ros`: an initialised rclpy context with an executor; `ros.node(name)` creates a plain node,
   `ros.add(node)` spins an existing one, `ros.spin_until(cond, timeout)` spins until `cond()` is
   true or fails the test, `ros.spin_for(seconds)` spins for a while. Everything is destroyed and
@@ -9,6 +10,7 @@ Fixtures:
 from __future__ import annotations
 
 import atexit
+import json
 import os
 import shutil
 import tempfile
@@ -34,3 +36,12 @@ def ros():
         yield harness
     finally:
         harness.close()
+
+
+@pytest.fixture
+def course_map(tmp_path):
+    path = tmp_path / "course_map.json"
+    path.write_text(json.dumps({"metric": {
+        "boundary": [[-2, -2], [2, -2], [2, 2], [-2, 2]],
+        "holes": [[[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]]]}}))
+    return path

@@ -22,6 +22,7 @@ from amr_evaluation.evaluation import (
     expand_grid,
     load_config,
     parse_seeds,
+    parse_start_list,
 )
 from amr_evaluation.evaluation_report import (
     ProgressBar,
@@ -98,13 +99,45 @@ def test_config_file_is_validated(tmp_path):
              "worlds: [lab02]\njobs: 0\n": "'jobs' must be a positive integer",
              "worlds: [lab02]\nparams: [1, 2]\n": "'params' must map",
              "- just a list\n": "expected a mapping",
-             "worlds: [lab02\n": "not valid YAML"}
+             "worlds: [lab02\n": "not valid YAML: .* at line 2, column 1",
+             "worlds: 5\n": "'worlds' must be a name, a list of names or 'all', got 5",
+             "worlds: lab02\nprofiles: {a: 1}\n": "'profiles' must be a name",
+             "worlds: lab02\nstarts: [[1, 2]]\n": r"'starts': start pose \[1, 2\]",
+             "worlds: lab02\ncontroller: 3\n": "'controller' must be MODULE:CLASS"}
     for text, message in cases.items():
         bad.write_text(text)
         with pytest.raises(EvaluationError, match=message):
             load_config(bad)
     with pytest.raises(EvaluationError, match="cannot read"):
         load_config(tmp_path / "missing.yaml")
+    bad.write_bytes(b"\x89PNG\r\n\x1a\n\x00\xff\xfe" * 20)
+    with pytest.raises(EvaluationError, match="not a text file"):
+        load_config(bad)
+
+
+def test_start_lists_mix_names_and_poses():
+    assert parse_start_list("outer,-1,-1.5,1.57,inner") == ["outer", (-1.0, -1.5, 1.57), "inner"]
+    assert parse_start_list([-1, -1, 1.57]) == [(-1.0, -1.0, 1.57)]  # YAML: [-1, -1, 1.57]
+    assert parse_start_list(["outer", [0.6, -0.6, 4.71]]) == ["outer", (0.6, -0.6, 4.71)]
+    for bad in ("1,2", [[1, 2]], [True], "a,1,2,3,4", "1,nan,0"):
+        with pytest.raises(EvaluationError, match=r"x,y,theta|\[x, y, theta\]|neither"):
+            parse_start_list(bad)
+
+
+def test_a_pose_applies_to_every_world_and_maps_without_starts_need_one(course_map, tmp_path):
+    specs = expand_grid(f"lab02,{course_map}", "all,-1.0,-1.0,1.57", "ideal", "0", duration=1)
+    assert [spec.label for spec in specs] == [
+        "lab02/outer/ideal/seed 0", "lab02/inner/ideal/seed 0", "lab02/-1,-1,1.57/ideal/seed 0",
+        "course_map/-1,-1,1.57/ideal/seed 0"]
+    with pytest.raises(EvaluationError, match="names no start poses, so 'all' is none"):
+        expand_grid(str(course_map), "all")
+    with pytest.raises(EvaluationError, match="inside obstacle"):
+        expand_grid(str(course_map), "0,0,0")
+    config = tmp_path / "poses.yaml"
+    config.write_text("worlds: [lab02]\nstarts: [outer, [1.0, -1.0, 1.57], '-0.6,-0.6,4.71']\n")
+    loaded = load_config(config)
+    assert [s.start for s in expand_grid(loaded["worlds"], loaded["starts"])] == [
+        "outer", (1.0, -1.0, 1.57), (-0.6, -0.6, 4.71)]
 
 
 # --- controller loading ---------------------------------------------------------------------

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import time
 from pathlib import Path
 
 import pytest
@@ -162,7 +163,15 @@ def test_stamp_is_read_from_serialized_bytes():
     ns = 1_234_567_891_011
     assert cdr_header_stamp_ns(serialize_message(_scan(ns, 0))) == ns
     assert cdr_header_stamp_ns(serialize_message(_command(ns, 0))) == ns
-    assert cdr_header_stamp_ns(serialize_message(LaserScan())) is None  # zero stamp
+    assert cdr_header_stamp_ns(serialize_message(LaserScan())) is None  # zero: unset
+    assert cdr_header_stamp_ns(serialize_message(LaserScan()), zero_is_unset=False) == 0
+    from geometry_msgs.msg import TransformStamped
+    from tf2_msgs.msg import TFMessage
+    transform = TransformStamped()
+    _stamp(transform, ns)
+    tf = serialize_message(TFMessage(transforms=[transform]))
+    assert cdr_header_stamp_ns(tf, in_sequence=True) == ns
+    assert cdr_header_stamp_ns(serialize_message(TFMessage()), in_sequence=True) is None
     assert cdr_header_stamp_ns(b"\x00\x01\x00") is None
 
 
@@ -185,24 +194,24 @@ def test_bad_input_gives_clear_errors(tmp_path):
         assert sum(1 for _ in reader.messages()) == 1
 
 
-def test_attach_records_what_a_node_receives(ros, tmp_path):
-    path = tmp_path / "attached.mcap"
+def _attached_recording(ros, path, sent_ns, **attach_options) -> dict[str, list[int]]:
+    """Publish /scan stamped `sent_ns` and unstamped (zero) /cmd_vel; the log times per topic."""
     talker = ros.node("mcap_talker")
     listener = ros.node("mcap_listener")
     scan_pub = talker.create_publisher(LaserScan, "/scan", 10)
     cmd_pub = talker.create_publisher(TwistStamped, "/cmd_vel", 10)
     recorder = McapRecorder(path)
-    recorder.attach(listener, {"/scan": LaserScan, "/cmd_vel": TwistStamped})
+    recorder.attach(listener, {"/scan": LaserScan, "/cmd_vel": TwistStamped}, **attach_options)
     ros.spin_until(lambda: scan_pub.get_subscription_count() > 0
                    and cmd_pub.get_subscription_count() > 0, 10.0, "recorder subscriptions")
-    sent_ns = [2_000_000_000 + k * DT_NS for k in range(5)]
     for ns in sent_ns:
         scan_pub.publish(_scan(ns, 1))
         command = _command(ns, 2)
-        command.header.stamp.sec = command.header.stamp.nanosec = 0  # unstamped: node clock
+        command.header.stamp.sec = command.header.stamp.nanosec = 0
         cmd_pub.publish(command)
-    ros.spin_until(lambda: recorder.message_counts.get("/scan", 0) == 5
-                   and recorder.message_counts.get("/cmd_vel", 0) == 5, 10.0, "5 messages each")
+    ros.spin_until(lambda: recorder.message_counts.get("/scan", 0) == len(sent_ns)
+                   and recorder.message_counts.get("/cmd_vel", 0) == len(sent_ns), 10.0,
+                   "every message")
     recorder.close()
     with AnyReader([path]) as reader:
         times: dict[str, list[int]] = {"/scan": [], "/cmd_vel": []}
@@ -211,5 +220,26 @@ def test_attach_records_what_a_node_receives(ros, tmp_path):
             if connection.topic == "/scan":
                 scan = reader.deserialize(raw, connection.msgtype)
                 assert scan.ranges[0] == pytest.approx(1.5) and scan.ranges[7] == 0.0
+    return times
+
+
+def test_attach_logs_every_message_when_it_arrives_on_one_clock(ros, tmp_path):
+    """The default, as `ros2 bag record`: one time base whatever the stamps say."""
+    sent_ns = [2_000_000_000 + k * DT_NS for k in range(5)]
+    before = time.time_ns()
+    times = _attached_recording(ros, tmp_path / "receive.mcap", sent_ns)
+    after = time.time_ns()
+    for topic in ("/scan", "/cmd_vel"):  # the node's clock (wall time here), stamps ignored
+        assert len(times[topic]) == 5 and all(before <= t <= after for t in times[topic])
+
+
+def test_attach_can_log_header_stamps_with_zero_as_a_stamp(ros, tmp_path):
+    """A lockstep simulation stamps everything with simulated time, starting at 0."""
+    sent_ns = [k * DT_NS for k in range(5)]  # the first stamp is 0: not "unstamped"
+    simulated_now = [123 * DT_NS]
+    times = _attached_recording(ros, tmp_path / "header.mcap", sent_ns, log_time="header",
+                                clock=lambda: simulated_now[0])
     assert times["/scan"] == sent_ns
-    assert len(times["/cmd_vel"]) == 5 and min(times["/cmd_vel"]) > 10**18  # wall clock, not 0
+    assert times["/cmd_vel"] == [0] * 5  # its stamps are zero: t = 0 too, not the wall clock
+    with pytest.raises(ValueError, match="log_time"):
+        McapRecorder(tmp_path / "x.mcap").attach(ros.node("x"), {}, log_time="stamp")

@@ -100,12 +100,13 @@ def test_explore_localize_plan_and_stop_on_the_goal_with_the_particle_filter(nam
 
 @pytest.mark.slow
 @pytest.mark.parametrize("profile, kidnap", [("ideal", (35.0, -1.0, -1.0, 0.0)),
-                                             ("turtlebot3", (60.0, 0.2, 1.0, 3.14159))])
+                                             ("turtlebot3", (40.0, 0.2, 1.0, 3.14159))])
 def test_a_robot_kidnapped_on_the_way_relocalizes_replans_and_reaches_the_goal(profile, kidnap):
     pytest.importorskip("amr_localization.particle_filter")
     result = run_navigation_episode("lab02", "outer", "inner_far", profile=profile,
                                     pose_source="filter", kidnap=kidnap, duration=300.0,
                                     record_trajectory=False)
+    # Localized at about 27 s, at the goal at about 55 s if not kidnapped.
     assert result.localized_time_s < kidnap[0], "kidnapped while following the path"
     assert result.plans >= 2, "replanned from the relocalized pose"
     assert result.goal_reached and result.collisions == 0, result.summary()

@@ -1,13 +1,25 @@
-"""run_sim.py end to end: simulator + wall follower + lifecycle manager in one process."""
+"""run_sim.py end to end: simulator + wall follower + lifecycle manager in one process.
+
+Its option checks (nothing simulated) are in test_cli_checks.py.
+"""
 from __future__ import annotations
 
 import json
+import os
+import signal
+import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
+from geometry_msgs.msg import TwistStamped
 
-SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
+from amr_common.qos import RELIABLE_10
+from tests.processes import terminate
+
+REPO = Path(__file__).resolve().parent.parent
+SCRIPTS = REPO / "scripts"
 sys.path.insert(0, str(SCRIPTS))
 import run_sim  # noqa: E402
 
@@ -84,16 +96,51 @@ def test_record_writes_an_mcap_that_an_independent_reader_opens(tmp_path):
             for transform in getattr(msg, "transforms", []):
                 frames.add((transform.header.frame_id, transform.child_frame_id))
     for topic in ("/scan", "/odometry", "/cmd_vel", "/ground_truth", "/tf"):
-        # One per step (+ the first measurement).
-        assert 99 <= counts[topic] <= 101, (topic, counts)
-        steps = sorted(stamps[topic])
+        # One per step (+ the first measurement, + the final zero command on /cmd_vel).
+        assert 99 <= counts[topic] <= 102, (topic, counts)
+        steps = sorted(set(stamps[topic]))
         assert all(b - a == 50_000_000 for a, b in zip(steps, steps[1:])), topic
+        # One time base, simulated time, from t = 0 (not the wall clock for the first ones).
+        assert log_times[topic] == stamps[topic], topic
+        assert min(log_times[topic]) == 0, topic
     assert max(stamps["/scan"]) == 5 * 10**9
     # The recording opens placed in Foxglove: map, the whole TF tree, all on simulated time.
     assert counts["/tf_static"] == counts["/map"] == counts["/map_markers"] == 1
     assert frames == {("base_footprint", "base_scan"), ("odom", "base_footprint"),
                       ("map", "base_footprint_truth"), ("map", "odom")}
     assert max(max(times) for times in log_times.values()) <= 5 * 10**9
+
+
+def _log_times(path):
+    from rosbags.highlevel import AnyReader
+    with AnyReader([path]) as reader:
+        return {c.topic: [t for conn, t, _ in reader.messages([c])] for c in reader.connections}
+
+
+def test_the_realtime_rehearsal_records_on_simulated_time_only(tmp_path):
+    record = tmp_path / "rehearsal.mcap"
+    run_sim.main(["--profile", "turtlebot3", "--realtime", "--duration", "3",
+                  "--record", str(record)])
+    times = _log_times(record)
+    assert {"/scan", "/odom", "/odometry", "/cmd_vel"} <= set(times)
+    every = sorted(t for topic_times in times.values() for t in topic_times)
+    # The controller stamps its commands with the wall clock: logged at arrival, on the
+    # simulated clock like the rest (a wall-clock log time would be ~1.8e18 ns).
+    assert 0 <= every[0] and every[-1] <= 3.5e9, (every[0], every[-1])
+
+
+def test_record_with_every_start_writes_one_file_per_start(tmp_path, capsys):
+    from mcap.reader import make_reader
+    record = tmp_path / "run.mcap"
+    assert run_sim.main(["--world", "corridor_loop", "--start", "all", "--duration", "1",
+                         "--record", str(record)]) == 0
+    assert not record.exists()
+    for start in ("south", "north", "corner"):
+        path = tmp_path / f"run-{start}.mcap"
+        with open(path, "rb") as stream:
+            metadata = {m.name: m.metadata for m in make_reader(stream).iter_metadata()}
+        assert metadata["amr_sim"]["start"] == start
+        assert 20 <= len(_log_times(path)["/scan"]) <= 21
 
 
 def test_gui_runs_headless(tmp_path, monkeypatch):
@@ -136,6 +183,110 @@ def test_report_gives_the_time_of_the_first_collision(tmp_path):
     report = json.loads(report_path.read_text())
     assert exit_code == 1 and report["collisions"] >= 1
     assert report["first_collision_time_s"] == pytest.approx(10.5, abs=0.2)
+
+
+def test_a_course_map_runs_from_a_pose_with_negative_numbers(tmp_path, course_map):
+    report_path = tmp_path / "run.json"
+    code = run_sim.main(["--world", str(course_map), "--start", "-1.0,-1.0,1.57",
+                         "--duration", "2", "--report", str(report_path)])
+    report = json.loads(report_path.read_text())
+    assert code == 0
+    assert report["start"] == "-1,-1,1.57" and report["steps"] == 40
+    assert report["trajectory"][0][1:] == pytest.approx([-1.0, -1.0, 1.57])
+
+
+def test_an_integer_for_a_float_parameter_runs(tmp_path):
+    report_path = tmp_path / "run.json"
+    assert run_sim.main(["-p", "kp:=5", "-p", "wall_distance_m:=0.2", "--duration", "1",
+                         "--report", str(report_path)]) == 0
+    assert json.loads(report_path.read_text())["steps"] == 20
+
+
+def test_the_printed_plot_path_is_the_file_written(capsys, tmp_path):
+    assert run_sim.main(["--duration", "1", "--plot", str(tmp_path / "run")]) == 0
+    out = capsys.readouterr().out
+    written = tmp_path / "run.png"
+    assert f"plot written to {written}\n" in out
+    assert written.read_bytes()[:4] == b"\x89PNG"
+
+
+# --- Ctrl-C, as a user does it: a real process, SIGINT at different moments -------------------
+# The whole run ends (not only the current start of --start all), without a traceback, with a
+# zero command as the robot's last command and the partial report marked interrupted. Spec:
+# within a second; the bound leaves room for a loaded 2-core machine (measured times: -s).
+END_WITHIN_S = 3.0
+
+
+def _start_run(tmp_path):
+    log = open(tmp_path / "run_sim.log", "w+")
+    # The test's own domain (conftest): the test hears the run's /cmd_vel.
+    process = subprocess.Popen(
+        [sys.executable, str(SCRIPTS / "run_sim.py"), "--world", "corridor_loop", "--start",
+         "all", "--duration", "3000", "--report", str(tmp_path / "run.json")],
+        cwd=REPO, env=dict(os.environ), stdout=log, stderr=subprocess.STDOUT)
+    return process, log
+
+
+def _read(log) -> str:
+    log.flush()
+    log.seek(0)
+    return log.read()
+
+
+def _interrupt(process, log, ros, ready, what: str, delay: float = 0.0) -> str:
+    """SIGINT once ready() (then `delay` s); checks the clean, prompt exit; the run's output."""
+    try:
+        ros.spin_until(lambda: ready() or process.poll() is not None, 60.0, what)
+        assert process.poll() is None, _read(log)
+        ros.spin_for(delay)
+        sent = time.monotonic()
+        process.send_signal(signal.SIGINT)
+        ros.spin_until(lambda: process.poll() is not None, 30.0, "run_sim to exit")
+        ended = time.monotonic() - sent
+        ros.spin_for(0.3)  # the last commands still in flight
+    finally:
+        terminate(process, 5.0)
+    output = _read(log)
+    print(f"run_sim ended {ended:.2f} s after SIGINT")
+    assert process.returncode == 130, output
+    assert "Traceback" not in output and "Exception" not in output, output
+    assert ended < END_WITHIN_S, output
+    return output
+
+
+@pytest.mark.parametrize("delay", [0.0, 0.5, 1.5])
+def test_ctrl_c_mid_run_ends_everything_with_a_zero_command_and_a_report(ros, tmp_path, delay):
+    commands = []
+    ros.node("cmd_vel_listener").create_subscription(TwistStamped, "/cmd_vel", commands.append,
+                                                     RELIABLE_10)
+    process, log = _start_run(tmp_path)
+    # Mid-run: the robot is driving (the test hears its commands).
+    output = _interrupt(process, log, ros, lambda: len(commands) > 0, "commands", delay)
+    reports = json.loads((tmp_path / "run.json").read_text())
+    # --start all on corridor_loop has three starts: only the first one ran, partly.
+    assert [r["start"] for r in reports] == ["south"], output
+    assert reports[0]["interrupted"] is True and reports[0]["sim_time_s"] < 3000
+    assert len(reports[0]["trajectory"]) == reports[0]["steps"] + 1
+    last = commands[-1].twist
+    assert (last.linear.x, last.angular.z) == (0.0, 0.0), output
+
+
+@pytest.mark.parametrize("moment", ["importing", "building the graph"])
+def test_ctrl_c_during_startup_ends_at_once_and_cleanly(ros, tmp_path, moment):
+    process, log = _start_run(tmp_path)
+    started = time.monotonic()
+    if moment == "importing":
+        output = _interrupt(process, log, ros, lambda: time.monotonic() - started > 0.3,
+                            "0.3 s")
+    else:  # the options are checked; the nodes are being created and configured
+        output = _interrupt(process, log, ros, lambda: "ROS_DOMAIN_ID=" in _read(log),
+                            "the graph settings line")
+    report_path = tmp_path / "run.json"
+    if report_path.exists():  # whatever started is reported, marked interrupted
+        reports = json.loads(report_path.read_text())
+        assert len(reports) == 1 and reports[0]["interrupted"] is True, output
+    else:
+        assert "interrupted before the simulation started (no report)" in output
 
 
 def test_goal_values_with_signs_and_names_parse():

@@ -315,7 +315,8 @@ def test_params_files_are_ros2_params_files_the_follower_accepts(name, simulatio
     data = yaml.safe_load((REPO / "amr_control" / "params" / name).read_text())
     params = data["wall_follower"]["ros__parameters"]
     node_keys = {"simulation", "dt", "queue_size", "slop", "enable_localization",
-                 "cmd_vel_stamped", "angular_sign", "data_timeout", "controller"}
+                 "stop_when_localized", "cmd_vel_stamped", "angular_sign", "data_timeout",
+                 "controller"}
     assert node_keys <= set(params)
     assert params["simulation"] is simulation and params["slop"] == slop
     tuning = {k: v for k, v in params.items() if k not in node_keys}

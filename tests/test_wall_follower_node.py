@@ -149,30 +149,91 @@ def test_robot_mode_commands_on_a_timer_and_stops_when_scan_stops(ros):
         "keeps commanding zero while data is stale"
 
 
-def test_localized_pose_stops_commanding(ros):
+def pose_msg(stamp_ns, localized):
+    from amr_msgs.msg import PoseStamped
+    pose = PoseStamped()
+    pose.header.stamp.sec, pose.header.stamp.nanosec = divmod(stamp_ns, 10**9)
+    pose.header.frame_id = "map"
+    pose.localized = localized
+    return pose
+
+
+def test_lockstep_handover_publishes_nothing_while_localized_and_resumes_when_lost(ros):
+    """In lockstep the follower is silent while localized and answers when lost.
+
+    In lockstep the pure pursuit answers localized poses: the follower must be silent then
+    (two answers per step would advance the simulator twice) and answer again when lost.
+    """
     from amr_msgs.msg import PoseStamped
     node = make_node(ros, controller="tests.controllers:ConstantController",
                      enable_localization=True)
     robot = Robot(ros)
     pose_pub = robot.node.create_publisher(PoseStamped, "/pose", 10)
     bring_up(ros, node, robot)
+    localized = [False, True, True, False, True, False]
+    answered = []
+    for k, flag in enumerate(localized, start=1):
+        stamp = k * 50_000_000
+        before = len(robot.commands)
+        pose_pub.publish(pose_msg(stamp, flag))
+        robot.send(stamp, v=0.1)
+        if flag:
+            ros.spin_for(0.3)
+        else:
+            ros.spin_until(lambda: len(robot.commands) == before + 1, 5.0, f"command {k}")
+        answered.append(len(robot.commands) - before)
+    assert answered == [0 if flag else 1 for flag in localized]
+    stamps = [c.header.stamp.nanosec for c in robot.commands]
+    assert stamps == [50_000_000, 200_000_000, 300_000_000], "each answer carries its set's stamp"
+    assert all(twist_of(c).linear.x == pytest.approx(0.1) for c in robot.commands)
+    assert len(node.controller.calls) == len(localized), "the controller saw every set"
 
-    def send_with_pose(stamp_ns, localized):
-        pose = PoseStamped()
-        pose.header.stamp.sec, pose.header.stamp.nanosec = divmod(stamp_ns, 10**9)
-        pose.localized = localized
-        pose_pub.publish(pose)
-        robot.send(stamp_ns)
 
-    send_with_pose(50_000_000, False)
-    ros.spin_until(lambda: len(robot.commands) == 1, 5.0, "a command before localization")
-    assert twist_of(robot.commands[0]).linear.x == pytest.approx(0.1)
-    send_with_pose(100_000_000, True)
-    ros.spin_until(lambda: len(robot.commands) == 2, 5.0, "the stop command")
-    assert twist_of(robot.commands[1]).linear.x == 0.0
-    send_with_pose(150_000_000, True)
-    ros.spin_for(0.5)
-    assert len(robot.commands) == 2, "no commanding once localized"
+def test_stop_when_localized_false_keeps_exploring(ros):
+    from amr_msgs.msg import PoseStamped
+    node = make_node(ros, controller="tests.controllers:ConstantController",
+                     enable_localization=True, stop_when_localized=False)
+    robot = Robot(ros)
+    pose_pub = robot.node.create_publisher(PoseStamped, "/pose", 10)
+    bring_up(ros, node, robot)
+    for k in range(1, 4):
+        pose_pub.publish(pose_msg(k * 50_000_000, True))
+        robot.send(k * 50_000_000, v=0.1)
+        ros.spin_until(lambda: len(robot.commands) == k, 5.0, f"command {k}")
+    assert all(twist_of(c).linear.x == pytest.approx(0.1) for c in robot.commands)
+
+
+def test_robot_mode_handover_sends_one_zero_then_nothing_then_resumes(ros):
+    from amr_msgs.msg import PoseStamped
+    node = make_node(ros, controller="tests.controllers:ConstantController",
+                     enable_localization=True, simulation=False, dt=0.05)
+    robot = Robot(ros)
+    pose_pub = robot.node.create_publisher(PoseStamped, "/pose", 10)
+    bring_up(ros, node, robot)
+    stamp = [0]
+
+    def feed(seconds, localized):
+        end = node.get_clock().now().nanoseconds + int(seconds * 1e9)
+        while node.get_clock().now().nanoseconds < end:
+            stamp[0] += 50_000_000
+            pose_pub.publish(pose_msg(stamp[0], localized))
+            robot.send(stamp[0])
+            ros.spin_for(0.05)
+
+    feed(0.6, False)
+    assert any(twist_of(c).linear.x > 0 for c in robot.commands), "wall following"
+    count = len(robot.commands)
+    feed(0.8, True)
+    handed_over = robot.commands[count:]
+    moving_after = [c for c in handed_over if twist_of(c).linear.x != 0.0]
+    zeros = [c for c in handed_over if twist_of(c).linear.x == 0.0 and twist_of(c).angular.z == 0]
+    # Up to a few moving commands computed on sets from before the localized ones arrived,
+    # then exactly one zero, then silence.
+    assert len(zeros) == 1 and handed_over[-1] is zeros[0], [twist_of(c) for c in handed_over]
+    assert len(moving_after) <= 3
+    count = len(robot.commands)
+    feed(0.6, False)
+    assert any(twist_of(c).linear.x > 0 for c in robot.commands[count:]), "resumed when lost"
 
 
 def test_bad_parameters_fail_configure_with_a_reason(ros):

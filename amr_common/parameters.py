@@ -1,0 +1,103 @@
+"""Typed ROS parameters that take an integer wherever a double is expected.
+
+rclpy types a parameter by its default: after `declare_parameter("kp", 10.0)`, `-p kp:=5`,
+`kp: 5` in a params file or a `Parameter("kp", value=5)` override raise
+InvalidParameterTypeException in the node's constructor, which kills the executable. Here
+numeric parameters (int, double and double-array defaults) are declared with dynamic typing (the
+descriptor still names the intended type), an integer given for a double is stored as a double,
+and `read_parameters` returns every value in its declared type or names each one that is not, so
+on_configure can fail with a reason instead of the constructor raising.
+
+    PARAMETERS = {"kp": (10.0, "Proportional gain [rad/s/m]"), "side": ("right", "...")}
+    declare_parameters(node, PARAMETERS)                     # in __init__
+    values, problems = read_parameters(node, PARAMETERS)     # in on_configure
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping
+
+from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+# name -> (default, description)
+ParameterTable = Mapping[str, tuple[Any, str]]
+
+_NUMERIC_TYPES = (ParameterType.PARAMETER_INTEGER, ParameterType.PARAMETER_DOUBLE,
+                  ParameterType.PARAMETER_DOUBLE_ARRAY)
+
+
+def parameter_type(default: Any) -> int:
+    """The ParameterType a default value stands for (an empty list: a double array)."""
+    if isinstance(default, (list, tuple)) and len(default) == 0:
+        return ParameterType.PARAMETER_DOUBLE_ARRAY
+    return Parameter.Type.from_parameter_value(default).value
+
+
+def declare_parameters(node: Node, table: ParameterTable,
+                       types: Mapping[str, int] | None = None) -> None:
+    """Declare every parameter of `table` not yet declared; numbers accept ints for doubles.
+
+    `types` gives the ParameterType of names whose default does not show it.
+    """
+    for name, (default, description) in table.items():
+        if node.has_parameter(name):
+            continue
+        type_ = (types or {}).get(name, parameter_type(default))
+        numeric = type_ in _NUMERIC_TYPES
+        node.declare_parameter(name, default, ParameterDescriptor(
+            description=description, type=type_, dynamic_typing=numeric))
+        value = node.get_parameter(name).value
+        if type_ == ParameterType.PARAMETER_DOUBLE and _is_integer(value):
+            node.set_parameters([Parameter(name, Parameter.Type.DOUBLE, float(value))])
+
+
+def read_parameters(node: Node, table: ParameterTable,
+                    types: Mapping[str, int] | None = None) -> tuple[dict[str, Any], list[str]]:
+    """Every parameter of `table` in its declared type (ints as floats for doubles).
+
+    Returns (values, problems): a problem names a parameter whose value has the wrong type (it
+    keeps its raw value in `values`).
+    """
+    values: dict[str, Any] = {}
+    problems: list[str] = []
+    for name, (default, _) in table.items():
+        value = node.get_parameter(name).value
+        type_ = (types or {}).get(name, parameter_type(default))
+        values[name], problem = _as_declared(name, value, type_)
+        if problem:
+            problems.append(problem)
+    return values, problems
+
+
+def _is_integer(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _as_declared(name: str, value: Any, type_: int) -> tuple[Any, str | None]:
+    if type_ == ParameterType.PARAMETER_DOUBLE:
+        if _is_integer(value) or isinstance(value, float):
+            return float(value), None
+        return value, f"{name} must be a number (got {value!r})"
+    if type_ == ParameterType.PARAMETER_INTEGER:
+        if _is_integer(value):
+            return value, None
+        return value, f"{name} must be an integer (got {value!r})"
+    if type_ == ParameterType.PARAMETER_DOUBLE_ARRAY:
+        if value is None:
+            return [], None
+        items = list(value) if isinstance(value, (list, tuple)) or hasattr(value, "tolist") \
+            else None
+        if items is not None and all(_is_integer(v) or isinstance(v, float) for v in items):
+            return [float(v) for v in items], None
+        return value, f"{name} must be a list of numbers (got {value!r})"
+    return value, None  # statically typed: rclpy already refused other types
+
+
+def finite(value: Any) -> bool:
+    """True for a finite int or float (not a bool)."""
+    return (_is_integer(value) or isinstance(value, float)) and math.isfinite(value)
+
+
+__all__ = ["ParameterTable", "parameter_type", "declare_parameters", "read_parameters", "finite"]

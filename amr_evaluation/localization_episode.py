@@ -1,0 +1,281 @@
+"""Headless localization episodes: simulator, wall follower and particle filter.
+
+Headless localization episodes: Simulator + wall follower + ParticleFilter, the same classes
+as the ROS nodes, with the figures that say whether the filter can be trusted.
+
+    result = run_localization_episode("lab02", "outer", profile="turtlebot3", seed=3,
+                                      duration=60.0, kidnap=(30.0, 0.6, -0.6, 3 * pi / 2))
+    print(result.time_to_localized_s, result.false_localizations, result.tracking_error_mean_m)
+
+Timing as amr_evaluation.episode: `ideal` is the course's lockstep (a new scan every step);
+`turtlebot3` runs the controller and the filter every dt on the newest odometry twist, the filter
+weighing each NEW scan (every 0.2 s). The wall follower keeps exploring once localized
+(stop_when_localized false, as in run_sim.py --localize); with stop_when_localized true it
+commands zero from then on (no planner here).
+
+Metrics (errors of the estimate against the true pose, every step):
+- time_to_localized_s / distance_to_localized_m: first step with localized true.
+- false_localizations: times the flag was true while the error exceeded 10 cm or 10 degrees
+  (each run of such steps counts once), outside the window right after a kidnapping where the
+  truth jumped and the filter has not yet seen it (up to the loss report, at most 2 s);
+  false_localized_s: the simulated time spent so.
+- tracking_error_*: position error while localized (mean, p95, max, m), heading p95 (deg).
+- relocalization_times_s: each later false -> true transition.
+- kidnap: loss_reported_after_s (first localized false after it) and relocalized_after_s.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from amr_common.world import World
+from amr_evaluation.episode import default_controller
+from amr_localization.particle_filter import ParticleFilter
+from amr_sim.profiles import SensorProfile, get_profile
+from amr_sim.simulator import Simulator
+
+FALSE_POSITION_M = 0.10
+FALSE_HEADING_RAD = math.radians(10.0)
+KIDNAP_GRACE_S = 2.0  # the loss must be reported within this; meanwhile the flag may be stale
+
+
+@dataclass
+class LocalizationResult:
+    """What one localization episode produced (JSON-serialisable with to_dict())."""
+
+    world: str
+    start: str | list[float]
+    profile: str
+    seed: int
+    steps: int
+    sim_time_s: float
+    wall_time_s: float
+    filter_wall_time_s: float
+    collisions: int
+    distance_m: float
+    time_to_localized_s: float | None
+    distance_to_localized_m: float | None
+    false_localizations: int
+    false_localized_s: float
+    localized_share: float  # of the time after the first localization
+    tracking_error_mean_m: float | None
+    tracking_error_p95_m: float | None
+    tracking_error_max_m: float | None
+    heading_error_p95_deg: float | None
+    relocalization_times_s: list[float] = field(default_factory=list)
+    global_searches: int = 1
+    particles_max: int = 0
+    particles_final: int = 0
+    kidnap: list[float] | None = None  # [t, x, y, theta]
+    loss_reported_after_s: float | None = None
+    relocalized_after_s: float | None = None
+    start_pose: list[float] = field(default_factory=list)
+    trajectory: list[list[float]] = field(default_factory=list)  # [t, x, y, theta]
+    estimate: list[list[float]] = field(default_factory=list)  # [t, x, y, theta, localized]
+    particles_snapshot: list[list[float]] = field(default_factory=list)  # [x, y, theta]
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON-serialisable dict."""
+        return asdict(self)
+
+    @property
+    def real_time_factor(self) -> float:
+        """Simulated seconds per wall-clock second of the whole loop."""
+        return self.sim_time_s / self.wall_time_s if self.wall_time_s > 0 else math.inf
+
+    def summary(self) -> str:
+        """One line for a terminal."""
+        def fmt(value, unit="", scale=1.0, digits=1):
+            return "n/a" if value is None else f"{value * scale:.{digits}f}{unit}"
+        kidnap = "" if self.kidnap is None else (
+            f", kidnap at {self.kidnap[0]:g} s: loss reported after "
+            f"{fmt(self.loss_reported_after_s, ' s', digits=2)}, relocalized after "
+            f"{fmt(self.relocalized_after_s, ' s')}")
+        to_localized = fmt(self.distance_to_localized_m, " m", digits=2)
+        return (f"{self.world} / {self.start} / {self.profile} / seed {self.seed}: localized "
+                f"after {fmt(self.time_to_localized_s, ' s')} ({to_localized}), "
+                f"false {self.false_localizations}, error mean "
+                f"{fmt(self.tracking_error_mean_m, ' cm', 100)} p95 "
+                f"{fmt(self.tracking_error_p95_m, ' cm', 100)} max "
+                f"{fmt(self.tracking_error_max_m, ' cm', 100)}, heading p95 "
+                f"{fmt(self.heading_error_p95_deg, ' deg')}, relocalizations "
+                f"{len(self.relocalization_times_s)}{kidnap}; {self.real_time_factor:.0f}x "
+                f"real time")
+
+
+def run_localization_episode(world: World | str, start=None,
+                             profile: str | SensorProfile = "ideal", seed: int = 0,
+                             duration: float = 60.0, dt: float = 0.05,
+                             kidnap: tuple[float, float, float, float] | None = None,
+                             filter_params: dict[str, Any] | None = None, controller=None,
+                             stop_when_localized: bool = False,
+                             record: bool = True) -> LocalizationResult:
+    """Run the wall follower with the particle filter for `duration` simulated seconds.
+
+    kidnap (t, x, y, theta): teleport the robot at simulated time t (Simulator.teleport).
+    filter_params: ParticleFilter parameters (seed and lidar_offset_x_m default to the episode's
+    seed and the profile's LiDAR position).
+    """
+    world_obj = world if isinstance(world, World) else World.load(world)
+    prof = get_profile(profile)
+    sim = Simulator(world_obj, start=start, dt=dt, profile=prof, seed=seed)
+    if controller is None:
+        controller = default_controller(sim.dt, prof)
+    if callable(getattr(controller, "set_scan_geometry", None)):
+        controller.set_scan_geometry(prof.angle_min, prof.angle_increment, prof.range_min,
+                                     prof.range_max)
+    params = {"seed": seed, "lidar_offset_x_m": prof.lidar_offset_x, **(filter_params or {})}
+    pf = ParticleFilter(world_obj, **params)
+    pf.set_scan_geometry(prof.angle_min, prof.angle_increment, prof.scan_rays, prof.range_min,
+                         prof.range_max)
+
+    n_steps = int(round(float(duration) / sim.dt))
+    truth = np.empty((n_steps + 1, 4))
+    estimate = np.empty((n_steps + 1, 5))
+    distances = np.empty(n_steps + 1)
+    truth[0] = (0.0, *sim.pose)
+    estimate[0] = (0.0, *pf.estimate, 0.0)
+    distances[0] = 0.0
+    particles_max = pf.particle_count
+    snapshot: list[list[float]] = []
+    odom_period = prof.odom_period
+    next_odom = 0.0
+    kidnapped = kidnap is None
+
+    z_scan, z_v, z_w = sim.measure()
+    held_v, held_w = z_v, z_w
+    scan_time = sim.scan_time
+    pf.correct(z_scan, force=True)
+    filter_time = 0.0
+    wall_start = time.perf_counter()
+    for k in range(1, n_steps + 1):
+        if stop_when_localized and pf.localized:
+            v, w = 0.0, 0.0
+        else:
+            v, w = controller.compute_commands(z_scan, held_v, held_w)
+        if not kidnapped and sim.time >= kidnap[0] - 1e-9:
+            sim.teleport(kidnap[1:])
+            kidnapped = True
+        z_scan, z_v, z_w = sim.step(v, w)
+        if odom_period is None or sim.time >= next_odom - 1e-9:
+            held_v, held_w = z_v, z_w
+            if odom_period is not None:
+                while next_odom <= sim.time + 1e-9:
+                    next_odom += odom_period
+        started = time.perf_counter()
+        pf.predict(held_v, held_w, sim.dt)
+        new_scan = sim.scan_time != scan_time
+        scan_time = sim.scan_time
+        pf.correct(z_scan, new_scan=new_scan)
+        filter_time += time.perf_counter() - started
+        particles_max = max(particles_max, pf.particle_count)
+        truth[k] = (sim.time, *sim.pose)
+        estimate[k] = (sim.time, *pf.estimate, float(pf.localized))
+        distances[k] = sim.distance
+        if record and not snapshot and pf.localized:
+            snapshot = pf.particles[::max(1, pf.particle_count // 500)].tolist()
+    wall_time = time.perf_counter() - wall_start
+
+    start_label = start if isinstance(start, str) else (
+        next(iter(world_obj.starts)) if start is None and world_obj.starts
+        else [float(c) for c in sim.start])
+    metrics = localization_metrics(truth, estimate, distances, kidnap)
+    return LocalizationResult(
+        world=world_obj.name, start=start_label, profile=prof.name, seed=int(seed),
+        steps=sim.steps, sim_time_s=sim.time, wall_time_s=wall_time,
+        filter_wall_time_s=filter_time, collisions=sim.collisions, distance_m=sim.distance,
+        global_searches=pf.global_searches, particles_max=particles_max,
+        particles_final=pf.particle_count, kidnap=list(kidnap) if kidnap else None,
+        start_pose=[float(c) for c in sim.start],
+        trajectory=truth.tolist() if record else [],
+        estimate=estimate.tolist() if record else [],
+        particles_snapshot=snapshot if record else [], **metrics)
+
+
+def metrics_from_rows(trajectory, estimate, kidnap=None) -> dict[str, Any]:
+    """The metrics of the module docstring from a run's rows, as run_sim.py records them.
+
+    trajectory: [t, x, y, theta] of the truth at every simulation step; estimate: [t, x, y,
+    theta, localized] at every /pose (t = its stamp; in real time fewer rows than steps). Each
+    estimate is compared with the truth at its stamp.
+    """
+    truth = np.asarray(trajectory, dtype=np.float64).reshape(-1, 4)
+    rows = np.asarray(estimate, dtype=np.float64).reshape(-1, 5)
+    if len(rows) == 0 or len(truth) == 0:
+        return localization_metrics(np.zeros((0, 4)), np.zeros((0, 5)), np.zeros(0), kidnap)
+    index = np.clip(np.searchsorted(truth[:, 0], rows[:, 0] - 1e-6), 0, len(truth) - 1)
+    travelled = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(truth[:, 1:3], axis=0).T))])
+    at_stamps = truth[index].copy()
+    at_stamps[:, 0] = rows[:, 0]
+    return localization_metrics(at_stamps, rows, travelled[index], kidnap)
+
+
+def pose_errors(truth: np.ndarray, estimate: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Position (m) and absolute heading (rad) errors of estimate rows against truth rows."""
+    position = np.hypot(estimate[:, 1] - truth[:, 1], estimate[:, 2] - truth[:, 2])
+    heading = np.abs(np.remainder(estimate[:, 3] - truth[:, 3] + math.pi, 2.0 * math.pi)
+                     - math.pi)
+    return position, heading
+
+
+def localization_metrics(truth: np.ndarray, estimate: np.ndarray, distances: np.ndarray,
+                         kidnap=None) -> dict[str, Any]:
+    """The metrics of the module docstring from per-step rows.
+
+    Truth [t, x, y, theta], estimate [t, x, y, theta, localized], distance travelled (m).
+    """
+    t = truth[:, 0]
+    if len(t) == 0:
+        return {"time_to_localized_s": None, "distance_to_localized_m": None,
+                "false_localizations": 0, "false_localized_s": 0.0, "localized_share": 0.0,
+                "relocalization_times_s": [], "loss_reported_after_s": None,
+                "relocalized_after_s": None, "tracking_error_mean_m": None,
+                "tracking_error_p95_m": None, "tracking_error_max_m": None,
+                "heading_error_p95_deg": None}
+    localized = estimate[:, 4] > 0.5
+    position, heading = pose_errors(truth, estimate)
+    wrong = (position > FALSE_POSITION_M) | (heading > FALSE_HEADING_RAD)
+    dt = float(t[1] - t[0]) if len(t) > 1 else 0.0
+    excused = np.zeros(len(t), dtype=bool)
+    loss_after = relocalized_after = None
+    if kidnap is not None:
+        after = t >= kidnap[0] - 1e-9
+        lost = np.flatnonzero(after & ~localized)
+        if lost.size:
+            loss_after = float(t[lost[0]] - kidnap[0])
+            back = np.flatnonzero(after & localized & (t > t[lost[0]]))
+            if back.size:
+                relocalized_after = float(t[back[0]] - kidnap[0])
+        grace_end = kidnap[0] + (min(loss_after, KIDNAP_GRACE_S) if loss_after is not None
+                                 else KIDNAP_GRACE_S)
+        excused = after & (t <= grace_end + 1e-9)
+    false_steps = localized & wrong & ~excused
+    false_runs = int(np.count_nonzero(false_steps[1:] & ~false_steps[:-1]) + false_steps[0])
+    durations = np.diff(t, prepend=t[0] - dt)  # rows may be uneven (a real-time /pose)
+    first = np.flatnonzero(localized)
+    rises = np.flatnonzero(localized[1:] & ~localized[:-1]) + 1
+    tracked = localized & ~excused
+    result: dict[str, Any] = {
+        "time_to_localized_s": float(t[first[0]]) if first.size else None,
+        "distance_to_localized_m": float(distances[first[0]]) if first.size else None,
+        "false_localizations": false_runs,
+        "false_localized_s": float(durations[false_steps].sum()),
+        "localized_share": float(np.mean(localized[first[0]:])) if first.size else 0.0,
+        "relocalization_times_s": [float(t[i]) for i in rises if first.size and i > first[0]],
+        "loss_reported_after_s": loss_after,
+        "relocalized_after_s": relocalized_after,
+        "tracking_error_mean_m": None, "tracking_error_p95_m": None,
+        "tracking_error_max_m": None, "heading_error_p95_deg": None,
+    }
+    if tracked.any():
+        result.update({
+            "tracking_error_mean_m": float(position[tracked].mean()),
+            "tracking_error_p95_m": float(np.percentile(position[tracked], 95)),
+            "tracking_error_max_m": float(position[tracked].max()),
+            "heading_error_p95_deg": float(np.degrees(np.percentile(heading[tracked], 95))),
+        })
+    return result

@@ -1,0 +1,262 @@
+"""Batch localization episodes on a process pool, and their aggregate figures.
+
+Batch localization episodes (worlds x starts x profiles x seeds, optional kidnapping) on a
+process pool, and the aggregate figures that say whether the filter can be trusted.
+
+`scripts/evaluate.py --localize` is the command line (evaluate_main). Each episode is
+amr_evaluation.localization_episode.run_localization_episode, with the wall follower built as
+evaluate.py builds it (its params file, -p overrides, the profile's LiDAR position).
+"""
+from __future__ import annotations
+
+import math
+import multiprocessing
+import os
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class LocalizationSpec:
+    """One localization episode to run (picklable)."""
+
+    world: str
+    start: str | None = None
+    profile: str = "ideal"
+    seed: int = 0
+    duration: float = 60.0
+    kidnap: tuple[float, float, float, float] | None = None
+    filter_params: tuple[tuple[str, Any], ...] = ()
+    controller: str = "amr_control.wall_follower:WallFollower"
+    controller_params: tuple[tuple[str, Any], ...] = ()
+
+    @property
+    def label(self) -> str:
+        """A short name for logs: world/start/profile/seed[/kidnap@t]."""
+        kidnap = "" if self.kidnap is None else f"/kidnap@{self.kidnap[0]:g}s"
+        return f"{self.world}/{self.start or '-'}/{self.profile}/seed {self.seed}{kidnap}"
+
+
+@dataclass
+class LocalizationOutcome:
+    """The result of one spec, or the error that stopped it."""
+
+    spec: LocalizationSpec
+    result: Any = None
+    error: str | None = None
+    wall_time_s: float = 0.0
+    extra: dict = field(default_factory=dict)
+
+
+def kidnap_pose(world_name: str, start: str | None, at: float) -> tuple[float, ...] | None:
+    """A kidnapping pose for `start` at time `at`.
+
+    A kidnapping for `start`: at time `at`, to the world's next named start (turned by a
+    quarter turn, so the view differs), or None if the world has a single start.
+    """
+    from amr_common.world import World
+    world = World.load(world_name)
+    names = list(world.starts)
+    if len(names) < 2:
+        return None
+    current = names.index(start) if start in names else 0
+    x, y, theta = world.starts[names[(current + 1) % len(names)]]
+    return (float(at), x, y, math.remainder(theta + math.pi / 2.0, 2.0 * math.pi))
+
+
+def run_one(spec: LocalizationSpec) -> LocalizationOutcome:
+    """Run one episode in this process (an exception becomes the outcome's error)."""
+    from amr_common.controller_loader import load_controller_class
+    from amr_evaluation.episode import robot_parameters
+    from amr_evaluation.localization_episode import run_localization_episode
+    from amr_sim.profiles import get_profile
+    started = time.perf_counter()
+    try:
+        controller_class = load_controller_class(spec.controller)
+        params = {**robot_parameters(controller_class, get_profile(spec.profile)),
+                  **dict(spec.controller_params)}
+        result = run_localization_episode(spec.world, spec.start, profile=spec.profile,
+                                          seed=spec.seed, duration=spec.duration,
+                                          kidnap=spec.kidnap,
+                                          filter_params=dict(spec.filter_params),
+                                          controller=controller_class(0.05, **params),
+                                          record=False)
+        return LocalizationOutcome(spec, result=result,
+                                   wall_time_s=time.perf_counter() - started)
+    except Exception as exc:  # one broken episode must not lose the others
+        detail = traceback.format_exception_only(type(exc), exc)[-1].strip()
+        return LocalizationOutcome(spec, error=detail, wall_time_s=time.perf_counter() - started)
+
+
+def run_localization_specs(specs: Sequence[LocalizationSpec], jobs: int | None = None,
+                           progress: Callable[[int, int, LocalizationOutcome], None] | None
+                           = None) -> list[LocalizationOutcome]:
+    """Run every spec on `jobs` processes (None: all cores), results in spec order."""
+    specs = list(specs)
+    jobs = (os.cpu_count() or 1) if jobs is None else max(int(jobs), 1)
+    outcomes: list[LocalizationOutcome | None] = [None] * len(specs)
+    if jobs == 1 or len(specs) <= 1:
+        for index, spec in enumerate(specs):
+            outcomes[index] = run_one(spec)
+            if progress:
+                progress(index + 1, len(specs), outcomes[index])
+        return outcomes  # type: ignore[return-value]
+    context = multiprocessing.get_context("forkserver" if "forkserver" in
+                                          multiprocessing.get_all_start_methods() else "spawn")
+    with context.Pool(processes=min(jobs, len(specs))) as pool:
+        done = 0
+        for index, outcome in pool.imap_unordered(_indexed, list(enumerate(specs)),
+                                                  chunksize=1):
+            outcomes[index] = outcome
+            done += 1
+            if progress:
+                progress(done, len(specs), outcome)
+    return outcomes  # type: ignore[return-value]
+
+
+def _indexed(item):
+    index, spec = item
+    return index, run_one(spec)
+
+
+def summarize(outcomes: Sequence[LocalizationOutcome], within_s: float = 30.0,
+              relocalize_within_s: float = 30.0) -> dict[str, Any]:
+    """Aggregate figures over the episodes that ran."""
+    results = [o.result for o in outcomes if o.result is not None]
+    times = [r.time_to_localized_s for r in results if r.time_to_localized_s is not None]
+    errors = [r.tracking_error_mean_m for r in results if r.tracking_error_mean_m is not None]
+    kidnapped = [r for r in results if r.kidnap is not None]
+    reported = [r.loss_reported_after_s for r in kidnapped if r.loss_reported_after_s is not None]
+    relocalized = [r for r in kidnapped if r.relocalized_after_s is not None and
+                   r.relocalized_after_s <= relocalize_within_s]
+    sim_time = sum(r.sim_time_s for r in results)
+    wall = sum(r.wall_time_s for r in results)
+
+    def pct(values, q):
+        return float(np.percentile(values, q)) if values else None
+
+    return {
+        "episodes": len(outcomes), "failed": sum(o.error is not None for o in outcomes),
+        "false_localizations": sum(r.false_localizations for r in results),
+        "localized": len(times), f"localized_within_{within_s:g}s": sum(t <= within_s
+                                                                        for t in times),
+        "time_to_localized_median_s": pct(times, 50), "time_to_localized_p90_s": pct(times, 90),
+        "tracking_error_mean_m": float(np.mean(errors)) if errors else None,
+        "tracking_error_worst_mean_m": max(errors) if errors else None,
+        "tracking_error_p95_max_m": max((r.tracking_error_p95_m for r in results
+                                         if r.tracking_error_p95_m is not None), default=None),
+        "tracking_error_max_m": max((r.tracking_error_max_m for r in results
+                                     if r.tracking_error_max_m is not None), default=None),
+        "heading_error_p95_max_deg": max((r.heading_error_p95_deg for r in results
+                                          if r.heading_error_p95_deg is not None), default=None),
+        "kidnapped": len(kidnapped), "loss_reported_max_s": max(reported, default=None),
+        f"relocalized_within_{relocalize_within_s:g}s": len(relocalized),
+        "real_time_factor": sim_time / wall if wall > 0 else None,
+    }
+
+
+def outcome_row(outcome: LocalizationOutcome) -> dict[str, Any]:
+    """One table/CSV row: the spec and the metrics (no per-step data)."""
+    spec, result = outcome.spec, outcome.result
+    row: dict[str, Any] = {"world": spec.world, "start": spec.start, "profile": spec.profile,
+                           "seed": spec.seed, "kidnap_s": spec.kidnap[0] if spec.kidnap else None}
+    if result is None:
+        row["error"] = outcome.error
+        return row
+    data = result.to_dict()
+    for key in ("time_to_localized_s", "distance_to_localized_m", "false_localizations",
+                "false_localized_s", "tracking_error_mean_m", "tracking_error_p95_m",
+                "tracking_error_max_m", "heading_error_p95_deg", "relocalization_times_s",
+                "loss_reported_after_s", "relocalized_after_s", "global_searches",
+                "particles_max", "particles_final", "collisions", "distance_m"):
+        row[key] = data[key]
+    row["real_time_factor"] = round(result.real_time_factor, 1)
+    return row
+
+
+_TABLE = [("world", "world", "{}"), ("start", "start", "{}"), ("profile", "profile", "{}"),
+          ("seed", "seed", "{}"), ("localized_s", "time_to_localized_s", "{:.1f}"),
+          ("dist_m", "distance_to_localized_m", "{:.2f}"),
+          ("false", "false_localizations", "{}"),
+          ("err_mean_cm", "tracking_error_mean_m", "{:.2f}"),
+          ("err_p95_cm", "tracking_error_p95_m", "{:.2f}"),
+          ("err_max_cm", "tracking_error_max_m", "{:.2f}"),
+          ("hdg_p95_deg", "heading_error_p95_deg", "{:.2f}"),
+          ("reloc", "relocalization_times_s", "{}"), ("loss_s", "loss_reported_after_s", "{:.2f}"),
+          ("reloc_s", "relocalized_after_s", "{:.1f}"), ("rtf", "real_time_factor", "{:.0f}")]
+
+
+def format_table(rows: Sequence[dict[str, Any]]) -> str:
+    """Aligned text table of outcome rows (errors in cm, relocalizations counted)."""
+    lines = [[header for header, _, _ in _TABLE]]
+    for row in rows:
+        if "error" in row:
+            lines.append([str(row[k]) for k in ("world", "start", "profile", "seed")]
+                         + [f"ERROR {row['error']}"])
+            continue
+        cells = []
+        for _, key, fmt in _TABLE:
+            value = row.get(key)
+            if value is None:
+                cells.append("-")
+            elif key.endswith("_m") and key.startswith("tracking"):
+                cells.append(fmt.format(100 * value))
+            elif key == "relocalization_times_s":
+                cells.append(str(len(value)))
+            else:
+                cells.append(fmt.format(value))
+        lines.append(cells)
+    widths = [max(len(line[i]) for line in lines if i < len(line)) for i in range(len(_TABLE))]
+    return "\n".join("  ".join(cell.ljust(w) for cell, w in zip(line, widths)).rstrip()
+                     for line in lines)
+
+
+def evaluate_main(specs, settings: dict[str, Any], args, out: Path) -> int:
+    """evaluate.py --localize: localization episodes for evaluate.py's grid (EpisodeSpecs).
+
+    Writes results.json (summary + rows) and results.csv to `out`, prints the table and the
+    summary; exit code 1 if any episode declared a wrong pose localized, 3 if one failed.
+    """
+    import csv
+    import json
+
+    from amr_common.controller_loader import parse_overrides
+    kidnap_at = getattr(args, "kidnap_at", None)
+    filter_params = tuple(sorted(parse_overrides(getattr(args, "pf_param", [])).items()))
+    controller_params = tuple(sorted(settings["params"].items()))
+    local = [LocalizationSpec(s.world, s.start, s.profile, s.seed, s.duration,
+                              kidnap_pose(s.world, s.start, kidnap_at) if kidnap_at else None,
+                              filter_params, settings["controller"], controller_params)
+             for s in specs]
+    print(f"evaluate: {len(local)} localization episodes of {settings['duration']:g} s"
+          + (f", kidnapped at {kidnap_at:g} s" if kidnap_at else ""), flush=True)
+    started = time.monotonic()
+
+    def progress(done, total, outcome):
+        text = outcome.result.summary() if outcome.result is not None else \
+            f"{outcome.spec.label}: ERROR {outcome.error}"
+        print(f"[{done}/{total}] {text}", flush=True)
+
+    outcomes = run_localization_specs(local, jobs=settings["jobs"], progress=progress)
+    summary = summarize(outcomes)
+    summary["wall_time_s"] = round(time.monotonic() - started, 1)
+    rows = [outcome_row(o) for o in outcomes]
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "results.json").write_text(json.dumps({"summary": summary, "episodes": rows},
+                                                 indent=1, default=float))
+    with open(out / "results.csv", "w", newline="") as handle:
+        keys = list(dict.fromkeys(k for row in rows for k in row))
+        writer = csv.DictWriter(handle, fieldnames=keys)
+        writer.writeheader()
+        writer.writerows(rows)
+    print(format_table(rows))
+    print(json.dumps(summary, indent=1, default=float))
+    print(f"evaluate: results in {out}")
+    if summary["failed"]:
+        return 3
+    return 1 if summary["false_localizations"] else 0

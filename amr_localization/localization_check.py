@@ -1,0 +1,171 @@
+"""When is the filter localized? The estimate, its cluster, the scan match and the decision.
+
+Why not "the particles' spread is small": in the course's mazes (0.4 m corridors on a 0.4 m grid)
+a pose rotated by 90 or 180 degrees, or shifted by one cell, explains almost every beam, so the
+particles can gather tightly around a WRONG pose; a spread test then declares it (7 of 30 global
+runs in the prototypes of localization-planning.md). The test here needs three things, held for
+`localize_updates` consecutive measurement updates (the robot moving between them):
+1. one dominant cluster: the particles within `cluster_radius_m` / `cluster_angle_rad` of the
+   heaviest region carry at least `cluster_min_share` of the weight (two symmetric hypotheses
+   alive at once fail this);
+2. the estimate (the cluster's weighted mean) explains the WHOLE scan: at least
+   `localize_match_fraction` of all rays, ray-cast exactly from the estimate (not the table, not
+   only the beams the filter weighs), match the reading within `match_tolerance_m`, a reading
+   without a return matching only a ray that expects none;
+3. both hold at every update of the streak: a wrong pose that happens to fit one corridor stops
+   fitting once the robot moves on.
+Once localized, the scan match is checked at every update: below `keep_match_fraction` for
+`lost_updates` updates in a row, the filter reports localized false and starts a global search
+(kidnapping, a wrong convergence). A dominant cluster that explains less than
+`reinit_match_fraction` of the rays for `reinit_updates` updates also restarts the search.
+No rclpy import.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from amr_common.jit import jit
+from amr_common.raycast import scan_into
+from amr_localization.cluster import Cluster, dominant_cluster, weighted_pose_mean
+
+
+def _count_matches(expected, ranges, range_min, range_max, tolerance):
+    """Count the rays where reading and expectation agree.
+
+    Rays where reading and expectation agree within tolerance, or both have no return
+    (expected: NaN = no return; readings: NaN, inf, 0.0 or outside the limits).
+    """
+    matches = 0
+    for i in range(ranges.shape[0]):
+        r = ranges[i]
+        valid = r >= range_min and r <= range_max and r > 0.0  # NaN fails
+        e = expected[i]
+        if valid:
+            if e == e and abs(r - e) <= tolerance:
+                matches += 1
+        elif e != e:
+            matches += 1
+    return matches
+
+
+count_matches = jit(_count_matches)
+
+
+class ScanMatcher:
+    """Fraction of a scan's rays that a pose explains, ray-cast exactly against the walls."""
+
+    def __init__(self, segments: np.ndarray, angle_min: float, angle_increment: float,
+                 rays: int, range_min: float, range_max: float, lidar_offset: float,
+                 allowed: Callable[[float, float], bool] | None = None) -> None:
+        """Rays and limits of the scan, LiDAR position, where the robot can be.
+
+        `allowed(x, y)`: False where the robot centre cannot be (a pose there explains
+        nothing: match fraction 0).
+        """
+        angles = angle_min + angle_increment * np.arange(rays)
+        self.segments = np.ascontiguousarray(segments, dtype=np.float64)
+        self.base_cos, self.base_sin = np.cos(angles), np.sin(angles)
+        self.range_min, self.range_max = float(range_min), float(range_max)
+        self.lidar_offset = float(lidar_offset)
+        self.rays = int(rays)
+        self.allowed = allowed
+        self._expected = np.empty(rays)
+        self._zeros = np.zeros(rays)
+
+    def expected(self, pose: tuple[float, float, float]) -> np.ndarray:
+        """The scan a LiDAR on the robot at `pose` reads (NaN = no return), as a new array."""
+        x, y, theta = pose
+        ox = x + self.lidar_offset * math.cos(theta)
+        oy = y + self.lidar_offset * math.sin(theta)
+        scan_into(self.segments, ox, oy, theta, self.base_cos, self.base_sin, self.range_min,
+                  self.range_max, math.nan, self._zeros, self._expected)
+        return self._expected.copy()
+
+    def match_fraction(self, pose: tuple[float, float, float], ranges: np.ndarray,
+                       tolerance: float) -> float:
+        """Share of rays where reading and expectation agree.
+
+        Within `tolerance` (m), or where both have no return. Readings: NaN, inf, 0.0 or outside
+        the limits = no return.
+        """
+        if self.allowed is not None and not self.allowed(pose[0], pose[1]):
+            return 0.0
+        x, y, theta = pose
+        ox = x + self.lidar_offset * math.cos(theta)
+        oy = y + self.lidar_offset * math.sin(theta)
+        scan_into(self.segments, ox, oy, theta, self.base_cos, self.base_sin, self.range_min,
+                  self.range_max, math.nan, self._zeros, self._expected)
+        matches = count_matches(self._expected, np.asarray(ranges, dtype=np.float64),
+                                self.range_min, self.range_max, float(tolerance))
+        return matches / max(self.rays, 1)
+
+
+@dataclass
+class CheckSettings:
+    """Thresholds of the localized test (see the module docstring)."""
+
+    match_tolerance_m: float = 0.03
+    localize_match_fraction: float = 0.97
+    localize_updates: int = 10
+    cluster_min_share: float = 0.9
+    keep_match_fraction: float = 0.8
+    lost_updates: int = 3
+    reinit_match_fraction: float = 0.5
+    reinit_updates: int = 3
+
+
+class LocalizedDecision:
+    """The localized flag with its streaks; `update()` once per measurement update."""
+
+    def __init__(self, settings: CheckSettings) -> None:
+        self.settings = settings
+        self.reset()
+
+    def reset(self) -> None:
+        """Not localized, all streaks at zero (after any re-initialization)."""
+        self.localized = False
+        self.good_streak = 0
+        self.bad_streak = 0
+        self.poor_streak = 0
+
+    def confirm(self) -> None:
+        """The candidate pose is unambiguous: localized from now on."""
+        self.localized = True
+        self.bad_streak = 0
+
+    def reject(self) -> None:
+        """The candidate pose is ambiguous: start the streak again."""
+        self.good_streak = 0
+
+    def update(self, share: float, match: float) -> str:
+        """Record one measurement update and return what it decided.
+
+        Record one update: returns "candidate" (the streak is complete: check for ambiguity,
+        then confirm() or reject()), "lost" (just lost: re-initialize globally), "reinit"
+        (converged on a pose that does not explain the scan) or "".
+        """
+        s = self.settings
+        if self.localized:
+            self.bad_streak = self.bad_streak + 1 if match < s.keep_match_fraction else 0
+            if self.bad_streak >= s.lost_updates:
+                self.reset()
+                return "lost"
+            return ""
+        good = share >= s.cluster_min_share and match >= s.localize_match_fraction
+        self.good_streak = self.good_streak + 1 if good else 0
+        if self.good_streak >= s.localize_updates:
+            return "candidate"  # the caller checks for ambiguity, then confirm() or reject()
+        poor = share >= s.cluster_min_share and match < s.reinit_match_fraction
+        self.poor_streak = self.poor_streak + 1 if poor else 0
+        if self.poor_streak >= s.reinit_updates:
+            self.reset()
+            return "reinit"
+        return ""
+
+
+__all__ = ["Cluster", "weighted_pose_mean", "dominant_cluster", "ScanMatcher", "CheckSettings",
+           "LocalizedDecision"]

@@ -1,0 +1,460 @@
+"""Monte Carlo localization of the Burger in a known World (no ROS).
+
+    pf = ParticleFilter(World.load("lab02"), lidar_offset_x_m=-0.032)
+    pf.set_scan_geometry(angle_min=0.0, angle_increment=2 * pi / 360, rays=360,
+                         range_min=0.12, range_max=3.5)
+    pf.predict(v, w, dt)          # every odometry twist
+    pf.correct(ranges)            # every NEW scan (weighed when the robot moved enough)
+    pf.estimate, pf.localized, pf.covariance
+
+Global localization (uniform over the free space, all headings) is the default; an initial pose
+tracks from there. Predict: motion_model. Correct: beam model on the expected-range table
+(beam_model, expected_ranges), low-variance resampling when the effective sample size drops,
+with a KLD-sized particle count (resampling). The localized flag: localization_check.
+"""
+from __future__ import annotations
+
+import logging
+import math
+from typing import Any
+
+import numpy as np
+
+from amr_common.robot import ROBOT_RADIUS
+from amr_common.world import World
+from amr_localization.ambiguity import TRACK_ANGLE_RAD, TRACK_DISTANCE_M, AmbiguityGuard
+from amr_localization.beam_model import (
+    log_likelihood_table,
+    log_likelihoods,
+    reading_to_mm,
+    split_beams,
+)
+from amr_localization.expected_ranges import expected_range_table
+from amr_localization.localization_check import (
+    CheckSettings,
+    LocalizedDecision,
+    ScanMatcher,
+    dominant_cluster,
+)
+from amr_localization.map_grid import clearances, sample_free_poses
+from amr_localization.motion_model import MotionNoise, sample_motion
+from amr_localization.particle_filter_params import check_parameters
+from amr_localization.pose_search import PoseSearch, refine
+from amr_localization.resampling import (
+    effective_sample_size,
+    kld_count,
+    occupied_bins,
+    resample,
+)
+
+log = logging.getLogger("amr_localization.particle_filter")
+
+# A particle's centre may be this much closer to a wall than the robot radius before it counts
+# as inside the wall: the table's cells are 2 cm, and the simulated robot rests ~0.5 mm deep.
+_WALL_SLACK_M = 0.02
+
+
+class ParticleFilter:
+    """Particles (N, 3) [x, y, theta] with weights; see the module docstring for the cycle."""
+
+    def __init__(self, world: World | str, **params: Any) -> None:
+        self.world = world if isinstance(world, World) else World.load(world)
+        p = check_parameters(params)
+        self.params = p
+        self.rng = np.random.default_rng(p["seed"])
+        self.table = expected_range_table(self.world, p["table_resolution_m"], p["table_angles"])
+        grid = self.table.grid
+        self._robot_ok = grid.robot_cells(slack=_WALL_SLACK_M)
+        self.noise = MotionNoise(p["noise_v_per_v"], p["noise_v_per_w"], p["noise_w_per_w"],
+                                 p["noise_w_per_v"])
+        self._lut = log_likelihood_table(p["sigma_hit_m"], p["z_random"])
+        self.check = LocalizedDecision(CheckSettings(**{
+            name: p[name] for name in CheckSettings.__dataclass_fields__}))
+        kb, kt = p["kld_bin_xy_m"], p["kld_bin_theta_rad"]
+        self._kld_shape = (int(math.ceil(grid.nx * grid.resolution / kb)) + 1,
+                           int(math.ceil(grid.ny * grid.resolution / kb)) + 1,
+                           int(math.ceil(2.0 * math.pi / kt)) + 1)
+        self._kld_seen = np.zeros(int(np.prod(self._kld_shape)), dtype=np.uint8)
+        self.matcher: ScanMatcher | None = None
+        self.search = PoseSearch(self.table, self._robot_ok)
+        self.guard = AmbiguityGuard(p["ambiguity_match_fraction"], p["localize_match_fraction"])
+        self.last_alternatives: list = []
+        self._last_doubt = -10**9  # total_updates at the last search for a better pose
+        self._beams = np.zeros(0, dtype=np.int64)
+        self._beam_bins = np.zeros(0)
+        self.particles = np.zeros((0, 3))
+        self.weights = np.zeros(0)
+        self.estimate: tuple[float, float, float] = (math.nan, math.nan, math.nan)
+        self.covariance = np.full((3, 3), math.nan)
+        self.cluster_share = 0.0
+        self.match_fraction = 0.0
+        self.updates = 0  # measurement updates since the last (re-)initialization
+        self.total_updates = 0
+        self.global_searches = 0
+        self.events: list[tuple[str, int]] = []  # (event, total_updates) for logs and tests
+        self._since_update = [math.inf, math.inf, math.inf]  # distance, angle, time
+        if p["initial_pose"] is not None:
+            self.initialize_pose(p["initial_pose"], p["initial_pose_sigma"])
+        else:
+            self.initialize_global()
+
+    # --- (re-)initialization ---------------------------------------------------------------
+    def initialize_global(self) -> None:
+        """Uniform over the free space (clearance >= robot radius), all headings: not localized.
+
+        The next scan re-seeds the particles at the poses that fit it (_seed_from_scan).
+        """
+        count = self.params["max_particles"]
+        self._set_particles(sample_free_poses(self.world, self.table.grid, count, self.rng))
+        self._seed_pending = True
+        self.global_searches += 1
+        self.events.append(("global", self.total_updates))
+
+    def _seed_from_scan(self, ranges: np.ndarray) -> None:
+        """Seed a global search from an exhaustive pose search on this scan.
+
+        Particles of a global search from an exhaustive pose search on this scan: the
+        best-fitting grid poses (share 1 - seed_uniform_share) and uniform ones (the rest).
+
+        Uniform particles alone are too sparse: 8,000 of them over a 2.4 m maze leave ~1 within
+        5 cm and 10 degrees of any pose, and the first updates collapse onto the luckiest one,
+        in a symmetric maze often a rotated copy of the truth.
+        """
+        p = self.params
+        count = p["max_particles"]
+        seeded = int(round(count * (1.0 - p["seed_uniform_share"])))
+        range_min, range_max = self._range_limits
+        poses = self.search.best_poses(
+            seeded, self._beam_bins, reading_to_mm(ranges[self._beams], range_min, range_max),
+            (int(math.ceil(range_min * 1000.0)), int(range_max * 1000.0)),
+            p["lidar_offset_x_m"], self.rng)
+        free = clearances(self.world.segments, np.ascontiguousarray(poses[:, :2])) >= ROBOT_RADIUS
+        poses = poses[free]
+        uniform = sample_free_poses(self.world, self.table.grid, count - len(poses), self.rng)
+        self._set_particles(np.concatenate([poses, uniform]))
+        self._seed_pending = False
+
+    def initialize_pose(self, pose, sigma=None) -> None:
+        """Re-initialize around a pose: Gaussian particles, not localized.
+
+        Gaussian around pose (x, y, theta) with sigma [sx, sy, stheta] (default
+        initial_pose_sigma): not localized until the scans confirm it.
+        """
+        x, y, theta = (float(v) for v in pose)
+        sx, sy, st = (float(v) for v in (sigma if sigma is not None
+                                          else self.params["initial_pose_sigma"]))
+        if not all(math.isfinite(v) for v in (x, y, theta, sx, sy, st)):
+            raise ValueError(f"initial pose {pose} / sigma {sigma} is not finite")
+        count = self.params["tracking_particles"]
+        particles = np.column_stack([self.rng.normal(x, sx, count), self.rng.normal(y, sy, count),
+                                     self.rng.normal(theta, st, count)])
+        particles[:, 2] = np.remainder(particles[:, 2] + math.pi, 2.0 * math.pi) - math.pi
+        self._set_particles(particles)
+        self.estimate = (x, y, math.atan2(math.sin(theta), math.cos(theta)))
+        self.events.append(("pose", self.total_updates))
+
+    def _set_particles(self, particles: np.ndarray) -> None:
+        self._seed_pending = False
+        self.particles = np.ascontiguousarray(particles, dtype=np.float64)
+        self.weights = np.full(len(particles), 1.0 / len(particles))
+        self.check.reset()
+        self.guard.clear()
+        self.updates = 0
+        self._since_update = [math.inf, math.inf, math.inf]
+        cluster = dominant_cluster(self.particles, self.weights, self.params["cluster_radius_m"],
+                                   self.params["cluster_angle_rad"])
+        self.estimate, self.cluster_share = cluster.pose, cluster.share
+        self.covariance = cluster.covariance
+
+    # --- scan geometry ---------------------------------------------------------------------
+    def set_scan_geometry(self, angle_min: float, angle_increment: float, rays: int,
+                          range_min: float, range_max: float) -> None:
+        """Tell the filter where the scan's rays point and their valid limits.
+
+        Where the scan's rays point (rad, counter-clockwise from angle_min), how many there
+        are and the valid range limits (m). Call again whenever they change.
+        """
+        if not (math.isfinite(angle_min) and math.isfinite(angle_increment)
+                and angle_increment != 0.0 and rays >= 1):
+            raise ValueError(f"unusable scan geometry: angle_min {angle_min}, increment "
+                             f"{angle_increment}, {rays} rays")
+        if not (math.isfinite(range_min) and math.isfinite(range_max) and
+                0.0 <= range_min < range_max):
+            raise ValueError(f"unusable scan limits: range_min {range_min}, range_max {range_max}")
+        beams = min(self.params["beams"], rays)
+        self._beams = np.unique(np.round(np.linspace(0, rays, beams, endpoint=False))
+                                .astype(np.int64))
+        angles = angle_min + angle_increment * self._beams
+        bins_per_rad = self.table.angles / (2.0 * math.pi)
+        self._beam_bins = np.remainder(angles * bins_per_rad, self.table.angles)
+        self._range_limits = (range_min, range_max)
+        self.matcher = ScanMatcher(self.world.segments, angle_min, angle_increment, rays,
+                                   range_min, range_max, self.params["lidar_offset_x_m"],
+                                   allowed=self.robot_can_be_at)
+
+    def robot_can_be_at(self, x: float, y: float) -> bool:
+        """True if a particle's centre at (x, y) is where the robot can be.
+
+        True if a particle's centre at (x, y) is in the free space, clear of the walls
+        (robot radius, less the grid's slack).
+        """
+        cell = self.table.grid.cell_of(x, y)
+        return cell >= 0 and bool(self._robot_ok[cell])
+
+    @property
+    def scan_rays(self) -> int:
+        """Rays the current scan geometry expects (0 before set_scan_geometry)."""
+        return 0 if self.matcher is None else self.matcher.rays
+
+    # --- the filter cycle ------------------------------------------------------------------
+    def predict(self, v: float, w: float, dt: float) -> None:
+        """Move every particle by the odometry twist (v m/s, w rad/s) over dt s, with noise."""
+        if not (math.isfinite(v) and math.isfinite(w) and math.isfinite(dt)) or dt <= 0.0:
+            return
+        sample_motion(self.particles, len(self.particles), v, w, dt, self.noise, self.rng)
+        # The estimate follows the same twist until the next measurement update.
+        x, y, theta = self.estimate
+        mid = theta + 0.5 * w * dt
+        theta = theta + w * dt
+        self.estimate = (x + v * dt * math.cos(mid), y + v * dt * math.sin(mid),
+                         math.atan2(math.sin(theta), math.cos(theta)))
+        self.guard.predict(v, w, dt)
+        since = self._since_update
+        since[0] += abs(v) * dt
+        since[1] += abs(w) * dt
+        since[2] += dt
+
+    def update_due(self, new_scan: bool = True) -> bool:
+        """True when a measurement update is due.
+
+        For a new scan, once the robot moved or turned enough or update_max_interval_s passed since
+        the last update; for a scan seen before (held between sensor updates, or a stationary
+        robot's identical one) only by time.
+        """
+        p, (distance, angle, elapsed) = self.params, self._since_update
+        if elapsed >= p["update_max_interval_s"]:
+            return True
+        return new_scan and (distance >= p["update_min_distance_m"]
+                             or angle >= p["update_min_angle_rad"])
+
+    def correct(self, ranges: np.ndarray, force: bool = False, new_scan: bool = True) -> bool:
+        """Weigh the particles with a scan, resample, re-check the localized flag.
+
+        Weigh the particles with the scan (if update_due(new_scan) or force), resample,
+        re-check the localized flag. Returns True if a measurement update happened.
+        """
+        if self.matcher is None:
+            raise RuntimeError("set_scan_geometry() before correct()")
+        ranges = np.asarray(ranges, dtype=np.float64)
+        if ranges.shape != (self.matcher.rays,):
+            raise ValueError(f"scan has {ranges.size} rays, the scan geometry {self.matcher.rays}")
+        if self._seed_pending:
+            self._seed_from_scan(ranges)
+        elif not (force or self.update_due(new_scan)):
+            return False
+        self._weigh(ranges)
+        self._since_update = [0.0, 0.0, 0.0]
+        self.updates += 1
+        self.total_updates += 1
+        cluster = dominant_cluster(self.particles, self.weights, self.params["cluster_radius_m"],
+                                   self.params["cluster_angle_rad"])
+        self.estimate, self.cluster_share = cluster.pose, cluster.share
+        self.covariance = cluster.covariance
+        tolerance = self.params["match_tolerance_m"]
+        self.match_fraction = self.matcher.match_fraction(self.estimate, ranges, tolerance)
+        if not self.localized and self.cluster_share >= self.params["cluster_min_share"] and \
+                0.9 * self.params["localize_match_fraction"] <= self.match_fraction \
+                < self.params["localize_match_fraction"]:
+            # Borderline: the filter's mean carries the table's 2 cm quantization; the best
+            # pose within a couple of cm of it decides whether the cluster explains the scan.
+            self.match_fraction = refine(self.estimate, self.matcher, ranges,
+                                         tolerance).match_fraction
+        if not self.localized and self.cluster_share >= self.params["cluster_min_share"] and \
+                self.match_fraction < self.params["ambiguity_match_fraction"] and \
+                self.total_updates - self._last_doubt >= self.params["localize_updates"]:
+            # Converged on a pose that does not explain the scan: if the true pose lost its
+            # particles earlier (a symmetric maze), the exhaustive search finds it again.
+            self._last_doubt = self.total_updates
+            rivals = self.guard.unresolved(self._alternatives(ranges))
+            if rivals:
+                self._inject([a.pose for a in rivals])
+        if not self.localized and self.guard.tracks:
+            winner = self.guard.observe(self.estimate, self.match_fraction, self.matcher, ranges,
+                                        self.params["match_tolerance_m"], self.particles,
+                                        self.weights, self._searcher(ranges))
+            if winner is not None:
+                self._move_to(winner.pose)
+                self.events.append(("switch", self.total_updates))
+                return True
+        event = self.check.update(self.cluster_share, self.match_fraction)
+        if event == "candidate":
+            event = self._check_ambiguity(ranges)
+        if event:
+            self.events.append((event, self.total_updates))
+        if event in ("lost", "reinit"):
+            log.info("%s: scan match %.2f at (%.2f, %.2f, %.2f): global search", event,
+                     self.match_fraction, *self.estimate)
+            self.initialize_global()
+            return True
+        if effective_sample_size(self.weights) < self.params["resample_ess_fraction"] * \
+                len(self.weights):
+            self._resample()
+        return True
+
+    def _searcher(self, ranges: np.ndarray):
+        """best_near(pose) of PoseSearch for this scan, over a rival track's neighbourhood."""
+        p = self.params
+        range_min, range_max = self._range_limits
+        z_mm = reading_to_mm(ranges[self._beams], range_min, range_max)
+        limits = (int(math.ceil(range_min * 1000.0)), int(range_max * 1000.0))
+
+        def search(pose):
+            return self.search.best_near(pose, TRACK_DISTANCE_M, TRACK_ANGLE_RAD,
+                                         self._beam_bins, z_mm, limits, p["lidar_offset_x_m"],
+                                         self.matcher, ranges, p["match_tolerance_m"])
+        return search
+
+    def _check_ambiguity(self, ranges: np.ndarray) -> str:
+        """Declare the candidate only if no other pose explains the scan as well.
+
+        Declare the candidate only if no other pose explains the scan nearly as well;
+        otherwise add particles at those poses (the filter must then tell them apart).
+        """
+        p = self.params
+        live = [t for t in self.guard.open_tracks if t.last_match >= p["ambiguity_match_fraction"]]
+        if live:  # known rivals still explain the scan: no need to search again
+            self.check.reject()
+            return "ambiguous"
+        rivals = self.guard.unresolved(self._alternatives(ranges))
+        if not rivals:
+            self.check.confirm()
+            return "localized"
+        self.check.reject()
+        self._inject([a.pose for a in rivals])
+        return "ambiguous"
+
+    def _alternatives(self, ranges: np.ndarray) -> list:
+        """The best poses away from the estimate for this scan (PoseSearch.alternatives)."""
+        p = self.params
+        range_min, range_max = self._range_limits
+        z_mm = reading_to_mm(ranges[self._beams], range_min, range_max)
+        self.last_alternatives = self.search.alternatives(
+            self.estimate, self._beam_bins, z_mm,
+            (int(math.ceil(range_min * 1000.0)), int(range_max * 1000.0)), p["lidar_offset_x_m"],
+            self.matcher, ranges, p["match_tolerance_m"])
+        return self.last_alternatives
+
+    def _move_to(self, pose) -> None:
+        """Move every particle to a rival that explains the scans better.
+
+        All particles around `pose` (a rival that explains the scans better than the
+        estimate did), the rival tracks kept: not localized.
+        """
+        count = len(self.particles)
+        sigma = np.array([0.02, 0.02, 0.03])
+        particles = np.asarray(pose) + self.rng.standard_normal((count, 3)) * sigma
+        particles[:, 2] = np.remainder(particles[:, 2] + math.pi, 2.0 * math.pi) - math.pi
+        self.particles = particles
+        self.weights = np.full(count, 1.0 / count)
+        self.check.reset()
+        self.estimate = tuple(float(v) for v in pose)
+
+    def _inject(self, poses) -> None:
+        """Replace a share of the particles by Gaussians around `poses` (equal weights)."""
+        p = self.params
+        per_pose = max(int(p["inject_share"] * len(self.particles) / len(poses)), 1)
+        sx, sy, st = p["initial_pose_sigma"]
+        sigma = np.array([min(sx, 0.03), min(sy, 0.03), min(st, 0.05)])
+        new = np.concatenate([np.asarray(pose) + self.rng.standard_normal((per_pose, 3)) * sigma
+                              for pose in poses])
+        new[:, 2] = np.remainder(new[:, 2] + math.pi, 2.0 * math.pi) - math.pi
+        replace = self.rng.choice(len(self.particles), size=min(len(new), len(self.particles)),
+                                  replace=False)
+        self.particles[replace] = new[:len(replace)]
+        self.weights = np.full(len(self.particles), 1.0 / len(self.particles))
+
+    def _weigh(self, ranges: np.ndarray) -> None:
+        grid, table = self.table.grid, self.table
+        range_min, range_max = self._range_limits
+        z_mm = reading_to_mm(ranges[self._beams], range_min, range_max)
+        scores = np.empty(len(self.particles))
+        log_likelihoods(self.particles, len(self.particles), table.ranges, table.angles,
+                        grid.x0, grid.y0, grid.resolution, grid.nx, grid.ny, self._robot_ok,
+                        self.params["lidar_offset_x_m"], *split_beams(self._beam_bins, z_mm),
+                        self._lut, int(math.ceil(range_min * 1000.0)), int(range_max * 1000.0),
+                        scores)
+        best = scores.max()
+        if not np.isfinite(best):  # every particle inside a wall or off the map
+            log.info("every particle is in a wall or off the map (an impossible hypothesis): "
+                     "global search")
+            self.initialize_global()
+            return
+        scores -= best
+        if not self.localized:
+            scores *= self._temper(scores)
+        weights = self.weights * np.exp(scores)
+        total = weights.sum()
+        if not total > 0.0:  # the old weights underflowed against the new scores
+            weights = np.exp(scores)
+            total = weights.sum()
+        self.weights = weights / total
+
+    def _temper(self, scores: np.ndarray) -> float:
+        """Flatten the likelihood while searching: the exponent beta in (0, 1].
+
+        The exponent beta in (0, 1] of the likelihood that keeps the effective sample size
+        of the new weights at search_ess_fraction of the particles (1 if it already is).
+
+        While searching, the particles are far sparser than the likelihood is narrow: the full
+        likelihood would keep only the few luckiest particles, and in a symmetric maze the
+        luckiest may sit at a rotated copy of the true pose. Flattening it keeps every
+        hypothesis that roughly fits alive until later scans decide.
+        """
+        target = self.params["search_ess_fraction"] * len(scores)
+        finite = np.isfinite(scores)
+        prior = self.weights
+
+        def ess(beta: float) -> float:
+            w = np.where(finite, prior * np.exp(beta * np.where(finite, scores, 0.0)), 0.0)
+            total = w.sum()
+            return float(total * total / np.dot(w, w)) if total > 0 else 0.0
+
+        if ess(1.0) >= target:
+            return 1.0
+        low, high = 0.0, 1.0
+        for _ in range(10):
+            mid = 0.5 * (low + high)
+            if ess(mid) >= target:
+                low = mid
+            else:
+                high = mid
+        return max(low, 1e-3)
+
+    def _resample(self) -> None:
+        p = self.params
+        count = len(self.particles)
+        drawn = resample(self.particles, self.weights, count, self.rng)
+        nbx, nby, nbt = self._kld_shape
+        bins = occupied_bins(drawn, count, self.table.grid.x0, self.table.grid.y0,
+                             p["kld_bin_xy_m"], p["kld_bin_theta_rad"], nbx, nby, nbt,
+                             self._kld_seen)
+        wanted = min(max(kld_count(bins, p["kld_epsilon"], p["kld_z"]), p["min_particles"]),
+                     p["max_particles"])
+        if wanted != count:
+            drawn = resample(self.particles, self.weights, wanted, self.rng)
+        self.particles = np.ascontiguousarray(drawn)
+        self.weights = np.full(len(drawn), 1.0 / len(drawn))
+
+    # --- results ---------------------------------------------------------------------------
+    @property
+    def localized(self) -> bool:
+        """The trustworthy flag (localization_check): True only after the streak of checks."""
+        return self.check.localized
+
+    @property
+    def particle_count(self) -> int:
+        """Particles now (the adaptive count)."""
+        return len(self.particles)
+
+
+__all__ = ["ParticleFilter"]

@@ -1,0 +1,393 @@
+"""The `particle_filter` lifecycle node: /odometry + /scan -> /pose.
+
+Outputs /pose (amr_msgs/PoseStamped with `localized`), /amcl_pose and /particles, on the world
+map of the simulator (one loader).
+
+Thin: messages become ParticleFilter.predict / correct calls and results become messages.
+- Every /odometry message moves the particles by its twist over the time since the previous one
+  (so between the turtlebot3's 5 Hz scans the pose is predicted from odometry).
+- Every approximately synchronized (/odometry, /scan) pair is answered with exactly one /pose,
+  stamped with the scan's stamp, in frame `map` (the lockstep loop and the simulator's
+  /cmd_vel-/pose synchronization must never stall). A scan whose readings differ from the
+  previous one is weighed when the robot moved enough; one seen before (the lockstep simulator
+  re-publishes the last 5 Hz scan every step; a standing robot's ideal scan repeats) only every
+  update_max_interval_s (ParticleFilter.correct).
+- /amcl_pose (geometry_msgs/PoseWithCovarianceStamped) after every measurement update;
+  /particles (geometry_msgs/PoseArray) at most every `particles_period_s` of stamp time.
+- /initialpose (RViz's and Foxglove's "2D Pose Estimate") re-initializes around that pose.
+Bad input (NaN or 0.0 everywhere, inconsistent scan geometry, non-finite odometry, stamps going
+backwards) is skipped with a throttled message, never a crash; without a usable scan for
+`max_scan_age_s` the node reports localized false. All stamps come from the messages, so the node
+works the same in lockstep (simulated stamps) and in real time; use_sim_time only changes its
+log clock.
+"""
+from __future__ import annotations
+
+import math
+import sys
+from typing import Any
+
+import numpy as np
+from geometry_msgs.msg import Pose, PoseArray, PoseWithCovarianceStamped
+from nav_msgs.msg import Odometry
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from sensor_msgs.msg import LaserScan
+
+from amr_common import message_filters
+from amr_common.node_runner import run_lifecycle_node
+from amr_common.parameters import declare_parameters, read_parameters
+from amr_common.qos import RELIABLE_10, scan_qos
+from amr_common.ros_conversions import (
+    pose_from_message,
+    scan_ranges,
+    time_to_nanoseconds,
+    yaw_to_quaternion,
+)
+from amr_common.world import World, WorldError
+from amr_localization.particle_filter import ParticleFilter
+from amr_localization.particle_filter_params import PARAMETERS as FILTER_PARAMETERS
+from amr_localization.particle_filter_params import check_parameters
+
+_NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
+    "world": ("lab02", "Bundled world name or path to a world .yaml / course map .json (the "
+                       "simulator's loader)"),
+    "queue_size": (10, "Synchronizer queue size per input"),
+    "slop": (0.15, "Synchronizer slop in seconds (lockstep stamps are equal; the real robot's "
+                   "/odometry and /scan differ by up to half an odometry period)"),
+    "max_odometry_gap_s": (1.0, "Odometry messages further apart than this (stamp time) are not "
+                                "integrated across the gap (the data in between is lost)"),
+    "max_scan_age_s": (1.0, "Report localized false when the last usable scan is older than "
+                            "this (stamp time)"),
+    "min_valid_share": (0.1, "A scan with fewer valid readings than this share is skipped"),
+    "particles_period_s": (0.5, "Least stamp time between two /particles messages (0 = every "
+                                "/pose)"),
+    "particles_published": (500, "Most particles in one /particles message (evenly picked)"),
+    "map_frame": ("map", "Frame of /pose, /amcl_pose and /particles"),
+    "odometry_topic": ("/odometry", "nav_msgs/Odometry input with twist filled"),
+    "scan_topic": ("/scan", "sensor_msgs/LaserScan input (subscribed best effort)"),
+    "pose_topic": ("/pose", "amr_msgs/PoseStamped output (with localized)"),
+    "amcl_pose_topic": ("/amcl_pose", "geometry_msgs/PoseWithCovarianceStamped output"),
+    "particles_topic": ("/particles", "geometry_msgs/PoseArray output"),
+    "initialpose_topic": ("/initialpose", "geometry_msgs/PoseWithCovarianceStamped input"),
+}
+_ARRAYS = {"initial_pose", "initial_pose_sigma"}
+
+
+class ParticleFilterNode(LifecycleNode):
+    """Monte Carlo localization on the world map; see the module docstring for the I/O.
+
+    Creates nothing until configured; the filter (with its expected-range table) is built in
+    on_configure, so a missing or malformed map fails that transition with the loader's message.
+    """
+
+    def __init__(self, node_name: str = "particle_filter", **kwargs) -> None:
+        super().__init__(node_name, **kwargs)
+        # Numbers take ints for doubles (-p slop:=1), checked in on_configure.
+        declare_parameters(self, _NODE_PARAMETERS)
+        declare_parameters(self, FILTER_PARAMETERS)
+        # Run scripts append callables here: each is called with (stamp_ns, (x, y, theta),
+        # localized, node) after every /pose (in-process observation without a subscription).
+        self.on_pose: list = []
+        self._reset_runtime()
+
+    # --- lifecycle -------------------------------------------------------------------------
+    def _reset_runtime(self) -> None:
+        self.filter: ParticleFilter | None = None
+        self._outputs: dict[str, Any] = {}
+        self._subscribers: list = []
+        self._initialpose_subscription = None
+        self._synchronizer = None
+        self._active = False
+        self._last_odometry_ns: int | None = None
+        self._last_ranges: bytes | None = None
+        self._last_scan_ns: int | None = None  # newest usable scan
+        self._last_particles_ns: int | None = None
+        self._scan_key: tuple | None = None
+        self.pose_count = 0  # /pose messages published (tests, run scripts)
+
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Load the world, build the filter, create the publishers and inputs.
+
+        Load the world, build the filter, create the publishers, the synchronized
+        /odometry + /scan inputs and the /initialpose subscription. FAILURE (with the reason
+        logged) for bad parameters or a missing/malformed world file.
+        """
+        node, problems = read_parameters(self, _NODE_PARAMETERS)
+        filter_values, filter_problems = read_parameters(self, FILTER_PARAMETERS)
+        problems += filter_problems
+        for name in ("slop", "max_odometry_gap_s", "max_scan_age_s", "particles_period_s"):
+            value = node[name]
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+                    not math.isfinite(value) or value < 0:
+                problems.append(f"{name} must be a number >= 0 (got {value!r})")
+        if not 0.0 <= float(node["min_valid_share"]) <= 1.0:
+            problems.append(f"min_valid_share must be in [0, 1] (got {node['min_valid_share']})")
+        for name in ("queue_size", "particles_published"):
+            if node[name] < 1:
+                problems.append(f"{name} must be >= 1 (got {node[name]})")
+        filter_params: dict[str, Any] = {}
+        if not filter_problems:
+            try:
+                filter_params = check_parameters(
+                    {name: list(value) if name in _ARRAYS else value
+                     for name, value in filter_values.items()})
+            except ValueError as exc:
+                problems.append(str(exc))
+        if problems:
+            self.get_logger().error("configure failed: " + "; ".join(problems))
+            return TransitionCallbackReturn.FAILURE
+        try:
+            world = World.load(node["world"])
+            params = {k: v for k, v in filter_params.items()}
+            params["initial_pose"] = list(params["initial_pose"] or [])
+            self.filter = ParticleFilter(world, **params)
+        except (WorldError, ValueError) as exc:
+            self.get_logger().error(f"configure failed: {exc}")
+            self._reset_runtime()
+            return TransitionCallbackReturn.FAILURE
+        from amr_msgs.msg import PoseStamped
+        self.node_params = node
+        self._pose_message = PoseStamped()
+        self._pose_message.header.frame_id = node["map_frame"]
+        self._outputs = {
+            "pose": self.create_lifecycle_publisher(PoseStamped, node["pose_topic"],
+                                                    RELIABLE_10),
+            "amcl_pose": self.create_lifecycle_publisher(
+                PoseWithCovarianceStamped, node["amcl_pose_topic"], RELIABLE_10),
+            "particles": self.create_lifecycle_publisher(PoseArray, node["particles_topic"],
+                                                         RELIABLE_10),
+        }
+        odometry = message_filters.Subscriber(self, Odometry, node["odometry_topic"],
+                                              qos_profile=RELIABLE_10)
+        # Registered before the synchronizer: a pair is handled after its odometry moved the
+        # particles, whichever of the two messages completes it.
+        odometry.registerCallback(self._on_odometry)
+        scan = message_filters.Subscriber(self, LaserScan, node["scan_topic"],
+                                          qos_profile=scan_qos(10))
+        self._subscribers = [odometry, scan]
+        self._synchronizer = message_filters.ApproximateTimeSynchronizer(
+            self._subscribers, int(node["queue_size"]), float(node["slop"]))
+        self._synchronizer.registerCallback(self._on_pair)
+        self._initialpose_subscription = self.create_subscription(
+            PoseWithCovarianceStamped, node["initialpose_topic"], self._on_initial_pose,
+            RELIABLE_10)
+        f = self.filter
+        mode = "tracking from initial_pose" if filter_params["initial_pose"] else \
+            "global localization"
+        self.get_logger().info(
+            f"configured: world '{world.name}' ({world.source}), {mode}, {f.particle_count} "
+            f"particles, {filter_params['beams']} beams, expected-range table "
+            f"{f.table.nbytes / 1e6:.1f} MB, LiDAR at x = {filter_params['lidar_offset_x_m']} m")
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Enable the publishers; messages are processed from now on."""
+        result = super().on_activate(state)
+        self._active = True
+        return result
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Stop processing messages (the filter keeps its state); publishers go quiet."""
+        self._active = False
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Destroy the subscriptions and publishers and drop the filter."""
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """As on_cleanup (nothing to send on the way down: the node commands nothing)."""
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def _release(self) -> None:
+        self._active = False
+        for subscriber in self._subscribers:
+            subscriber.close()
+        if self._initialpose_subscription is not None:
+            self.destroy_subscription(self._initialpose_subscription)
+        for publisher in self._outputs.values():
+            self.destroy_lifecycle_publisher(publisher)
+        self._reset_runtime()
+
+    # --- data path -------------------------------------------------------------------------
+    def _on_odometry(self, message: Odometry) -> None:
+        if not self._active:
+            return
+        stamp = time_to_nanoseconds(message.header.stamp)
+        v, w = message.twist.twist.linear.x, message.twist.twist.angular.z
+        if not (math.isfinite(v) and math.isfinite(w)):
+            self.get_logger().warning("odometry twist is not finite: ignored",
+                                      throttle_duration_sec=2.0)
+            return
+        last, self._last_odometry_ns = self._last_odometry_ns, stamp
+        if last is None:
+            return
+        dt = (stamp - last) * 1e-9
+        if dt <= 0.0:
+            self.get_logger().warning(f"odometry stamp went back or repeated ({dt:+.3f} s): "
+                                      "not integrated", throttle_duration_sec=2.0)
+            self._last_odometry_ns = max(last, stamp)
+            return
+        if dt > self.node_params["max_odometry_gap_s"]:
+            self.get_logger().warning(f"{dt:.2f} s without odometry: the motion in the gap is "
+                                      "lost", throttle_duration_sec=2.0)
+            return
+        self.filter.predict(float(v), float(w), dt)
+
+    def _on_pair(self, odometry: Odometry, scan: LaserScan) -> None:
+        if not self._active:
+            return
+        stamp_ns = time_to_nanoseconds(scan.header.stamp)
+        ranges = self._usable_ranges(scan)
+        if ranges is not None:
+            raw = ranges.tobytes()
+            new_scan = raw != self._last_ranges  # not the held one again
+            if new_scan:
+                self._last_ranges = raw
+                self._last_scan_ns = stamp_ns
+            try:
+                if self.filter.correct(ranges, new_scan=new_scan):
+                    self._last_scan_ns = stamp_ns
+                    self._publish_amcl_pose(scan.header.stamp)
+            except Exception as exc:  # never take the executor down
+                self.get_logger().error(f"measurement update failed: {exc!r}",
+                                        throttle_duration_sec=2.0)
+        self._publish_pose(scan.header.stamp, stamp_ns)
+        self._publish_particles(scan.header.stamp, stamp_ns)
+
+    def _usable_ranges(self, scan: LaserScan) -> np.ndarray | None:
+        """The scan's ranges if the message is usable, else None.
+
+        The scan's ranges if the message is usable (geometry consistent, enough valid
+        readings), after telling the filter a new geometry; None (and a warning) if not.
+        """
+        n = len(scan.ranges)
+        geometry = (scan.angle_min, scan.angle_increment, n, scan.range_min, scan.range_max)
+        if n == 0 or not all(math.isfinite(v) for v in geometry) or scan.angle_increment == 0:
+            self._warn(f"scan has no rays or unusable angles/limits {geometry}: skipped")
+            return None
+        expected = round((scan.angle_max - scan.angle_min) / scan.angle_increment) + 1 \
+            if math.isfinite(scan.angle_max) else -1
+        if expected != n:
+            self._warn(f"scan has {n} ranges but angle_min/angle_max/angle_increment describe "
+                       f"{expected}: skipped")
+            return None
+        if geometry != self._scan_key:
+            try:
+                self.filter.set_scan_geometry(scan.angle_min, scan.angle_increment, n,
+                                              scan.range_min, scan.range_max)
+            except ValueError as exc:
+                self._warn(f"scan geometry rejected: {exc}")
+                return None
+            self._scan_key = geometry
+        ranges = scan_ranges(scan)
+        with np.errstate(invalid="ignore"):
+            valid = np.count_nonzero(np.isfinite(ranges) & (ranges >= scan.range_min)
+                                     & (ranges <= scan.range_max) & (ranges > 0.0))
+        if valid < self.node_params["min_valid_share"] * n:
+            self._warn(f"scan has {valid} valid readings of {n} (NaN, inf, 0.0 or outside "
+                       f"[{scan.range_min}, {scan.range_max}]): skipped")
+            return None
+        return ranges
+
+    def _warn(self, text: str) -> None:
+        self.get_logger().warning(text, throttle_duration_sec=2.0)
+
+    # --- outputs ---------------------------------------------------------------------------
+    def localized(self, stamp_ns: int) -> bool:
+        """The filter's flag, unless the newest usable scan is older than max_scan_age_s."""
+        if self.filter is None or not self.filter.localized or self._last_scan_ns is None:
+            return False
+        return (stamp_ns - self._last_scan_ns) * 1e-9 <= self.node_params["max_scan_age_s"]
+
+    def _publish_pose(self, stamp, stamp_ns: int) -> None:
+        x, y, theta = self.filter.estimate
+        finite = all(math.isfinite(v) for v in (x, y, theta))
+        message = self._pose_message
+        message.header.stamp = stamp
+        _fill_pose(message.pose, (x, y, theta) if finite else (0.0, 0.0, 0.0))
+        message.localized = finite and self.localized(stamp_ns)
+        self._outputs["pose"].publish(message)
+        self.pose_count += 1
+        for hook in list(self.on_pose):
+            try:
+                hook(stamp_ns, (x, y, theta), message.localized, self)
+            except Exception as exc:  # an observer must not stop the filter
+                self.get_logger().error(f"on_pose hook {hook!r} failed: {exc!r}",
+                                        throttle_duration_sec=5.0)
+
+    def _publish_amcl_pose(self, stamp) -> None:
+        estimate, cov = self.filter.estimate, self.filter.covariance
+        if not (all(math.isfinite(v) for v in estimate) and np.all(np.isfinite(cov))):
+            return
+        message = PoseWithCovarianceStamped()
+        message.header.stamp = stamp
+        message.header.frame_id = self.node_params["map_frame"]
+        _fill_pose(message.pose.pose, estimate)
+        covariance = np.zeros((6, 6))
+        index = [0, 1, 5]  # x, y, yaw in ROS's (x, y, z, roll, pitch, yaw) order
+        covariance[np.ix_(index, index)] = cov
+        message.pose.covariance = covariance.ravel().tolist()
+        self._outputs["amcl_pose"].publish(message)
+
+    def _publish_particles(self, stamp, stamp_ns: int) -> None:
+        period_ns = int(self.node_params["particles_period_s"] * 1e9)
+        if self._last_particles_ns is not None and 0 <= stamp_ns - self._last_particles_ns \
+                < period_ns:
+            return
+        publisher = self._outputs["particles"]
+        if publisher.get_subscription_count() == 0:
+            return
+        self._last_particles_ns = stamp_ns
+        particles = self.filter.particles
+        step = max(1, len(particles) // int(self.node_params["particles_published"]))
+        message = PoseArray()
+        message.header.stamp = stamp
+        message.header.frame_id = self.node_params["map_frame"]
+        for x, y, theta in particles[::step]:
+            pose = Pose()
+            _fill_pose(pose, (x, y, theta))
+            message.poses.append(pose)
+        publisher.publish(message)
+
+    def _on_initial_pose(self, message: PoseWithCovarianceStamped) -> None:
+        """Re-initialize around a 2D pose estimate (sigmas from its covariance when usable)."""
+        if self.filter is None:
+            return
+        frame = message.header.frame_id
+        if frame and frame != self.node_params["map_frame"]:
+            self._warn(f"/initialpose in frame '{frame}' ignored: expected "
+                       f"'{self.node_params['map_frame']}'")
+            return
+        try:
+            x, y, theta = pose_from_message(message.pose.pose)
+        except ValueError as exc:
+            self._warn(f"/initialpose ignored: {exc}")
+            return
+        if not (math.isfinite(x) and math.isfinite(y)) or \
+                not self.filter.world.contains(x, y):
+            self._warn(f"/initialpose ({x:.2f}, {y:.2f}) is outside the free space: ignored")
+            return
+        cov = np.asarray(message.pose.covariance, dtype=float)
+        sigma = None
+        if cov.size == 36 and np.all(np.isfinite(cov[[0, 7, 35]])) and np.all(cov[[0, 7, 35]] > 0):
+            sigma = np.sqrt(cov[[0, 7, 35]])
+        self.filter.initialize_pose((x, y, theta), sigma)
+        self.get_logger().info(f"re-initialized around ({x:.2f}, {y:.2f}, {theta:.2f}) from "
+                               "/initialpose: not localized until the scans confirm it")
+
+
+def _fill_pose(pose: Pose, xyt) -> None:
+    pose.position.x, pose.position.y = float(xyt[0]), float(xyt[1])
+    pose.position.z = 0.0
+    yaw_to_quaternion(float(xyt[2]), pose.orientation)
+
+
+def main(args: list[str] | None = None) -> int:
+    return run_lifecycle_node(ParticleFilterNode, args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

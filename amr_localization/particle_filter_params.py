@@ -1,0 +1,150 @@
+"""The ParticleFilter's parameters and their checking.
+
+The ParticleFilter's parameters: name -> (default, description with units), and their
+checking. No rclpy import; the particle_filter node declares each as a ROS parameter.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+# name: (default, description). The defaults localize in both simulator profiles.
+PARAMETERS: dict[str, tuple[Any, str]] = {
+    "lidar_offset_x_m": (0.0, "Forward position of the LiDAR relative to the robot centre [m] "
+                              "(-0.032 on a real Burger; the run scripts set the profile's)."),
+    "initial_pose": ([], "Tracking start [x, y, theta] (m, m, rad); [] = global localization "
+                         "(uniform over the free space, all headings)."),
+    "initial_pose_sigma": ([0.1, 0.1, 0.2], "Standard deviations [x m, y m, theta rad] of the "
+                                            "particles drawn around initial_pose or "
+                                            "/initialpose."),
+    "seed": (0, "Seed of the filter's random numbers: the same seed and inputs give the same "
+                "run."),
+    "max_particles": (8000, "Particles of a global search (and the most the adaptive count "
+                            "uses)."),
+    "min_particles": (300, "Fewest particles the adaptive (KLD) count goes down to."),
+    "tracking_particles": (2000, "Particles drawn around an initial pose (/initialpose, "
+                                 "initial_pose)."),
+    "beams": (60, "Beams of each scan weighed per particle, evenly spread over the rays."),
+    "sigma_hit_m": (0.03, "Standard deviation of a beam's range around the expected range [m]."),
+    "z_random": (0.05, "Weight of the uniform part of a beam's likelihood: a beam that misses "
+                       "costs log(z_random), whatever the miss (robust to clutter)."),
+    "table_resolution_m": (0.02, "Cell size of the expected-range table [m]."),
+    "table_angles": (360, "Directions of the expected-range table over 360 degrees."),
+    "noise_v_per_v": (0.1, "Linear-speed noise per unit of linear speed [(m/s)/(m/s)]."),
+    "noise_v_per_w": (0.01, "Linear-speed noise per unit of turn rate [(m/s)/(rad/s)]."),
+    "noise_w_per_w": (0.1, "Turn-rate noise per unit of turn rate [(rad/s)/(rad/s)]."),
+    "noise_w_per_v": (0.5, "Turn-rate noise per unit of linear speed [(rad/s)/(m/s)]."),
+    "update_min_distance_m": (0.02, "Weigh a new scan once the robot drove this far since the "
+                                    "last measurement update [m] ..."),
+    "update_min_angle_rad": (0.05, "... or turned this much [rad] ..."),
+    "update_max_interval_s": (0.5, "... or this long passed (also while standing still) [s]."),
+    "seed_uniform_share": (0.1, "Share of a global search's particles drawn uniformly; the "
+                                "others at the poses an exhaustive search finds fitting the "
+                                "first scan."),
+    "search_ess_fraction": (0.2, "While not localized, the likelihood is flattened so that the "
+                                 "effective sample size stays at least this share of the "
+                                 "particles (no premature collapse on a lucky rotated pose)."),
+    "resample_ess_fraction": (0.5, "Resample when the effective sample size falls below this "
+                                   "share of the particle count."),
+    "kld_epsilon": (0.05, "KLD sampling: bound on the K-L divergence of the particle set."),
+    "kld_z": (2.33, "KLD sampling: standard normal quantile of the bound's confidence (2.33 = "
+                    "99 %)."),
+    "kld_bin_xy_m": (0.05, "KLD histogram bin size in x and y [m] (sized for 2-3 m mazes)."),
+    "kld_bin_theta_rad": (0.1745, "KLD histogram bin size in heading [rad]."),
+    "cluster_radius_m": (0.1, "Particles within this distance of the heaviest region form the "
+                              "dominant cluster [m]."),
+    "cluster_angle_rad": (0.35, "... and within this heading difference [rad]."),
+    "cluster_min_share": (0.9, "Localized needs the dominant cluster to carry this share of the "
+                               "weight."),
+    "match_tolerance_m": (0.03, "A ray matches when reading and exact expectation at the "
+                                "estimate differ by at most this [m]."),
+    "localize_match_fraction": (0.97, "Localized needs this share of ALL rays to match ..."),
+    "localize_updates": (10, "... at this many consecutive measurement updates."),
+    "ambiguity_match_fraction": (0.9, "Localized needs that no pose elsewhere (> 15 cm or "
+                                      "> 15 degrees away, exhaustive search) explains this share "
+                                      "of the rays."),
+    "inject_share": (0.2, "Share of the particles moved to the rival poses of an ambiguous "
+                          "scan."),
+    "keep_match_fraction": (0.8, "Once localized, fewer matching rays than this share ..."),
+    "lost_updates": (3, "... at this many consecutive updates = lost: localized false and a "
+                        "global search."),
+    "reinit_match_fraction": (0.75, "A dominant cluster matching fewer rays than this share ..."),
+    "reinit_updates": (10, "... at this many consecutive updates restarts the global search."),
+}
+
+_INTEGERS = {"seed", "max_particles", "min_particles", "tracking_particles", "beams",
+             "table_angles", "localize_updates", "lost_updates", "reinit_updates"}
+_FRACTIONS = {"z_random", "seed_uniform_share", "resample_ess_fraction", "search_ess_fraction",
+              "cluster_min_share", "inject_share", "ambiguity_match_fraction",
+              "localize_match_fraction", "keep_match_fraction", "reinit_match_fraction"}
+_VECTORS = {"initial_pose", "initial_pose_sigma"}
+
+
+def check_parameters(overrides: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Every parameter's value, checked and normalised.
+
+    Every parameter's value (defaults updated with `overrides`), checked and normalised
+    (floats, ints, tuples; initial_pose None when empty); ValueError naming every bad one.
+    """
+    values = {name: default for name, (default, _) in PARAMETERS.items()}
+    unknown = sorted(set(overrides or {}) - set(PARAMETERS))
+    if unknown:
+        raise ValueError(f"unknown particle filter parameter(s) {unknown}; known: "
+                         f"{sorted(PARAMETERS)}")
+    values.update(overrides or {})
+    problems = []
+    for name, value in values.items():
+        if name in _VECTORS:
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+                not math.isfinite(value):
+            problems.append(f"{name} must be a finite number (got {value!r})")
+        elif name in _INTEGERS:
+            if int(value) != value or value < (0 if name == "seed" else 1):
+                problems.append(f"{name} must be a positive integer (got {value!r})")
+            values[name] = int(value)
+        elif name in _FRACTIONS and not 0.0 <= value <= 1.0:
+            problems.append(f"{name} must be in [0, 1] (got {value!r})")
+        elif name != "lidar_offset_x_m" and value < 0.0:
+            problems.append(f"{name} must be >= 0 (got {value!r})")
+        else:
+            values[name] = float(value)
+    for name in ("sigma_hit_m", "table_resolution_m", "kld_epsilon", "kld_bin_xy_m",
+                 "kld_bin_theta_rad", "cluster_radius_m", "cluster_angle_rad",
+                 "match_tolerance_m"):
+        if isinstance(values[name], float) and values[name] <= 0.0:
+            problems.append(f"{name} must be > 0 (got {values[name]!r})")
+    if isinstance(values["z_random"], float) and not 0.0 < values["z_random"] < 1.0:
+        problems.append(f"z_random must be in (0, 1) (got {values['z_random']!r})")
+    if isinstance(values["min_particles"], int) and isinstance(values["max_particles"], int) \
+            and values["min_particles"] > values["max_particles"]:
+        problems.append(f"min_particles ({values['min_particles']}) must not exceed "
+                        f"max_particles ({values['max_particles']})")
+    pose = _vector(values["initial_pose"], (0, 3), "initial_pose", problems)
+    values["initial_pose"] = pose if pose else None
+    sigma = _vector(values["initial_pose_sigma"], (3,), "initial_pose_sigma", problems)
+    if sigma is not None and any(s < 0 for s in sigma):
+        problems.append(f"initial_pose_sigma must be >= 0 (got {list(sigma)})")
+    values["initial_pose_sigma"] = sigma
+    if problems:
+        raise ValueError("; ".join(problems))
+    return values
+
+
+def _vector(value: Any, lengths: tuple[int, ...], name: str, problems: list[str]):
+    try:
+        items = tuple(float(v) for v in value if not isinstance(v, bool))
+        ok = len(items) == len(list(value)) and len(items) in lengths and \
+            all(math.isfinite(v) for v in items)
+    except (TypeError, ValueError):
+        ok, items = False, ()
+    if not ok:
+        sizes = " or ".join(f"{n} numbers" for n in lengths)
+        problems.append(f"{name} must be {sizes} (got {value!r})")
+        return None
+    return items
+
+
+def parameter_descriptions() -> dict[str, tuple[Any, str]]:
+    """Name -> (default, description) of every parameter."""
+    return dict(PARAMETERS)

@@ -1,0 +1,270 @@
+"""Exhaustive pose search over the whole map: which OTHER poses explain this scan?
+
+The last guard of the localized test (localization_check): before the filter declares a pose,
+every pose the robot could have on a coarse grid (robot-centre cells every `stride` table cells,
+`headings` directions) is scored by how many of the weighed beams its expected ranges (table
+lookups) match within a wide tolerance; the best poses away from the estimate are refined by an
+exact local search (ray casting all rays, ScanMatcher). If one of them explains nearly as much of
+the scan as the estimate, the scan is ambiguous (a symmetric part of the maze): the filter does not
+declare, and gets particles at those poses so that the ambiguity must be resolved by driving on.
+Cost on a 2.4 m maze: about 10-30 ms (lookups) + a few ms per refined candidate. No rclpy import.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from amr_common.jit import HAVE_NUMBA, jit
+from amr_localization.expected_ranges import ExpectedRangeTable
+from amr_localization.localization_check import ScanMatcher
+
+SEARCH_BEAMS = 30
+
+
+def score_poses_python(cells, centres, headings, table, angles, x0, y0, resolution, nx,
+                       lidar_offset, beam_bins, z_mm, tolerance_mm, range_min_mm, range_max_mm,
+                       max_misses, out):
+    """out[c, h] = beams matched by the robot centred at cells[c] with heading h * 2 pi / H.
+
+    A pose is dropped (scored by what it matched so far) after more than max_misses misses:
+    most poses are wrong, and their misses come early because beam_bins is in an interleaved
+    order (see PoseSearch).
+    """
+    inv_res = 1.0 / resolution
+    n_beams = beam_bins.shape[0]
+    bins_per_heading = angles / headings
+    offset_x = np.empty(headings)
+    offset_y = np.empty(headings)
+    for h in range(headings):
+        offset_x[h] = lidar_offset * math.cos(h * (2.0 * math.pi / headings)) - x0
+        offset_y[h] = lidar_offset * math.sin(h * (2.0 * math.pi / headings)) - y0
+    for c in range(cells.shape[0]):
+        cx = centres[cells[c], 0]
+        cy = centres[cells[c], 1]
+        for h in range(headings):
+            li = int((cx + offset_x[h]) * inv_res)
+            lj = int((cy + offset_y[h]) * inv_res)
+            row = lj * nx + li
+            t = h * bins_per_heading + 0.5
+            matched = 0
+            misses = 0
+            for b in range(n_beams):
+                k = int(t + beam_bins[b])
+                if k >= angles:
+                    k -= angles
+                    if k >= angles:
+                        k -= angles
+                r = np.int32(table[row, k])
+                z = z_mm[b]
+                if z < 0:
+                    hit = r < range_min_mm or r > range_max_mm
+                else:
+                    hit = abs(z - r) <= tolerance_mm
+                if hit:
+                    matched += 1
+                else:
+                    misses += 1
+                    if misses > max_misses:
+                        break
+            out[c, h] = matched
+
+
+score_poses_kernel = jit(score_poses_python)
+
+
+def score_poses_numpy(cells, centres, headings, table, angles, x0, y0, resolution, nx,
+                      lidar_offset, beam_bins, z_mm, tolerance_mm, range_min_mm, range_max_mm,
+                      max_misses, out):
+    """The same scores as numpy operations, one heading at a time.
+
+    The same scores as numpy operations, one heading at a time (a pose's misses after the
+    (max_misses + 1)-th no longer hide its later matches: the same ranking above the cut).
+    """
+    cx, cy = centres[cells, 0], centres[cells, 1]
+    for h in range(headings):
+        theta = h * (2.0 * math.pi / headings)
+        li = ((cx + lidar_offset * math.cos(theta) - x0) / resolution).astype(np.int64)
+        lj = ((cy + lidar_offset * math.sin(theta) - y0) / resolution).astype(np.int64)
+        k = (h * angles / headings + 0.5 + beam_bins).astype(np.int64) % angles
+        r = table[(lj * nx + li)[:, None], k[None, :]].astype(np.int32)
+        hit = np.where(z_mm[None, :] < 0, (r < range_min_mm) | (r > range_max_mm),
+                       np.abs(z_mm[None, :] - r) <= tolerance_mm)
+        misses = np.cumsum(~hit, axis=1)
+        out[:, h] = np.where(misses[:, -1] > max_misses,
+                             np.sum(hit & (misses <= max_misses), axis=1), hit.sum(axis=1))
+
+
+score_poses = score_poses_kernel if HAVE_NUMBA else score_poses_numpy
+
+
+@dataclass
+class Alternative:
+    """A pose and the share of all rays it explains (exact ray casting)."""
+
+    pose: tuple[float, float, float]
+    match_fraction: float
+
+
+def interleaved_order(count: int) -> np.ndarray:
+    """0 .. count - 1 in an order that spreads every prefix around the circle (bit reversal)."""
+    bits = max(int(count - 1).bit_length(), 1)
+    keys = [int(f"{i:0{bits}b}"[::-1], 2) for i in range(count)]
+    return np.argsort(keys, kind="stable")
+
+
+class PoseSearch:
+    """Coarse exhaustive scoring + exact refinement of the best distinct candidates."""
+
+    def __init__(self, table: ExpectedRangeTable, robot_ok: np.ndarray, stride: int = 2,
+                 headings: int = 120, tolerance_m: float = 0.06, candidates: int = 8,
+                 miss_share: float = 0.25) -> None:
+        grid = table.grid
+        keep = robot_ok.astype(bool).reshape(grid.ny, grid.nx)
+        mask = np.zeros_like(keep)
+        mask[::stride, ::stride] = True  # a sub-grid of robot-centre cells
+        self.cells = np.flatnonzero((keep & mask).ravel()).astype(np.int64)
+        self.centres = grid.centres()
+        self.table = table
+        self.headings = int(headings)
+        self.tolerance_mm = int(round(tolerance_m * 1000.0))
+        self.candidates = int(candidates)
+        self.miss_share = float(miss_share)
+        self.step = (stride * grid.resolution, 2.0 * math.pi / headings)
+        self._scores = np.empty((len(self.cells), self.headings), dtype=np.int32)
+
+    def _score(self, beam_bins, z_mm, range_limits_mm, lidar_offset: float) -> np.ndarray:
+        """Scores of every (cell, heading) of the coarse grid, flattened (cell-major)."""
+        grid, table = self.table.grid, self.table
+        # At most SEARCH_BEAMS beams, spread around: a coarse ranking (the candidates are then
+        # refined with every ray), and half the lookups of 60 beams.
+        keep = np.arange(0, len(beam_bins), max(1, -(-len(beam_bins) // SEARCH_BEAMS)))
+        beam_bins, z_mm = beam_bins[keep], z_mm[keep]
+        order = interleaved_order(len(beam_bins))
+        score_poses(self.cells, self.centres, self.headings, table.ranges, table.angles,
+                    grid.x0, grid.y0, grid.resolution, grid.nx, lidar_offset,
+                    np.ascontiguousarray(beam_bins[order]), np.ascontiguousarray(z_mm[order]),
+                    self.tolerance_mm, range_limits_mm[0], range_limits_mm[1],
+                    int(self.miss_share * len(beam_bins)), self._scores)
+        self.scored_beams = len(beam_bins)
+        return self._scores.ravel()
+
+    def best_poses(self, count: int, beam_bins, z_mm, range_limits_mm, lidar_offset: float,
+                   rng: np.random.Generator) -> np.ndarray:
+        """The best-fitting grid poses for this scan, jittered: a global search's particles.
+
+        (count, 3) poses: the `count` best-scoring grid poses for this scan, each jittered
+        uniformly within its grid step (the particles of a global search, so that every pose
+        that fits the first scan, the true one and its symmetric copies alike, is represented).
+        """
+        scores = self._score(beam_bins, z_mm, range_limits_mm, lidar_offset)
+        count = min(int(count), scores.size)
+        flat = np.argpartition(-scores, count - 1)[:count]
+        cells, headings = np.divmod(flat, self.headings)
+        centres = self.centres[self.cells[cells]]
+        half_xy, half_theta = self.step[0] / 2.0, self.step[1] / 2.0
+        poses = np.empty((count, 3))
+        poses[:, :2] = centres + rng.uniform(-half_xy, half_xy, (count, 2))
+        theta = headings * self.step[1] + rng.uniform(-half_theta, half_theta, count)
+        poses[:, 2] = np.remainder(theta + math.pi, 2.0 * math.pi) - math.pi
+        return poses
+
+    def best_near(self, pose, radius: float, angle: float, beam_bins, z_mm, range_limits_mm,
+                  lidar_offset: float, matcher: ScanMatcher, ranges: np.ndarray,
+                  match_tolerance: float) -> Alternative:
+        """The pose near `pose` that explains the scan best.
+
+        The pose within `radius` (m) and `angle` (rad) of `pose` that explains the scan best:
+        coarse scores of that neighbourhood, then the best three distinct candidates (and
+        `pose` itself) refined exactly. Used before calling a hypothesis refuted: refuted must
+        mean that NO pose near it explains the scan, not that its current pose drifted.
+        """
+        grid, table = self.table.grid, self.table
+        centres = self.centres[self.cells]
+        near = np.flatnonzero(np.hypot(centres[:, 0] - pose[0], centres[:, 1] - pose[1])
+                              <= radius)
+        candidates = [tuple(pose)]
+        if near.size:
+            cells = np.ascontiguousarray(self.cells[near])
+            scores = np.empty((len(cells), self.headings), dtype=np.int32)
+            order = interleaved_order(len(beam_bins))
+            score_poses(cells, self.centres, self.headings, table.ranges, table.angles,
+                        grid.x0, grid.y0, grid.resolution, grid.nx, lidar_offset,
+                        np.ascontiguousarray(beam_bins[order]),
+                        np.ascontiguousarray(z_mm[order]), self.tolerance_mm,
+                        range_limits_mm[0], range_limits_mm[1], len(beam_bins), scores)
+            headings = np.arange(self.headings) * self.step[1]
+            off = np.abs(np.remainder(headings - pose[2] + math.pi, 2.0 * math.pi) - math.pi)
+            scores[:, off > angle] = -1
+            for flat in np.argsort(-scores.ravel(), kind="stable")[:64]:
+                c, h = divmod(int(flat), self.headings)
+                x, y = self.centres[cells[c]]
+                candidate = (float(x), float(y), math.remainder(h * self.step[1], 2.0 * math.pi))
+                if not any(close_poses(candidate, other, 0.05, math.radians(5.0))
+                           for other in candidates):
+                    candidates.append(candidate)
+                if len(candidates) >= 4:
+                    break
+        refined = [refine(c, matcher, ranges, match_tolerance, self.step) for c in candidates]
+        return max(refined, key=lambda a: a.match_fraction)
+
+    def alternatives(self, estimate, beam_bins, z_mm, range_limits_mm, lidar_offset: float,
+                     matcher: ScanMatcher, ranges: np.ndarray, match_tolerance: float,
+                     exclusion_m: float = 0.15,
+                     exclusion_rad: float = math.radians(15.0)) -> list[Alternative]:
+        """The best distinct poses away from `estimate`, refined, best first.
+
+        The best distinct poses farther than exclusion_m / exclusion_rad from `estimate`,
+        each refined locally, best first.
+        """
+        scores = self._score(beam_bins, z_mm, range_limits_mm, lidar_offset)
+        # Candidates: the poses within a few beams of the best (a rival explaining >= 90 % of
+        # the rays matches nearly every beam at this tolerance), best first.
+        best = np.flatnonzero(scores >= scores.max() - max(self.scored_beams // 6, 2))
+        best = best[np.argsort(-scores[best], kind="stable")][:4000]
+        chosen: list[tuple[float, float, float]] = []
+        for flat in best:
+            c, h = divmod(int(flat), self.headings)
+            x, y = self.centres[self.cells[c]]
+            theta = math.remainder(h * self.step[1], 2.0 * math.pi)
+            pose = (float(x), float(y), theta)
+            if close_poses(pose, estimate, exclusion_m, exclusion_rad):
+                continue
+            if any(close_poses(pose, other, 0.1, math.radians(10.0)) for other in chosen):
+                continue
+            chosen.append(pose)
+            if len(chosen) >= self.candidates:
+                break
+        refined = [refine(pose, matcher, ranges, match_tolerance, self.step) for pose in chosen]
+        return sorted(refined, key=lambda a: -a.match_fraction)
+
+
+def refine(pose, matcher: ScanMatcher, ranges: np.ndarray, tolerance: float,
+           step: tuple[float, float] = (0.04, math.radians(2.0)), halvings: int = 3
+           ) -> Alternative:
+    """Coordinate ascent of the exact match fraction from `pose`.
+
+    First steps half of `step` (m, rad), halved whenever no neighbour is better (`halvings` times).
+    """
+    best = (tuple(pose), matcher.match_fraction(pose, ranges, tolerance))
+    dxy, dth = step[0] / 2.0, step[1] / 2.0
+    while halvings > 0:
+        x, y, theta = best[0]
+        improved = False
+        for candidate in ((x + dxy, y, theta), (x - dxy, y, theta), (x, y + dxy, theta),
+                          (x, y - dxy, theta), (x, y, theta + dth), (x, y, theta - dth)):
+            fraction = matcher.match_fraction(candidate, ranges, tolerance)
+            if fraction > best[1]:
+                best, improved = (candidate, fraction), True
+        if not improved:
+            dxy, dth = dxy / 2.0, dth / 2.0
+            halvings -= 1
+    x, y, theta = best[0]
+    return Alternative((x, y, math.remainder(theta, 2.0 * math.pi)), best[1])
+
+
+def close_poses(a, b, distance: float, angle: float) -> bool:
+    """True if poses a and b (x, y, theta) are within `distance` (m) and `angle` (rad)."""
+    d_theta = abs(math.remainder(a[2] - b[2], 2.0 * math.pi))
+    return math.hypot(a[0] - b[0], a[1] - b[1]) <= distance and d_theta <= angle

@@ -1,0 +1,172 @@
+#!/usr/bin/env python3
+"""Benchmarks of the particle filter, each against a reference measured in the same run.
+
+1. Measurement update (the beam model on the expected-range table, 60 beams per particle):
+   particle updates per second on one core, numba kernel vs the plain numpy version of the same
+   model (target >= 5 M/s), for particles spread over the whole map (a global search: every
+   particle reads its own 720-byte table row, so memory bound) and gathered around one pose
+   (tracking: the rows stay in cache).
+2. One full filter update (move, weigh, resample, cluster, scan check) at 2,000 particles x 60
+   beams (target <= 1 ms), vs the measurement model alone.
+3. Headless localization episode (simulator + wall follower + filter) in simulated seconds per
+   CPU second (target >= 200x real time), vs the same episode without the filter.
+Rates are per CPU second of this process (time.process_time: on a shared machine the
+wall-clock figure also counts waiting for a CPU); wall-clock figures are printed alongside.
+
+Usage: .venv/bin/python scripts/bench_localization.py [--quick]
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from amr_common.world import World  # noqa: E402
+from amr_localization import beam_model  # noqa: E402
+from amr_localization.particle_filter import ParticleFilter  # noqa: E402
+from amr_sim.lidar import Lidar  # noqa: E402
+
+TARGET_UPDATES_PER_S = 5e6
+TARGET_UPDATE_MS = 1.0
+TARGET_REAL_TIME = 200.0
+
+
+def _timed(function, repeats: int) -> tuple[float, float]:
+    """Best (CPU seconds, wall seconds) per call over `repeats` calls."""
+    best_cpu = best_wall = math.inf
+    for _ in range(repeats):
+        cpu, wall = time.process_time(), time.perf_counter()
+        function()
+        best_cpu = min(best_cpu, time.process_time() - cpu)
+        best_wall = min(best_wall, time.perf_counter() - wall)
+    return best_cpu, best_wall
+
+
+def bench_measurement(particles: int, repeats: int) -> dict:
+    world = World.load("lab02")
+    pf = ParticleFilter(world, max_particles=particles)
+    pf.set_scan_geometry(0.0, 2 * math.pi / 360, 360, 0.12, 3.5)
+    lidar = Lidar(world.segments, 360, 0.0, 2 * math.pi / 360, 0.12, 3.5, 0.0)
+    ranges = lidar.scan(1.0 - 0.032, -1.0, math.pi / 2)
+    table, grid = pf.table, pf.table.grid
+    z_mm = beam_model.reading_to_mm(ranges[pf._beams], 0.12, 3.5)
+    out = np.empty(particles)
+    beams = beam_model.split_beams(pf._beam_bins, z_mm)
+
+    def run(kernel, count):
+        return lambda: kernel(pf.particles, count, table.ranges, table.angles, grid.x0,
+                              grid.y0, grid.resolution, grid.nx, grid.ny, pf._robot_ok, -0.032,
+                              *beams, pf._lut, 120, 3500, out)
+
+    run(beam_model.log_likelihoods_kernel, 16)()  # compile / load from cache
+    jit_cpu, jit_wall = _timed(run(beam_model.log_likelihoods_kernel, particles), repeats)
+    spread = pf.particles
+    rng = np.random.default_rng(0)
+    pf.particles = np.column_stack([rng.normal(1.0, 0.02, particles),
+                                    rng.normal(-1.0, 0.02, particles),
+                                    rng.normal(math.pi / 2, 0.05, particles)])
+    tracking_cpu, _ = _timed(run(beam_model.log_likelihoods_kernel, particles), repeats)
+    pf.particles = spread
+    small = min(particles, 20000)
+    np_cpu, np_wall = _timed(run(beam_model.log_likelihoods_numpy, small), max(repeats // 4, 2))
+    figures = {"particles": particles, "beams": len(pf._beams),
+               "numba_updates_per_s": particles / jit_cpu,
+               "numba_updates_per_s_wall": particles / jit_wall,
+               "numba_tracking_updates_per_s": particles / tracking_cpu,
+               "numpy_updates_per_s": small / np_cpu,
+               "numba_over_numpy": (particles / jit_cpu) / (small / np_cpu)}
+    figures["beam_evaluations_per_s"] = figures["numba_updates_per_s"] * figures["beams"]
+    return figures
+
+
+def bench_full_update(particles: int, updates: int) -> dict:
+    """Tracking a robot driving an arc in lab02's inner maze, a scan at every pose."""
+    world = World.load("lab02")
+    pose = (0.6, -0.6, math.pi)
+    pf = ParticleFilter(world, initial_pose=list(pose), tracking_particles=particles,
+                        min_particles=particles, max_particles=particles,
+                        initial_pose_sigma=[0.02, 0.02, 0.05], lidar_offset_x_m=-0.032)
+    pf.set_scan_geometry(0.0, 2 * math.pi / 360, 360, 0.12, 3.5)
+    lidar = Lidar(world.segments, 360, 0.0, 2 * math.pi / 360, 0.12, 3.5, 0.0)
+    v, w, dt = 0.1, 0.1, 0.05
+    x, y, theta = pose
+    times_cpu, times_wall = [], []
+    for k in range(updates + 20):
+        mid = theta + 0.5 * w * dt
+        x, y, theta = x + v * dt * math.cos(mid), y + v * dt * math.sin(mid), theta + w * dt
+        if k % 40 == 39:
+            w = -w  # wiggle: stay within the inner maze's corridor
+        ranges = lidar.scan(x - 0.032 * math.cos(theta), y - 0.032 * math.sin(theta), theta)
+        cpu, wall = time.process_time(), time.perf_counter()
+        pf.predict(v, w, dt)
+        pf.correct(ranges, force=True)
+        pf._resample()  # a full update resamples every time here (the worst case)
+        if k >= 20:  # after the first localization and its one exhaustive search
+            times_cpu.append(time.process_time() - cpu)
+            times_wall.append(time.perf_counter() - wall)
+    assert pf.particle_count == particles
+    return {"particles": particles, "beams": len(pf._beams), "localized": pf.localized,
+            "update_ms_median": 1e3 * float(np.median(times_cpu)),
+            "update_ms_p90": 1e3 * float(np.percentile(times_cpu, 90)),
+            "update_ms_median_wall": 1e3 * float(np.median(times_wall))}
+
+
+def bench_episode(duration: float) -> dict:
+    from amr_evaluation.episode import run_episode
+    from amr_evaluation.localization_episode import run_localization_episode
+    world = World.load("twin_maze")
+    run_localization_episode(world, "south_west", duration=2.0, record=False)  # warm caches
+    figures = {}
+    for profile in ("ideal", "turtlebot3"):
+        cpu = time.process_time()
+        result = run_localization_episode(world, "south_west", profile=profile, seed=0,
+                                          duration=duration, record=False)
+        cpu = time.process_time() - cpu
+        cpu_plain = time.process_time()
+        run_episode(world, "south_west", profile=profile, duration=duration,
+                    record_trajectory=False)
+        cpu_plain = time.process_time() - cpu_plain
+        figures[profile] = {"real_time": duration / cpu, "real_time_wall":
+                            result.real_time_factor, "without_filter_real_time":
+                            duration / cpu_plain, "filter_share_of_wall":
+                            result.filter_wall_time_s / result.wall_time_s,
+                            "time_to_localized_s": result.time_to_localized_s}
+    return figures
+
+
+def main(argv=None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true")
+    args = parser.parse_args(argv)
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    m = bench_measurement(50000, 5 if args.quick else 20)
+    print(f"measurement update: {m['numba_updates_per_s'] / 1e6:.1f} M particle updates/s at "
+          f"{m['beams']} beams spread over the map ({m['beam_evaluations_per_s'] / 1e6:.0f} M "
+          f"beams/s; wall {m['numba_updates_per_s_wall'] / 1e6:.1f} M/s), "
+          f"{m['numba_tracking_updates_per_s'] / 1e6:.1f} M/s gathered (tracking) vs numpy "
+          f"{m['numpy_updates_per_s'] / 1e6:.2f} M/s: {m['numba_over_numpy']:.0f}x "
+          f"(target >= {TARGET_UPDATES_PER_S / 1e6:.0f} M/s)")
+    u = bench_full_update(2000, 50 if args.quick else 300)
+    print(f"full update (move, weigh, resample, cluster, scan check), {u['particles']} particles "
+          f"x {u['beams']} beams: median {u['update_ms_median']:.2f} ms, p90 "
+          f"{u['update_ms_p90']:.2f} ms (wall {u['update_ms_median_wall']:.2f} ms; target <= "
+          f"{TARGET_UPDATE_MS} ms)")
+    e = bench_episode(30.0 if args.quick else 60.0)
+    for profile, f in e.items():
+        print(f"localization episode twin_maze/{profile}: {f['real_time']:.0f}x real time per "
+              f"CPU second (wall {f['real_time_wall']:.0f}x), without the filter "
+              f"{f['without_filter_real_time']:.0f}x; filter {100 * f['filter_share_of_wall']:.0f}"
+              f"% of the loop (target >= {TARGET_REAL_TIME:.0f}x)")
+    print(f"load average {load:.1f} on {os.cpu_count()} cores")
+    return {"measurement": m, "full_update": u, "episode": e, "load": load}
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,53 @@
+"""evaluate.py's command line: start poses, integer parameters, bad input.
+
+Start poses with negative numbers on a map without named starts, integer parameters; bad files,
+controllers and output folders are one-line errors with exit code 2. (The grids and config
+files themselves: test_evaluation.py.)
+"""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
+sys.path.insert(0, str(SCRIPTS))
+import evaluate  # noqa: E402
+
+
+def _evaluate(capsys, *argv):
+    code = evaluate.main([*argv, "--duration", "1", "--jobs", "1", "--no-sheet"])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def test_evaluate_runs_a_course_map_from_a_negative_pose(capsys, tmp_path, course_map):
+    code, out, err = _evaluate(capsys, "--worlds", str(course_map), "--starts", "-1.0,-1.0,1.57",
+                               "-p", "kp:=5", "--out", str(tmp_path / "out"))
+    assert code == 0, err
+    rows = json.loads((tmp_path / "out" / "results.json").read_text())["episodes"]
+    assert [(r["world"], r["start"], r["error"]) for r in rows] == [
+        ("course_map", "-1,-1,1.57", None)]
+
+
+def test_bad_inputs_are_one_line_errors_with_exit_code_2(capsys, tmp_path, monkeypatch):
+    a_file = tmp_path / "a_file"
+    a_file.write_text("")
+    numbers = tmp_path / "numbers.yaml"
+    numbers.write_text("worlds: 5\n")
+    broken = tmp_path / "broken.yaml"
+    broken.write_text("wall_follower:\n  ros__parameters:\n    kp: [1\n")
+    (tmp_path / "broken_ctrl.py").write_text("class C:\n    def compute_commands(self)\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    cases = [(["--out", str(a_file)], "--out '%s' is a file, not a folder" % a_file),
+             (["--out", str(a_file / "sub")], "cannot be written"),
+             (["--config", str(numbers)], "'worlds' must be a name"),
+             (["--config", str(tmp_path)], "cannot read config"),
+             (["--params-file", str(broken)], "not valid YAML"),
+             (["--controller", "broken_ctrl:C"], "cannot import module 'broken_ctrl': "
+                                                 "SyntaxError")]
+    for argv, message in cases:
+        code, out, err = _evaluate(capsys, "--worlds", "lab02", *argv)
+        assert code == 2, (argv, err)
+        assert len(err.strip().splitlines()) == 1 and message in err, (argv, err)
+        assert "episodes" not in out  # nothing ran

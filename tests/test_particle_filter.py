@@ -1,0 +1,302 @@
+"""The particle filter's parts without ROS.
+
+Motion model, resampling, free-space sampling, the beam model on the expected-range table, KLD
+count, the localized decision; numba and plain Python/numpy paths agree.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from amr_common.robot import ROBOT_RADIUS
+from amr_common.world import World
+from amr_localization import beam_model, motion_model, pose_search, resampling
+from amr_localization.expected_ranges import build_expected_range_table, expected_range_table
+from amr_localization.localization_check import (
+    CheckSettings,
+    LocalizedDecision,
+    ScanMatcher,
+    dominant_cluster,
+)
+from amr_localization.map_grid import in_free_space, sample_free_poses
+from amr_localization.motion_model import MotionNoise, sample_motion
+from amr_localization.particle_filter import ParticleFilter
+from amr_localization.particle_filter_params import check_parameters
+from amr_sim.lidar import Lidar
+
+
+@pytest.fixture(scope="module")
+def corridor(tmp_path_factory):
+    """A straight 0.4 m corridor, 2.4 m long, closed at both ends.
+
+    Symmetric under a half turn about its centre, and every beam endpoint of a rotated pose lies on
+    SOME wall.
+    """
+    path = tmp_path_factory.mktemp("worlds") / "corridor.yaml"
+    path.write_text("boundary: [[0, 0], [2.4, 0], [2.4, 0.4], [0, 0.4]]\n")
+    return World.load(path)
+
+
+# --- motion model ---------------------------------------------------------------------------
+
+def test_motion_model_moments():
+    rng = np.random.default_rng(0)
+    count, v, w, dt = 20000, 0.2, 0.5, 0.05
+    particles = np.zeros((count, 3))
+    noise = MotionNoise(v_per_v=0.1, v_per_w=0.0, w_per_w=0.2, w_per_v=0.0)
+    steps = 20
+    for _ in range(steps):
+        sample_motion(particles, count, v, w, dt, noise, rng)
+    sigma_v, sigma_w = noise.sigmas(v, w)
+    # Headings: a sum of independent steps, mean w T, variance steps (sigma_w dt)^2.
+    assert particles[:, 2].mean() == pytest.approx(w * dt * steps, abs=0.002)
+    assert particles[:, 2].std() == pytest.approx(sigma_w * dt * math.sqrt(steps), rel=0.05)
+    # Positions: the arc of radius v / w in the mean.
+    radius = v / w
+    angle = w * dt * steps
+    assert particles[:, 0].mean() == pytest.approx(radius * math.sin(angle), abs=0.003)
+    assert particles[:, 1].mean() == pytest.approx(radius * (1 - math.cos(angle)), abs=0.003)
+    assert particles[:, 0].std() > 0.002
+    standing = np.zeros((100, 3))
+    sample_motion(standing, 100, 0.0, 0.0, dt, MotionNoise(), rng)
+    assert not standing.any(), "no motion, no noise: particles do not diffuse at rest"
+
+
+def test_motion_kernel_equals_python():
+    rng = np.random.default_rng(1)
+    particles = rng.uniform(-3, 3, (500, 3))
+    normals = rng.standard_normal((500, 2))
+    a, b = particles.copy(), particles.copy()
+    motion_model.move(a, 500, 0.2, -1.0, 0.05, 0.02, 0.1, normals)
+    motion_model.move_python(b, 500, 0.2, -1.0, 0.05, 0.02, 0.1, normals)
+    np.testing.assert_allclose(a, b, atol=1e-12)
+    assert np.all(np.abs(a[:, 2]) <= math.pi)
+
+
+# --- resampling -----------------------------------------------------------------------------
+
+def test_low_variance_resampling_keeps_the_weights_expectation():
+    rng = np.random.default_rng(2)
+    weights = rng.random(50) ** 3
+    weights /= weights.sum()
+    for count in (50, 1000):
+        indices = np.empty(count, dtype=np.int64)
+        resampling.low_variance_indices(weights, count, float(rng.random()), indices)
+        copies = np.bincount(indices, minlength=50)
+        # Low variance: every particle is drawn floor(M w) or ceil(M w) times.
+        assert np.all(copies >= np.floor(count * weights) - 1e-9)
+        assert np.all(copies <= np.ceil(count * weights) + 1e-9)
+        python = np.empty(count, dtype=np.int64)
+        resampling.low_variance_indices_python(weights, count, 0.3, python)
+        resampling.low_variance_indices(weights, count, 0.3, indices)
+        assert np.array_equal(python, indices)
+    # The expectation over many offsets is exactly M w.
+    mean = np.zeros(50)
+    for u in np.linspace(0, 1, 400, endpoint=False):
+        resampling.low_variance_indices(weights, 10, float(u), indices[:10])
+        mean += np.bincount(indices[:10], minlength=50) / 400
+    np.testing.assert_allclose(mean, 10 * weights, atol=0.03)
+
+
+def test_kld_count_grows_with_the_occupied_bins():
+    assert resampling.kld_count(1, 0.05, 2.33) == 1
+    counts = [resampling.kld_count(k, 0.05, 2.33) for k in (2, 10, 100, 1000)]
+    assert counts == sorted(counts) and counts[-1] > 10 * counts[1]
+    rng = np.random.default_rng(3)
+    spread = np.column_stack([rng.uniform(0, 2, 3000), rng.uniform(0, 2, 3000),
+                              rng.uniform(-math.pi, math.pi, 3000)])
+    tight = np.column_stack([rng.normal(1.025, 0.005, 3000), rng.normal(1.025, 0.005, 3000),
+                             rng.normal(0.08, 0.01, 3000)])  # one bin
+    seen = np.zeros(50 * 50 * 37, dtype=np.uint8)
+    for kernel in (resampling.occupied_bins, resampling.occupied_bins_python):
+        wide = kernel(spread, 3000, 0.0, 0.0, 0.05, 0.1745, 50, 50, 37, seen)
+        narrow = kernel(tight, 3000, 0.0, 0.0, 0.05, 0.1745, 50, 50, 37, seen)
+        assert wide > 1000 and narrow == 1 and not seen.any()
+
+
+# --- the map --------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("name", ["lab02", "room_obstacles", "twin_maze"])
+def test_particles_are_never_drawn_in_walls(name):
+    world = World.load(name)
+    table = expected_range_table(world)
+    poses = sample_free_poses(world, table.grid, 5000, np.random.default_rng(4))
+    assert in_free_space(world, poses[:, :2]).all()
+    assert world.clearances(poses[:, :2]).min() >= ROBOT_RADIUS
+    assert np.all(np.abs(poses[:, 2]) <= math.pi)
+    # A global search seeded from a scan keeps to the same rule.
+    pf = ParticleFilter(world, max_particles=3000)
+    pf.set_scan_geometry(0.0, 2 * math.pi / 240, 240, 0.016, 8.0)
+    lidar = Lidar(world.segments, 240, 0.0, 2 * math.pi / 240, 0.016, 8.0, math.nan)
+    x, y, theta = next(iter(world.starts.values()))
+    pf.correct(lidar.scan(x, y, theta))
+    assert in_free_space(world, pf.particles[:, :2]).all()
+    assert world.clearances(pf.particles[:, :2]).min() >= ROBOT_RADIUS - 0.02
+
+
+def test_expected_range_table_is_the_simulators_lidar_at_cell_centres():
+    world = World.load("twin_maze_small")
+    table = build_expected_range_table(world, resolution=0.02, angles=360)
+    lidar = Lidar(world.segments, 360, 0.0, 2 * math.pi / 360, 0.0, 100.0, math.nan)
+    rng = np.random.default_rng(5)
+    inside = np.flatnonzero(table.grid.inside & (table.grid.clearance > 0.05))
+    for cell in rng.choice(inside, 20, replace=False):
+        x, y = table.grid.centres()[cell]
+        np.testing.assert_allclose(table.ranges[cell] / 1000.0, lidar.scan(x, y, 0.0),
+                                   atol=0.0006)
+
+
+# --- measurement model ----------------------------------------------------------------------
+
+def _scores(world, poses, scan_pose, kernel, lidar_offset=0.0, rays=240):
+    table = expected_range_table(world)
+    grid = table.grid
+    angles = 2 * math.pi / rays * np.arange(rays)
+    beams = np.arange(0, rays, rays // 60)
+    lidar = Lidar(world.segments, rays, 0.0, 2 * math.pi / rays, 0.016, 8.0, math.nan)
+    x, y, theta = scan_pose
+    ranges = lidar.scan(x + lidar_offset * math.cos(theta), y + lidar_offset * math.sin(theta),
+                        theta)
+    z_mm = beam_model.reading_to_mm(ranges[beams], 0.016, 8.0)
+    bins = np.remainder(angles[beams] * table.angles / (2 * math.pi), table.angles)
+    out = np.empty(len(poses))
+    kernel(np.asarray(poses, float), len(poses), table.ranges, table.angles, grid.x0, grid.y0,
+           grid.resolution, grid.nx, grid.ny, grid.robot_cells(slack=0.02), lidar_offset,
+           *beam_model.split_beams(bins, z_mm), beam_model.log_likelihood_table(0.03, 0.05), 16,
+           8000, out)
+    return out
+
+
+def test_beam_model_ranks_the_true_pose_above_rotated_poses_on_a_symmetric_corridor(corridor):
+    truth, twin = (0.71, 0.21, 0.0), (1.69, 0.19, math.pi)  # twin: half turn about the centre
+    rotated = [(0.71, 0.21, math.pi), (0.71, 0.21, math.pi / 2), (0.71, 0.21, -math.pi / 2),
+               (1.69, 0.19, 0.0)]
+    for kernel in (beam_model.log_likelihoods_kernel, beam_model.log_likelihoods_numpy,
+                   beam_model.log_likelihoods_python):
+        scores = _scores(corridor, [truth, twin] + rotated, truth, kernel)
+        assert scores[1] == pytest.approx(scores[0], abs=2.0), "the exact twin fits as well"
+        assert np.all(scores[2:] < scores[0] - 20.0), scores
+    # The twin's own scan: now the twin ranks first.
+    twin_scores = _scores(corridor, [twin, (1.69, 0.19, 0.0)], twin,
+                          beam_model.log_likelihoods_kernel)
+    assert twin_scores[1] < twin_scores[0] - 20.0
+
+
+def test_beam_model_paths_agree_and_walls_get_no_weight():
+    world = World.load("lab02")
+    rng = np.random.default_rng(6)
+    poses = np.column_stack([rng.uniform(-1.3, 1.3, 3000), rng.uniform(-1.3, 1.3, 3000),
+                             rng.uniform(-math.pi, math.pi, 3000)])
+    poses[0] = (0.0, -0.8, 0.0)  # on a wall
+    poses[1] = (5.0, 5.0, 0.0)  # off the map
+    poses[2] = (math.nan, 0.0, 0.0)
+    jit = _scores(world, poses, (1.0, -1.0, math.pi / 2), beam_model.log_likelihoods_kernel,
+                  lidar_offset=-0.032)
+    numpy = _scores(world, poses, (1.0, -1.0, math.pi / 2), beam_model.log_likelihoods_numpy,
+                    lidar_offset=-0.032)
+    np.testing.assert_allclose(jit, numpy, rtol=1e-9, atol=1e-9)
+    assert np.all(np.isneginf(jit[:3]))
+    clear = world.clearances(poses[3:, :2]) < ROBOT_RADIUS - 0.05
+    assert np.all(np.isneginf(jit[3:][clear]))
+
+
+def test_pose_scores_paths_agree():
+    world = World.load("twin_maze_small")
+    table = expected_range_table(world)
+    grid = table.grid
+    search = pose_search.PoseSearch(table, grid.robot_cells(slack=0.02), headings=36)
+    lidar = Lidar(world.segments, 240, 0.0, 2 * math.pi / 240, 0.016, 8.0, math.nan)
+    ranges = lidar.scan(1.8, 0.2, math.pi)
+    beams = np.arange(0, 240, 4)
+    z_mm = beam_model.reading_to_mm(ranges[beams], 0.016, 8.0)
+    bins = np.remainder(2 * math.pi / 240 * beams * table.angles / (2 * math.pi), table.angles)
+    outputs = []
+    for kernel in (pose_search.score_poses_kernel, pose_search.score_poses_numpy):
+        out = np.empty((len(search.cells), 36), dtype=np.int32)
+        kernel(search.cells, search.centres, 36, table.ranges, table.angles, grid.x0, grid.y0,
+               grid.resolution, grid.nx, 0.0, bins, z_mm, 60, 16, 8000, 15, out)
+        outputs.append(out)
+    assert np.array_equal(outputs[0], outputs[1])
+    assert outputs[0].max() == 60
+
+
+# --- the localized decision -----------------------------------------------------------------
+
+def test_dominant_cluster_needs_one_heavy_group():
+    rng = np.random.default_rng(7)
+    a = np.column_stack([rng.normal(0.5, 0.01, 500), rng.normal(0.5, 0.01, 500),
+                         rng.normal(3.1, 0.02, 500)])
+    a[:, 2] = np.remainder(a[:, 2] + math.pi, 2 * math.pi) - math.pi  # straddles +-pi
+    b = a + [1.0, 0.0, 0.0]
+    both = np.vstack([a, b])
+    half = dominant_cluster(both, np.full(1000, 1e-3), 0.1, 0.35)
+    assert half.share == pytest.approx(0.5, abs=0.01)
+    weights = np.r_[np.full(500, 0.0019), np.full(500, 0.0001)]
+    heavy = dominant_cluster(both, weights, 0.1, 0.35)
+    assert heavy.share == pytest.approx(0.95, abs=0.01)
+    assert heavy.pose[0] == pytest.approx(0.5, abs=0.005)
+    assert abs(abs(heavy.pose[2]) - 3.1) < 0.01, "circular mean across +-pi"
+
+
+def test_localized_decision_streaks():
+    decision = LocalizedDecision(CheckSettings(localize_updates=3, lost_updates=2,
+                                               reinit_updates=2))
+    assert decision.update(0.95, 0.99) == "" and decision.update(0.95, 0.99) == ""
+    assert decision.update(0.5, 0.99) == "", "two hypotheses: the streak restarts"
+    assert [decision.update(0.95, 0.98) for _ in range(3)] == ["", "", "candidate"]
+    assert not decision.localized
+    decision.confirm()
+    assert decision.localized
+    assert decision.update(0.95, 0.5) == "" and decision.update(0.95, 0.9) == ""
+    assert decision.update(0.95, 0.5) == "" and decision.update(0.95, 0.5) == "lost"
+    assert not decision.localized
+    assert decision.update(0.99, 0.3) == "" and decision.update(0.99, 0.3) == "reinit"
+
+
+def test_scan_matcher_explains_the_true_scan_only():
+    world = World.load("lab02")
+    matcher = ScanMatcher(world.segments, 0.0, 2 * math.pi / 360, 360, 0.12, 3.5, -0.032)
+    lidar = Lidar(world.segments, 360, 0.0, 2 * math.pi / 360, 0.12, 3.5, 0.0)
+    pose = (0.6, -0.6, 3 * math.pi / 2)
+    ranges = lidar.scan(0.6 - 0.032 * math.cos(pose[2]), -0.6 - 0.032 * math.sin(pose[2]),
+                        pose[2])
+    assert matcher.match_fraction(pose, ranges, 0.03) == 1.0
+    assert matcher.match_fraction((0.6, -0.6, math.pi / 2), ranges, 0.03) < 0.6
+
+
+# --- the filter on its own ------------------------------------------------------------------
+
+def test_parameters_are_checked_with_every_problem_named():
+    with pytest.raises(ValueError) as error:
+        check_parameters({"beams": 0, "z_random": 1.5, "initial_pose": [1, 2],
+                          "min_particles": 900, "max_particles": 100})
+    text = str(error.value)
+    for name in ("beams", "z_random", "initial_pose", "min_particles"):
+        assert name in text
+    assert check_parameters({"initial_pose": [1, 2, 3]})["initial_pose"] == (1.0, 2.0, 3.0)
+    with pytest.raises(ValueError, match="unknown"):
+        check_parameters({"no_such": 1})
+
+
+def test_adaptive_count_shrinks_when_tracking():
+    """Tracking converges to the minimum count; a search starts at the maximum.
+
+    Tracking from a known pose converges to the minimum count; a global search starts with
+    the maximum.
+    """
+    world = World.load("lab02")
+    pose = world.starts["inner"]
+    pf = ParticleFilter(world, initial_pose=list(pose), min_particles=200,
+                        tracking_particles=3000)
+    assert pf.particle_count == 3000
+    pf.set_scan_geometry(0.0, 2 * math.pi / 240, 240, 0.016, 8.0)
+    lidar = Lidar(world.segments, 240, 0.0, 2 * math.pi / 240, 0.016, 8.0, math.nan)
+    for _ in range(15):
+        pf.correct(lidar.scan(*pose), force=True)
+    assert pf.particle_count == 200
+    # A standing robot: within the expected-range table's 2 cm cells the likelihood is flat.
+    assert math.hypot(pf.estimate[0] - pose[0], pf.estimate[1] - pose[1]) < 0.03
+    assert pf.localized, "a standing robot is confirmed by repeated updates"
+    assert ParticleFilter(world).particle_count == 8000

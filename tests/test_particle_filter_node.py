@@ -1,0 +1,232 @@
+"""The particle_filter node: one /pose per synchronized pair, bad input, /initialpose, outputs."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
+from nav_msgs.msg import Odometry
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import LaserScan
+
+from amr_common.ros_conversions import (
+    laser_scan_from_profile,
+    odometry_message,
+    seconds_to_time,
+    time_to_nanoseconds,
+)
+from amr_localization.particle_filter_node import ParticleFilterNode
+from amr_sim.simulator import Simulator
+
+BEST_EFFORT = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
+
+
+def make_node(ros, **params):
+    overrides = [Parameter(name, value=value) for name, value in params.items()]
+    return ros.add(ParticleFilterNode(context=ros.context, parameter_overrides=overrides))
+
+
+class FakeGraph:
+    """The test's side: a Simulator stepped by hand, publishing like the node.
+
+    The test's side: a Simulator stepped by hand, publishing /odometry and /scan as the
+    lockstep simulator node does (both every step, the held 5 Hz scan again with turtlebot3).
+    """
+
+    def __init__(self, ros, world="lab02", start="inner", profile="turtlebot3"):
+        from amr_msgs.msg import PoseStamped
+        self.sim = Simulator(world, start=start, profile=profile, seed=1)
+        self.node = ros.node("fake_simulator")
+        self.odometry = self.node.create_publisher(Odometry, "/odometry", 10)
+        self.scan = self.node.create_publisher(LaserScan, "/scan", BEST_EFFORT)
+        self.initialpose = self.node.create_publisher(PoseWithCovarianceStamped, "/initialpose",
+                                                      10)
+        self.poses, self.amcl, self.particles = [], [], []
+        self.node.create_subscription(PoseStamped, "/pose", self.poses.append, 10)
+        self.node.create_subscription(PoseWithCovarianceStamped, "/amcl_pose",
+                                      self.amcl.append, 10)
+        self.node.create_subscription(PoseArray, "/particles", self.particles.append, 10)
+
+    def publish(self, ranges=None, **scan_fields):
+        sim = self.sim
+        stamp = seconds_to_time(sim.time)
+        _, z_v, z_w = sim.measure()
+        self.odometry.publish(odometry_message(stamp, "odom", "base_footprint",
+                                               sim.odometry_pose, (z_v, z_w)))
+        scan = laser_scan_from_profile(sim.last_scan, sim.profile, stamp=stamp,
+                                       frame_id="base_scan", scan_time=sim.dt)
+        if ranges is not None:
+            scan.ranges = [float(r) for r in ranges]
+        for name, value in scan_fields.items():
+            setattr(scan, name, value)
+        self.scan.publish(scan)
+        return time_to_nanoseconds(stamp)
+
+
+def bring_up(ros, node, graph):
+    assert node.trigger_configure().name == "SUCCESS"
+    assert node.trigger_activate().name == "SUCCESS"
+    ros.spin_until(lambda: graph.node.count_subscribers("/scan") >= 1 and
+                   graph.node.count_publishers("/pose") >= 1 and
+                   node.count_publishers("/scan") >= 1 and
+                   node.count_subscribers("/pose") >= 0, 10.0, "discovery")
+    ros.spin_for(0.3)
+
+
+def step_lockstep(ros, graph, steps, v=0.1, w=0.0, **publish_kwargs):
+    """Publish a pair, wait for its /pose, step the simulator: the lockstep protocol."""
+    stamps = []
+    for _ in range(steps):
+        before = len(graph.poses)
+        stamps.append(graph.publish(**publish_kwargs))
+        ros.spin_until(lambda: len(graph.poses) == before + 1, 5.0,
+                       f"the /pose of pair {len(stamps)}")
+        graph.sim.step(v, w)
+    return stamps
+
+
+def test_one_pose_per_synchronized_pair_stamped_like_the_scan(ros):
+    """turtlebot3 profile: a new scan every 4th step, yet every step's pair gets its /pose."""
+    node = make_node(ros, world="lab02", lidar_offset_x_m=-0.032)
+    graph = FakeGraph(ros)
+    bring_up(ros, node, graph)
+    stamps = step_lockstep(ros, graph, 24)
+    ros.spin_for(0.2)
+    assert len(graph.poses) == 24 == node.pose_count, "exactly one /pose per pair"
+    assert [time_to_nanoseconds(p.header.stamp) for p in graph.poses] == stamps
+    assert all(p.header.frame_id == "map" for p in graph.poses)
+    assert all(math.isfinite(p.pose.position.x) for p in graph.poses)
+    # 24 steps = 1.2 s = six 5 Hz scans: the held scan between them is not weighed again.
+    assert node.filter.total_updates <= 7
+    assert graph.amcl, "the estimate with covariance after measurement updates"
+    cov = np.array(graph.amcl[-1].pose.covariance).reshape(6, 6)
+    assert cov[0, 0] >= 0 and cov[1, 1] >= 0 and cov[5, 5] >= 0 and np.all(np.isfinite(cov))
+
+
+def test_bad_scans_are_skipped_with_a_message_and_poses_keep_coming(ros):
+    node = make_node(ros, world="lab02")
+    graph = FakeGraph(ros, profile="ideal")
+    bring_up(ros, node, graph)
+    step_lockstep(ros, graph, 3)
+    updates = node.filter.total_updates
+    n = graph.sim.profile.scan_rays
+    step_lockstep(ros, graph, 2, ranges=[math.nan] * n)  # no return anywhere
+    step_lockstep(ros, graph, 2, ranges=[0.0] * n)  # the LDS-01's "no return"
+    step_lockstep(ros, graph, 2, ranges=[1.0] * (n // 2))  # fewer ranges than the angles say
+    step_lockstep(ros, graph, 2, angle_increment=0.0)
+    step_lockstep(ros, graph, 2, ranges=[math.inf] * n)
+    assert node.filter.total_updates == updates, "no bad scan was weighed"
+    assert node._state_machine.current_state[1] == "active"
+    assert not any(p.localized for p in graph.poses)
+    assert all(math.isfinite(p.pose.position.x) and math.isfinite(p.pose.orientation.w)
+               for p in graph.poses)
+    step_lockstep(ros, graph, 2)  # and good scans work again
+    assert node.filter.total_updates > updates
+
+
+def test_missing_or_malformed_world_fails_configure_with_the_reason(ros, tmp_path):
+    messages = []
+    node = make_node(ros, world=str(tmp_path / "nowhere.yaml"))
+    node.get_logger().error = lambda text, **kw: messages.append(text)
+    assert node.trigger_configure().name == "FAILURE"
+    assert "not found" in messages[-1] and "nowhere.yaml" in messages[-1]
+    broken = tmp_path / "broken.yaml"
+    broken.write_text("boundary: [[0, 0], [1, 0]]\n")
+    node2 = ros.add(ParticleFilterNode("pf2", context=ros.context, parameter_overrides=[
+        Parameter("world", value=str(broken))]))
+    node2.get_logger().error = lambda text, **kw: messages.append(text)
+    assert node2.trigger_configure().name == "FAILURE"
+    assert "boundary" in messages[-1]
+    bad = ros.add(ParticleFilterNode("pf3", context=ros.context, parameter_overrides=[
+        Parameter("beams", value=0), Parameter("sigma_hit_m", value=-1.0)]))
+    bad.get_logger().error = lambda text, **kw: messages.append(text)
+    assert bad.trigger_configure().name == "FAILURE"
+    assert "beams" in messages[-1] and "sigma_hit_m" in messages[-1]
+
+
+def test_initialpose_reinitializes_around_the_given_pose(ros):
+    from amr_common.ros_conversions import yaw_to_quaternion
+    node = make_node(ros, world="lab02")
+    graph = FakeGraph(ros, profile="ideal")
+    bring_up(ros, node, graph)
+    step_lockstep(ros, graph, 2)
+    message = PoseWithCovarianceStamped()
+    message.header.frame_id = "map"
+    message.pose.pose.position.x, message.pose.pose.position.y = 0.6, -0.6
+    yaw_to_quaternion(-math.pi / 2, message.pose.pose.orientation)
+    covariance = np.zeros(36)
+    covariance[[0, 7, 35]] = [0.02 ** 2, 0.02 ** 2, 0.05 ** 2]
+    message.pose.covariance = covariance.tolist()
+    graph.initialpose.publish(message)
+    ros.spin_until(lambda: node.filter.events[-1][0] == "pose", 5.0, "re-initialization")
+    particles = node.filter.particles
+    assert np.mean(particles[:, 0]) == pytest.approx(0.6, abs=0.01)
+    assert np.mean(particles[:, 1]) == pytest.approx(-0.6, abs=0.01)
+    assert np.std(particles[:, 0]) == pytest.approx(0.02, rel=0.2), "sigma from the covariance"
+    assert not node.filter.localized, "a given pose is confirmed by the scans, not trusted"
+    # The true pose of the 'inner' start, the robot standing: the identical scan is weighed
+    # every update_max_interval_s, and the filter confirms the pose after localize_updates.
+    steps = 0
+    while not graph.poses[-1].localized and steps < 200:
+        step_lockstep(ros, graph, 1, v=0.0)
+        steps += 1
+    assert graph.poses[-1].localized
+    assert graph.poses[-1].pose.position.x == pytest.approx(graph.sim.pose[0], abs=0.03)
+    # A pose in another frame, or outside the map, is refused.
+    events = list(node.filter.events)
+    message.header.frame_id = "odom"
+    graph.initialpose.publish(message)
+    message.header.frame_id = "map"
+    message.pose.pose.position.x = 5.0
+    graph.initialpose.publish(message)
+    ros.spin_for(0.3)
+    assert node.filter.events == events and node.filter.localized
+
+
+def test_particles_are_throttled(ros):
+    node = make_node(ros, world="lab02", particles_period_s=0.5, particles_published=100)
+    graph = FakeGraph(ros, profile="ideal")
+    bring_up(ros, node, graph)
+    ros.spin_until(lambda: node._outputs["particles"].get_subscription_count() >= 1, 5.0,
+                   "the /particles subscriber")
+    step_lockstep(ros, graph, 30)  # 1.5 s of stamps
+    ros.spin_for(0.3)
+    assert 3 <= len(graph.particles) <= 4, "one per 0.5 s of stamp time"
+    assert all(len(m.poses) <= 110 for m in graph.particles)
+    assert graph.particles[0].header.frame_id == "map"
+
+
+@pytest.mark.slow
+def test_the_executable_answers_with_autostart_and_exits_cleanly_on_ctrl_c(ros, tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from tests.processes import terminate, wait_for
+
+    repo = Path(__file__).resolve().parent.parent
+    graph = FakeGraph(ros, world="twin_maze_small", start="middle", profile="ideal")
+    log = open(tmp_path / "pf.log", "w")
+    process = subprocess.Popen(
+        [str(Path(sys.executable).parent / "amr_particle_filter"), "--ros-args",
+         "-p", "autostart:=true", "-p", "world:=twin_maze_small"],
+        cwd=repo, env=dict(os.environ), stdout=log, stderr=subprocess.STDOUT)
+    try:
+        def answered():
+            graph.publish()
+            ros.spin_for(0.1)
+            return bool(graph.poses)
+
+        wait_for(answered, 30.0, "a /pose from the executable")
+        process.send_signal(signal.SIGINT)
+        process.wait(timeout=15)
+    finally:
+        terminate(process, timeout=5)
+        log.close()
+    output = (tmp_path / "pf.log").read_text()
+    assert process.returncode == 0, output
+    assert "configured: world 'twin_maze_small'" in output

@@ -1,0 +1,106 @@
+"""run_sim.py --localize, run_robot.py --localize and evaluate.py --localize end to end."""
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+import pytest
+
+SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
+sys.path.insert(0, str(SCRIPTS))
+import evaluate  # noqa: E402
+import run_robot  # noqa: E402
+import run_sim  # noqa: E402
+
+pytestmark = pytest.mark.slow
+
+
+def test_lockstep_graph_localizes_and_reports_every_pose(tmp_path):
+    report_path, plot_path = tmp_path / "loc.json", tmp_path / "loc.png"
+    exit_code = run_sim.main(["--world", "twin_maze_small", "--start", "north_west",
+                              "--localize", "--duration", "25", "--report", str(report_path),
+                              "--plot", str(plot_path)])
+    report = json.loads(report_path.read_text())
+    assert exit_code == 0
+    assert report["nodes"] == ["wall_follower", "particle_filter", "amr_simulator"]
+    # One /pose per synchronized pair: the first measurement and every step, stamped alike
+    # (the run ends before the measurement after its last step is answered).
+    estimate = report["estimate"]
+    assert len(estimate) == report["steps"] == 500
+    assert [round(row[0], 6) for row in estimate] == [round(0.05 * k, 6) for k in range(500)]
+    assert [row[0] for row in estimate[:3]] == [0.0, 0.05, 0.1]
+    metrics = report["localization"]
+    assert metrics["false_localizations"] == 0
+    assert metrics["time_to_localized_s"] is not None and metrics["time_to_localized_s"] < 20
+    assert metrics["tracking_error_mean_m"] < 0.02
+    assert report["particles_snapshot"], "the particles when the filter first declared a pose"
+    assert report["collisions"] == 0, "the wall follower keeps exploring once localized"
+    assert report["distance_m"] > 2.0
+    assert plot_path.stat().st_size > 30_000
+
+
+def test_kidnapping_in_the_ros_graph_is_reported_and_recovered(tmp_path):
+    report_path = tmp_path / "kidnap.json"
+    run_sim.main(["--world", "maze_deadends", "--start", "south_west", "--localize",
+                  "--kidnap", f"15,1.4,1.0,{math.pi / 2}", "--duration", "45",
+                  "--report", str(report_path)])
+    metrics = json.loads(report_path.read_text())["localization"]
+    assert metrics["time_to_localized_s"] < 15
+    assert metrics["loss_reported_after_s"] <= 2.0
+    assert metrics["relocalized_after_s"] is not None and metrics["relocalized_after_s"] < 30
+    assert metrics["false_localizations"] == 0
+
+
+def test_record_holds_pose_and_particles(tmp_path):
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+
+    record = tmp_path / "loc.mcap"
+    run_sim.main(["--world", "twin_maze_small", "--localize", "--duration", "3", "--record",
+                  str(record)])
+    typestore = get_typestore(Stores.ROS2_JAZZY)
+    with AnyReader([record], default_typestore=typestore) as reader:
+        counts = {c.topic: c.msgcount for c in reader.connections}
+        types = {c.topic: c.msgtype for c in reader.connections}
+    assert 59 <= counts["/pose"] <= 61 and types["/pose"] == "amr_msgs/msg/PoseStamped"
+    assert counts["/particles"] >= 6 and types["/particles"] == "geometry_msgs/msg/PoseArray"
+    assert counts["/amcl_pose"] >= 1
+
+
+def test_realtime_rehearsal_runs_the_robot_graph_with_the_filter(tmp_path):
+    report_path = tmp_path / "rehearsal.json"
+    exit_code = run_sim.main(["--world", "twin_maze_small", "--profile", "turtlebot3",
+                              "--realtime", "--localize", "--duration", "10",
+                              "--report", str(report_path)])
+    report = json.loads(report_path.read_text())
+    assert exit_code == 0
+    assert report["nodes"] == ["amr_odometry", "wall_follower", "particle_filter",
+                               "amr_simulator"]
+    # Real time: a /pose per synchronized /odometry + 5 Hz /scan pair.
+    assert 35 <= len(report["estimate"]) <= 55
+    assert report["localization"]["false_localizations"] == 0
+    assert report["distance_m"] > 0.5
+
+
+def test_run_robot_localize_needs_a_world(capsys):
+    with pytest.raises(SystemExit):
+        run_robot.parse_args(["--localize"])
+    assert "--world" in capsys.readouterr().err
+    args = run_robot.parse_args(["--localize", "--world", "lab02", "--pf-param", "beams:=90"])
+    assert args.localize and args.pf_overrides == {"beams": 90}
+
+
+def test_evaluate_localize_writes_the_metrics_as_columns(tmp_path):
+    out = tmp_path / "eval"
+    exit_code = evaluate.main(["--localize", "--worlds", "twin_maze_small", "--starts",
+                               "north_west", "--profiles", "ideal,turtlebot3", "--seeds", "0",
+                               "--duration", "20", "--jobs", "1", "--out", str(out)])
+    assert exit_code == 0
+    data = json.loads((out / "results.json").read_text())
+    assert data["summary"]["episodes"] == 2 and data["summary"]["false_localizations"] == 0
+    header = (out / "results.csv").read_text().splitlines()[0].split(",")
+    for column in ("time_to_localized_s", "false_localizations", "tracking_error_mean_m",
+                   "tracking_error_p95_m", "heading_error_p95_deg", "relocalization_times_s"):
+        assert column in header
