@@ -23,11 +23,11 @@ from typing import Any
 
 import numpy as np
 from nav_msgs.msg import Path
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import LaserScan
 
 from amr_common.node_runner import run_lifecycle_node
+from amr_common.parameters import declare_parameters, read_parameters
 from amr_common.qos import LATCHED, RELIABLE_10, scan_qos
 from amr_common.ros_conversions import (
     path_points,
@@ -54,7 +54,6 @@ _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
     "scan_topic": ("/scan", "sensor_msgs/LaserScan input for the proximity slow-down"),
     "cmd_vel_topic": ("/cmd_vel", "Velocity command output"),
 }
-_NUMBERS = {"dt", "data_timeout"} | set(PurePursuit.parameter_descriptions())
 
 
 class PurePursuitNode(LifecycleNode):
@@ -66,12 +65,7 @@ class PurePursuitNode(LifecycleNode):
     def __init__(self, node_name: str = "pure_pursuit", **kwargs) -> None:
         """Declare the parameters; nothing is created before on_configure."""
         super().__init__(node_name, **kwargs)
-        tuning = {name: entry for name, entry in PurePursuit.parameter_descriptions().items()}
-        for name, (default, description) in {**_NODE_PARAMETERS, **tuning}.items():
-            if not self.has_parameter(name):
-                self.declare_parameter(name, default, ParameterDescriptor(
-                    description=description, dynamic_typing=name in _NUMBERS))
-        self._tuning_names = list(tuning)
+        declare_parameters(self, {**_NODE_PARAMETERS, **PurePursuit.parameter_descriptions()})
         self._reset_runtime()
 
     def _reset_runtime(self) -> None:
@@ -93,12 +87,14 @@ class PurePursuitNode(LifecycleNode):
         Builds the PurePursuit, the /cmd_vel lifecycle publisher and the /pose, /path and /scan
         subscriptions. FAILURE with a logged reason on bad parameters.
         """
-        p = {name: self.get_parameter(name).value for name in _NODE_PARAMETERS}
-        problems = command_parameter_problems(p)
-        tuning = {name: self.get_parameter(name).value for name in self._tuning_names}
+        p, problems = read_parameters(self, _NODE_PARAMETERS)
+        tuning, tuning_problems = read_parameters(self, PurePursuit.parameter_descriptions())
+        problems += tuning_problems
+        if not problems:
+            problems = command_parameter_problems(p)
         try:
             pursuit = PurePursuit(p["dt"] if not problems else 0.05, **tuning)
-        except ValueError as exc:
+        except (TypeError, ValueError) as exc:
             problems.append(str(exc))
         if problems:
             self.get_logger().error("configure failed: " + "; ".join(problems))

@@ -27,10 +27,8 @@ import sys
 from typing import Any
 
 import numpy as np
-from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
-from rclpy.publisher import Publisher
 from sensor_msgs.msg import LaserScan
 
 from amr_common import message_filters
@@ -42,8 +40,8 @@ from amr_common.controller_loader import (
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameters import declare_parameters, read_parameters
 from amr_common.qos import RELIABLE_10, scan_qos
-from amr_common.robot import MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED
 from amr_common.tf import StaticTransformListener
+from amr_control.command_output import CommandOutput, command_parameter_problems, limit_command
 
 _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
     "simulation": (True, "true: compute on each synchronized set (lockstep with the simulator);"
@@ -126,7 +124,7 @@ class WallFollowerNode(LifecycleNode):
     # --- lifecycle -------------------------------------------------------------------------
     def _reset_runtime(self) -> None:
         self.controller = None
-        self._cmd_publisher: Publisher | None = None
+        self._output: CommandOutput | None = None
         self._subscribers: list = []
         self._synchronizer = None
         self._timer = None
@@ -154,16 +152,11 @@ class WallFollowerNode(LifecycleNode):
         if problems:
             self.get_logger().error("configure failed: " + "; ".join(problems))
             return TransitionCallbackReturn.FAILURE
-        if not (math.isfinite(p["dt"]) and p["dt"] > 0):
-            problems.append(f"dt must be a positive number of seconds (got {p['dt']})")
+        problems = command_parameter_problems(p)
         if p["queue_size"] < 1:
             problems.append(f"queue_size must be >= 1 (got {p['queue_size']})")
         if not math.isfinite(p["slop"]):
             problems.append(f"slop must be finite (got {p['slop']})")
-        if p["angular_sign"] not in (1, -1):
-            problems.append(f"angular_sign must be 1 or -1 (got {p['angular_sign']})")
-        if not (math.isfinite(p["data_timeout"]) and p["data_timeout"] > 0):
-            problems.append(f"data_timeout must be > 0 s (got {p['data_timeout']})")
         if problems:
             self.get_logger().error("configure failed: " + "; ".join(problems))
             return TransitionCallbackReturn.FAILURE
@@ -184,11 +177,7 @@ class WallFollowerNode(LifecycleNode):
         self.stop_when_localized = bool(p["stop_when_localized"])
         slop = p["slop"] if p["slop"] >= 0 else (10.0 if self.simulation else 0.15)
 
-        self._cmd_message = TwistStamped() if self.stamped else Twist()
-        if self.stamped:
-            self._cmd_message.header.frame_id = "base_footprint"
-        self._cmd_publisher = self.create_lifecycle_publisher(
-            TwistStamped if self.stamped else Twist, p["cmd_vel_topic"], RELIABLE_10)
+        self._output = CommandOutput(self, p["cmd_vel_topic"], self.stamped, self.angular_sign)
         self._subscribers = [
             message_filters.Subscriber(self, Odometry, p["odometry_topic"],
                                        qos_profile=RELIABLE_10),
@@ -266,8 +255,8 @@ class WallFollowerNode(LifecycleNode):
             subscriber.close()
         if self._static_listener is not None:
             self._static_listener.close()
-        if self._cmd_publisher is not None:
-            self.destroy_lifecycle_publisher(self._cmd_publisher)
+        if self._output is not None:
+            self._output.destroy()
         self._reset_runtime()
 
     # --- data path -------------------------------------------------------------------------
@@ -376,33 +365,18 @@ class WallFollowerNode(LifecycleNode):
         if not (math.isfinite(v) and math.isfinite(w)):
             self.get_logger().warning(f"controller returned non-finite ({v}, {w}): commanding "
                                       f"zero", throttle_duration_sec=2.0)
-            return 0.0, 0.0
-        return (min(max(v, -MAX_LINEAR_SPEED), MAX_LINEAR_SPEED),
-                min(max(w, -MAX_ANGULAR_SPEED), MAX_ANGULAR_SPEED))
+        return limit_command(v, w)
 
     def _publish(self, v: float, w: float, stamp, force: bool = False) -> None:
-        if self._cmd_publisher is None:
-            return
-        # One message object reused: publish() serializes it at once, and building a
-        # TwistStamped per step is a noticeable share of the lockstep loop.
-        msg = self._cmd_message
-        twist = msg.twist if self.stamped else msg
-        twist.linear.x = v
-        twist.angular.z = self.angular_sign * w
-        if self.stamped:
-            msg.header.stamp = stamp
-        if force:  # a final zero goes out even when the lifecycle publisher is disabled
-            Publisher.publish(self._cmd_publisher, msg)
-        else:
-            self._cmd_publisher.publish(msg)
+        if self._output is not None:
+            self._output.publish(v, w, stamp, force=force)
 
     def _publish_zero(self, why: str, force: bool = False) -> None:
-        if self._cmd_publisher is None:
+        if self._output is None:
             return
-        self.get_logger().info(f"{why}: commanding zero velocity")
         stamp = self._last_stamp if self.simulation and self._last_stamp is not None else \
             self.get_clock().now().to_msg()
-        self._publish(0.0, 0.0, stamp, force=force)
+        self._output.publish_zero(why, stamp, force=force)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -21,10 +21,10 @@ from typing import Any
 
 from geometry_msgs.msg import PoseStamped as GoalPoseStamped
 from nav_msgs.msg import Path
-from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
 from amr_common.node_runner import run_lifecycle_node
+from amr_common.parameters import declare_parameters, read_parameters
 from amr_common.qos import LATCHED, RELIABLE_10
 from amr_common.ros_conversions import path_message
 from amr_common.world import World
@@ -42,8 +42,6 @@ _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
     "goal_pose_topic": ("/goal_pose", "geometry_msgs/PoseStamped goal input"),
     "path_topic": ("/path", "nav_msgs/Path output (transient local)"),
 }
-_NUMBERS = {"goal"} | {name for name, (default, _) in Planner.parameter_descriptions().items()
-                       if isinstance(default, float)}
 
 
 class PlannerNode(LifecycleNode):
@@ -52,16 +50,7 @@ class PlannerNode(LifecycleNode):
     def __init__(self, node_name: str = "planner", **kwargs) -> None:
         """Declare the parameters; nothing is built before on_configure."""
         super().__init__(node_name, **kwargs)
-        tuning = Planner.parameter_descriptions()
-        for name, (default, description) in {**_NODE_PARAMETERS, **tuning}.items():
-            if self.has_parameter(name):
-                continue
-            descriptor = ParameterDescriptor(description=description,
-                                             dynamic_typing=name in _NUMBERS)
-            if name == "goal":
-                descriptor.type = ParameterType.PARAMETER_DOUBLE_ARRAY
-            self.declare_parameter(name, default, descriptor)
-        self._tuning_names = list(tuning)
+        declare_parameters(self, {**_NODE_PARAMETERS, **Planner.parameter_descriptions()})
         self._reset_runtime()
 
     def _reset_runtime(self) -> None:
@@ -85,8 +74,11 @@ class PlannerNode(LifecycleNode):
         /goal_pose subscriptions. FAILURE with a logged reason on a bad world or parameter.
         """
         self._reset_runtime()
-        p = {name: self.get_parameter(name).value for name in _NODE_PARAMETERS}
-        tuning = {name: self.get_parameter(name).value for name in self._tuning_names}
+        p, problems = read_parameters(self, _NODE_PARAMETERS)
+        tuning, tuning_problems = read_parameters(self, Planner.parameter_descriptions())
+        if problems + tuning_problems:
+            self.get_logger().error("configure failed: " + "; ".join(problems + tuning_problems))
+            return TransitionCallbackReturn.FAILURE
         try:
             world = World.load(p["world"])
             self.goal = _configured_goal(world, p["goal"], p["goal_name"])
