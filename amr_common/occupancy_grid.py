@@ -30,27 +30,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from amr_common.geometry import points_in_polygon
-from amr_common.jit import HAVE_NUMBA, jit
-from amr_common.raycast import nearest_wall_kernel
+from amr_common.jit import HAVE_NUMBA
+from amr_common.raycast import clearances
 from amr_common.world import World
 
 FREE, OCCUPIED, UNKNOWN = 0, 100, -1  # nav_msgs/OccupancyGrid values
-
-
-def _distance_field_python(segments, x0, y0, resolution, out):
-    """out[row, col] = distance from (x0 + col * res, y0 + row * res) to the nearest segment."""
-    for row in range(out.shape[0]):
-        y = y0 + row * resolution
-        for col in range(out.shape[1]):
-            out[row, col] = nearest_wall_kernel(segments, x0 + col * resolution, y)[0]
-
-
-_distance_field = jit(_distance_field_python)
-
-
-def _distance_field_numpy(world: World, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
-    gx, gy = np.meshgrid(xs, ys)
-    return world.clearances(np.column_stack([gx.ravel(), gy.ravel()])).reshape(gx.shape)
 
 
 @dataclass(frozen=True)
@@ -82,16 +66,13 @@ class OccupancyGrid:
         width, height = last[0] - first[0] + 1, last[1] - first[1] + 1
         xs = (first[0] + np.arange(width)) * resolution
         ys = (first[1] + np.arange(height)) * resolution
-        if HAVE_NUMBA:
-            distance = np.empty((height, width))
-            _distance_field(world.segments, float(xs[0]), float(ys[0]), resolution, distance)
-        else:
-            distance = _distance_field_numpy(world, xs, ys)
         gx, gy = np.meshgrid(xs, ys)
+        centres = np.column_stack([gx.ravel(), gy.ravel()])
+        distance = (clearances(world.segments, centres) if HAVE_NUMBA
+                    else world.clearances(centres)).reshape(height, width)
         in_boundary = np.ones((height, width), dtype=bool) if world.boundary is None else \
             points_in_polygon(world.boundary, gx, gy)
-        inside = world.contains_points(np.column_stack([gx.ravel(), gy.ravel()]))
-        inside = inside.reshape(height, width)
+        inside = world.contains_points(centres).reshape(height, width)
         origin = (float(xs[0] - 0.5 * resolution), float(ys[0] - 0.5 * resolution))
         walls = _wall_cells(world.segments, origin, resolution, (height, width))
         return cls(resolution, origin, inside & ~walls, np.where(inside, distance, 0.0),

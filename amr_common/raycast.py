@@ -91,6 +91,17 @@ scan_kernel = jit(scan_python)
 nearest_wall_kernel = jit(nearest_wall_python)
 
 
+def clearances_python(segments, points):
+    """Distance from each point of a (K, 2) array to the nearest segment: a (K,) array."""
+    out = np.empty(points.shape[0])
+    for k in range(points.shape[0]):
+        out[k] = nearest_wall_kernel(segments, points[k, 0], points[k, 1])[0]
+    return out
+
+
+clearances = jit(clearances_python)
+
+
 def scan_numpy(segments, ox, oy, theta, base_cos, base_sin, range_min, range_max, no_return,
                noise, out):
     """The same maths as a rays x segments matrix (fallback without numba)."""

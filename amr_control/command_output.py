@@ -74,12 +74,16 @@ class CommandOutput:
         else:
             self._publisher.publish(msg)
 
-    def publish_zero(self, why: str, stamp, force: bool = False) -> None:
-        """Send a zero command and log why."""
+    def publish_zero(self, why: str, stamp=None, force: bool = False) -> None:
+        """Send a zero command and log why.
+
+        stamp: the newest measurement's simulated stamp in lockstep, None for the node's clock.
+        """
         if self._publisher is None:
             return
         self.node.get_logger().info(f"{why}: commanding zero velocity")
-        self.publish(0.0, 0.0, stamp, force=force)
+        self.publish(0.0, 0.0, stamp if stamp is not None else
+                     self.node.get_clock().now().to_msg(), force=force)
 
     def destroy(self) -> None:
         """Release the publisher (on_cleanup / on_shutdown). Idempotent."""

@@ -372,11 +372,8 @@ class WallFollowerNode(LifecycleNode):
             self._output.publish(v, w, stamp, force=force)
 
     def _publish_zero(self, why: str, force: bool = False) -> None:
-        if self._output is None:
-            return
-        stamp = self._last_stamp if self.simulation and self._last_stamp is not None else \
-            self.get_clock().now().to_msg()
-        self._output.publish_zero(why, stamp, force=force)
+        if self._output is not None:
+            self._output.publish_zero(why, self._last_stamp if self.simulation else None, force)
 
 
 def main(args: list[str] | None = None) -> int:

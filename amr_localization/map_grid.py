@@ -14,35 +14,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from amr_common.jit import jit
-from amr_common.raycast import nearest_wall
+from amr_common.raycast import clearances
 from amr_common.robot import ROBOT_RADIUS
 from amr_common.world import World
 
 
-def inside_polygon(polygon: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Even-odd test of many points (K, 2) against one closed polygon (M, 2) -> (K,) bool."""
-    px, py = points[:, 0], points[:, 1]
-    inside = np.zeros(len(points), dtype=bool)
-    x1, y1 = polygon[:, 0], polygon[:, 1]
-    x2, y2 = np.roll(x1, -1), np.roll(y1, -1)
-    for ax, ay, bx, by in zip(x1, y1, x2, y2):
-        if ay == by:
-            continue  # a horizontal edge never crosses the ray
-        crosses = (ay > py) != (by > py)
-        x_cross = ax + (py - ay) * (bx - ax) / (by - ay)
-        inside ^= crosses & (px < x_cross)
-    return inside
-
-
 def in_free_space(world: World, points: np.ndarray) -> np.ndarray:
     """(K,) bool: each point inside the world's boundary and outside all of its holes."""
-    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    free = np.ones(len(points), dtype=bool) if world.boundary is None else \
-        inside_polygon(world.boundary, points)
-    for hole in world.holes:
-        free &= ~inside_polygon(hole, points)
-    return free
+    return world.contains_points(points)
 
 
 @dataclass(frozen=True)
@@ -103,15 +82,6 @@ def build_map_grid(world: World, resolution: float, margin: float = 0.1) -> MapG
     clearance = np.full(len(centres), -1.0)
     clearance[inside] = clearances(world.segments, centres[inside])
     return MapGrid(x0, y0, float(resolution), nx, ny, inside, clearance)
-
-
-@jit
-def clearances(segments, points):
-    """Distance from each point of a (K, 2) array to the nearest of the wall segments."""
-    out = np.empty(points.shape[0])
-    for k in range(points.shape[0]):
-        out[k] = nearest_wall(segments, points[k, 0], points[k, 1])[0]
-    return out
 
 
 def sample_free_poses(world: World, grid: MapGrid, count: int, rng: np.random.Generator,

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from amr_common.raycast import clearances
 from amr_common.robot import ROBOT_RADIUS
 from amr_common.world import World
 from amr_localization.ambiguity import TRACK_ANGLE_RAD, TRACK_DISTANCE_M, AmbiguityGuard
@@ -36,7 +37,7 @@ from amr_localization.localization_check import (
     ScanMatcher,
     dominant_cluster,
 )
-from amr_localization.map_grid import clearances, sample_free_poses
+from amr_localization.map_grid import sample_free_poses
 from amr_localization.motion_model import MotionNoise, sample_motion
 from amr_localization.particle_filter_params import check_parameters
 from amr_localization.pose_search import PoseSearch, refine

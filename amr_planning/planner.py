@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from amr_common import raycast
 from amr_common.occupancy_grid import OccupancyGrid
 from amr_common.raycast import nearest_wall_kernel
 from amr_common.robot import ROBOT_RADIUS
@@ -201,9 +202,9 @@ class Planner:
             points = smoothing.fillet_and_sample(
                 self.segments, corners, p["path_spacing_m"], p["min_turn_radius_m"],
                 p["max_turn_radius_m"], cap, floor, tol, ds)
-        clearances = smoothing.path_clearances(self.segments, points)
+        clearance = raycast.clearances(self.segments, np.ascontiguousarray(points))
         length = float(np.hypot(*np.diff(points, axis=0).T).sum()) if len(points) > 1 else 0.0
-        return Plan(points=points, length_m=length, min_clearance_m=float(clearances.min()),
+        return Plan(points=points, length_m=length, min_clearance_m=float(clearance.min()),
                     cost=cost, grid_path=grid_path, expanded=expanded,
                     search_time_s=search_time, total_time_s=time.perf_counter() - began,
                     algorithm=p["algorithm"])

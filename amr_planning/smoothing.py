@@ -23,7 +23,7 @@ import math
 import numpy as np
 
 from amr_common.jit import jit
-from amr_common.raycast import nearest_wall_kernel
+from amr_common.raycast import clearances, nearest_wall_kernel
 
 _MAX_ARC_STEP_RAD = 0.25
 
@@ -137,9 +137,8 @@ def simplify(segments: np.ndarray, points: np.ndarray, cap: float, floor: float,
     points = np.ascontiguousarray(points, dtype=np.float64)
     if len(points) <= 2:
         return points.copy()
-    clearances = np.array([nearest_wall_kernel(segments, x, y)[0] for x, y in points])
     keep = np.zeros(len(points), dtype=np.bool_)
-    _simplify(segments, points, clearances, cap, floor, tolerance, ds, keep)
+    _simplify(segments, points, clearances(segments, points), cap, floor, tolerance, ds, keep)
     return points[keep]
 
 
@@ -202,9 +201,4 @@ def _sample_arc(a: np.ndarray, u: np.ndarray, turn: float, radius: float,
     return centre + radius * np.column_stack([np.cos(angles), np.sin(angles)])
 
 
-def path_clearances(segments: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Exact distance to the nearest wall of each point."""
-    return np.array([nearest_wall_kernel(segments, float(x), float(y))[0] for x, y in points])
-
-
-__all__ = ["simplify", "fillet_and_sample", "path_clearances"]
+__all__ = ["simplify", "fillet_and_sample"]

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from amr_common import occupancy_grid
+from amr_common import occupancy_grid, raycast
 from amr_common.geometry import points_in_polygon
 from amr_common.occupancy_grid import OccupancyGrid
 from amr_common.world import World, bundled_worlds
@@ -60,16 +60,12 @@ def test_walls_are_occupied_lines_and_values_follow_the_nav_msgs_layout():
     assert values[grid.cell_of(-1.2, 0.0)] == occupancy_grid.OCCUPIED  # the boundary wall
 
 
-def test_compiled_and_numpy_distance_fields_agree():
+def test_compiled_and_python_clearances_agree():
     world = World.load("room_obstacles")
-    xs, ys = np.arange(0, 4.0, 0.1), np.arange(0, 3.0, 0.1)
-    compiled = np.empty((len(ys), len(xs)))
-    occupancy_grid._distance_field(world.segments, 0.0, 0.0, 0.1, compiled)
-    python = np.empty_like(compiled)
-    occupancy_grid._distance_field_python(world.segments, 0.0, 0.0, 0.1, python)
-    reference = occupancy_grid._distance_field_numpy(world, xs, ys)
-    assert np.allclose(compiled, python, atol=1e-12)
-    assert np.allclose(compiled, reference, atol=1e-12)
+    points = np.random.default_rng(2).uniform((0, 0), (4, 3), size=(300, 2))
+    compiled = raycast.clearances(world.segments, points)
+    assert np.allclose(compiled, raycast.clearances_python(world.segments, points), atol=1e-12)
+    assert np.allclose(compiled, world.clearances(points), atol=1e-12)
 
 
 @pytest.mark.parametrize("resolution", [0.0, -0.02, float("nan"), "2cm"])
