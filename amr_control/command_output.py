@@ -1,7 +1,8 @@
 """The /cmd_vel end of the controller nodes (wall follower, pure pursuit).
 
 One publisher, one reused message, the node parameters every commanding node checks the same
-way, and the forced final zero a robot without a command timeout needs.
+way, the forced final zero a robot without a command timeout needs, and the lifecycle callbacks
+that start and stop commanding (CommandingNode).
 """
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import math
 from typing import Any
 
 from geometry_msgs.msg import Twist, TwistStamped
-from rclpy.lifecycle import LifecycleNode
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.publisher import Publisher
 
 from amr_common.qos import RELIABLE_10
@@ -92,4 +93,67 @@ class CommandOutput:
             self.node.destroy_lifecycle_publisher(publisher)
 
 
-__all__ = ["CommandOutput", "command_parameter_problems", "limit_command"]
+class CommandingNode:
+    """The lifecycle callbacks of a node that commands the robot.
+
+    A mixin listed before the node's LifecycleNode base. The node's on_configure sets
+    `simulation`, `dt` and `_output` (a CommandOutput); the node keeps `_active`, `_timer`,
+    `_latest` (its newest stored input) and `_last_stamp` (the newest answered stamp in
+    lockstep), and provides `_on_timer` (robot mode) and `_release` (destroys what on_configure
+    created, the timer first).
+    """
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Enable /cmd_vel and start commanding.
+
+        Forgets any stored input; in robot mode creates the control timer (every dt). In
+        simulation mode each input is answered as it comes.
+        """
+        result = super().on_activate(state)
+        self._active = True
+        self._latest = None
+        if not self.simulation:
+            self._timer = self.create_timer(self.dt, self._on_timer)
+        return result
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Stop commanding: destroy the control timer and send a zero command.
+
+        The zero goes out while the publisher is still enabled; then the publisher is disabled.
+        What on_configure created stays for a later activate.
+        """
+        self._stop_timer()
+        self._publish_zero("deactivating")  # before the publisher goes quiet
+        self._active = False
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Send a zero command, then release everything on_configure created.
+
+        The zero is sent even though the publisher is disabled (inactive state).
+        """
+        self._publish_zero("cleaning up", force=True)
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """From any state (Ctrl-C included): stop, send a final zero command, release all.
+
+        The timer is destroyed first so no command follows the zero.
+        """
+        self._stop_timer()
+        self._publish_zero("shutting down", force=True)
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def _stop_timer(self) -> None:
+        if self._timer is not None:
+            self.destroy_timer(self._timer)
+            self._timer = None
+
+    def _publish_zero(self, why: str, force: bool = False) -> None:
+        if self._output is not None:
+            self._output.publish_zero(why, self._last_stamp if self.simulation else None, force)
+
+
+__all__ = ["CommandOutput", "CommandingNode", "command_parameter_problems", "limit_command"]

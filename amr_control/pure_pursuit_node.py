@@ -35,7 +35,12 @@ from amr_common.ros_conversions import (
     scan_ranges,
     time_to_nanoseconds,
 )
-from amr_control.command_output import CommandOutput, command_parameter_problems, limit_command
+from amr_control.command_output import (
+    CommandingNode,
+    CommandOutput,
+    command_parameter_problems,
+    limit_command,
+)
 from amr_control.pure_pursuit import PurePursuit, scan_clearance
 
 _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
@@ -56,7 +61,7 @@ _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
 }
 
 
-class PurePursuitNode(LifecycleNode):
+class PurePursuitNode(CommandingNode, LifecycleNode):
     """Follows /path with a regulated pure pursuit while /pose is localized (module docstring).
 
     Parameters: the node's own (simulation, dt, topics, ...) and every PurePursuit tuning value.
@@ -118,40 +123,6 @@ class PurePursuitNode(LifecycleNode):
                                f"{pursuit.params['max_lookahead_m']} m, up to "
                                f"{pursuit.params['max_linear_speed_mps']} m/s")
         return TransitionCallbackReturn.SUCCESS
-
-    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Enable /cmd_vel; in robot mode start the control timer."""
-        result = super().on_activate(state)
-        self._active = True
-        self._latest = None
-        if not self.simulation:
-            self._timer = self.create_timer(self.dt, self._on_timer)
-        return result
-
-    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Stop the timer and send a zero command before /cmd_vel goes quiet."""
-        self._stop_timer()
-        self._publish_zero("deactivating")
-        self._active = False
-        return super().on_deactivate(state)
-
-    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Send a forced zero command, then release the publisher and subscriptions."""
-        self._publish_zero("cleaning up", force=True)
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
-
-    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Send a forced zero command (Ctrl-C included), then release everything."""
-        self._stop_timer()
-        self._publish_zero("shutting down", force=True)
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
-
-    def _stop_timer(self) -> None:
-        if self._timer is not None:
-            self.destroy_timer(self._timer)
-            self._timer = None
 
     def _release(self) -> None:
         self._stop_timer()
@@ -280,9 +251,6 @@ class PurePursuitNode(LifecycleNode):
                 f"farther than {self.pursuit.params['max_path_deviation_m']} m from the path: "
                 f"commanding zero until back on it or a new path comes")
 
-    def _publish_zero(self, why: str, force: bool = False) -> None:
-        if self._output is not None:
-            self._output.publish_zero(why, self._last_stamp if self.simulation else None, force)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -41,7 +41,12 @@ from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameters import declare_parameters, read_parameters
 from amr_common.qos import RELIABLE_10, scan_qos
 from amr_common.tf import StaticTransformListener
-from amr_control.command_output import CommandOutput, command_parameter_problems, limit_command
+from amr_control.command_output import (
+    CommandingNode,
+    CommandOutput,
+    command_parameter_problems,
+    limit_command,
+)
 
 _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
     "simulation": (True, "true: compute on each synchronized set (lockstep with the simulator);"
@@ -97,7 +102,7 @@ def parameter_names(controller_class: type) -> list[str]:
     return sorted({*_NODE_PARAMETERS, *tuning_table(controller_class), "use_sim_time"})
 
 
-class WallFollowerNode(LifecycleNode):
+class WallFollowerNode(CommandingNode, LifecycleNode):
     """The wall follower as a lifecycle node: synchronized /odometry + /scan in, /cmd_vel out.
 
     __init__ declares the node's parameters and, when the controller class describes them
@@ -198,56 +203,6 @@ class WallFollowerNode(LifecycleNode):
             f"configured: {mode}, controller {p['controller']}, slop {slop} s, /cmd_vel as "
             f"{'TwistStamped' if self.stamped else 'Twist'}, angular_sign {self.angular_sign}")
         return TransitionCallbackReturn.SUCCESS
-
-    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Enable the /cmd_vel publisher and start commanding.
-
-        Forgets any stored measurement; in robot mode creates the control timer (every dt,
-        zero until fresh data arrives). In simulation mode each synchronized set is answered.
-        """
-        result = super().on_activate(state)
-        self._active = True
-        self._latest = None
-        if not self.simulation:
-            self._timer = self.create_timer(self.dt, self._on_timer)
-        return result
-
-    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Stop commanding: destroy the control timer and send a zero command.
-
-        The zero goes out while the publisher is still enabled; then the publisher is
-        disabled. The controller, publisher and subscriptions stay for a later activate.
-        """
-        self._stop_timer()
-        self._publish_zero("deactivating")  # before the publisher goes quiet
-        self._active = False
-        return super().on_deactivate(state)
-
-    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Send a zero command, then release everything configure created.
-
-        The zero is sent even though the publisher is disabled (inactive state). Released:
-        the timer, the subscriptions and synchronizer, the publisher and the controller.
-        """
-        self._publish_zero("cleaning up", force=True)
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
-
-    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """From any state (Ctrl-C included): stop, send a final zero command, release all.
-
-        The timer is destroyed first so no command follows the zero; then the subscriptions,
-        synchronizer, publisher and controller are released as in cleanup.
-        """
-        self._stop_timer()
-        self._publish_zero("shutting down", force=True)
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
-
-    def _stop_timer(self) -> None:
-        if self._timer is not None:
-            self.destroy_timer(self._timer)
-            self._timer = None
 
     def _release(self) -> None:
         self._stop_timer()
@@ -371,9 +326,6 @@ class WallFollowerNode(LifecycleNode):
         if self._output is not None:
             self._output.publish(v, w, stamp, force=force)
 
-    def _publish_zero(self, why: str, force: bool = False) -> None:
-        if self._output is not None:
-            self._output.publish_zero(why, self._last_stamp if self.simulation else None, force)
 
 
 def main(args: list[str] | None = None) -> int:
