@@ -52,7 +52,7 @@ def draw_world(ax, world: World, show_starts: bool = True, show_grid: bool = Fal
         for name, (x, y) in world.goals.items():
             _draw_goal(ax, x, y)
             ax.annotate(name, (x, y), xytext=(6, -10), textcoords="offset points", fontsize=8,
-                        color="darkgoldenrod", zorder=6)
+                        color="darkred", zorder=6)
         if world.goal is not None and world.goal not in world.goals.values():
             _draw_goal(ax, *world.goal)
 
@@ -68,7 +68,7 @@ def draw_navigation(ax, planned_path: Any = None, goal: Sequence[float] | None =
 
 
 def _draw_goal(ax, x: float, y: float, label: str | None = None) -> None:
-    ax.plot(x, y, marker="*", markersize=14, color="gold", markeredgecolor="k", zorder=6,
+    ax.plot(x, y, marker="*", markersize=14, color="tab:red", markeredgecolor="k", zorder=6,
             linestyle="none", label=label)
 
 
