@@ -22,9 +22,10 @@ import sys
 from typing import Any
 
 from rcl_interfaces.msg import ParameterType
-from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 
 from amr_common.introspection import UnknownTypeError, matched_qos, message_class
+from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.mcap_recorder import (
     MessageDefinitionError,
     cdr_header_stamp_ns,
@@ -48,7 +49,7 @@ PARAMETERS: dict[str, tuple[Any, int, str]] = {
 _WORK_PERIOD_S = 0.05  # how often the executor thread picks up the SDK's requests
 
 
-class FoxgloveBridgeNode(LifecycleNode):
+class FoxgloveBridgeNode(GuardedLifecycleNode):
     """Forwards the graph's topics to Foxglove clients and publishes what clients send."""
 
     def __init__(self, node_name: str = "foxglove_bridge", **kwargs) -> None:

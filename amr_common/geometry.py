@@ -1,4 +1,4 @@
-"""Planar geometry shared by every package: angles, yaw <-> quaternion, points in polygons.
+"""Planar geometry shared by every package: angle wrapping and yaw <-> quaternion.
 
 Pure math on floats (no message classes, no rclpy); amr_common.ros_conversions applies it to
 geometry_msgs. REP 103: x forward/east, y left/north, yaw counter-clockwise about +z.
@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 from transforms3d.euler import quat2euler
 
 _MIN_QUATERNION_NORM = 1e-6
@@ -46,22 +45,4 @@ def quaternion_to_yaw(x: float, y: float, z: float, w: float) -> float:
     return float(yaw)
 
 
-def points_in_polygon(polygon: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Even-odd test of many points (x, y arrays of one shape) against a closed polygon.
-
-    polygon: (K, 2) vertices, the closing edge implied. Returns a bool array shaped like x.
-    """
-    inside = np.zeros(np.shape(x), dtype=bool)
-    px, py = polygon[:, 0], polygon[:, 1]
-    qx, qy = np.roll(px, -1), np.roll(py, -1)
-    for x1, y1, x2, y2 in zip(px, py, qx, qy):
-        if y1 == y2:
-            continue  # a horizontal edge never crosses the horizontal ray
-        crosses = (y1 > y) != (y2 > y)
-        x_cross = x1 + (y - y1) * (x2 - x1) / (y2 - y1)
-        inside ^= crosses & (x < x_cross)
-    return inside
-
-
-__all__ = ["wrap_angle", "angle_difference", "yaw_to_quaternion", "quaternion_to_yaw",
-           "points_in_polygon"]
+__all__ = ["wrap_angle", "angle_difference", "yaw_to_quaternion", "quaternion_to_yaw"]

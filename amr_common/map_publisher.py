@@ -11,8 +11,9 @@ from __future__ import annotations
 import sys
 
 from rcl_interfaces.msg import ParameterType
-from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 
+from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.map_messages import MAP_MARKERS_TOPIC, MAP_TOPIC, world_map_messages
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameters import declare_parameters
@@ -27,7 +28,7 @@ _PARAMETERS = {
 }
 
 
-class MapPublisherNode(LifecycleNode):
+class MapPublisherNode(GuardedLifecycleNode):
     """Publishes a world's OccupancyGrid on /map and its walls on /map_markers (latched)."""
 
     def __init__(self, node_name: str = "map_publisher", **kwargs) -> None:

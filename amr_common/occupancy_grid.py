@@ -29,9 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from amr_common.geometry import points_in_polygon
-from amr_common.jit import HAVE_NUMBA
-from amr_common.raycast import clearances
+from amr_common.coverage_grid import check_grid_size, inside_polygon_grid
 from amr_common.world import World
 
 FREE, OCCUPIED, UNKNOWN = 0, 100, -1  # nav_msgs/OccupancyGrid values
@@ -64,17 +62,18 @@ class OccupancyGrid:
         first = [math.floor(round(v / resolution, 6)) - pad for v in (xmin, ymin)]
         last = [math.ceil(round(v / resolution, 6)) + pad for v in (xmax, ymax)]
         width, height = last[0] - first[0] + 1, last[1] - first[1] + 1
+        check_grid_size(float(width), float(height), resolution,
+                        f"{world.source}: the occupancy grid", "use a larger resolution")
         xs = (first[0] + np.arange(width)) * resolution
         ys = (first[1] + np.arange(height)) * resolution
         gx, gy = np.meshgrid(xs, ys)
         centres = np.column_stack([gx.ravel(), gy.ravel()])
-        distance = (clearances(world.segments, centres) if HAVE_NUMBA
-                    else world.clearances(centres)).reshape(height, width)
+        distance = world.clearances(centres).reshape(height, width)
         in_boundary = np.ones((height, width), dtype=bool) if world.boundary is None else \
-            points_in_polygon(world.boundary, gx, gy)
+            inside_polygon_grid(world.boundary, xs, ys)
         inside = world.contains_points(centres).reshape(height, width)
         origin = (float(xs[0] - 0.5 * resolution), float(ys[0] - 0.5 * resolution))
-        walls = _wall_cells(world.segments, origin, resolution, (height, width))
+        walls = wall_cells(world.segments, origin, resolution, (height, width))
         return cls(resolution, origin, inside & ~walls, np.where(inside, distance, 0.0),
                    in_boundary, walls)
 
@@ -122,8 +121,8 @@ class OccupancyGrid:
         return values
 
 
-def _wall_cells(segments: np.ndarray, origin: tuple[float, float], resolution: float,
-                shape: tuple[int, int]) -> np.ndarray:
+def wall_cells(segments: np.ndarray, origin: tuple[float, float], resolution: float,
+               shape: tuple[int, int]) -> np.ndarray:
     """(height, width) bool: the cells some wall passes through (walked in quarter cells)."""
     cells = np.zeros(shape, dtype=bool)
     for x1, y1, x2, y2 in segments:
@@ -136,4 +135,4 @@ def _wall_cells(segments: np.ndarray, origin: tuple[float, float], resolution: f
     return cells
 
 
-__all__ = ["OccupancyGrid", "FREE", "OCCUPIED", "UNKNOWN"]
+__all__ = ["OccupancyGrid", "FREE", "OCCUPIED", "UNKNOWN", "wall_cells"]

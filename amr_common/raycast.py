@@ -87,19 +87,20 @@ def nearest_wall_python(segments, px, py):
     return best, nx, ny
 
 
+def clearances_python(segments, points, out):
+    """Distance from each point of a (K, 2) array to the nearest segment, written into out."""
+    for i in range(points.shape[0]):
+        best = np.inf
+        for k in range(segments.shape[0]):
+            d = segment_offset(segments, k, points[i, 0], points[i, 1])[2]
+            best = d if d < best else best
+        out[i] = best
+
+
 scan_kernel = jit(scan_python)
 nearest_wall_kernel = jit(nearest_wall_python)
+clearances_kernel = jit(clearances_python)
 
-
-def clearances_python(segments, points):
-    """Distance from each point of a (K, 2) array to the nearest segment: a (K,) array."""
-    out = np.empty(points.shape[0])
-    for k in range(points.shape[0]):
-        out[k] = nearest_wall_kernel(segments, points[k, 0], points[k, 1])[0]
-    return out
-
-
-clearances = jit(clearances_python)
 
 
 def scan_numpy(segments, ox, oy, theta, base_cos, base_sin, range_min, range_max, no_return,
@@ -132,5 +133,19 @@ def nearest_wall_numpy(segments, px, py):
     return best, 0.0, 0.0
 
 
+def clearances_numpy(segments, points, out):
+    """clearances_python as (chunk x segments) matrices (fallback without numba)."""
+    x1, y1 = segments[:, 0], segments[:, 1]
+    ex, ey = segments[:, 2] - x1, segments[:, 3] - y1
+    step = max(1, 262_144 // max(segments.shape[0], 1))  # bounds the matrices' size
+    for start in range(0, points.shape[0], step):
+        px = points[start:start + step, 0:1]
+        py = points[start:start + step, 1:2]
+        t = np.clip(((px - x1) * ex + (py - y1) * ey) / (ex * ex + ey * ey), 0.0, 1.0)
+        cx, cy = x1 + t * ex - px, y1 + t * ey - py
+        out[start:start + step] = np.sqrt(cx * cx + cy * cy).min(axis=1)
+
+
 scan_into = scan_kernel if HAVE_NUMBA else scan_numpy
 nearest_wall = nearest_wall_kernel if HAVE_NUMBA else nearest_wall_numpy
+clearances_into = clearances_kernel if HAVE_NUMBA else clearances_numpy

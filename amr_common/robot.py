@@ -20,10 +20,23 @@ WHEEL_SPEED_MAX = LINEAR_SPEED_MAX / WHEEL_RADIUS  # rad/s
 LIDAR_OFFSET_X = -0.032  # m, base_scan from base_link along x (LDS-01 on the Burger)
 LIDAR_HEIGHT = 0.182  # m, base_scan above base_footprint (base_link 0.010 + base_scan 0.172)
 MASS = 1.0  # kg, Burger (affects only contact impulses; the drive reaches commands within a step)
+# Measured speeds beyond the limits times this margin (noise, wheel slip, a push by hand) are
+# physically impossible for the Burger: such odometry is corrupt and is rejected, not clipped.
+PLAUSIBLE_SPEED_MARGIN = 3.0
+MAX_PLAUSIBLE_LINEAR_SPEED = PLAUSIBLE_SPEED_MARGIN * MAX_LINEAR_SPEED  # 0.66 m/s
+MAX_PLAUSIBLE_ANGULAR_SPEED = PLAUSIBLE_SPEED_MARGIN * MAX_ANGULAR_SPEED  # 8.52 rad/s
 
 _HALF_TRACK = TRACK / 2.0
 # Commands beyond this are absurd; clipping first keeps v +- w * TRACK / 2 finite.
 _COMMAND_CLIP = 1.0e6
+
+
+def is_plausible_twist(v: float, w: float) -> bool:
+    """True if a measured twist (v m/s, w rad/s) is finite and possible for the Burger.
+
+    Possible: within MAX_PLAUSIBLE_LINEAR_SPEED and MAX_PLAUSIBLE_ANGULAR_SPEED.
+    """
+    return abs(v) <= MAX_PLAUSIBLE_LINEAR_SPEED and abs(w) <= MAX_PLAUSIBLE_ANGULAR_SPEED
 
 
 def inverse_kinematics(v: float, w: float) -> tuple[float, float]:

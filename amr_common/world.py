@@ -8,6 +8,8 @@ Two file formats load with `World.load(name_or_path)`:
        name: lab02               # optional, defaults to the file stem
        description: free text    # optional
        cell_size: 0.4            # m, > 0: grid used by coverage metrics (corridor pitch)
+       grid_origin: [x, y]       # optional: a point the coverage grid lines pass through
+                                 # (default: the boundary's lower-left corner)
        boundary: [[x, y], ...]   # REQUIRED closed polyline: the outer walls (>= 3 points)
        holes:                    # optional closed polylines: obstacles (>= 3 points each)
          - [[x, y], ...]
@@ -22,10 +24,12 @@ Two file formats load with `World.load(name_or_path)`:
 
    Coordinates are metres in the world frame (REP 103: x east, y north, theta CCW from x).
    A closed polyline may repeat its first point at the end; it is closed either way.
+   Numbers may be written 1e-6 (YAML 1.1 alone would read that as a string).
 
 2. The course's map JSON, by path: `{"metric": {"boundary": [[x, y], ...], "holes": [[[x, y],
    ...], ...]}}` (boundary = outer closed polyline, each hole = a closed obstacle polyline).
-   It has no starts; pass a start pose (x, y, theta) explicitly.
+   It has no starts; pass a start pose (x, y, theta) explicitly. Its coverage grid (0.4 m)
+   starts at the boundary's lower-left corner.
 
 Every problem (missing file, unknown name, bad YAML/JSON, missing keys, non-numeric or non-finite
 coordinates, polylines with too few points, zero-length walls, start poses or goals outside the
@@ -42,13 +46,27 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 
-from .geometry import points_in_polygon
+from .coverage_grid import CoverageGrid, build_coverage_grid, inside_polygon_points
+from .raycast import clearances_into
 from .robot import ROBOT_RADIUS
 
 WORLDS_DIR = Path(__file__).resolve().parent / "worlds"
 
 _PI_EXPR = re.compile(r"^\s*([+-]?)\s*(\d+(?:\.\d*)?)?\s*\*?\s*pi\s*(?:/\s*(\d+(?:\.\d*)?))?\s*$")
+
+
+class _WorldYamlLoader(yaml.SafeLoader):
+    """yaml.SafeLoader that also reads floats without a dot (1e-6, -2E3) as numbers.
+
+    YAML 1.2 reads them as numbers, YAML 1.1 (PyYAML) as strings.
+    """
+
+
+_WorldYamlLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float", re.compile(r"^[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."))
 
 
 class WorldError(ValueError):
@@ -76,6 +94,8 @@ class World:
     description: str = ""
     boundary: np.ndarray | None = None  # (K, 2) outer closed polyline
     holes: list[np.ndarray] = field(default_factory=list)  # closed obstacle polylines
+    grid_origin: tuple[float, float] | None = None  # None: the boundary's lower-left corner
+    _grids: dict = field(default_factory=dict, init=False, repr=False, compare=False)
     goals: dict[str, tuple[float, float]] = field(default_factory=dict)  # named goals
 
     # ------------------------------------------------------------------ loading
@@ -105,17 +125,15 @@ class World:
 
     @classmethod
     def _from_yaml(cls, raw: str, path: Path) -> "World":
-        import yaml  # local import: only YAML worlds need it
-
         try:
-            data = yaml.safe_load(raw)
+            data = yaml.load(raw, Loader=_WorldYamlLoader)
         except yaml.YAMLError as exc:
             raise WorldError(f"{path}: invalid YAML: {exc}") from exc
         if not isinstance(data, dict):
             raise WorldError(f"{path}: expected a mapping with keys boundary, holes, walls, "
                              f"starts, ...")
-        known = {"name", "description", "cell_size", "boundary", "holes", "walls", "starts",
-                 "goal", "goals"}
+        known = {"name", "description", "cell_size", "grid_origin", "boundary", "holes", "walls",
+                 "starts", "goal", "goals"}
         unknown = set(data) - known
         if unknown:
             raise WorldError(f"{path}: unknown key(s) {sorted(unknown)}; allowed: {sorted(known)}")
@@ -127,6 +145,9 @@ class World:
         walls = [_polyline(w, path, f"walls[{i}]", closed=False)
                  for i, w in enumerate(_as_list(data.get("walls", []), path, "walls"))]
         cell_size = _positive_number(data.get("cell_size", 0.4), path, "cell_size")
+        grid_origin = None
+        if data.get("grid_origin") is not None:
+            grid_origin = _point(data["grid_origin"], path, "grid_origin")
         starts_raw = data.get("starts", {}) or {}
         if not isinstance(starts_raw, dict):
             raise WorldError(f"{path}: 'starts' must be a mapping name: [x, y, theta]")
@@ -146,6 +167,7 @@ class World:
         name = str(data.get("name") or path.stem)
         world = cls._build(name, path, boundary, holes, walls, starts, goal, cell_size,
                            str(data.get("description") or ""), goals)
+        world.grid_origin = grid_origin
         return world
 
     @classmethod
@@ -202,28 +224,35 @@ class World:
 
     def clearances(self, points: np.ndarray) -> np.ndarray:
         """Distance from each point of a (K, 2) array to the nearest wall."""
-        pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 2))
         out = np.empty(len(pts))
-        for i0 in range(0, len(pts), 2048):  # chunks keep the (K, N) matrix small
-            chunk = pts[i0:i0 + 2048]
-            d2 = _squared_distances(self.segments, chunk[:, :1], chunk[:, 1:])
-            out[i0:i0 + 2048] = np.sqrt(d2.min(axis=1))
+        clearances_into(self.segments, pts, out)
         return out
 
     def contains(self, x: float, y: float) -> bool:
         """True if (x, y) is inside the boundary and outside every hole."""
-        if self.boundary is not None and not _point_in_polygon(self.boundary, x, y):
-            return False
-        return not any(_point_in_polygon(h, x, y) for h in self.holes)
+        return bool(self.contains_points(np.array([[x, y]], dtype=np.float64))[0])
 
     def contains_points(self, points: np.ndarray) -> np.ndarray:
-        """contains() for each point of a (K, 2) array, vectorised: a (K,) bool array."""
+        """(K,) bool: which points of a (K, 2) array are in the free space (see contains).
+
+        Each hole is tested only against the points within its bounding box.
+        """
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-        inside = np.ones(len(pts), dtype=bool)
-        if self.boundary is not None:
-            inside &= points_in_polygon(self.boundary, pts[:, 0], pts[:, 1])
-        for hole in self.holes:
-            inside &= ~points_in_polygon(hole, pts[:, 0], pts[:, 1])
+        inside = inside_polygon_points(self.boundary, pts) if self.boundary is not None else \
+            np.ones(len(pts), dtype=bool)
+        if not self.holes:
+            return inside
+        if "hole_boxes" not in self._grids:
+            self._grids["hole_boxes"] = np.array(
+                [[*h.min(axis=0), *h.max(axis=0)] for h in self.holes])
+        boxes = self._grids["hole_boxes"]
+        x, y = pts[:, 0:1], pts[:, 1:2]
+        candidates = ((x >= boxes[:, 0]) & (x <= boxes[:, 2]) & (y >= boxes[:, 1])
+                      & (y <= boxes[:, 3]) & inside[:, None])
+        for hole_index in np.flatnonzero(candidates.any(axis=0)):
+            rows = np.flatnonzero(candidates[:, hole_index])
+            inside[rows] &= ~inside_polygon_points(self.holes[hole_index], pts[rows])
         return inside
 
     def resolve_start(self, start: str | tuple | list | np.ndarray | None
@@ -272,30 +301,36 @@ class World:
         x, y, _ = pose
         if self.boundary is not None and not _point_in_polygon(self.boundary, x, y):
             raise WorldError(f"{self.source}: {what} ({x:g}, {y:g}) is outside the boundary")
-        for i, hole in enumerate(self.holes):
-            if _point_in_polygon(hole, x, y):
-                raise WorldError(f"{self.source}: {what} ({x:g}, {y:g}) is inside obstacle "
-                                 f"holes[{i}]")
+        if not self.contains(x, y):  # inside a hole: name it
+            for i, hole in enumerate(self.holes):
+                if _point_in_polygon(hole, x, y):
+                    raise WorldError(f"{self.source}: {what} ({x:g}, {y:g}) is inside obstacle "
+                                     f"holes[{i}]")
         c = self.clearance(x, y)
         if c < ROBOT_RADIUS:
             raise WorldError(f"{self.source}: {what} ({x:g}, {y:g}) touches a wall: clearance "
                              f"{c:.3f} m < robot radius {ROBOT_RADIUS} m")
 
+    def coverage_grid(self, margin: float = ROBOT_RADIUS) -> CoverageGrid:
+        """The cell_size grid behind the coverage metrics (amr_common.coverage_grid).
+
+        Computed once per margin. Raises GridTooLargeError if it would have too many cells.
+        """
+        key = ("grid", float(margin))
+        if key not in self._grids:
+            self._grids[key] = build_coverage_grid(
+                self.segments, self.boundary, self.holes, self.cell_size, self.grid_origin,
+                float(margin), source=self.source)
+        return self._grids[key]
+
     def free_cells(self, margin: float = ROBOT_RADIUS) -> np.ndarray:
         """Centres (K, 2) of the cell_size grid cells in the free space with clearance > margin.
 
-        The grid is aligned with multiples of cell_size (cell centres at (k + 0.5) * cell_size),
-        so it matches corridors whose walls lie on grid lines.
+        Row by row. The grid lines pass through `grid_origin` (default: the boundary's
+        lower-left corner), so corridors that start at the boundary have their cells centred
+        in them.
         """
-        xmin, ymin, xmax, ymax = self.bounds
-        cs = self.cell_size
-        xs = (np.arange(math.floor(xmin / cs), math.ceil(xmax / cs)) + 0.5) * cs
-        ys = (np.arange(math.floor(ymin / cs), math.ceil(ymax / cs)) + 0.5) * cs
-        gx, gy = np.meshgrid(xs, ys)
-        pts = np.column_stack([gx.ravel(), gy.ravel()])
-        keep = self.clearances(pts) > margin
-        keep &= np.array([self.contains(x, y) for x, y in pts])
-        return pts[keep]
+        return self.coverage_grid(margin).free_centres()
 
     def free_space_centroid(self) -> tuple[float, float]:
         """Mean of the free cells (the bounds' centre if there are none)."""
@@ -347,12 +382,7 @@ def _squared_distances(seg: np.ndarray, px, py) -> np.ndarray:
 
 def _point_in_polygon(poly: np.ndarray, x: float, y: float) -> bool:
     """Even-odd ray crossing test."""
-    px, py = poly[:, 0], poly[:, 1]
-    qx, qy = np.roll(px, -1), np.roll(py, -1)
-    crosses = (py > y) != (qy > y)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        xint = px + (y - py) * (qx - px) / (qy - py)
-    return bool(np.count_nonzero(crosses & (x < xint)) % 2)
+    return bool(inside_polygon_points(poly, np.array([[x, y]], dtype=np.float64))[0])
 
 
 def _closed_segments(poly: np.ndarray) -> np.ndarray:

@@ -23,9 +23,10 @@ from typing import Any
 
 import numpy as np
 from nav_msgs.msg import Path
-from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import LaserScan
 
+from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameters import declare_parameters, read_parameters
 from amr_common.qos import LATCHED, RELIABLE_10, scan_qos
@@ -61,7 +62,7 @@ _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
 }
 
 
-class PurePursuitNode(CommandingNode, LifecycleNode):
+class PurePursuitNode(CommandingNode, GuardedLifecycleNode):
     """Follows /path with a regulated pure pursuit while /pose is localized (module docstring).
 
     Parameters: the node's own (simulation, dt, topics, ...) and every PurePursuit tuning value.

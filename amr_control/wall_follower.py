@@ -39,7 +39,12 @@ from typing import Any
 import numpy as np
 
 from amr_common.geometry import wrap_angle
-from amr_common.robot import MAX_LINEAR_SPEED
+from amr_common.python_logging import ThrottledLogger
+from amr_common.robot import (
+    MAX_LINEAR_SPEED,
+    MAX_PLAUSIBLE_ANGULAR_SPEED,
+    MAX_PLAUSIBLE_LINEAR_SPEED,
+)
 from amr_control.pose_trail import PoseTrail
 from amr_control.scan_sectors import LocalPointCloud, Perception, PerceptionSpec, ScanGeometry
 from amr_control.wall_follower_params import PARAMETERS, check_parameters
@@ -60,6 +65,8 @@ class WallFollower:
         if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0.0):
             raise ValueError(f"WallFollower: dt must be a positive number of seconds, got {dt!r}")
         self._dt = float(dt)
+        # Bad input repeats with every message: each kind of warning at most once per 5 s.
+        self._log = ThrottledLogger(_LOG)
         for name, value in check_parameters(params).items():
             setattr(self, name, value)
         self._side = -1.0 if self.follow_side == "right" else 1.0   # sign of the followed side's y
@@ -114,7 +121,8 @@ class WallFollower:
         geometry = ScanGeometry(float(angle_min), float(angle_increment),
                                 float(range_min), float(range_max))
         if not geometry.is_sane():
-            _LOG.warning("WallFollower: ignoring unusable scan geometry %s", geometry)
+            self._log.warning("geometry", "WallFollower: ignoring unusable scan geometry %s "
+                              "(using the course convention instead)", geometry)
             self._geometry = None
             return
         self._geometry = geometry
@@ -132,12 +140,26 @@ class WallFollower:
             (v, w): linear [m/s] and angular [rad/s] velocity commands, always finite and within
             the robot's limits.
         """
-        z_v = float(z_v) if _is_finite_number(z_v) else self._last_v
-        z_w = float(z_w) if _is_finite_number(z_w) else self._last_w
+        z_v, z_w = self._checked_odometry(z_v, z_w)
         self._observe(z_scan, z_v, z_w)
         v, w = self._step_state_machine()
         v, w = self._limit(v, w)
         self._last_v, self._last_w = v, w
+        return v, w
+
+    def _checked_odometry(self, z_v: Any, z_w: Any) -> tuple[float, float]:
+        """The odometry twist, each bad value replaced by the last command's.
+
+        Bad: not a finite number, or physically impossible (a corrupt message: it would poison
+        the integrated heading and position that turns and loop detection rely on).
+        """
+        v = float(z_v) if _is_finite_number(z_v) else self._last_v
+        w = float(z_w) if _is_finite_number(z_w) else self._last_w
+        if abs(v) > MAX_PLAUSIBLE_LINEAR_SPEED or abs(w) > MAX_PLAUSIBLE_ANGULAR_SPEED:
+            self._log.warning("odometry", "WallFollower: physically impossible odometry (v=%r "
+                              "m/s, w=%r rad/s) ignored", z_v, z_w)
+            v = v if abs(v) <= MAX_PLAUSIBLE_LINEAR_SPEED else self._last_v
+            w = w if abs(w) <= MAX_PLAUSIBLE_ANGULAR_SPEED else self._last_w
         return v, w
 
     # ---- perception ----------------------------------------------------------------------
@@ -151,7 +173,7 @@ class WallFollower:
         self._y += z_v * dt * math.sin(mid_heading)
         self._heading += z_w * dt
         self._winding += self._side * z_w * dt
-        ranges = _as_ranges(z_scan)
+        ranges = _as_ranges(z_scan, self._log)
         geometry = None
         if ranges is not None:
             geometry = self._geometry or ScanGeometry(0.0, 2.0 * math.pi / ranges.size,
@@ -408,16 +430,16 @@ def _is_finite_number(value: Any) -> bool:
         return False
 
 
-def _as_ranges(z_scan: Any) -> np.ndarray | None:
+def _as_ranges(z_scan: Any, log: ThrottledLogger) -> np.ndarray | None:
     """The scan as a 1-D float array, or None (with a warning) if it is not one."""
     try:
         # A copy as a contiguous float64 array: the one array type the kernels are compiled
         # for, and the controller may keep it (the caller may reuse its own array).
         ranges = np.array(z_scan, dtype=np.float64).ravel()
     except (TypeError, ValueError):
-        _LOG.warning("WallFollower: scan is not a sequence of numbers; ignored")
+        log.warning("scan", "WallFollower: scan is not a sequence of numbers; ignored")
         return None
     if ranges.size < 4:
-        _LOG.warning("WallFollower: scan has %d readings; ignored", ranges.size)
+        log.warning("readings", "WallFollower: scan has %d readings; ignored", ranges.size)
         return None
     return ranges

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 from nav_msgs.msg import Odometry
-from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import LaserScan
 
 from amr_common import message_filters
@@ -37,9 +37,15 @@ from amr_common.controller_loader import (
     ControllerSpecError,
     load_controller_class,
 )
+from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameters import declare_parameters, read_parameters
 from amr_common.qos import RELIABLE_10, scan_qos
+from amr_common.robot import (
+    MAX_PLAUSIBLE_ANGULAR_SPEED,
+    MAX_PLAUSIBLE_LINEAR_SPEED,
+    is_plausible_twist,
+)
 from amr_common.tf import StaticTransformListener
 from amr_control.command_output import (
     CommandingNode,
@@ -80,7 +86,7 @@ _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
 }
 
 
-def _load_controller_spec(node: LifecycleNode) -> str:
+def _load_controller_spec(node: GuardedLifecycleNode) -> str:
     """The `controller` parameter, declared early so its tuning parameters can be declared."""
     declare_parameters(node, {"controller": _NODE_PARAMETERS["controller"]})
     return str(node.get_parameter("controller").value)
@@ -102,7 +108,7 @@ def parameter_names(controller_class: type) -> list[str]:
     return sorted({*_NODE_PARAMETERS, *tuning_table(controller_class), "use_sim_time"})
 
 
-class WallFollowerNode(CommandingNode, LifecycleNode):
+class WallFollowerNode(CommandingNode, GuardedLifecycleNode):
     """The wall follower as a lifecycle node: synchronized /odometry + /scan in, /cmd_vel out.
 
     __init__ declares the node's parameters and, when the controller class describes them
@@ -139,6 +145,7 @@ class WallFollowerNode(CommandingNode, LifecycleNode):
         self._scan_geometry: tuple | None = None
         self._last_stamp = None  # newest measurement's stamp (simulated time in lockstep)
         self._active = False
+        self._stop_log_forwarding = None
         self._computed = False  # the controller has computed a command since it was built
         self._static_listener: StaticTransformListener | None = None
 
@@ -195,6 +202,8 @@ class WallFollowerNode(CommandingNode, LifecycleNode):
         self._synchronizer = message_filters.ApproximateTimeSynchronizer(
             self._subscribers, p["queue_size"], slop)
         self._synchronizer.registerCallback(self._on_synchronized)
+        # The controller's (throttled) Python warnings go to this node's ROS logger.
+        self._stop_log_forwarding = self.forward_python_logging(type(self.controller).__module__)
         if "lidar_offset_x_m" in tuning:
             self._lidar_frames = (p["base_frame"], p["scan_frame"])
             self._static_listener = StaticTransformListener(self, self._on_static_transforms)
@@ -212,6 +221,8 @@ class WallFollowerNode(CommandingNode, LifecycleNode):
             self._static_listener.close()
         if self._output is not None:
             self._output.destroy()
+        if self._stop_log_forwarding is not None:
+            self._stop_log_forwarding()
         self._reset_runtime()
 
     # --- data path -------------------------------------------------------------------------
@@ -273,6 +284,13 @@ class WallFollowerNode(CommandingNode, LifecycleNode):
             self.get_logger().warning("odometry twist is not finite: set ignored",
                                       throttle_duration_sec=2.0)
             return None
+        if not is_plausible_twist(z_v, z_w):
+            # A corrupt message: the Burger cannot move like this. The next good one is used.
+            self.get_logger().warning(
+                f"odometry twist (v={z_v:.3g} m/s, w={z_w:.3g} rad/s) is physically impossible "
+                f"(limits {MAX_PLAUSIBLE_LINEAR_SPEED:.2f} m/s, {MAX_PLAUSIBLE_ANGULAR_SPEED:.2f}"
+                f" rad/s): set ignored", throttle_duration_sec=2.0)
+            return None
         if len(scan.ranges) == 0 or not (math.isfinite(scan.angle_min)
                                          and math.isfinite(scan.angle_increment)
                                          and scan.angle_increment != 0.0):
@@ -280,9 +298,17 @@ class WallFollowerNode(CommandingNode, LifecycleNode):
                                       throttle_duration_sec=2.0)
             return None
         geometry = (scan.angle_min, scan.angle_increment, scan.range_min, scan.range_max)
-        if geometry != self._scan_geometry and hasattr(self.controller, "set_scan_geometry"):
+        if not (math.isfinite(scan.range_min) and math.isfinite(scan.range_max)
+                and 0.0 <= scan.range_min < scan.range_max):
+            self.get_logger().warning(
+                f"scan range limits [{scan.range_min}, {scan.range_max}] m are unusable: the "
+                f"controller decides which readings to trust", throttle_duration_sec=5.0)
+        # NaN never equals itself: compare a NaN-free key, so a repeated broken geometry is
+        # handed to the controller once, not with every scan.
+        key = tuple(None if math.isnan(value) else value for value in geometry)
+        if key != self._scan_geometry and hasattr(self.controller, "set_scan_geometry"):
             self.controller.set_scan_geometry(*geometry)
-            self._scan_geometry = geometry
+            self._scan_geometry = key
         return np.asarray(scan.ranges, dtype=float), float(z_v), float(z_w)
 
     def _on_timer(self) -> None:
@@ -325,7 +351,6 @@ class WallFollowerNode(CommandingNode, LifecycleNode):
     def _publish(self, v: float, w: float, stamp, force: bool = False) -> None:
         if self._output is not None:
             self._output.publish(v, w, stamp, force=force)
-
 
 
 def main(args: list[str] | None = None) -> int:

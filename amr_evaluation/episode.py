@@ -14,13 +14,18 @@ Timing: with `ideal` the loop is the course's lockstep (measure, compute, step, 
 odom_period, 0.05 s).
 
 Metrics:
-- explored_fraction: share of the world's free cells (cell_size grid, centre clearance > robot
-  radius) whose centre the robot passed within cell_size / 2 of.
+- explored_fraction: share of the world's free cells (cell_size grid aligned with the map, see
+  amr_common.coverage_grid; centre clearance > robot radius) whose centre the robot passed
+  within cell_size / 2 of.
 - laps: full turns of the robot's position around the centroid of the world's free space, from
   the accumulated (unwrapped) winding angle: floor(|winding| / 2 pi). Meaningful for ring-shaped
   routes (lab02 `outer`, corridor_loop); a route that never encircles the centroid gives 0.
 - rms_wall_error_m: RMS of the controller's `wall_distance_error` attribute (read after each
   compute_commands; a float while it follows a straight wall, else None); None without samples.
+- invalid_commands: commands that were not a pair of finite numbers (NaN, inf, a string ...);
+  the simulator stopped the robot for each (amr_sim.Simulator.bad_commands).
+A metric that cannot be computed (explored_fraction and laps on a world whose coverage grid
+would be too large) is None, with the reason in `metric_errors`; the rest is reported.
 """
 from __future__ import annotations
 
@@ -32,6 +37,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from amr_common.coverage_grid import GridTooLargeError
 from amr_common.world import WORLDS_DIR, World
 from amr_sim.profiles import SensorProfile, get_profile
 from amr_sim.simulator import Simulator
@@ -52,14 +58,16 @@ class EpisodeResult:
     first_collision_time_s: float | None
     min_clearance_m: float
     distance_m: float
-    explored_fraction: float
-    laps: int
+    explored_fraction: float | None  # None: not computable, see metric_errors
+    laps: int | None
     rms_wall_error_m: float | None
     dt: float = 0.05
     controller: str = ""
     start_pose: list[float] = field(default_factory=list)  # [x, y, theta] actually used
     trajectory: list[list[float]] = field(default_factory=list)  # [[t, x, y, theta], ...]
     collision_points: list[list[float]] = field(default_factory=list)  # [[x, y], ...]
+    invalid_commands: int = 0  # commands that were not finite numbers (the robot stopped)
+    metric_errors: dict[str, str] = field(default_factory=dict)  # metric -> why it is None
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-serialisable dict (floats, ints, strings, lists, None)."""
@@ -73,11 +81,14 @@ class EpisodeResult:
     def summary(self) -> str:
         """One line with the setup and the metrics, for a terminal."""
         rms = "n/a" if self.rms_wall_error_m is None else f"{self.rms_wall_error_m:.3f} m"
+        explored = "n/a" if self.explored_fraction is None else \
+            f"{100 * self.explored_fraction:.0f} %"
+        laps = "n/a" if self.laps is None else self.laps
+        invalid = f", INVALID COMMANDS {self.invalid_commands}" if self.invalid_commands else ""
         return (f"{self.world} / {self.start} / {self.profile}: {self.sim_time_s:.1f} s simulated "
                 f"in {self.wall_time_s:.2f} s ({self.steps} steps), collisions {self.collisions}, "
                 f"min clearance {self.min_clearance_m:.3f} m, distance {self.distance_m:.2f} m, "
-                f"explored {100 * self.explored_fraction:.0f} %, laps {self.laps}, wall error "
-                f"RMS {rms}")
+                f"explored {explored}, laps {laps}, wall error RMS {rms}{invalid}")
 
 
 def default_controller(dt: float, profile: SensorProfile | None = None):
@@ -165,31 +176,47 @@ def run_episode(world: World | str, start=None, profile: str | SensorProfile = "
         next(iter(world_obj.starts)) if start is None and world_obj.starts
         else [float(c) for c in sim.start])
     bundled_name = world_obj.name if _is_bundled(world_obj) else world_obj.source
+    metrics = trajectory_metrics(world_obj, positions)
     return EpisodeResult(
         world=bundled_name, start=start_label, profile=prof.name, seed=int(seed), steps=sim.steps,
         sim_time_s=sim.time, wall_time_s=wall_time, collisions=sim.collisions,
         first_collision_time_s=sim.first_collision_time, min_clearance_m=sim.min_clearance,
-        distance_m=sim.distance, explored_fraction=explored_fraction(world_obj, positions),
-        laps=count_laps(world_obj, positions),
+        distance_m=sim.distance, explored_fraction=metrics["explored_fraction"],
+        laps=metrics["laps"],
         rms_wall_error_m=math.sqrt(wall_err_sq / wall_err_n) if wall_err_n else None,
         dt=sim.dt, controller=type(controller).__module__ + ":" + type(controller).__qualname__,
         start_pose=[float(c) for c in sim.start], trajectory=trajectory,
-        collision_points=[[float(px), float(py)] for px, py in sim.collision_points])
+        collision_points=[[float(px), float(py)] for px, py in sim.collision_points],
+        invalid_commands=sim.bad_commands, metric_errors=metrics["metric_errors"])
 
 
 def explored_fraction(world: World, positions: np.ndarray) -> float:
-    """Share of the world's free cells whose centre some position passed within cell_size / 2."""
-    cells = world.free_cells()
-    if len(cells) == 0 or len(positions) == 0:
+    """Share of the world's free cells whose centre some position passed within cell_size / 2 of.
+
+    Raises GridTooLargeError if the world's coverage grid would be too large.
+    """
+    free = world.coverage_grid().free
+    total = int(np.count_nonzero(free))
+    if total == 0 or len(positions) == 0:
         return 0.0
-    cs = world.cell_size
-    pos = np.asarray(positions, dtype=np.float64).reshape(-1, 2)
-    idx = np.floor(pos / cs)  # a point within cs/2 of a centre lies in that centre's cell
-    near = np.hypot(*((idx + 0.5) * cs - pos).T) <= cs / 2
-    visited = {(int(i), int(j)) for i, j in idx[near]}
-    cell_idx = np.floor(cells / cs).astype(int)
-    hits = sum((int(i), int(j)) in visited for i, j in cell_idx)
-    return hits / len(cells)
+    visited = world.coverage_grid().visited(positions)
+    return int(np.count_nonzero(visited & free)) / total
+
+
+def trajectory_metrics(world: World, positions: np.ndarray) -> dict[str, Any]:
+    """explored_fraction and laps of a trajectory's (K, 2) positions, plus `metric_errors`.
+
+    A metric that cannot be computed is None, with the reason in metric_errors, instead of
+    losing the report (the run scripts and run_episode both use this).
+    """
+    metrics: dict[str, Any] = {"metric_errors": {}}
+    for name, compute in (("explored_fraction", explored_fraction), ("laps", count_laps)):
+        try:
+            metrics[name] = compute(world, positions)
+        except (GridTooLargeError, MemoryError) as exc:
+            metrics[name] = None
+            metrics["metric_errors"][name] = str(exc) or type(exc).__name__
+    return metrics
 
 
 def count_laps(world: World, positions: np.ndarray) -> int:

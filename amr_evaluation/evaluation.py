@@ -16,6 +16,7 @@ import signal
 import time
 import traceback
 from dataclasses import dataclass
+from multiprocessing.connection import Connection, wait
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
@@ -414,11 +415,6 @@ def _init_worker() -> None:
         pass           # run_one imports it again and reports the error per episode instead
 
 
-def _run_indexed(item: tuple[int, EpisodeSpec]) -> tuple[int, EpisodeOutcome]:
-    index, spec = item
-    return index, run_one(spec)
-
-
 def run_one(spec: EpisodeSpec) -> EpisodeOutcome:
     """Run one episode in this process; an exception becomes the outcome's error text."""
     from amr_evaluation.episode import robot_parameters, run_episode
@@ -444,6 +440,9 @@ def run_one(spec: EpisodeSpec) -> EpisodeOutcome:
     except Exception as exc:  # one broken episode must not lose the others' results
         detail = traceback.format_exception_only(type(exc), exc)[-1].strip()
         return EpisodeOutcome(spec, error=detail, wall_time_s=time.perf_counter() - start)
+    except SystemExit as exc:  # a controller calling sys.exit ends its episode, not the run
+        return EpisodeOutcome(spec, error=f"the episode called sys.exit({exc.code!r})",
+                              wall_time_s=time.perf_counter() - start)
 
 
 def _context() -> multiprocessing.context.BaseContext:
@@ -476,10 +475,114 @@ def run_episodes(specs: Sequence[EpisodeSpec], jobs: int | None = None,
             if progress:
                 progress(done, len(specs), outcomes[index])
         return outcomes  # type: ignore[return-value]
-    with _context().Pool(processes=min(jobs, len(specs)), initializer=_init_worker) as pool:
-        for index, outcome in pool.imap_unordered(_run_indexed, enumerate(specs), chunksize=1):
-            outcomes[index] = outcome
-            done += 1
-            if progress:
-                progress(done, len(specs), outcome)
+    for index, outcome in _WorkerPool(specs, min(jobs, len(specs))).run():
+        outcomes[index] = outcome
+        done += 1
+        if progress:
+            progress(done, len(specs), outcome)
     return outcomes  # type: ignore[return-value]
+
+
+def _worker_main(connection: Connection) -> None:
+    """A worker process: runs each (index, spec) it receives until it receives None."""
+    _init_worker()
+    while True:
+        try:
+            item = connection.recv()
+        except EOFError:  # the parent went away
+            return
+        if item is None:
+            return
+        index, spec = item
+        outcome = run_one(spec)
+        try:
+            connection.send((index, outcome))
+        except Exception as exc:  # e.g. a result that cannot be pickled
+            connection.send((index, EpisodeOutcome(
+                spec, error=f"the result could not be sent back: {exc!r}",
+                wall_time_s=outcome.wall_time_s)))
+
+
+class _WorkerPool:
+    """Worker processes that each run one episode at a time.
+
+    Unlike multiprocessing.Pool (which waits forever for the task of a worker that died), a
+    worker that ends during an episode (os._exit, a crash, the OOM killer) makes that
+    episode's error; a new worker takes the remaining episodes.
+    """
+
+    def __init__(self, specs: Sequence[EpisodeSpec], workers: int) -> None:
+        self._context = _context()
+        self._pending = list(enumerate(specs))[::-1]  # popped from the end: spec order
+        self._specs = specs
+        self._workers = workers
+        # connection -> [process, index of the episode it runs or None, start time]
+        self._running: dict[Connection, list] = {}
+
+    def run(self):
+        """Yield (index, EpisodeOutcome) as episodes finish; workers are ended on exit."""
+        try:
+            for _ in range(self._workers):
+                self._start_worker()
+            while self._running:
+                by_sentinel = {entry[0].sentinel: conn for conn, entry in self._running.items()}
+                for ready in wait([*self._running, *by_sentinel]):
+                    conn = by_sentinel.get(ready, ready)
+                    if conn in self._running:
+                        yield from self._collect(conn)
+        finally:
+            for conn, (process, _, _) in list(self._running.items()):
+                process.terminate()
+                process.join(timeout=5.0)
+                conn.close()
+            self._running.clear()
+
+    def _start_worker(self) -> None:
+        ours, theirs = self._context.Pipe()
+        process = self._context.Process(target=_worker_main, args=(theirs,), daemon=True)
+        process.start()
+        theirs.close()
+        self._running[ours] = [process, None, 0.0]
+        self._assign(ours)
+
+    def _assign(self, conn: Connection) -> None:
+        entry = self._running[conn]
+        if not self._pending:
+            entry[1] = None
+            try:
+                conn.send(None)  # nothing left: the worker exits
+            except OSError:
+                pass
+            return
+        index, spec = self._pending.pop()
+        entry[1], entry[2] = index, time.perf_counter()
+        conn.send((index, spec))
+
+    def _collect(self, conn: Connection):
+        process, index, started = self._running[conn]
+        try:
+            if conn.poll():
+                result_index, outcome = conn.recv()
+                yield result_index, outcome
+                self._assign(conn)
+                return
+            if process.is_alive():
+                return  # a spurious wake-up
+        except (EOFError, OSError):
+            pass  # its end of the pipe closed: the worker is gone or going
+        process.join(timeout=5.0)
+        if process.is_alive():  # closed its pipe but did not exit
+            process.terminate()
+            process.join(timeout=5.0)
+        del self._running[conn]
+        conn.close()
+        if index is not None:
+            code = process.exitcode
+            how = f"killed by signal {-code}" if code is not None and code < 0 else \
+                f"exit code {code}"
+            yield index, EpisodeOutcome(
+                self._specs[index], wall_time_s=time.perf_counter() - started,
+                error=f"worker process died ({how}) during this episode: the controller or the "
+                      f"simulator ended the process (os._exit, a crash, out of memory)")
+            if self._pending:
+                self._start_worker()

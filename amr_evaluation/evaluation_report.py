@@ -27,12 +27,14 @@ __all__ = [
 
 RESULT_COLUMNS = ("world", "start", "profile", "seed", "sim_time_s", "collisions",
                   "first_collision_time_s", "min_clearance_m", "distance_m", "laps",
-                  "explored_fraction", "rms_wall_error_m", "wall_time_s", "error")
+                  "explored_fraction", "rms_wall_error_m", "invalid_commands", "wall_time_s",
+                  "error")
 # Navigation episodes (a goal) have these instead of laps ... rms_wall_error_m.
 NAVIGATION_COLUMNS = ("world", "start", "goal", "profile", "seed", "sim_time_s", "collisions",
                       "min_clearance_m", "distance_m", "goal_reached", "localized_time_s",
                       "goal_reached_time_s", "stopped_time_s", "final_position_error_m",
-                      "path_length_m", "plans", "stalled", "wall_time_s", "error")
+                      "path_length_m", "plans", "stalled", "invalid_commands", "wall_time_s",
+                      "error")
 _SPEC_COLUMNS = {"world", "start", "goal", "profile", "seed", "wall_time_s", "error"}
 
 
@@ -99,6 +101,7 @@ _TABLE = (  # header, row key, formatter
     ("distance m", "distance_m", lambda v: f"{v:.1f}"), ("laps", "laps", str),
     ("explored %", "explored_fraction", lambda v: f"{v * 100:.0f}"),
     ("RMS err. cm", "rms_wall_error_m", lambda v: f"{v * 100:.1f}"),
+    ("invalid cmds", "invalid_commands", str),
     ("wall s", "wall_time_s", lambda v: f"{v:.1f}"),
 )
 _NAVIGATION_TABLE = (
@@ -143,15 +146,21 @@ def format_table(rows: Iterable[Mapping[str, Any]]) -> str:
 def verdict(outcomes: Sequence[EpisodeOutcome]) -> tuple[str, int]:
     """One summary line and the exit code.
 
-    0 clean, 1 any collision or a navigation goal not reached, 3 any episode failed to run.
+    0 clean, 1 any collision, invalid command (NaN, inf, not a number: the simulator stopped
+    the robot instead) or navigation goal not reached, 3 any episode failed.
     """
     rows = [outcome_row(o) for o in outcomes]
     failed = [r for r in rows if r["error"]]
     collided = [r for r in rows if not r["error"] and (r["collisions"] or 0) > 0]
+    invalid = [r for r in rows if not r["error"] and (r["invalid_commands"] or 0) > 0]
     navigating = [r for r in rows if r.get("goal") and not r["error"]]
     missed = [r for r in navigating if not r["goal_reached"]]
     clear = [r for r in rows if r["min_clearance_m"] is not None]
     parts = []
+    if invalid:
+        names = ", ".join(f"{_short(r)} ({r['invalid_commands']})" for r in invalid[:5])
+        more = f" and {len(invalid) - 5} more" if len(invalid) > 5 else ""
+        parts.append(f"INVALID COMMANDS in {len(invalid)}/{len(rows)} episodes: {names}{more}")
     if collided:
         names = ", ".join(f"{_short(r)} ({r['collisions']})" for r in collided[:5])
         more = f" and {len(collided) - 5} more" if len(collided) > 5 else ""
@@ -170,7 +179,7 @@ def verdict(outcomes: Sequence[EpisodeOutcome]) -> tuple[str, int]:
                         if missed else ""))
     if failed:
         parts.append(f"{len(failed)} episode(s) FAILED to run")
-    code = 3 if failed else 1 if collided or missed else 0
+    code = 3 if failed else 1 if collided or invalid or missed else 0
     return "verdict: " + "; ".join(parts), code
 
 

@@ -119,6 +119,7 @@ class NavigationResult:
     cross_track_mean_m: float | None  # true position to the followed path while pursuing
     cross_track_max_m: float | None
     finish_reason: str
+    invalid_commands: int = 0  # commands that were not finite numbers (the robot stopped)
     kidnap: list[float] | None = None  # [t, x, y, theta]
     stalled: bool = False  # localized with zero commands for stall_timeout_s before the goal
     dt: float = 0.05
@@ -297,6 +298,7 @@ def run_navigation_episode(
         cross_track_max_m=float(cross.max()) if cross is not None else None,
         finish_reason="stopped at the goal" if events["stopped"] is not None else
         "stalled" if stalled else "duration",
+        invalid_commands=sim.bad_commands,
         kidnap=[float(k) for k in kidnap] if kidnap is not None else None, stalled=stalled,
         dt=sim.dt, trajectory=trajectory,
         path=path.points.tolist() if path is not None else [],

@@ -5,7 +5,8 @@ in the free space (inside the boundary, outside every hole) and its distance to 
 
 Particles are drawn and kept where the robot can be: centre inside the free space and at least
 the robot radius from every wall (`sample_free_poses` checks each drawn point exactly with the
-shared nearest-wall kernel). No rclpy import.
+world's clearance kernel). Free space, clearances and the grid size limit are the World's and
+amr_common.coverage_grid's. No rclpy import.
 """
 from __future__ import annotations
 
@@ -14,14 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from amr_common.raycast import clearances
+from amr_common.coverage_grid import check_grid_size
 from amr_common.robot import ROBOT_RADIUS
 from amr_common.world import World
-
-
-def in_free_space(world: World, points: np.ndarray) -> np.ndarray:
-    """(K,) bool: each point inside the world's boundary and outside all of its holes."""
-    return world.contains_points(points)
 
 
 @dataclass(frozen=True)
@@ -71,16 +67,15 @@ def build_map_grid(world: World, resolution: float, margin: float = 0.1) -> MapG
         raise ValueError(f"grid resolution must be > 0 m, got {resolution}")
     xmin, ymin, xmax, ymax = world.bounds
     x0, y0 = xmin - margin, ymin - margin
-    nx = int(math.ceil((xmax + margin - x0) / resolution))
-    ny = int(math.ceil((ymax + margin - y0) / resolution))
-    if nx * ny > 4_000_000:
-        raise ValueError(f"a {resolution} m grid over {world.name} has {nx * ny} cells; use a "
-                         "coarser resolution")
+    nx = math.ceil((xmax + margin - x0) / resolution)
+    ny = math.ceil((ymax + margin - y0) / resolution)
+    check_grid_size(float(nx), float(ny), resolution, f"{world.source}: the localization grid",
+                    "use a coarser resolution")
     grid = MapGrid(x0, y0, float(resolution), nx, ny, np.zeros(0, bool), np.zeros(0))
     centres = grid.centres()
-    inside = in_free_space(world, centres)
+    inside = world.contains_points(centres)
     clearance = np.full(len(centres), -1.0)
-    clearance[inside] = clearances(world.segments, centres[inside])
+    clearance[inside] = world.clearances(centres[inside])
     return MapGrid(x0, y0, float(resolution), nx, ny, inside, clearance)
 
 
@@ -107,7 +102,7 @@ def sample_free_poses(world: World, grid: MapGrid, count: int, rng: np.random.Ge
         x = grid.x0 + (cells % grid.nx + rng.random(batch)) * grid.resolution
         y = grid.y0 + (cells // grid.nx + rng.random(batch)) * grid.resolution
         points = np.column_stack([x, y])
-        keep = points[clearances(world.segments, points) >= radius]
+        keep = points[world.clearances(points) >= radius]
         take = min(len(keep), count - filled)
         out[filled:filled + take, :2] = keep[:take]
         filled += take

@@ -20,7 +20,6 @@ from typing import Any
 
 import numpy as np
 
-from amr_common.raycast import clearances
 from amr_common.robot import ROBOT_RADIUS
 from amr_common.world import World
 from amr_localization.ambiguity import TRACK_ANGLE_RAD, TRACK_DISTANCE_M, AmbiguityGuard
@@ -129,7 +128,7 @@ class ParticleFilter:
             seeded, self._beam_bins, reading_to_mm(ranges[self._beams], range_min, range_max),
             (int(math.ceil(range_min * 1000.0)), int(range_max * 1000.0)),
             p["lidar_offset_x_m"], self.rng)
-        free = clearances(self.world.segments, np.ascontiguousarray(poses[:, :2])) >= ROBOT_RADIUS
+        free = self.world.clearances(poses[:, :2]) >= ROBOT_RADIUS
         poses = poses[free]
         uniform = sample_free_poses(self.world, self.table.grid, count - len(poses), self.rng)
         self._set_particles(np.concatenate([poses, uniform]))

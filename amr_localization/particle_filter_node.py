@@ -30,10 +30,11 @@ from typing import Any
 import numpy as np
 from geometry_msgs.msg import Pose, PoseArray, PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
-from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import LaserScan
 
 from amr_common import message_filters
+from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameters import declare_parameters, read_parameters
 from amr_common.qos import RELIABLE_10, scan_qos
@@ -73,7 +74,7 @@ _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
 _ARRAYS = {"initial_pose", "initial_pose_sigma"}
 
 
-class ParticleFilterNode(LifecycleNode):
+class ParticleFilterNode(GuardedLifecycleNode):
     """Monte Carlo localization on the world map; see the module docstring for the I/O.
 
     Creates nothing until configured; the filter (with its expected-range table) is built in

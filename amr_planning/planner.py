@@ -29,7 +29,6 @@ from typing import Any
 
 import numpy as np
 
-from amr_common import raycast
 from amr_common.occupancy_grid import OccupancyGrid
 from amr_common.raycast import nearest_wall_kernel
 from amr_common.robot import ROBOT_RADIUS
@@ -202,7 +201,7 @@ class Planner:
             points = smoothing.fillet_and_sample(
                 self.segments, corners, p["path_spacing_m"], p["min_turn_radius_m"],
                 p["max_turn_radius_m"], cap, floor, tol, ds)
-        clearance = raycast.clearances(self.segments, np.ascontiguousarray(points))
+        clearance = self.world.clearances(points)
         length = float(np.hypot(*np.diff(points, axis=0).T).sum()) if len(points) > 1 else 0.0
         return Plan(points=points, length_m=length, min_clearance_m=float(clearance.min()),
                     cost=cost, grid_path=grid_path, expanded=expanded,

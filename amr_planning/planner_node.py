@@ -21,8 +21,9 @@ from typing import Any
 
 from geometry_msgs.msg import PoseStamped as GoalPoseStamped
 from nav_msgs.msg import Path
-from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 
+from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameters import declare_parameters, read_parameters
 from amr_common.qos import LATCHED, RELIABLE_10
@@ -44,7 +45,7 @@ _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
 }
 
 
-class PlannerNode(LifecycleNode):
+class PlannerNode(GuardedLifecycleNode):
     """Plans from the localized /pose to the goal and publishes /path (module docstring)."""
 
     def __init__(self, node_name: str = "planner", **kwargs) -> None:

@@ -23,7 +23,7 @@ import math
 import numpy as np
 
 from amr_common.jit import jit
-from amr_common.raycast import clearances, nearest_wall_kernel
+from amr_common.raycast import clearances_into, nearest_wall_kernel
 
 _MAX_ARC_STEP_RAD = 0.25
 
@@ -138,7 +138,9 @@ def simplify(segments: np.ndarray, points: np.ndarray, cap: float, floor: float,
     if len(points) <= 2:
         return points.copy()
     keep = np.zeros(len(points), dtype=np.bool_)
-    _simplify(segments, points, clearances(segments, points), cap, floor, tolerance, ds, keep)
+    clearances = np.empty(len(points))
+    clearances_into(segments, points, clearances)
+    _simplify(segments, points, clearances, cap, floor, tolerance, ds, keep)
     return points[keep]
 
 

@@ -29,11 +29,12 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rclpy.clock import Clock, ClockType
-from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from rosgraph_msgs.msg import Clock as ClockMessage
 from sensor_msgs.msg import LaserScan
 
 from amr_common.geometry import angle_difference
+from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameters import declare_parameters, read_parameters
 from amr_common.qos import RELIABLE_10, scan_qos
@@ -65,7 +66,7 @@ def true_velocity(before: tuple, after: tuple, dt: float) -> tuple[float, float]
     return forward / dt, d_theta / dt
 
 
-class SimulatorNode(LifecycleNode):
+class SimulatorNode(GuardedLifecycleNode):
     """The amr_sim Simulator behind the course's topics, as a lifecycle node.
 
     __init__ declares the parameters; configure loads the world, builds the Simulator and

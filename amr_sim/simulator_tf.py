@@ -12,6 +12,7 @@ from typing import Any
 
 from tf2_msgs.msg import TFMessage
 
+from amr_common.coverage_grid import GridTooLargeError
 from amr_common.map_messages import MAP_MARKERS_TOPIC, MAP_TOPIC, world_map_messages
 from amr_common.qos import LATCHED
 from amr_common.robot import LIDAR_HEIGHT
@@ -33,8 +34,13 @@ class SimulatorTf:
         self._frames = (p["world_frame"], p["odom_frame"], p["base_frame"], p["truth_frame"])
         self._map_to_odom = bool(p["map_to_odom_from_truth"])
         self._scan_frame = p["scan_frame"]
-        self._map_messages = world_map_messages(simulator.world, p["map_resolution"],
-                                                p["world_frame"]) if p["publish_map"] else None
+        self._map_messages = None
+        if p["publish_map"]:
+            try:
+                self._map_messages = world_map_messages(simulator.world, p["map_resolution"],
+                                                        p["world_frame"])
+            except GridTooLargeError as exc:  # a huge world still simulates, without /map
+                node.get_logger().warning(f"no /map: {exc}")
         create = node.create_lifecycle_publisher
         self._tf = create(TFMessage, TF_TOPIC, TF_QOS)
         self._static = StaticTransformBroadcaster(node, create)

@@ -6,9 +6,10 @@ fields estimated from consecutive poses (amr_turtlebot3.velocity_estimator: sign
 +-pi, reset on time jumps). Pose, covariances, frames and the header stamp are preserved, so
 /odometry stays synchronizable with /scan.
 
-Nothing is published for a first message (nor the first after a reset, a duplicate stamp or a
-rejected pose): a zero twist would be false for a moving robot. Messages received while inactive
-are ignored, and activation restarts the estimator.
+Nothing is published for a first message (nor the first after a reset, a duplicate stamp, a
+stamp less than 1 ms after the previous one, a rejected pose or a physically impossible pose
+jump): a zero twist would be false for a moving robot. The last three are logged (throttled).
+Messages received while inactive are ignored, and activation restarts the estimator.
 
 Parameters: max_gap, smoothing_time_constant, input_topic, output_topic (see _PARAMETERS).
 Both topics are reliable, KeepLast(10), like the robot's /odom.
@@ -19,8 +20,9 @@ import math
 from typing import Any
 
 from nav_msgs.msg import Odometry
-from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 
+from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameters import declare_parameters, read_parameters
 from amr_common.qos import RELIABLE_10
@@ -39,7 +41,7 @@ _PARAMETERS: dict[str, tuple[Any, str]] = {
 }
 
 
-class OdometryNode(LifecycleNode):
+class OdometryNode(GuardedLifecycleNode):
     """The real robot's /odom (pose only) in, /odometry (pose + estimated twist) out.
 
     __init__ declares the parameters; configure creates the VelocityEstimator, the output
@@ -139,12 +141,21 @@ class OdometryNode(LifecycleNode):
             msg.twist.twist.linear.x = result.v
             msg.twist.twist.angular.z = result.w
             self._publisher.publish(msg)
+        # One call per kind: rclpy throttles per call site, and one kind must not hide another.
         elif result.status is Status.REJECTED:
-            self.get_logger().warning(f"{self.get_parameter('input_topic').value}: "
-                                      f"{result.reason}; message dropped",
+            self.get_logger().warning(self._dropped(result.reason),
+                                      throttle_duration_sec=WARNING_PERIOD)
+        elif result.status is Status.TOO_SHORT:
+            self.get_logger().warning(self._dropped(result.reason),
+                                      throttle_duration_sec=WARNING_PERIOD)
+        elif result.status is Status.RESET_IMPLAUSIBLE:
+            self.get_logger().warning(self._dropped(result.reason),
                                       throttle_duration_sec=WARNING_PERIOD)
         elif result.status in (Status.RESET_BACKWARDS, Status.RESET_GAP):
             self.get_logger().info(result.reason, throttle_duration_sec=WARNING_PERIOD)
+
+    def _dropped(self, reason: str) -> str:
+        return f"{self.get_parameter('input_topic').value}: {reason}; message dropped"
 
 
 def main(args: list[str] | None = None) -> int:

@@ -14,11 +14,16 @@ turn rate w. From two consecutive poses (x, y, yaw, stamp):
 Timing rules (stamps are integer nanoseconds from the message headers):
 - First sample (or first after a reset): nothing to differentiate, so NO estimate is produced
   (the node publishes nothing rather than a zero twist that would be false for a moving robot).
-- dt == 0 (duplicate stamp): skipped; the previous sample is kept.
+- dt == 0 (duplicate stamp) or 0 < dt < MIN_INTERVAL_NS (1 ms: no odometry comes faster, and
+  pose noise over 1 ns would read as 1e7 m/s): skipped; the previous sample is kept, so the next
+  sample is differentiated over the whole interval.
 - dt < 0 (bag loop, simulation reset) or dt > max_gap: reset, the sample starts a new sequence,
   instead of producing a spike or a stale average.
 - Invalid input (NaN/inf position, zero-norm or NaN quaternion): rejected with a reason; the
   previous valid sample is kept, so the next valid one is differentiated against it.
+- A physically impossible speed (beyond the Burger's limits with a margin, amr_common.robot:
+  a pose jump such as an odometry reset): no estimate; the estimator restarts from the new
+  sample, so an odometry reset costs one message and a lone outlier two.
 
 Optional smoothing: a first-order low-pass with time constant tau (alpha = 1 - exp(-dt / tau),
 correct for irregular dt), off when tau == 0. It restarts from the first estimate after a reset.
@@ -31,6 +36,13 @@ import math
 from dataclasses import dataclass
 
 from amr_common.geometry import quaternion_to_yaw, wrap_angle
+from amr_common.robot import (
+    MAX_PLAUSIBLE_ANGULAR_SPEED,
+    MAX_PLAUSIBLE_LINEAR_SPEED,
+    is_plausible_twist,
+)
+
+MIN_INTERVAL_NS = 1_000_000  # samples closer than 1 ms to the previous one are skipped
 
 
 class Status(enum.Enum):
@@ -39,8 +51,10 @@ class Status(enum.Enum):
     OK = "ok"
     FIRST = "first sample, nothing to differentiate yet"
     DUPLICATE = "duplicate stamp (dt == 0), skipped"
+    TOO_SHORT = "interval shorter than 1 ms, skipped"
     RESET_BACKWARDS = "time jumped backwards, estimator reset"
     RESET_GAP = "gap longer than max_gap, estimator reset"
+    RESET_IMPLAUSIBLE = "physically impossible speed (pose jump), estimator reset"
     REJECTED = "invalid pose rejected"
 
 
@@ -108,6 +122,9 @@ class VelocityEstimator:
         dt_ns = sample.stamp_ns - previous.stamp_ns
         if dt_ns == 0:
             return VelocityEstimate(None, None, Status.DUPLICATE, Status.DUPLICATE.value)
+        if 0 < dt_ns < MIN_INTERVAL_NS:
+            return VelocityEstimate(None, None, Status.TOO_SHORT,
+                                    f"{Status.TOO_SHORT.value} (dt = {dt_ns} ns)")
         if dt_ns < 0 or dt_ns * 1e-9 > self.max_gap:
             status = Status.RESET_BACKWARDS if dt_ns < 0 else Status.RESET_GAP
             self.reset()
@@ -126,6 +143,17 @@ class VelocityEstimator:
         if not (math.isfinite(v) and math.isfinite(w)):  # e.g. positions near float max
             return VelocityEstimate(None, None, Status.REJECTED,
                                     f"non-finite velocity from x={x} y={y}")
+        # The displacement's length too: a sideways jump projects to v = 0 on the heading.
+        jump_speed = math.hypot(sample.x - previous.x, sample.y - previous.y) / dt
+        if not (is_plausible_twist(v, w) and is_plausible_twist(jump_speed, 0.0)):
+            self.reset()
+            self._previous = sample
+            return VelocityEstimate(
+                None, None, Status.RESET_IMPLAUSIBLE,
+                f"physically impossible motion v={v:.3g} m/s ({jump_speed:.3g} m/s in any "
+                f"direction), w={w:.3g} rad/s over dt = {dt:.3f} s (limits "
+                f"{MAX_PLAUSIBLE_LINEAR_SPEED:.2f} m/s, {MAX_PLAUSIBLE_ANGULAR_SPEED:.2f} rad/s): "
+                f"pose jump, estimator reset")
         self._previous = sample
         v, w = self._smooth(v, w, dt)
         return VelocityEstimate(v, w, Status.OK)

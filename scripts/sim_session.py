@@ -20,7 +20,7 @@ from rclpy.signals import SignalHandlerOptions
 from amr_common.lifecycle_manager import LifecycleManager, LifecycleStartupError
 from amr_common.node_runner import make_executor, shutdown_node
 from amr_common.world import start_label
-from amr_evaluation.episode import count_laps, explored_fraction
+from amr_evaluation.episode import trajectory_metrics
 from amr_sim.simulator_node import SimulatorNode
 from launch_common import (
     ROBOT_PARAMS,
@@ -74,8 +74,7 @@ def _report(args, world, start, sim, trajectory, wall_errors, wall_time: float,
         "collisions": sim.collisions,
         "first_collision_time_s": sim.first_collision_time,
         "min_clearance_m": sim.min_clearance, "distance_m": sim.distance,
-        "explored_fraction": explored_fraction(world, positions),
-        "laps": count_laps(world, positions),
+        **trajectory_metrics(world, positions),  # None + metric_errors if not computable
         "rms_wall_error_m": rms,
         "trajectory": trajectory,
         "collision_points": [list(p) for p in sim.collision_points],
@@ -374,7 +373,8 @@ class SimSession:
                 f"time), "
                 f"{report['steps']} steps, collisions {report['collisions']}, min clearance "
                 f"{report['min_clearance_m'] * 100:.1f} cm, distance {report['distance_m']:.1f} m,"
-                f" explored {report['explored_fraction'] * 100:.0f}%"
+                + (" explored n/a" if report["explored_fraction"] is None else
+                   f" explored {report['explored_fraction'] * 100:.0f}%")
                 + (f", laps {laps}" if laps else "") + _localization_line(report))
 
     def close(self) -> None:

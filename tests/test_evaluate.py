@@ -51,3 +51,15 @@ def test_bad_inputs_are_one_line_errors_with_exit_code_2(capsys, tmp_path, monke
         assert code == 2, (argv, err)
         assert len(err.strip().splitlines()) == 1 and message in err, (argv, err)
         assert "episodes" not in out  # nothing ran
+
+
+def test_evaluate_finishes_when_worker_processes_die(capsys, tmp_path):
+    """Issue 10 B8: it used to wait forever for the episode of a worker that died."""
+    out = tmp_path / "out"
+    code = evaluate.main(["--worlds", "lab02", "--starts", "outer,inner", "--duration", "1",
+                          "--jobs", "2", "--no-sheet", "--out", str(out),
+                          "--controller", "tests.test_evaluation:ExitsTheProcess"])
+    assert code == 3, capsys.readouterr()
+    episodes = json.loads((out / "results.json").read_text())["episodes"]
+    assert ["worker process died" in (e["error"] or "") for e in episodes] == [True, True]
+    assert "2 episode(s) FAILED" in capsys.readouterr().out

@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -23,6 +24,7 @@ from amr_evaluation.evaluation import (
     load_config,
     parse_seeds,
     parse_start_list,
+    run_episodes,
 )
 from amr_evaluation.evaluation_report import (
     ProgressBar,
@@ -214,8 +216,8 @@ def test_json_and_csv_hold_every_episode(tmp_path):
     assert first == {"world": "lab02", "start": "outer", "profile": "ideal", "seed": 0,
                      "sim_time_s": 60.0, "collisions": 0, "first_collision_time_s": None,
                      "min_clearance_m": 0.0421, "distance_m": 11.5, "laps": 2,
-                     "explored_fraction": 0.5, "rms_wall_error_m": 0.012, "wall_time_s": 1.234,
-                     "error": None}
+                     "explored_fraction": 0.5, "rms_wall_error_m": 0.012, "invalid_commands": 0,
+                     "wall_time_s": 1.234, "error": None}
     assert second["rms_wall_error_m"] is None and second["first_collision_time_s"] == 12.5
     assert third["error"] == "RuntimeError: controller exploded" and third["collisions"] is None
     with open(tmp_path / "r.csv", newline="") as stream:
@@ -328,7 +330,6 @@ def test_a_collision_gives_exit_code_1_and_its_time(tmp_path):
 
 
 def test_a_failing_controller_is_reported_not_fatal():
-    from amr_evaluation.evaluation import run_episodes
     specs = [EpisodeSpec("lab02", "outer", duration=1.0,
                          controller="tests.test_evaluation:Exploding"),
              EpisodeSpec("lab02", "outer", duration=1.0,
@@ -388,6 +389,92 @@ def test_episodes_tell_the_controller_where_the_profiles_lidar_is(profile, param
     outcome = run_one(spec)
     assert outcome.error is None
     assert LidarAwareController.received == [expected]
+
+# --- controllers that end their process or command garbage (issue 10, B8) ------------------
+# A dead worker is that episode's error and the others still run; NaN or non-number commands
+# are counted per episode and fail the verdict.
+
+_HERE = "tests.test_evaluation"
+
+
+class Standing:
+    """Commands zero: a clean episode."""
+
+    def __init__(self, dt):
+        pass
+
+    def compute_commands(self, z_scan, z_v, z_w):
+        return 0.0, 0.0
+
+
+class ExitsTheProcess(Standing):
+    """Ends its process on the 5th call: os._exit (no cleanup) or sys.exit."""
+
+    def __init__(self, dt, how="os._exit"):
+        self.how, self.calls = how, 0
+
+    def compute_commands(self, z_scan, z_v, z_w):
+        self.calls += 1
+        if self.calls == 5:
+            if self.how == "os._exit":
+                os._exit(7)
+            sys.exit(4)
+        return 0.0, 0.0
+
+
+class Garbage(Standing):
+    """Every other command is NaN, inf or not a number at all."""
+
+    def __init__(self, dt, kind="nan"):
+        self.kind, self.calls = kind, 0
+
+    def compute_commands(self, z_scan, z_v, z_w):
+        self.calls += 1
+        if self.calls % 2:
+            return 0.0, 0.0
+        return {"nan": (math.nan, 0.0), "inf": (0.1, -math.inf), "text": ("fast", None)}[self.kind]
+
+
+def _pool_spec(controller: str, **params) -> EpisodeSpec:
+    return EpisodeSpec("lab02", "outer", duration=1.0, controller=f"{_HERE}:{controller}",
+                       params=params)
+
+
+def test_a_worker_that_dies_is_its_episodes_error_and_the_others_still_run():
+    specs = [_pool_spec("Standing"), _pool_spec("ExitsTheProcess", how="os._exit"),
+             _pool_spec("Standing"), _pool_spec("ExitsTheProcess", how="sys.exit"),
+             _pool_spec("Standing"), _pool_spec("Standing")]
+    seen = []
+    outcomes = run_episodes(specs, jobs=2, progress=lambda done, total, o: seen.append(done))
+    assert seen == [1, 2, 3, 4, 5, 6]
+    errors = [o.error for o in outcomes]
+    assert errors[0] is None and errors[2] is None and errors[4] is None and errors[5] is None
+    assert "worker process died" in errors[1] and "exit code 7" in errors[1]
+    assert "sys.exit(4)" in errors[3]
+    assert all(o.result.steps == 20 for i, o in enumerate(outcomes) if i not in (1, 3))
+    line, code = verdict(outcomes)
+    assert code == 3 and "2 episode(s) FAILED" in line
+
+
+def test_sys_exit_in_a_controller_does_not_end_a_single_process_evaluation():
+    (outcome,) = run_episodes([_pool_spec("ExitsTheProcess", how="sys.exit")], jobs=1)
+    assert "sys.exit(4)" in outcome.error
+
+
+@pytest.mark.parametrize("kind", ["nan", "inf", "text"])
+def test_invalid_commands_are_counted_and_fail_the_verdict(kind):
+    outcomes = run_episodes([_pool_spec("Standing"), _pool_spec("Garbage", kind=kind)], jobs=1)
+    clean, garbage = outcomes
+    assert clean.error is None and clean.result.invalid_commands == 0
+    assert garbage.error is None and garbage.result.invalid_commands == 10   # 20 steps
+    assert garbage.result.collisions == 0
+    row = outcome_row(garbage)
+    assert row["invalid_commands"] == 10
+    assert "10" in format_table([outcome_row(clean), row]).splitlines()[-1]
+    line, code = verdict(outcomes)
+    assert code == 1, line
+    assert "INVALID COMMANDS in 1/2 episodes: lab02/outer/ideal/seed 0 (10)" in line
+    assert verdict(outcomes[:1])[1] == 0
 
 
 # --- navigation episodes -------------------------------------------------------------------

@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from amr_common import occupancy_grid, raycast
-from amr_common.geometry import points_in_polygon
+from amr_common import occupancy_grid
+from amr_common.map_raster import points_in_polygon
 from amr_common.occupancy_grid import OccupancyGrid
 from amr_common.world import World, bundled_worlds
 
@@ -58,14 +58,6 @@ def test_walls_are_occupied_lines_and_values_follow_the_nav_msgs_layout():
     assert values[row + 2, col] == occupancy_grid.FREE
     assert values[0, 0] == occupancy_grid.UNKNOWN  # the lower-left cell lies outside
     assert values[grid.cell_of(-1.2, 0.0)] == occupancy_grid.OCCUPIED  # the boundary wall
-
-
-def test_compiled_and_python_clearances_agree():
-    world = World.load("room_obstacles")
-    points = np.random.default_rng(2).uniform((0, 0), (4, 3), size=(300, 2))
-    compiled = raycast.clearances(world.segments, points)
-    assert np.allclose(compiled, raycast.clearances_python(world.segments, points), atol=1e-12)
-    assert np.allclose(compiled, world.clearances(points), atol=1e-12)
 
 
 @pytest.mark.parametrize("resolution", [0.0, -0.02, float("nan"), "2cm"])

@@ -179,3 +179,38 @@ def test_velocities_of_the_cyclone_dds_emulated_robot(ros, tmp_path):
     for msg in steady:
         assert msg.twist.twist.linear.x == pytest.approx(-0.15, abs=1e-6)
         assert msg.twist.twist.angular.z == pytest.approx(2.5, abs=1e-6)
+
+
+def test_huge_quaternions_and_implausible_stamps_never_publish_absurd_velocities(ros, capfd):
+    """Issue 10 B11: only the Burger's possible velocities come out.
+
+    A 1e300-norm quaternion keeps its yaw, stamps 1 ns apart are skipped and a pose jump is
+    not a speed.
+    """
+    h = Harness(ros)
+    h.node.trigger_configure()
+    h.node.trigger_activate()
+    h.wait_for_matching()
+    v, w, yaw0 = 0.2, 0.5, 1.0
+    first = odom_message(0.0, v, w, yaw0)
+    h.send(first, expect_output=False)
+    scaled = odom_message(0.05, v, w, yaw0)
+    q = scaled.pose.pose.orientation
+    q.z, q.w = q.z * 1e300, q.w * 1e300
+    h.send(scaled, expect_output=True)
+    nanosecond_later = odom_message(0.05, v, w, yaw0)
+    nanosecond_later.header.stamp.nanosec += 1
+    nanosecond_later.pose.pose.position.x += 0.01
+    h.send(nanosecond_later, expect_output=False)
+    h.send(odom_message(0.10, v, w, yaw0), expect_output=True)
+    jumped = odom_message(0.15, v, w, yaw0)
+    jumped.pose.pose.position.x += 2.0   # 40 m/s
+    h.send(jumped, expect_output=False)
+    h.send(odom_message(0.20, v, w, yaw0), expect_output=False)  # restarted from the jump
+    h.send(odom_message(0.25, v, w, yaw0), expect_output=True)
+    assert len(h.received) == 3
+    for got in h.received:
+        assert got.twist.twist.linear.x == pytest.approx(v, abs=1e-6)
+        assert got.twist.twist.angular.z == pytest.approx(w, abs=1e-6)
+    logged = capfd.readouterr().err
+    assert "interval shorter than 1 ms" in logged and "physically impossible motion" in logged

@@ -20,7 +20,7 @@ from amr_localization.localization_check import (
     ScanMatcher,
     dominant_cluster,
 )
-from amr_localization.map_grid import in_free_space, sample_free_poses
+from amr_localization.map_grid import sample_free_poses
 from amr_localization.motion_model import MotionNoise, sample_motion
 from amr_localization.particle_filter import ParticleFilter
 from amr_localization.particle_filter_params import check_parameters
@@ -123,7 +123,7 @@ def test_particles_are_never_drawn_in_walls(name):
     world = World.load(name)
     table = expected_range_table(world)
     poses = sample_free_poses(world, table.grid, 5000, np.random.default_rng(4))
-    assert in_free_space(world, poses[:, :2]).all()
+    assert world.contains_points(poses[:, :2]).all()
     assert world.clearances(poses[:, :2]).min() >= ROBOT_RADIUS
     assert np.all(np.abs(poses[:, 2]) <= math.pi)
     # A global search seeded from a scan keeps to the same rule.
@@ -132,7 +132,7 @@ def test_particles_are_never_drawn_in_walls(name):
     lidar = Lidar(world.segments, 240, 0.0, 2 * math.pi / 240, 0.016, 8.0, math.nan)
     x, y, theta = next(iter(world.starts.values()))
     pf.correct(lidar.scan(x, y, theta))
-    assert in_free_space(world, pf.particles[:, :2]).all()
+    assert world.contains_points(pf.particles[:, :2]).all()
     assert world.clearances(pf.particles[:, :2]).min() >= ROBOT_RADIUS - 0.02
 
 

@@ -139,9 +139,9 @@ def test_gap_longer_than_max_gap_resets():
     assert within.ok and within.v == pytest.approx(0.2, abs=EXACT)
     gap = estimator.update(5.0, 0.0, *quaternion(2.0), 1_000_000_000)  # 0.55 s > max_gap
     assert gap.status is Status.RESET_GAP and gap.v is None
-    nxt = estimator.update(5.01, 0.0, *quaternion(0.0), 1_050_000_000)
+    nxt = estimator.update(5.01, 0.0, *quaternion(1.9), 1_050_000_000)
     assert nxt.ok  # differentiated against the post-gap sample, not the stale one
-    assert nxt.w == pytest.approx(-2.0 / 0.05, abs=EXACT)
+    assert nxt.w == pytest.approx(-0.1 / 0.05, abs=EXACT)
 
 
 def test_smoothing_reduces_noise_variance_without_bias():
@@ -184,3 +184,38 @@ def test_smoothing_is_off_by_default_and_restarts_after_reset():
 def test_bad_parameters_raise(kwargs):
     with pytest.raises(ValueError):
         VelocityEstimator(**kwargs)
+
+
+# ---- implausible intervals and speeds (issue 10, B11) ---------------------------------------
+def test_stamps_a_nanosecond_apart_are_skipped_not_turned_into_megametres_per_second():
+    estimator = VelocityEstimator()
+    estimator.update(0.0, 0.0, *quaternion(0.0), 1_000_000_000)
+    close = estimator.update(0.01, 0.0, *quaternion(0.001), 1_000_000_001)   # 1 ns later
+    assert close.status is Status.TOO_SHORT and close.v is None and close.reason
+    # The next sample is differentiated over the whole interval from the kept one.
+    nxt = estimator.update(0.01, 0.0, *quaternion(0.0), 1_000_000_000 + ODOM_PERIOD_NS)
+    assert nxt.ok and nxt.v == pytest.approx(0.2, abs=EXACT) and nxt.w == pytest.approx(0.0)
+
+
+@pytest.mark.parametrize("jump", [(1.0, 0.0, 0.0), (0.0, 0.0, 1.0), (0.0, 1e6, 0.0)])
+def test_physically_impossible_speed_restarts_from_the_new_pose(jump):
+    estimator = VelocityEstimator()
+    run(estimator, v=0.2, w=0.0, steps=10)
+    stamp = 1_000_000_000 + 10 * ODOM_PERIOD_NS
+    x, y, yaw = pose_at(0.2, 0.0, 10 * ODOM_PERIOD_NS * 1e-9)
+    dx, dy, dyaw = jump   # 1 m or 1 rad in 50 ms: 20 m/s, 20 rad/s
+    jumped = estimator.update(x + dx, y + dy, *quaternion(yaw + dyaw), stamp)
+    assert jumped.status is Status.RESET_IMPLAUSIBLE and jumped.v is None
+    assert "impossible" in jumped.reason
+    # An odometry reset (the new pose is the truth) goes on from there at once.
+    nxt = estimator.update(x + dx + 0.01, y + dy, *quaternion(yaw + dyaw),
+                           stamp + ODOM_PERIOD_NS)
+    assert nxt.ok and nxt.w == pytest.approx(0.0, abs=EXACT)
+    assert nxt.v == pytest.approx(0.2 * math.cos(yaw + dyaw), abs=1e-6)
+
+
+def test_quaternion_of_norm_1e300_gives_the_right_turn_rate():
+    unit = run(VelocityEstimator(), v=0.1, w=0.5, steps=20, yaw0=1.0)
+    huge = run(VelocityEstimator(), v=0.1, w=0.5, steps=20, yaw0=1.0, scale=1e300)
+    assert_all(huge, 0.1, 0.5)
+    assert max(abs(a.w - b.w) for a, b in zip(unit, huge)) < 1e-12

@@ -341,3 +341,47 @@ def test_lab02_outer_corridor_lap_without_touching(profile):
     assert result.collisions == 0
     assert result.min_clearance_m > 0.03
     assert result.laps >= 1
+
+
+# ---- physically impossible odometry and repeated bad input (issue 10, B4 / B11) ------------
+def lab02_run(corrupt_at=None, bad=(0.0, 0.0), repeat=1, steps=800):
+    """Drive lab02's outer corridor; odometry replaced by `bad` for `repeat` steps."""
+    from amr_common.world import World
+    from amr_sim.simulator import Simulator
+
+    world = World.load("lab02")
+    sim = Simulator(world, start=world.starts["outer"], dt=DT, profile="ideal", seed=0)
+    wf = WallFollower(DT)
+    z_scan, z_v, z_w = sim.measure()
+    for k in range(steps):
+        if corrupt_at is not None and corrupt_at <= k < corrupt_at + repeat:
+            z_v, z_w = bad
+        z_scan, z_v, z_w = sim.step(*wf.compute_commands(z_scan, z_v, z_w))
+    return sim, wf
+
+
+@pytest.mark.parametrize("bad", [(1e20, 0.0), (0.0, 1e16), (-1e20, 1e20), (0.0, -50.0)])
+def test_impossible_odometry_is_rejected_once_logged_and_the_run_goes_on(bad, caplog):
+    clean, _ = lab02_run()
+    with caplog.at_level("WARNING", logger="amr_control"):
+        sim, wf = lab02_run(corrupt_at=100, bad=bad, repeat=3)
+    assert sim.collisions == 0
+    assert sim.distance == pytest.approx(clean.distance, rel=0.05)   # it did not freeze
+    # Its own dead reckoning was not poisoned: odometer and heading follow the real motion.
+    assert wf._odometer == pytest.approx(sim.distance, rel=0.05)
+    assert abs(wf._heading) < 50.0
+    warnings = [r for r in caplog.records if "impossible" in r.getMessage()]
+    assert len(warnings) == 1, [r.getMessage() for r in caplog.records]
+
+
+def test_repeated_bad_scans_and_geometry_warn_once_per_kind(caplog):
+    wf = make()
+    good = cast(right_wall(0.26), COURSE_240)
+    with caplog.at_level("WARNING", logger="amr_control"):
+        for _ in range(50):
+            wf.set_scan_geometry(0.0, 2.0 * math.pi / 240, math.nan, 8.0)
+            wf.compute_commands([0.5], 0.0, 0.0)
+            wf.compute_commands(good, 0.0, 0.0)
+    messages = [r.getMessage() for r in caplog.records]
+    assert sum("geometry" in m for m in messages) == 1, messages
+    assert sum("readings" in m for m in messages) == 1, messages

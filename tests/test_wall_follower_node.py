@@ -279,3 +279,55 @@ def test_ctrl_c_on_the_executable_sends_a_final_zero(ros):
     assert process.returncode == 0, output
     last = twist_of(robot.commands[-1])
     assert (last.linear.x, last.angular.z) == (0.0, 0.0), output
+
+
+def send_set(ros, robot, stamp_ns, count_before, scan=None, **odometry):
+    """Publish one odometry + scan pair and wait for the lockstep answer."""
+    robot.odometry.publish(odom_msg(stamp_ns, **odometry))
+    robot.scan.publish(scan or scan_msg(stamp_ns))
+    ros.spin_until(lambda: len(robot.commands) > count_before, 5.0, "the lockstep answer")
+
+
+def test_physically_impossible_odometry_is_ignored_and_the_next_good_set_used(ros, capfd):
+    node = make_node(ros, controller="tests.controllers:ConstantController")
+    robot = Robot(ros)
+    bring_up(ros, node, robot)
+    stamp = 0
+    for bad in ({"v": 1e20}, {"w": 1e16}, {"v": -5.0, "w": 0.1}, {"v": 1e20, "w": -1e20}):
+        stamp += 50_000_000
+        send_set(ros, robot, stamp, len(robot.commands), **bad)
+        assert (twist_of(robot.commands[-1]).linear.x,
+                twist_of(robot.commands[-1]).angular.z) == (0.0, 0.0), bad
+    assert node.controller.calls == []   # the controller never saw them
+    stamp += 50_000_000
+    send_set(ros, robot, stamp, len(robot.commands), v=0.2, w=-2.0)
+    assert node.controller.calls == [(360, pytest.approx(0.2), pytest.approx(-2.0))]
+    assert twist_of(robot.commands[-1]).linear.x == pytest.approx(0.1)
+    logged = capfd.readouterr().err
+    assert logged.count("is physically impossible") == 1, logged   # throttled
+
+
+def test_broken_scans_warn_throttled_through_the_ros_logger(ros, capfd, caplog):
+    node = make_node(ros)   # the project's WallFollower
+    robot = Robot(ros)
+    bring_up(ros, node, robot)
+    stamp = 0
+    with caplog.at_level("WARNING"):
+        for k in range(30):
+            stamp += 50_000_000
+            scan = scan_msg(stamp)
+            if k < 15:
+                scan.range_min = math.nan          # unusable range limits
+            else:
+                scan.ranges = [1.0]                # one ray
+            send_set(ros, robot, stamp, len(robot.commands), scan=scan)
+    logged = capfd.readouterr().err
+    python_messages = [r.getMessage() for r in caplog.records]
+    # Each problem reported, through the node's logger, once (throttled), not once per scan.
+    assert logged.count("range limits [nan, 3.5] m are unusable") == 1, logged
+    assert logged.count("[wall_follower]: WallFollower: ignoring unusable scan geometry") == 1, \
+        logged
+    assert logged.count("[wall_follower]: WallFollower: scan has 1 readings") == 1, logged
+    assert sum("scan geometry" in m for m in python_messages) == 1, python_messages
+    assert sum("1 readings" in m for m in python_messages) == 1, python_messages
+    assert all(math.isfinite(twist_of(c).linear.x) for c in robot.commands)

@@ -76,6 +76,19 @@ def test_yaml_world_with_pi_angles_open_walls_and_goal(tmp_path):
 GOOD = "boundary: [[0, 0], [2, 0], [2, 2], [0, 2]]\n"
 
 
+def test_numbers_with_an_exponent_and_no_dot_are_numbers(tmp_path):
+    """YAML 1.1 reads 1e-6 as a string; a world file means the number (issue 10, B11)."""
+    path = tmp_path / "exponents.yaml"
+    path.write_text("cell_size: 4e-1\nboundary: [[0, 0], [2E0, 0], [2, 2], [-1e-6, 2]]\n"
+                    "starts: {a: [1, +1e0, 1e-6], b: [1.5e0, 1.5, -2.5E-1]}\n")
+    world = World.load(path)
+    assert world.cell_size == 0.4 and world.boundary[3].tolist() == [-1e-6, 2.0]
+    assert world.starts == {"a": (1.0, 1.0, 1e-6), "b": (1.5, 1.5, -0.25)}
+    path.write_text(GOOD + "description: 1e-6 is a number, and 'e5' stays a string\n"
+                    "starts: {a: [1, 1, 'pi/2']}\n")
+    assert World.load(path).starts["a"][2] == pytest.approx(math.pi / 2)
+
+
 @pytest.mark.parametrize("text, problem", [
     ("boundary: [[0, 0], [2, 0]\n", "invalid YAML"),
     ("- 1\n- 2\n", "expected a mapping"),

@@ -1,0 +1,174 @@
+"""GuardedLifecycleNode: the base class of every lifecycle node of the project.
+
+rclpy's LifecycleNode (Jazzy wheel) raises RCLError "Transition is not registered" for a
+transition that is not possible in the current state (activate before configure, configure
+twice, cleanup while active, ...). From the change_state service that exception escapes the
+executor and kills the node's process; from trigger_*() it reaches the caller. This class
+checks every request against the transitions available in the current state first:
+- a request that is not possible is refused and logged (warning): the service answers
+  `success: false`, trigger_*() returns FAILURE; the node stays in its state and keeps running;
+- a transition callback that raises is logged (error) and the transition ends as ERROR (rclpy
+  then runs on_error), instead of rclpy's silent ERROR.
+It also forwards a plain-Python algorithm's logging to the node's logger on request
+(forward_python_logging), until the node is destroyed.
+
+Use it exactly like rclpy.lifecycle.LifecycleNode (on_configure, on_activate, ... overrides).
+"""
+from __future__ import annotations
+
+from typing import Callable
+
+from lifecycle_msgs.msg import Transition
+from lifecycle_msgs.srv import ChangeState
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+
+from amr_common.python_logging import forward_to_ros_logger
+
+_PRIMARY_STATES = ("unconfigured", "inactive", "active")
+_SHUTDOWN_TRANSITIONS = (Transition.TRANSITION_UNCONFIGURED_SHUTDOWN,
+                         Transition.TRANSITION_INACTIVE_SHUTDOWN,
+                         Transition.TRANSITION_ACTIVE_SHUTDOWN)
+
+
+class GuardedLifecycleNode(LifecycleNode):
+    """A LifecycleNode that refuses (and logs) out-of-order transitions instead of raising.
+
+    Every lifecycle node of the project inherits from it (SimulatorNode, WallFollowerNode,
+    OdometryNode, ...). The change_state service answers `success: false` for a transition that
+    is not possible in the current state, trigger_configure/activate/deactivate/cleanup/shutdown
+    return TransitionCallbackReturn.FAILURE for one, and a transition callback that raises is
+    logged with its exception. See the module docstring.
+    """
+
+    def __init__(self, node_name: str, **kwargs) -> None:
+        """Create the node as rclpy's LifecycleNode does, with guarded lifecycle services."""
+        super().__init__(node_name, **kwargs)
+        # rclpy registered the on_* callbacks by state id: log what they raise.
+        for state_id, callback in list(self._callbacks.items()):
+            self._callbacks[state_id] = self._logging_callback(callback)
+        service = getattr(self, "_service_change_state", None)
+        if service is not None:  # None when created without the communication interface
+            service.callback = self._on_change_state_request
+        self._log_forwardings: list[Callable[[], None]] = []
+
+    def forward_python_logging(self, logger_name: str) -> Callable[[], None]:
+        """Send Python logger `logger_name`'s records to this node's logger.
+
+        For the node's plain-Python algorithm (its warnings then reach rosout and the node's
+        log). Returns a function that stops the forwarding; destroy_node() stops it too.
+        """
+        stop = forward_to_ros_logger(logger_name, self.get_logger())
+        self._log_forwardings.append(stop)
+
+        def stop_once() -> None:
+            if stop in self._log_forwardings:
+                self._log_forwardings.remove(stop)
+                stop()
+        return stop_once
+
+    def destroy_node(self) -> None:
+        """Stop the Python log forwarding, then destroy the node as rclpy does."""
+        for stop in list(self._log_forwardings):
+            stop()
+        self._log_forwardings.clear()
+        super().destroy_node()
+
+    # --- requests from code ------------------------------------------------------------------
+    def trigger_configure(self) -> TransitionCallbackReturn:
+        """Configure if the node is unconfigured; else refuse (logged) with FAILURE."""
+        return self._guarded(Transition.TRANSITION_CONFIGURE)
+
+    def trigger_cleanup(self) -> TransitionCallbackReturn:
+        """Clean up if the node is inactive; else refuse (logged) with FAILURE."""
+        return self._guarded(Transition.TRANSITION_CLEANUP)
+
+    def trigger_activate(self) -> TransitionCallbackReturn:
+        """Activate if the node is inactive; else refuse (logged) with FAILURE."""
+        return self._guarded(Transition.TRANSITION_ACTIVATE)
+
+    def trigger_deactivate(self) -> TransitionCallbackReturn:
+        """Deactivate if the node is active; else refuse (logged) with FAILURE."""
+        return self._guarded(Transition.TRANSITION_DEACTIVATE)
+
+    def trigger_shutdown(self) -> TransitionCallbackReturn:
+        """Shut down from any primary state; refuse (logged) with FAILURE once finalized."""
+        for transition_id in _SHUTDOWN_TRANSITIONS:
+            if self._available_label(transition_id) is not None:
+                return self._guarded(transition_id)
+        return self._refuse("shutdown")
+
+    # --- requests from the change_state service ----------------------------------------------
+    def _on_change_state_request(self, request: ChangeState.Request,
+                                 response: ChangeState.Response) -> ChangeState.Response:
+        transition_id = request.transition.id
+        label = request.transition.label
+        if label:  # as rclpy: a label wins over the id
+            matching = [t[0] for t in self._state_machine.available_transitions if t[1] == label]
+            if not matching:
+                self._refuse(label)
+                response.success = False
+                return response
+            transition_id = matching[0]
+        response.success = self._guarded(transition_id) == TransitionCallbackReturn.SUCCESS
+        return response
+
+    # --- the guard ---------------------------------------------------------------------------
+    def current_state_label(self) -> str:
+        """The current state's label, e.g. 'unconfigured', 'active' or 'finalized'."""
+        return self._state_machine.current_state[1]
+
+    def _available_label(self, transition_id: int) -> str | None:
+        for available in self._state_machine.available_transitions:
+            if available[0] == transition_id:
+                return available[1]
+        return None
+
+    def _guarded(self, transition_id: int) -> TransitionCallbackReturn:
+        label = self._available_label(transition_id)
+        if label is None:
+            return self._refuse(_TRANSITION_LABELS.get(transition_id, f"id {transition_id}"))
+        trigger = {
+            Transition.TRANSITION_CONFIGURE: super().trigger_configure,
+            Transition.TRANSITION_CLEANUP: super().trigger_cleanup,
+            Transition.TRANSITION_ACTIVATE: super().trigger_activate,
+            Transition.TRANSITION_DEACTIVATE: super().trigger_deactivate,
+        }.get(transition_id, super().trigger_shutdown)
+        try:
+            return trigger()
+        except Exception as exc:  # never let a transition take the process down
+            self._log_error(f"lifecycle transition '{label}' failed: {exc!r}")
+            return TransitionCallbackReturn.ERROR
+
+    def _refuse(self, label: str) -> TransitionCallbackReturn:
+        state = self.current_state_label()
+        possible = [t[1] for t in self._state_machine.available_transitions]
+        self._log_refusal(
+            f"lifecycle request '{label}' refused: it is not possible in state '{state}' "
+            f"(possible: {', '.join(possible) if possible else 'none'}); staying '{state}'")
+        return TransitionCallbackReturn.FAILURE
+
+    def _logging_callback(self, callback: Callable[[LifecycleState], TransitionCallbackReturn]
+                          ) -> Callable[[LifecycleState], TransitionCallbackReturn]:
+        def logged(state: LifecycleState) -> TransitionCallbackReturn:
+            try:
+                return callback(state)
+            except Exception as exc:
+                self._log_error(f"{callback.__name__} raised {exc!r}: transition ends in ERROR")
+                raise  # rclpy turns it into ERROR and runs on_error
+        return logged
+
+    # Separate methods so tests can observe what is logged.
+    def _log_refusal(self, text: str) -> None:
+        self.get_logger().warning(text)
+
+    def _log_error(self, text: str) -> None:
+        self.get_logger().error(text)
+
+
+_TRANSITION_LABELS = {Transition.TRANSITION_CONFIGURE: "configure",
+                      Transition.TRANSITION_CLEANUP: "cleanup",
+                      Transition.TRANSITION_ACTIVATE: "activate",
+                      Transition.TRANSITION_DEACTIVATE: "deactivate",
+                      **{t: "shutdown" for t in _SHUTDOWN_TRANSITIONS}}
+
+__all__ = ["GuardedLifecycleNode"]
