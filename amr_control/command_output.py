@@ -16,6 +16,15 @@ from rclpy.publisher import Publisher
 from amr_common.qos import RELIABLE_10
 from amr_common.robot import MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED
 
+# The parameters every commanding node declares alike (the nodes add their own, e.g. what
+# data_timeout applies to).
+COMMAND_PARAMETERS: dict[str, tuple[Any, str]] = {
+    "cmd_vel_stamped": (True, "Publish geometry_msgs/TwistStamped (Jazzy) instead of Twist "
+                              "(Humble); simulation mode always uses TwistStamped"),
+    "angular_sign": (1, "+1 for REP 103 (counter-clockwise positive), -1 for setups with the "
+                        "opposite convention"),
+}
+
 
 def command_parameter_problems(p: dict[str, Any]) -> list[str]:
     """What is wrong with the commanding parameters dt, angular_sign and data_timeout."""
@@ -156,4 +165,5 @@ class CommandingNode:
             self._output.publish_zero(why, self._last_stamp if self.simulation else None, force)
 
 
-__all__ = ["CommandOutput", "CommandingNode", "command_parameter_problems", "limit_command"]
+__all__ = ["COMMAND_PARAMETERS", "CommandOutput", "CommandingNode", "command_parameter_problems",
+           "limit_command"]

@@ -37,6 +37,7 @@ from amr_common.ros_conversions import (
     time_to_nanoseconds,
 )
 from amr_control.command_output import (
+    COMMAND_PARAMETERS,
     CommandingNode,
     CommandOutput,
     command_parameter_problems,
@@ -48,10 +49,7 @@ _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
     "simulation": (True, "true: answer each localized /pose (lockstep with the simulator); "
                          "false: robot mode, compute on a timer every dt with the newest pose"),
     "dt": (0.05, "Control period in seconds"),
-    "cmd_vel_stamped": (True, "Publish geometry_msgs/TwistStamped (Jazzy) instead of Twist "
-                              "(Humble); simulation mode always uses TwistStamped"),
-    "angular_sign": (1, "+1 for REP 103 (counter-clockwise positive), -1 for setups with the "
-                        "opposite convention"),
+    **COMMAND_PARAMETERS,
     "data_timeout": (0.5, "Robot mode: command zero when the newest /pose is older than this; "
                           "a /scan older than this is not used (seconds)"),
     "frame_id": ("map", "Frame of /pose and /path"),

@@ -48,6 +48,7 @@ from amr_common.robot import (
 )
 from amr_common.tf import StaticTransformListener
 from amr_control.command_output import (
+    COMMAND_PARAMETERS,
     CommandingNode,
     CommandOutput,
     command_parameter_problems,
@@ -67,10 +68,7 @@ _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
     "stop_when_localized": (True, "With enable_localization: publish nothing while /pose is "
                                   "localized (the planner's controller is in charge), resume "
                                   "when it is not; false = keep exploring"),
-    "cmd_vel_stamped": (True, "Publish geometry_msgs/TwistStamped (Jazzy) instead of Twist "
-                              "(Humble); simulation mode always uses TwistStamped"),
-    "angular_sign": (1, "+1 for REP 103 (counter-clockwise positive), -1 for setups with the "
-                        "opposite convention"),
+    **COMMAND_PARAMETERS,
     "data_timeout": (0.5, "Robot mode: command zero when the newest synchronized data is older "
                           "than this (seconds)"),
     "controller": (DEFAULT_CONTROLLER, "Controller class as MODULE:CLASS with "
