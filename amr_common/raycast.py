@@ -102,7 +102,6 @@ nearest_wall_kernel = jit(nearest_wall_python)
 clearances_kernel = jit(clearances_python)
 
 
-
 def scan_numpy(segments, ox, oy, theta, base_cos, base_sin, range_min, range_max, no_return,
                noise, out):
     """The same maths as a rays x segments matrix (fallback without numba)."""
