@@ -50,7 +50,13 @@ _WORK_PERIOD_S = 0.05  # how often the executor thread picks up the SDK's reques
 
 
 class FoxgloveBridgeNode(GuardedLifecycleNode):
-    """Forwards the graph's topics to Foxglove clients and publishes what clients send."""
+    """Forwards the graph's topics to Foxglove clients and publishes what clients send.
+
+    Configure starts the WebSocket server; activate creates the work timer (discovery, client
+    requests) and the ROS subscriptions clients ask for; deactivate destroys the timer, every
+    ROS subscription and client publisher (the server and its clients stay); cleanup and
+    shutdown also stop the server (release()). Nothing is sent on the way down.
+    """
 
     def __init__(self, node_name: str = "foxglove_bridge", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
@@ -119,16 +125,6 @@ class FoxgloveBridgeNode(GuardedLifecycleNode):
         self._release_ros_entities()
         return super().on_deactivate(state)
 
-    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Stop the server (clients are disconnected) and forget every channel."""
-        self._stop()
-        return TransitionCallbackReturn.SUCCESS
-
-    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """As cleanup: nothing to send on the way down."""
-        self._stop()
-        return TransitionCallbackReturn.SUCCESS
-
     def _release_ros_entities(self) -> None:
         if self._timer is not None:
             self.destroy_timer(self._timer)
@@ -140,7 +136,11 @@ class FoxgloveBridgeNode(GuardedLifecycleNode):
             self.destroy_publisher(publisher)
         self._client_publishers.clear()
 
-    def _stop(self) -> None:
+    def release(self) -> None:
+        """Stop the server (clients are disconnected) and forget every channel; sends nothing.
+
+        The timer, every ROS subscription and client publisher go first.
+        """
         self._release_ros_entities()
         for channel, _ in self._channels.values():
             channel.close()

@@ -29,7 +29,12 @@ _PARAMETERS = {
 
 
 class MapPublisherNode(GuardedLifecycleNode):
-    """Publishes a world's OccupancyGrid on /map and its walls on /map_markers (latched)."""
+    """Publishes a world's OccupancyGrid on /map and its walls on /map_markers (latched).
+
+    Configure loads the world, builds both messages and creates the two latched lifecycle
+    publishers; activate publishes them once; cleanup and shutdown release the publishers
+    (release()). Nothing is sent on the way down.
+    """
 
     def __init__(self, node_name: str = "map_publisher", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
@@ -73,17 +78,11 @@ class MapPublisherNode(GuardedLifecycleNode):
         self._outputs["markers"].publish(self._messages[1])
         return result
 
-    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Destroy the publishers (late subscribers get no map from now on)."""
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
+    def release(self) -> None:
+        """Destroy the two publishers (late subscribers get no map from now on).
 
-    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Destroy the publishers; nothing to send on the way down."""
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
-
-    def _release(self) -> None:
+        Nothing to send on the way down.
+        """
         for publisher in self._outputs.values():
             self.destroy_lifecycle_publisher(publisher)
         self._outputs = {}

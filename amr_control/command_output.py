@@ -2,7 +2,7 @@
 
 One publisher, one reused message, the node parameters every commanding node checks the same
 way, the forced final zero a robot without a command timeout needs, and the lifecycle callbacks
-that start and stop commanding (CommandingNode).
+that start and stop commanding (CommandingNode, a GuardedLifecycleNode).
 """
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ from geometry_msgs.msg import Twist, TwistStamped
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.publisher import Publisher
 
+from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.qos import RELIABLE_10
 from amr_common.robot import MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED
 
@@ -102,14 +103,14 @@ class CommandOutput:
             self.node.destroy_lifecycle_publisher(publisher)
 
 
-class CommandingNode:
-    """The lifecycle callbacks of a node that commands the robot.
+class CommandingNode(GuardedLifecycleNode):
+    """The lifecycle callbacks of a node that commands the robot: zero on the way down.
 
-    A mixin listed before the node's LifecycleNode base. The node's on_configure sets
-    `simulation`, `dt` and `_output` (a CommandOutput); the node keeps `_active`, `_timer`,
-    `_latest` (its newest stored input) and `_last_stamp` (the newest answered stamp in
-    lockstep), and provides `_on_timer` (robot mode) and `_release` (destroys what on_configure
-    created, the timer first).
+    The base of the wall follower and pure pursuit nodes. The node's on_configure sets
+    `simulation`, `dt` and `_output` (a CommandOutput); the node keeps `_timer`, `_latest` (its
+    newest stored input) and `_last_stamp` (the newest answered stamp in lockstep), and provides
+    `_on_timer` (robot mode) and `release()` (destroys what on_configure created, the timer
+    first, e.g. with `_stop_timer()`).
     """
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -119,7 +120,6 @@ class CommandingNode:
         simulation mode each input is answered as it comes.
         """
         result = super().on_activate(state)
-        self._active = True
         self._latest = None
         if not self.simulation:
             self._timer = self.create_timer(self.dt, self._on_timer)
@@ -133,7 +133,6 @@ class CommandingNode:
         """
         self._stop_timer()
         self._publish_zero("deactivating")  # before the publisher goes quiet
-        self._active = False
         return super().on_deactivate(state)
 
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -142,8 +141,7 @@ class CommandingNode:
         The zero is sent even though the publisher is disabled (inactive state).
         """
         self._publish_zero("cleaning up", force=True)
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
+        return super().on_cleanup(state)
 
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
         """From any state (Ctrl-C included): stop, send a final zero command, release all.
@@ -152,8 +150,7 @@ class CommandingNode:
         """
         self._stop_timer()
         self._publish_zero("shutting down", force=True)
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
+        return super().on_shutdown(state)
 
     def _stop_timer(self) -> None:
         if self._timer is not None:

@@ -79,6 +79,11 @@ class ParticleFilterNode(GuardedLifecycleNode):
 
     Creates nothing until configured; the filter (with its expected-range table) is built in
     on_configure, so a missing or malformed map fails that transition with the loader's message.
+    Configure also creates the /pose, /amcl_pose and /particles lifecycle publishers, the
+    synchronized /odometry + /scan inputs and the /initialpose subscription; messages are
+    processed while active (deactivate stops processing, the filter keeps its state); cleanup
+    and shutdown release everything (release()). It commands nothing: nothing is sent on the
+    way down.
     """
 
     def __init__(self, node_name: str = "particle_filter", **kwargs) -> None:
@@ -98,7 +103,6 @@ class ParticleFilterNode(GuardedLifecycleNode):
         self._subscribers: list = []
         self._initialpose_subscription = None
         self._synchronizer = None
-        self._active = False
         self._last_odometry_ns: int | None = None
         self._last_ranges: bytes | None = None
         self._last_scan_ns: int | None = None  # newest usable scan
@@ -181,29 +185,11 @@ class ParticleFilterNode(GuardedLifecycleNode):
             f"{f.table.nbytes / 1e6:.1f} MB, LiDAR at x = {filter_params['lidar_offset_x_m']} m")
         return TransitionCallbackReturn.SUCCESS
 
-    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Enable the publishers; messages are processed from now on."""
-        result = super().on_activate(state)
-        self._active = True
-        return result
+    def release(self) -> None:
+        """Destroy the subscriptions and publishers and drop the filter.
 
-    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Stop processing messages (the filter keeps its state); publishers go quiet."""
-        self._active = False
-        return super().on_deactivate(state)
-
-    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Destroy the subscriptions and publishers and drop the filter."""
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
-
-    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """As on_cleanup (nothing to send on the way down: the node commands nothing)."""
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
-
-    def _release(self) -> None:
-        self._active = False
+        Nothing to send on the way down: the node commands nothing.
+        """
         for subscriber in self._subscribers:
             subscriber.close()
         if self._initialpose_subscription is not None:
@@ -214,7 +200,7 @@ class ParticleFilterNode(GuardedLifecycleNode):
 
     # --- data path -------------------------------------------------------------------------
     def _on_odometry(self, message: Odometry) -> None:
-        if not self._active:
+        if not self.is_active:
             return
         stamp = time_to_nanoseconds(message.header.stamp)
         v, w = message.twist.twist.linear.x, message.twist.twist.angular.z
@@ -238,7 +224,7 @@ class ParticleFilterNode(GuardedLifecycleNode):
         self.filter.predict(float(v), float(w), dt)
 
     def _on_pair(self, odometry: Odometry, scan: LaserScan) -> None:
-        if not self._active:
+        if not self.is_active:
             return
         stamp_ns = time_to_nanoseconds(scan.header.stamp)
         ranges = self._usable_ranges(scan)
