@@ -14,6 +14,7 @@ from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackRet
 from rclpy.publisher import Publisher
 
 from amr_common.lifecycle_node import GuardedLifecycleNode
+from amr_common.parameter_table import finite
 from amr_common.qos import RELIABLE_10
 from amr_common.robot import MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED
 
@@ -30,13 +31,11 @@ COMMAND_PARAMETERS: dict[str, tuple[Any, str]] = {
 def command_parameter_problems(p: dict[str, Any]) -> list[str]:
     """What is wrong with the commanding parameters dt, angular_sign and data_timeout."""
     problems = []
-    if not (isinstance(p["dt"], (int, float)) and not isinstance(p["dt"], bool)
-            and math.isfinite(p["dt"]) and p["dt"] > 0):
+    if not (finite(p["dt"]) and p["dt"] > 0):
         problems.append(f"dt must be a positive number of seconds (got {p['dt']})")
     if p["angular_sign"] not in (1, -1):
         problems.append(f"angular_sign must be 1 or -1 (got {p['angular_sign']})")
-    if not (isinstance(p["data_timeout"], (int, float)) and math.isfinite(p["data_timeout"])
-            and p["data_timeout"] > 0):
+    if not (finite(p["data_timeout"]) and p["data_timeout"] > 0):
         problems.append(f"data_timeout must be > 0 s (got {p['data_timeout']})")
     return problems
 

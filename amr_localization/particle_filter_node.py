@@ -36,7 +36,7 @@ from sensor_msgs.msg import LaserScan
 from amr_common import message_filters
 from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.node_runner import run_lifecycle_node
-from amr_common.parameters import declare_parameters, read_parameters
+from amr_common.parameters import declare_parameters, finite, read_parameters
 from amr_common.qos import RELIABLE_10, scan_qos
 from amr_common.ros_conversions import (
     pose_from_message,
@@ -121,10 +121,8 @@ class ParticleFilterNode(GuardedLifecycleNode):
         filter_values, filter_problems = read_parameters(self, FILTER_PARAMETERS)
         problems += filter_problems
         for name in ("slop", "max_odometry_gap_s", "max_scan_age_s", "particles_period_s"):
-            value = node[name]
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or \
-                    not math.isfinite(value) or value < 0:
-                problems.append(f"{name} must be a number >= 0 (got {value!r})")
+            if not finite(node[name]) or node[name] < 0:
+                problems.append(f"{name} must be a number >= 0 (got {node[name]!r})")
         if not 0.0 <= float(node["min_valid_share"]) <= 1.0:
             problems.append(f"min_valid_share must be in [0, 1] (got {node['min_valid_share']})")
         for name in ("queue_size", "particles_published"):

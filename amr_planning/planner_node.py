@@ -25,7 +25,7 @@ from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 
 from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.node_runner import run_lifecycle_node
-from amr_common.parameters import declare_parameters, read_parameters
+from amr_common.parameters import declare_parameters, finite, read_parameters
 from amr_common.qos import LATCHED, RELIABLE_10
 from amr_common.ros_conversions import path_message
 from amr_common.world import World
@@ -201,8 +201,7 @@ def _configured_goal(world: World, goal: Any, goal_name: str) -> tuple[float, fl
     Not checked against the walls here: a goal in a wall is reported when planning.
     """
     if goal is not None and len(goal) > 0:
-        if len(goal) != 2 or not all(isinstance(v, (int, float)) and math.isfinite(v)
-                                     for v in goal):
+        if len(goal) != 2 or not all(finite(v) for v in goal):
             raise ValueError(f"goal must be [] or [x, y] with finite numbers (got {list(goal)})")
         return float(goal[0]), float(goal[1])
     if goal_name:

@@ -38,12 +38,7 @@ from amr_common.ros_conversions import command_from_twist, pose_from_message
 from amr_common.world import World
 from amr_sim.simulator import Simulator
 from amr_sim.simulator_outputs import SimulatorOutputs
-from amr_sim.simulator_params import (
-    DEFAULT_START,
-    PARAMETER_TABLE,
-    PARAMETER_TYPES,
-    check_parameters,
-)
+from amr_sim.simulator_params import DEFAULT_START, PARAMETERS, check_parameters
 
 
 class SimulatorNode(GuardedLifecycleNode):
@@ -59,7 +54,7 @@ class SimulatorNode(GuardedLifecycleNode):
     def __init__(self, node_name: str = "amr_simulator", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
         # Numbers take ints for doubles (`-p dt:=1`): amr_common.parameters.
-        declare_parameters(self, PARAMETER_TABLE, types=PARAMETER_TYPES)
+        declare_parameters(self, PARAMETERS)
         # Run scripts append callables here; each is called with the simulator after a step.
         self.on_step: list[Callable[[Any], None]] = []
         self._reset()
@@ -87,7 +82,7 @@ class SimulatorNode(GuardedLifecycleNode):
 
     def _read_parameters(self) -> dict[str, Any]:
         """Parameter values, checked; raises ValueError naming every bad one."""
-        values, problems = read_parameters(self, PARAMETER_TABLE, types=PARAMETER_TYPES)
+        values, problems = read_parameters(self, PARAMETERS)
         if problems:
             raise ValueError("; ".join(problems))
         return check_parameters(values)
