@@ -58,7 +58,9 @@ class LifecycleManager(Node):
                                             "this order"))
         self.declare_parameter("service_timeout", 10.0, ParameterDescriptor(
             description="Seconds to wait for a node's lifecycle services to appear"))
-        self.declare_parameter("transition_timeout", 10.0, ParameterDescriptor(
+        # 60 s: the first configure after an install compiles the numba kernels (10-20 s on a
+        # slow laptop; more on a loaded machine), which is slow but not a failure.
+        self.declare_parameter("transition_timeout", 60.0, ParameterDescriptor(
             description="Seconds to wait for a node to answer one transition request"))
         self.node_startup_order = [n for n in self.get_parameter("node_startup_order").value
                                    if n]

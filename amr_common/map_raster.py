@@ -20,8 +20,7 @@ from amr_common.coverage_grid import (
     inside_polygon_grid,
     inside_polygon_points,
 )
-
-FREE, OCCUPIED, UNKNOWN = 0, 100, -1
+from amr_common.occupancy_grid import FREE, OCCUPIED, UNKNOWN, wall_cells
 
 
 @dataclass(frozen=True)
@@ -53,8 +52,9 @@ def points_in_polygon(polygon: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.n
 
 
 def rasterize_world(world, resolution: float = 0.05, padding_m: float = 0.1) -> Raster:
-    """The occupancy raster of a amr_common.world.World at `resolution` metres per cell."""
-    if not (math.isfinite(resolution) and resolution > 0):
+    """The occupancy raster of an amr_common.world.World at `resolution` metres per cell."""
+    if isinstance(resolution, bool) or not (isinstance(resolution, (int, float))
+                                            and math.isfinite(resolution) and resolution > 0):
         raise ValueError(f"map resolution must be > 0 m, got {resolution!r}")
     xmin, ymin, xmax, ymax = world.bounds
     x0 = math.floor((xmin - padding_m) / resolution) * resolution
@@ -74,14 +74,7 @@ def rasterize_world(world, resolution: float = 0.05, padding_m: float = 0.1) -> 
         columns, band = box_slices(xs, ys, *hole.min(axis=0), *hole.max(axis=0))
         block = values[band, columns]
         block[inside_polygon_grid(hole, xs[columns], ys[band])] = OCCUPIED
-    # Walls: every cell a segment passes through, sampled at a quarter cell.
-    for x1, y1, x2, y2 in world.segments:
-        n = max(2, int(math.ceil(math.hypot(x2 - x1, y2 - y1) / (0.25 * resolution))) + 1)
-        t = np.linspace(0.0, 1.0, n)
-        r = np.floor((y1 + t * (y2 - y1) - y0) / resolution).astype(int)
-        c = np.floor((x1 + t * (x2 - x1) - x0) / resolution).astype(int)
-        keep = (r >= 0) & (r < rows) & (c >= 0) & (c < cols)
-        values[r[keep], c[keep]] = OCCUPIED
+    values[wall_cells(world.segments, (x0, y0), resolution, (rows, cols))] = OCCUPIED
     return raster
 
 

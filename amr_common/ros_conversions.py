@@ -1,4 +1,4 @@
-"""Building and reading the ROS messages the simulator and the controllers exchange.
+"""Building and reading the ROS messages the simulator, the controllers and the planner exchange.
 
 Pure message helpers: no node, no publisher, no rclpy import (only message classes), so the
 simulator node, the wall follower node and the real-robot estimator share one definition of
@@ -12,8 +12,8 @@ from typing import Sequence
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import Quaternion, Twist, TwistStamped
-from nav_msgs.msg import Odometry
+from geometry_msgs.msg import PoseStamped, Quaternion, Twist, TwistStamped
+from nav_msgs.msg import Odometry, Path
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import LaserScan
 
@@ -135,6 +135,37 @@ def pose_from_message(pose) -> tuple[float, float, float]:
     return float(pose.position.x), float(pose.position.y), quaternion_to_yaw(pose.orientation)
 
 
+# --- paths --------------------------------------------------------------------------------
+
+def path_message(points: Sequence[Sequence[float]] | np.ndarray, stamp: Time,
+                 frame_id: str = "map") -> Path:
+    """nav_msgs/Path through the (K, 2) points, each pose facing the next point.
+
+    The last pose keeps the previous heading. No points: an empty path ("no path").
+    """
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    message = Path()
+    message.header.stamp = stamp
+    message.header.frame_id = frame_id
+    headings = np.arctan2(*np.diff(pts, axis=0)[:, ::-1].T) if len(pts) > 1 else np.zeros(0)
+    headings = np.append(headings, headings[-1] if len(headings) else 0.0)
+    poses = []
+    for (x, y), heading in zip(pts, headings):
+        pose = PoseStamped()
+        pose.header = message.header
+        pose.pose.position.x, pose.pose.position.y = float(x), float(y)
+        yaw_to_quaternion(float(heading), pose.pose.orientation)
+        poses.append(pose)
+    message.poses = poses
+    return message
+
+
+def path_points(message: Path) -> np.ndarray:
+    """(K, 2) positions of a nav_msgs/Path's poses (may hold non-finite values: check them)."""
+    return np.array([[p.pose.position.x, p.pose.position.y] for p in message.poses],
+                    dtype=np.float64).reshape(-1, 2)
+
+
 # --- laser scans --------------------------------------------------------------------------
 
 def float32_array(values: Sequence[float] | np.ndarray) -> array.array:
@@ -202,5 +233,6 @@ def ray_angles(message: LaserScan) -> np.ndarray:
 
 __all__ = ["seconds_to_time", "time_to_seconds", "time_to_nanoseconds", "clock_message",
            "yaw_to_quaternion", "quaternion_to_yaw", "command_from_twist", "twist_stamped",
-           "odometry_message", "pose_from_message", "float32_array", "laser_scan",
+           "odometry_message", "pose_from_message", "path_message", "path_points",
+           "float32_array", "laser_scan",
            "laser_scan_from_profile", "scan_ranges", "ray_angles"]

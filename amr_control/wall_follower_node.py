@@ -27,10 +27,8 @@ import sys
 from typing import Any
 
 import numpy as np
-from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
-from rclpy.publisher import Publisher
 from sensor_msgs.msg import LaserScan
 
 from amr_common import message_filters
@@ -44,13 +42,18 @@ from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameters import declare_parameters, read_parameters
 from amr_common.qos import RELIABLE_10, scan_qos
 from amr_common.robot import (
-    MAX_ANGULAR_SPEED,
-    MAX_LINEAR_SPEED,
     MAX_PLAUSIBLE_ANGULAR_SPEED,
     MAX_PLAUSIBLE_LINEAR_SPEED,
     is_plausible_twist,
 )
 from amr_common.tf import StaticTransformListener
+from amr_control.command_output import (
+    COMMAND_PARAMETERS,
+    CommandingNode,
+    CommandOutput,
+    command_parameter_problems,
+    limit_command,
+)
 
 _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
     "simulation": (True, "true: compute on each synchronized set (lockstep with the simulator);"
@@ -65,10 +68,7 @@ _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
     "stop_when_localized": (True, "With enable_localization: publish nothing while /pose is "
                                   "localized (the planner's controller is in charge), resume "
                                   "when it is not; false = keep exploring"),
-    "cmd_vel_stamped": (True, "Publish geometry_msgs/TwistStamped (Jazzy) instead of Twist "
-                              "(Humble); simulation mode always uses TwistStamped"),
-    "angular_sign": (1, "+1 for REP 103 (counter-clockwise positive), -1 for setups with the "
-                        "opposite convention"),
+    **COMMAND_PARAMETERS,
     "data_timeout": (0.5, "Robot mode: command zero when the newest synchronized data is older "
                           "than this (seconds)"),
     "controller": (DEFAULT_CONTROLLER, "Controller class as MODULE:CLASS with "
@@ -106,14 +106,15 @@ def parameter_names(controller_class: type) -> list[str]:
     return sorted({*_NODE_PARAMETERS, *tuning_table(controller_class), "use_sim_time"})
 
 
-class WallFollowerNode(GuardedLifecycleNode):
+class WallFollowerNode(CommandingNode):
     """The wall follower as a lifecycle node: synchronized /odometry + /scan in, /cmd_vel out.
 
     __init__ declares the node's parameters and, when the controller class describes them
     (`parameter_descriptions()`), its tuning values; nothing else exists until configure.
     Configure creates the controller, the /cmd_vel lifecycle publisher and the synchronized
     subscriptions; activate starts commanding; deactivate, cleanup and shutdown each send a
-    zero command, because the TurtleBot3 keeps its last command forever.
+    zero command, because the TurtleBot3 keeps its last command forever (CommandingNode), and
+    cleanup and shutdown then release everything (release()).
     """
 
     def __init__(self, node_name: str = "wall_follower", **kwargs) -> None:
@@ -133,7 +134,7 @@ class WallFollowerNode(GuardedLifecycleNode):
     # --- lifecycle -------------------------------------------------------------------------
     def _reset_runtime(self) -> None:
         self.controller = None
-        self._cmd_publisher: Publisher | None = None
+        self._output: CommandOutput | None = None
         self._subscribers: list = []
         self._synchronizer = None
         self._timer = None
@@ -142,7 +143,6 @@ class WallFollowerNode(GuardedLifecycleNode):
         self._latest_in_charge = True  # robot mode: the newest set's verdict
         self._scan_geometry: tuple | None = None
         self._last_stamp = None  # newest measurement's stamp (simulated time in lockstep)
-        self._active = False
         self._stop_log_forwarding = None
         self._computed = False  # the controller has computed a command since it was built
         self._static_listener: StaticTransformListener | None = None
@@ -162,16 +162,11 @@ class WallFollowerNode(GuardedLifecycleNode):
         if problems:
             self.get_logger().error("configure failed: " + "; ".join(problems))
             return TransitionCallbackReturn.FAILURE
-        if not (math.isfinite(p["dt"]) and p["dt"] > 0):
-            problems.append(f"dt must be a positive number of seconds (got {p['dt']})")
+        problems = command_parameter_problems(p)
         if p["queue_size"] < 1:
             problems.append(f"queue_size must be >= 1 (got {p['queue_size']})")
         if not math.isfinite(p["slop"]):
             problems.append(f"slop must be finite (got {p['slop']})")
-        if p["angular_sign"] not in (1, -1):
-            problems.append(f"angular_sign must be 1 or -1 (got {p['angular_sign']})")
-        if not (math.isfinite(p["data_timeout"]) and p["data_timeout"] > 0):
-            problems.append(f"data_timeout must be > 0 s (got {p['data_timeout']})")
         if problems:
             self.get_logger().error("configure failed: " + "; ".join(problems))
             return TransitionCallbackReturn.FAILURE
@@ -192,11 +187,7 @@ class WallFollowerNode(GuardedLifecycleNode):
         self.stop_when_localized = bool(p["stop_when_localized"])
         slop = p["slop"] if p["slop"] >= 0 else (10.0 if self.simulation else 0.15)
 
-        self._cmd_message = TwistStamped() if self.stamped else Twist()
-        if self.stamped:
-            self._cmd_message.header.frame_id = "base_footprint"
-        self._cmd_publisher = self.create_lifecycle_publisher(
-            TwistStamped if self.stamped else Twist, p["cmd_vel_topic"], RELIABLE_10)
+        self._output = CommandOutput(self, p["cmd_vel_topic"], self.stamped, self.angular_sign)
         self._subscribers = [
             message_filters.Subscriber(self, Odometry, p["odometry_topic"],
                                        qos_profile=RELIABLE_10),
@@ -220,64 +211,19 @@ class WallFollowerNode(GuardedLifecycleNode):
             f"{'TwistStamped' if self.stamped else 'Twist'}, angular_sign {self.angular_sign}")
         return TransitionCallbackReturn.SUCCESS
 
-    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Enable the /cmd_vel publisher and start commanding.
+    def release(self) -> None:
+        """Destroy what on_configure created; the zero command was sent before (CommandingNode).
 
-        Forgets any stored measurement; in robot mode creates the control timer (every dt,
-        zero until fresh data arrives). In simulation mode each synchronized set is answered.
+        The control timer, the synchronized subscriptions, the /tf_static listener and the
+        /cmd_vel publisher; the log forwarding stops and the controller is dropped.
         """
-        result = super().on_activate(state)
-        self._active = True
-        self._latest = None
-        if not self.simulation:
-            self._timer = self.create_timer(self.dt, self._on_timer)
-        return result
-
-    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Stop commanding: destroy the control timer and send a zero command.
-
-        The zero goes out while the publisher is still enabled; then the publisher is
-        disabled. The controller, publisher and subscriptions stay for a later activate.
-        """
-        self._stop_timer()
-        self._publish_zero("deactivating")  # before the publisher goes quiet
-        self._active = False
-        return super().on_deactivate(state)
-
-    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Send a zero command, then release everything configure created.
-
-        The zero is sent even though the publisher is disabled (inactive state). Released:
-        the timer, the subscriptions and synchronizer, the publisher and the controller.
-        """
-        self._publish_zero("cleaning up", force=True)
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
-
-    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """From any state (Ctrl-C included): stop, send a final zero command, release all.
-
-        The timer is destroyed first so no command follows the zero; then the subscriptions,
-        synchronizer, publisher and controller are released as in cleanup.
-        """
-        self._stop_timer()
-        self._publish_zero("shutting down", force=True)
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
-
-    def _stop_timer(self) -> None:
-        if self._timer is not None:
-            self.destroy_timer(self._timer)
-            self._timer = None
-
-    def _release(self) -> None:
         self._stop_timer()
         for subscriber in self._subscribers:
             subscriber.close()
         if self._static_listener is not None:
             self._static_listener.close()
-        if self._cmd_publisher is not None:
-            self.destroy_lifecycle_publisher(self._cmd_publisher)
+        if self._output is not None:
+            self._output.destroy()
         if self._stop_log_forwarding is not None:
             self._stop_log_forwarding()
         self._reset_runtime()
@@ -310,7 +256,7 @@ class WallFollowerNode(GuardedLifecycleNode):
         self.get_logger().info(f"LiDAR position from /tf_static: x = {offset.x:.3f} m")
 
     def _on_synchronized(self, odometry: Odometry, scan: LaserScan, pose=None) -> None:
-        if not self._active:
+        if not self.is_active:
             return
         in_charge = pose is None or not pose.localized or not self.stop_when_localized
         measurement = self._measurement(odometry, scan)
@@ -369,7 +315,7 @@ class WallFollowerNode(GuardedLifecycleNode):
         return np.asarray(scan.ranges, dtype=float), float(z_v), float(z_w)
 
     def _on_timer(self) -> None:
-        if not self._active:
+        if not self.is_active:
             return
         now = self.get_clock().now()
         fresh = self._latest is not None and \
@@ -403,33 +349,11 @@ class WallFollowerNode(GuardedLifecycleNode):
         if not (math.isfinite(v) and math.isfinite(w)):
             self.get_logger().warning(f"controller returned non-finite ({v}, {w}): commanding "
                                       f"zero", throttle_duration_sec=2.0)
-            return 0.0, 0.0
-        return (min(max(v, -MAX_LINEAR_SPEED), MAX_LINEAR_SPEED),
-                min(max(w, -MAX_ANGULAR_SPEED), MAX_ANGULAR_SPEED))
+        return limit_command(v, w)
 
     def _publish(self, v: float, w: float, stamp, force: bool = False) -> None:
-        if self._cmd_publisher is None:
-            return
-        # One message object reused: publish() serializes it at once, and building a
-        # TwistStamped per step is a noticeable share of the lockstep loop.
-        msg = self._cmd_message
-        twist = msg.twist if self.stamped else msg
-        twist.linear.x = v
-        twist.angular.z = self.angular_sign * w
-        if self.stamped:
-            msg.header.stamp = stamp
-        if force:  # a final zero goes out even when the lifecycle publisher is disabled
-            Publisher.publish(self._cmd_publisher, msg)
-        else:
-            self._cmd_publisher.publish(msg)
-
-    def _publish_zero(self, why: str, force: bool = False) -> None:
-        if self._cmd_publisher is None:
-            return
-        self.get_logger().info(f"{why}: commanding zero velocity")
-        stamp = self._last_stamp if self.simulation and self._last_stamp is not None else \
-            self.get_clock().now().to_msg()
-        self._publish(0.0, 0.0, stamp, force=force)
+        if self._output is not None:
+            self._output.publish(v, w, stamp, force=force)
 
 
 def main(args: list[str] | None = None) -> int:

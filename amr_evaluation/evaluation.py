@@ -2,7 +2,9 @@
 
 scripts/evaluate.py is the command line around it; bench.py and tests use it directly. Each
 episode is amr_evaluation.episode.run_episode with the same Simulator and controller classes as
-the ROS path.
+the ROS path; an episode with a goal is a navigation episode
+(amr_evaluation.navigation_episode.run_navigation_episode: the controller explores until the
+pose source is localized, then the planner and the pure pursuit drive to the goal).
 """
 from __future__ import annotations
 
@@ -33,11 +35,12 @@ __all__ = [
     "DEFAULT_CONTROLLER", "ControllerSpecError", "EvaluationError", "EpisodeSpec",
     "EpisodeOutcome", "parse_name_list", "parse_start_list", "parse_seeds", "parse_overrides",
     "expand_grid", "load_config", "load_ros_params_file", "check_controller", "run_one",
-    "run_summary", "lost_episode", "run_episodes",
+    "run_summary", "lost_episode", "run_episodes", "POSE_SOURCES",
 ]
 
-CONFIG_KEYS = ("worlds", "starts", "profiles", "seeds", "duration", "dt", "controller",
-               "params_file", "params", "jobs")
+CONFIG_KEYS = ("worlds", "starts", "goals", "pose_source", "profiles", "seeds", "duration", "dt",
+               "controller", "params_file", "params", "jobs")
+POSE_SOURCES = ("filter", "truth")
 MAX_EPISODES = 10_000
 
 
@@ -57,6 +60,8 @@ class EpisodeSpec:
     dt: float = 0.05
     controller: str = DEFAULT_CONTROLLER
     params: tuple[tuple[str, Any], ...] = ()
+    goal: str | None = None  # a named goal or "x,y": a navigation episode
+    pose_source: str = "filter"  # of a navigation episode: "filter" or "truth"
 
     def __post_init__(self) -> None:
         if isinstance(self.params, Mapping):
@@ -73,9 +78,10 @@ class EpisodeSpec:
 
     @property
     def label(self) -> str:
-        """world/start/profile/seed N, for tables and progress lines."""
+        """world/start[->goal]/profile/seed N, for tables and progress lines."""
         from amr_common.world import start_label
-        return (f"{Path(self.world).stem}/{start_label(self.start) or '-'}/{self.profile}/"
+        goal = f"->{self.goal}" if self.goal else ""
+        return (f"{Path(self.world).stem}/{start_label(self.start) or '-'}{goal}/{self.profile}/"
                 f"seed {self.seed}")
 
 
@@ -200,13 +206,17 @@ def parse_seeds(value: str | int | Sequence[Any] | None) -> list[int]:
 def expand_grid(worlds: str | Sequence[str], starts: str | Sequence[str] = "all",
                 profiles: str | Sequence[str] = ("ideal",), seeds: Any = (0,),
                 duration: float = 600.0, dt: float = 0.05, controller: str = DEFAULT_CONTROLLER,
-                params: Mapping[str, Any] | None = None) -> list[EpisodeSpec]:
-    """Every combination of world x start x profile x seed, in that nesting order.
+                params: Mapping[str, Any] | None = None,
+                goals: str | Sequence[str] | None = None,
+                pose_source: str = "filter") -> list[EpisodeSpec]:
+    """Every combination of world x start [x goal] x profile x seed, in that nesting order.
 
     `worlds` "all" means every bundled world; `starts` "all" means every named start of each world.
     A start name applies to the worlds that have it; a name no chosen world has is an error. A pose
     (x, y, theta; see parse_start_list) applies to every world. A world without named starts
-    (the course's map JSON) needs poses.
+    (the course's map JSON) needs poses. `goals` (navigation episodes): "all" = every named goal
+    of each world, or names, applied like the start names; None or empty: wall-following
+    episodes.
     """
     from amr_common.world import World, WorldError, bundled_worlds
     from amr_sim.profiles import get_profile
@@ -250,12 +260,38 @@ def expand_grid(worlds: str | Sequence[str], starts: str | Sequence[str] = "all"
     if unused:
         raise EvaluationError(f"start(s) {', '.join(unused)} exist in none of the worlds "
                               f"{', '.join(world_names)}")
+    goal_names = parse_name_list(goals)
+    world_goals = {w: _world_goals(w, goal_names) for w in world_names}
+    missing = [g for g in goal_names if g != "all" and not any(g in v for v in
+                                                                world_goals.values())]
+    if missing:
+        raise EvaluationError(f"goal(s) {', '.join(missing)} exist in none of the worlds "
+                              f"{', '.join(world_names)}")
+    if pose_source not in POSE_SOURCES:
+        raise EvaluationError(f"pose_source must be one of {', '.join(POSE_SOURCES)}, got "
+                              f"{pose_source!r}")
     specs = [EpisodeSpec(world=w, start=s, profile=p, seed=seed, duration=duration, dt=dt,
-                         controller=controller, params=dict(params or {}))
-             for w in world_names for s in loaded[w] for p in profile_names for seed in seed_list]
+                         controller=controller, params=dict(params or {}), goal=g,
+                         pose_source=pose_source)
+             for w in world_names for s in loaded[w] for g in world_goals[w]
+             for p in profile_names for seed in seed_list]
     if len(specs) > MAX_EPISODES:
         raise EvaluationError(f"{len(specs)} episodes requested; the limit is {MAX_EPISODES}")
     return specs
+
+
+def _world_goals(world_name: str, goal_names: list[str]) -> list[str | None]:
+    """The goals of one world an episode grid uses: [None] without goals (wall following)."""
+    if not goal_names:
+        return [None]
+    from amr_common.world import World
+    available = list(World.load(world_name).goals)
+    chosen = available if goal_names == ["all"] else [g for g in goal_names if g in available]
+    if not chosen:
+        raise EvaluationError(f"world '{world_name}' has none of the goals "
+                              f"{', '.join(goal_names)} (its goals: "
+                              f"{', '.join(available) or 'none'})")
+    return list(chosen)
 
 
 def _read_yaml(path: Path, what: str) -> Any:
@@ -343,6 +379,12 @@ def load_ros_params_file(path: str | os.PathLike,
         if isinstance(raw, dict) else []
     if not sections:
         raise EvaluationError(f"{path}: no '<node>: ros__parameters:' section")
+    if any(str(key).lstrip("/") == "wall_follower" for key in raw):
+        # The wall follower's own and wildcard sections, not the other nodes' (pure_pursuit
+        # also has a max_linear_speed_mps, for one).
+        sections = [v["ros__parameters"] for k, v in raw.items()
+                    if (str(k).lstrip("/") == "wall_follower" or "*" in str(k))
+                    and isinstance(v, dict) and isinstance(v.get("ros__parameters"), dict)]
     params: dict[str, Any] = {}
     for section in sections:
         params.update(section)
@@ -386,10 +428,18 @@ def run_one(spec: EpisodeSpec, trajectory: bool = True) -> EpisodeOutcome:
         # The simulated robot's own values (LiDAR position) unless the spec sets them.
         params = {**robot_parameters(controller_class, get_profile(spec.profile)),
                   **dict(spec.params)}
-        result = run_episode(spec.world, spec.start, profile=spec.profile, seed=spec.seed,
-                             duration=spec.duration, dt=spec.dt,
-                             controller_factory=lambda dt: controller_class(dt, **params),
-                             record_trajectory=trajectory)
+        if spec.goal is not None:
+            from amr_evaluation.navigation_episode import run_navigation_episode
+            result = run_navigation_episode(
+                spec.world, spec.start, spec.goal, profile=spec.profile, seed=spec.seed,
+                duration=spec.duration, dt=spec.dt, pose_source=spec.pose_source,
+                wall_follower=controller_class(spec.dt, **params),
+                record_trajectory=trajectory)
+        else:
+            result = run_episode(spec.world, spec.start, profile=spec.profile, seed=spec.seed,
+                                 duration=spec.duration, dt=spec.dt,
+                                 controller_factory=lambda dt: controller_class(dt, **params),
+                                 record_trajectory=trajectory)
         return EpisodeOutcome(spec, result=result, wall_time_s=time.perf_counter() - start)
     except Exception as exc:  # one broken episode must not lose the others' results
         detail = traceback.format_exception_only(type(exc), exc)[-1].strip()

@@ -21,14 +21,21 @@ from amr_common.world import start_label
 from amr_evaluation.evaluation import EpisodeOutcome
 
 __all__ = [
-    "RESULT_COLUMNS", "outcome_row", "write_json", "write_csv", "format_table", "verdict",
-    "ProgressBar",
+    "RESULT_COLUMNS", "NAVIGATION_COLUMNS", "columns_of", "outcome_row", "write_json",
+    "write_csv", "format_table", "verdict", "ProgressBar",
 ]
 
 RESULT_COLUMNS = ("world", "start", "profile", "seed", "sim_time_s", "collisions",
                   "first_collision_time_s", "min_clearance_m", "distance_m", "laps",
                   "explored_fraction", "rms_wall_error_m", "invalid_commands", "wall_time_s",
                   "error")
+# Navigation episodes (a goal) have these instead of laps ... rms_wall_error_m.
+NAVIGATION_COLUMNS = ("world", "start", "goal", "profile", "seed", "sim_time_s", "collisions",
+                      "min_clearance_m", "distance_m", "goal_reached", "localized_time_s",
+                      "goal_reached_time_s", "stopped_time_s", "final_position_error_m",
+                      "path_length_m", "plans", "stalled", "invalid_commands", "wall_time_s",
+                      "error")
+_SPEC_COLUMNS = {"world", "start", "goal", "profile", "seed", "wall_time_s", "error"}
 
 
 def _finite_or_none(value: Any) -> Any:
@@ -41,6 +48,11 @@ def _finite_or_none(value: Any) -> Any:
     return value
 
 
+def columns_of(outcomes: Sequence[EpisodeOutcome]) -> tuple[str, ...]:
+    """The columns of a set of outcomes: navigation ones if any episode has a goal."""
+    return NAVIGATION_COLUMNS if any(o.spec.goal for o in outcomes) else RESULT_COLUMNS
+
+
 def outcome_row(outcome: EpisodeOutcome) -> dict[str, Any]:
     """The flat per-episode metrics (JSON-safe: non-finite numbers become None)."""
     spec, result = outcome.spec, outcome.result
@@ -48,17 +60,16 @@ def outcome_row(outcome: EpisodeOutcome) -> dict[str, Any]:
              else spec.world)
     row: dict[str, Any] = {"world": world, "start": start_label(spec.start) or None,
                            "profile": spec.profile, "seed": spec.seed}
-    metrics = _result_metrics(result) if result is not None else {}
-    for column in RESULT_COLUMNS[4:-2]:
-        row[column] = _finite_or_none(metrics.get(column))
+    columns = NAVIGATION_COLUMNS if spec.goal else RESULT_COLUMNS
+    if spec.goal:
+        row["goal"] = spec.goal
+    for column in columns:
+        if column not in _SPEC_COLUMNS:
+            # Result fields carry their units in their names, like the columns.
+            row[column] = _finite_or_none(getattr(result, column, None))
     row["wall_time_s"] = round(outcome.wall_time_s, 3)
     row["error"] = outcome.error
     return row
-
-
-def _result_metrics(result: Any) -> dict[str, Any]:
-    # EpisodeResult fields carry their units in their names, like the columns.
-    return {column: getattr(result, column, None) for column in RESULT_COLUMNS[4:-2]}
 
 
 def write_json(path: str | os.PathLike, outcomes: Sequence[EpisodeOutcome],
@@ -71,10 +82,10 @@ def write_json(path: str | os.PathLike, outcomes: Sequence[EpisodeOutcome],
 
 
 def write_csv(path: str | os.PathLike, outcomes: Sequence[EpisodeOutcome]) -> Path:
-    """results.csv: one row per episode, RESULT_COLUMNS, empty cells for missing values."""
+    """results.csv: one row per episode (columns_of), empty cells for missing values."""
     path = Path(path)
     with path.open("w", newline="", encoding="utf-8") as stream:
-        writer = csv.DictWriter(stream, fieldnames=RESULT_COLUMNS)
+        writer = csv.DictWriter(stream, fieldnames=columns_of(outcomes), extrasaction="ignore")
         writer.writeheader()
         for outcome in outcomes:
             writer.writerow({k: ("" if v is None else v) for k, v in outcome_row(outcome).items()})
@@ -93,27 +104,40 @@ _TABLE = (  # header, row key, formatter
     ("invalid cmds", "invalid_commands", str),
     ("wall s", "wall_time_s", lambda v: f"{v:.1f}"),
 )
-_LEFT_ALIGNED = {"world", "start", "profile"}
+_NAVIGATION_TABLE = (
+    ("world", "world", str), ("start", "start", lambda v: v or "-"), ("goal", "goal", str),
+    ("profile", "profile", str), ("seed", "seed", str),
+    ("collisions", "collisions", str),
+    ("min clear. cm", "min_clearance_m", lambda v: f"{v * 100:.1f}"),
+    ("localized s", "localized_time_s", lambda v: f"{v:.1f}"),
+    ("reached s", "goal_reached_time_s", lambda v: f"{v:.1f}"),
+    ("stopped s", "stopped_time_s", lambda v: f"{v:.1f}"),
+    ("final err. cm", "final_position_error_m", lambda v: f"{v * 100:.1f}"),
+    ("path m", "path_length_m", lambda v: f"{v:.2f}"), ("plans", "plans", str),
+    ("wall s", "wall_time_s", lambda v: f"{v:.1f}"),
+)
+_LEFT_ALIGNED = {"world", "start", "goal", "profile"}
 
 
 def format_table(rows: Iterable[Mapping[str, Any]]) -> str:
     """Aligned text table of outcome rows; an episode that failed shows its error instead."""
     rows = list(rows)
-    cells = [[h for h, _, _ in _TABLE]]
+    table = _NAVIGATION_TABLE if any(r.get("goal") for r in rows) else _TABLE
+    cells = [[h for h, _, _ in table]]
     errors: list[str] = []
     for row in rows:
         line = []
-        for _, key, fmt in _TABLE:
+        for _, key, fmt in table:
             value = row.get(key)
             line.append("-" if value is None else fmt(value))
         cells.append(line)
         if row.get("error"):
             errors.append(f"  {row['world']}/{row['start'] or '-'}/{row['profile']}/seed "
                           f"{row['seed']}: ERROR {row['error']}")
-    widths = [max(len(r[i]) for r in cells) for i in range(len(_TABLE))]
+    widths = [max(len(r[i]) for r in cells) for i in range(len(table))]
     lines = []
     for r in cells:
-        lines.append("  ".join(c.ljust(w) if _TABLE[i][1] in _LEFT_ALIGNED else c.rjust(w)
+        lines.append("  ".join(c.ljust(w) if table[i][1] in _LEFT_ALIGNED else c.rjust(w)
                                for i, (c, w) in enumerate(zip(r, widths))).rstrip())
     lines.insert(1, "  ".join("-" * w for w in widths))
     return "\n".join(lines + errors)
@@ -122,13 +146,15 @@ def format_table(rows: Iterable[Mapping[str, Any]]) -> str:
 def verdict(outcomes: Sequence[EpisodeOutcome]) -> tuple[str, int]:
     """One summary line and the exit code.
 
-    0 clean, 1 any collision or invalid command (NaN, inf, not a number: the simulator stopped
-    the robot instead), 3 any episode failed.
+    0 clean, 1 any collision, invalid command (NaN, inf, not a number: the simulator stopped
+    the robot instead) or navigation goal not reached, 3 any episode failed.
     """
     rows = [outcome_row(o) for o in outcomes]
     failed = [r for r in rows if r["error"]]
     collided = [r for r in rows if not r["error"] and (r["collisions"] or 0) > 0]
     invalid = [r for r in rows if not r["error"] and (r["invalid_commands"] or 0) > 0]
+    navigating = [r for r in rows if r.get("goal") and not r["error"]]
+    missed = [r for r in navigating if not r["goal_reached"]]
     clear = [r for r in rows if r["min_clearance_m"] is not None]
     parts = []
     if invalid:
@@ -144,14 +170,22 @@ def verdict(outcomes: Sequence[EpisodeOutcome]) -> tuple[str, int]:
     if clear:
         worst = min(clear, key=lambda r: r["min_clearance_m"])
         parts.append(f"worst clearance {worst['min_clearance_m'] * 100:.1f} cm ({_short(worst)})")
+    if navigating:
+        reached = len(navigating) - len(missed)
+        errors = [r["final_position_error_m"] for r in navigating if r["goal_reached"]]
+        parts.append(f"goal reached in {reached}/{len(navigating)} episodes"
+                     + (f" (final error <= {max(errors) * 100:.1f} cm)" if errors else "")
+                     + ("; NOT reached: " + ", ".join(_short(r) for r in missed[:5])
+                        if missed else ""))
     if failed:
         parts.append(f"{len(failed)} episode(s) FAILED to run")
-    code = 3 if failed else 1 if collided or invalid else 0
+    code = 3 if failed else 1 if collided or invalid or missed else 0
     return "verdict: " + "; ".join(parts), code
 
 
 def _short(row: Mapping[str, Any]) -> str:
-    return f"{row['world']}/{row['start'] or '-'}/{row['profile']}/seed {row['seed']}"
+    goal = f"->{row['goal']}" if row.get("goal") else ""
+    return f"{row['world']}/{row['start'] or '-'}{goal}/{row['profile']}/seed {row['seed']}"
 
 
 class ProgressBar:

@@ -15,7 +15,7 @@ from matplotlib.figure import Figure
 
 from amr_common.world import World
 from amr_evaluation.localization_episode import FALSE_POSITION_M, pose_errors
-from amr_evaluation.plot import draw_world
+from amr_evaluation.plot import draw_navigation, draw_world
 
 
 def plot_localization(world: World | str, report: dict[str, Any], path: str | Path,
@@ -30,6 +30,7 @@ def plot_localization(world: World | str, report: dict[str, Any], path: str | Pa
     ax = fig.add_subplot(1, 2, 1)
     draw_world(ax, world, show_starts=False)
     ax.plot(truth[:, 1], truth[:, 2], color="0.55", linewidth=2.2, label="truth", zorder=4)
+    draw_navigation(ax, report.get("path"), report.get("goal"))  # navigation runs have them
     localized = estimate[:, 4] > 0.5
     searching = np.where(localized, np.nan, estimate[:, 1])
     ax.plot(searching, estimate[:, 2], ".", color="tab:orange", markersize=2, alpha=0.5,

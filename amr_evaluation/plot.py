@@ -20,8 +20,12 @@ from amr_common.world import World
 _WALL_COLOUR = "#222222"
 
 
-def draw_world(ax, world: World, show_starts: bool = True, show_grid: bool = False) -> None:
-    """Walls (and optionally named starts and the corridor grid) on a matplotlib Axes."""
+def draw_world(ax, world: World, show_starts: bool = True, show_grid: bool = False,
+               show_goals: bool | None = None) -> None:
+    """Walls and optionally named starts, named goals and the corridor grid on an Axes.
+
+    Goals are shown with the starts unless show_goals says otherwise.
+    """
     segs = world.segments.reshape(-1, 2, 2)
     ax.add_collection(LineCollection(segs, colors=_WALL_COLOUR, linewidths=2.0, capstyle="round",
                                      zorder=3))
@@ -44,9 +48,28 @@ def draw_world(ax, world: World, show_starts: bool = True, show_grid: bool = Fal
             _draw_robot(ax, x, y, th, colour="tab:green")
             ax.annotate(name, (x, y), xytext=(6, 6), textcoords="offset points", fontsize=8,
                         color="darkgreen", zorder=6)
-    if world.goal is not None:
-        ax.plot(*world.goal, marker="*", markersize=14, color="gold", markeredgecolor="k",
-                zorder=6)
+    if show_starts if show_goals is None else show_goals:
+        for name, (x, y) in world.goals.items():
+            _draw_goal(ax, x, y)
+            ax.annotate(name, (x, y), xytext=(6, -10), textcoords="offset points", fontsize=8,
+                        color="darkred", zorder=6)
+        if world.goal is not None and world.goal not in world.goals.values():
+            _draw_goal(ax, *world.goal)
+
+
+def draw_navigation(ax, planned_path: Any = None, goal: Sequence[float] | None = None) -> None:
+    """The planned path (dashed) and the goal (a star) on an Axes, where given."""
+    if planned_path is not None and len(planned_path):
+        plan = np.asarray(planned_path, dtype=np.float64).reshape(-1, 2)
+        ax.plot(plan[:, 0], plan[:, 1], linestyle="--", color="tab:red", linewidth=1.2,
+                zorder=5, label="planned path")
+    if goal is not None:
+        _draw_goal(ax, goal[0], goal[1], label="goal")
+
+
+def _draw_goal(ax, x: float, y: float, label: str | None = None) -> None:
+    ax.plot(x, y, marker="*", markersize=14, color="tab:red", markeredgecolor="k", zorder=6,
+            linestyle="none", label=label)
 
 
 def _draw_robot(ax, x: float, y: float, th: float, colour: str, label: str | None = None) -> None:
@@ -95,14 +118,17 @@ def _episode_parts(trajectory: Any, collision_points: Iterable) -> tuple[np.ndar
 
 
 def draw_episode(ax, world: World, trajectory: Any, collision_points: Iterable = (),
-                 colourbar: bool = True, small: bool = False) -> dict[str, float]:
+                 colourbar: bool = True, small: bool = False, planned_path: Any = None,
+                 goal: Sequence[float] | None = None) -> dict[str, float]:
     """Walls, the trajectory coloured by time, start/end markers and collisions on an Axes.
 
-    Returns the figures shown (collisions, min clearance, distance).
+    With navigation also the planned path (dashed) and the goal (a star). Returns the figures
+    shown (collisions, min clearance, distance).
     """
     traj, points, result = _episode_parts(trajectory, collision_points)
     draw_world(ax, world, show_starts=False)
     figures = _figures(world, traj, points, result)
+    draw_navigation(ax, planned_path, goal)
     if len(traj) >= 2:
         xy = traj[:, 1:3]
         lines = LineCollection(np.stack([xy[:-1], xy[1:]], axis=1), cmap="viridis",
@@ -151,9 +177,11 @@ def _title(world: World, result, figures: dict[str, float], title: str | None) -
 
 
 def plot_episode(world: World | str, trajectory: Any, collision_points: Iterable = (),
-                 path: str | Path = "x.png", title: str | None = None) -> Path:
+                 path: str | Path = "x.png", title: str | None = None,
+                 planned_path: Any = None, goal: Sequence[float] | None = None) -> Path:
     """Draw one episode to a PNG: walls, trajectory coloured by time, start, end, collisions.
 
+    For navigation also the planned path and the goal.
     `trajectory` is [[t, x, y, theta], ...] or an EpisodeResult (or its to_dict()), whose start,
     profile and figures then go into the title.
     """
@@ -162,17 +190,17 @@ def plot_episode(world: World | str, trajectory: Any, collision_points: Iterable
     FigureCanvasAgg(fig)
     ax = fig.add_subplot(1, 1, 1)
     traj, points, result = _episode_parts(trajectory, collision_points)
-    figures = draw_episode(ax, world, traj, points)
+    figures = draw_episode(ax, world, traj, points, planned_path=planned_path, goal=goal)
     ax.set_title(_title(world, result, figures, title), fontsize=10)
     return _save(fig, path)
 
 
 def plot_episodes_sheet(results: Sequence[Any], path: str | Path, columns: int | None = None,
                         title: str | None = None) -> Path:
-    """A grid of episodes (EpisodeResults or their dicts), one small subplot each."""
+    """A grid of episodes (EpisodeResults or their dicts, NavigationResults), one subplot each."""
     from .episode import EpisodeResult
 
-    items = [r if isinstance(r, EpisodeResult) else EpisodeResult.from_dict(r) for r in results]
+    items = [r if hasattr(r, "trajectory") else EpisodeResult.from_dict(r) for r in results]
     n = max(1, len(items))
     columns = columns or min(4, math.ceil(math.sqrt(n)))
     rows = math.ceil(n / columns)
@@ -182,7 +210,9 @@ def plot_episodes_sheet(results: Sequence[Any], path: str | Path, columns: int |
     for i, res in enumerate(items):
         ax = fig.add_subplot(rows, columns, i + 1)
         world = worlds.setdefault(res.world, World.load(res.world))
-        figures = draw_episode(ax, world, res, colourbar=False, small=True)
+        figures = draw_episode(ax, world, res, colourbar=False, small=True,
+                               planned_path=getattr(res, "path", None),
+                               goal=getattr(res, "goal", None))
         start = (res.start if isinstance(res.start, str)
                  else "(" + ", ".join(f"{c:.1f}" for c in res.start) + ")")
         ax.set_title(f"{res.world}/{start}/{res.profile} s{res.seed}\n"

@@ -12,8 +12,10 @@ TF (REP 105) as the robot's bringup: /tf_static base_footprint -> base_scan at t
 position; /tf with each odometry message (while anyone subscribes): odom -> base_footprint, map
 -> base_footprint_truth (the true pose) and, with `map_to_odom_from_truth`, map -> odom. /map and
 /map_markers: the world, latched, published on activation.
-With `enable_localization`, /pose (amr_msgs/PoseStamped) is compared with the true pose and
-reaching the goal while localized finishes the run (`finished`, `summary()`).
+With `enable_localization`, /pose (amr_msgs/PoseStamped) is compared with the true pose; the goal
+counts as reached when the true position is within goal_tolerance while localized (logged), and
+the run finishes once the robot has then been commanded to rest for goal_rest_time (at once for
+0, as the course template), so the final error is measured where it stops (`summary()`).
 For in-process run scripts: `node.simulator` and `node.on_step` (callables called with the
 simulator after every step) give access without topics; `node.finish(reason)` stops stepping.
 """
@@ -23,61 +25,36 @@ import math
 import time
 from typing import Any, Callable
 
-from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Twist, TwistStamped
-from nav_msgs.msg import Odometry
 from rclpy.clock import Clock, ClockType
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
-from rosgraph_msgs.msg import Clock as ClockMessage
-from sensor_msgs.msg import LaserScan
 
 from amr_common.geometry import angle_difference
 from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameters import declare_parameters, read_parameters
-from amr_common.qos import RELIABLE_10, scan_qos
-from amr_common.ros_conversions import (
-    command_from_twist,
-    float32_array,
-    laser_scan_from_profile,
-    odometry_message,
-    pose_from_message,
-    seconds_to_time,
-)
+from amr_common.qos import RELIABLE_10
+from amr_common.ros_conversions import command_from_twist, pose_from_message
 from amr_common.world import World
 from amr_sim.simulator import Simulator
-from amr_sim.simulator_params import (
-    DEFAULT_START,
-    PARAMETER_TABLE,
-    PARAMETER_TYPES,
-    check_parameters,
-)
-from amr_sim.simulator_tf import SimulatorTf
-
-
-def true_velocity(before: tuple, after: tuple, dt: float) -> tuple[float, float]:
-    """Body-frame (v, w) that moved the robot from pose `before` to `after` in dt."""
-    d_theta = angle_difference(after[2], before[2])
-    mid_heading = before[2] + 0.5 * d_theta
-    forward = (after[0] - before[0]) * math.cos(mid_heading) + \
-        (after[1] - before[1]) * math.sin(mid_heading)
-    return forward / dt, d_theta / dt
+from amr_sim.simulator_outputs import SimulatorOutputs
+from amr_sim.simulator_params import DEFAULT_START, PARAMETERS, check_parameters
 
 
 class SimulatorNode(GuardedLifecycleNode):
     """The amr_sim Simulator behind the course's topics, as a lifecycle node.
 
     __init__ declares the parameters; configure loads the world, builds the Simulator and
-    creates the publishers and the /cmd_vel (+ /pose) inputs; activate publishes a first
-    measurement (the lockstep loop starts) or starts the real-time timer; deactivate pauses;
-    cleanup and shutdown release everything. It commands no robot, so nothing is sent on the
-    way down: the simulated robot just stops being stepped.
+    creates the publishers (SimulatorOutputs) and the /cmd_vel (+ /pose) inputs; activate
+    publishes a first measurement (the lockstep loop starts) or starts the real-time timer;
+    deactivate pauses; cleanup and shutdown release everything (release()). It commands no
+    robot, so nothing is sent on the way down: the simulated robot just stops being stepped.
     """
 
     def __init__(self, node_name: str = "amr_simulator", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
         # Numbers take ints for doubles (`-p dt:=1`): amr_common.parameters.
-        declare_parameters(self, PARAMETER_TABLE, types=PARAMETER_TYPES)
+        declare_parameters(self, PARAMETERS)
         # Run scripts append callables here; each is called with the simulator after a step.
         self.on_step: list[Callable[[Any], None]] = []
         self._reset()
@@ -90,27 +67,22 @@ class SimulatorNode(GuardedLifecycleNode):
         self.goal: tuple[float, float] | None = None
         self.localized = False
         self.localization_error: tuple[float, float] | None = None  # (m, rad)
-        self._outputs: dict[str, Any] = {}
-        # One message per output, refilled every step: building Odometry messages dominated
-        # the step time (publish copies the message, so reuse is safe).
-        self._messages = {"clock": ClockMessage(), "truth": Odometry(), "odom": Odometry(),
-                          "scan": LaserScan(), "stamp": Time()}
+        self.goal_reached_time: float | None = None  # simulated s
+        self._rest_since: float | None = None  # simulated s the zero commands began
+        self._outputs: SimulatorOutputs | None = None
         self._inputs: list = []
         self._filters: list = []
         self._synchronizer = None
         self._timer = None
-        self._active = False
         self._wall_start: float | None = None
         self._wall_time = 0.0
         self._command = (0.0, 0.0)
         self._command_received: float | None = None  # monotonic time of the newest command
-        self._next_publish = {"odom": 0.0, "scan": 0.0}
         self._kidnapped = False
-        self._tf: SimulatorTf | None = None
 
     def _read_parameters(self) -> dict[str, Any]:
         """Parameter values, checked; raises ValueError naming every bad one."""
-        values, problems = read_parameters(self, PARAMETER_TABLE, types=PARAMETER_TYPES)
+        values, problems = read_parameters(self, PARAMETERS)
         if problems:
             raise ValueError("; ".join(problems))
         return check_parameters(values)
@@ -152,26 +124,14 @@ class SimulatorNode(GuardedLifecycleNode):
         # the first message and would stall the loop. Real time publishes what the profile's
         # robot publishes (/odom pose-only for the Burger).
         self.odometry_topic = profile.odom_topic if self.realtime else "/odometry"
-        self._outputs = {
-            "clock": self.create_lifecycle_publisher(ClockMessage, "/clock", RELIABLE_10),
-            "odom": self.create_lifecycle_publisher(Odometry, self.odometry_topic, RELIABLE_10),
-            "scan": self.create_lifecycle_publisher(
-                LaserScan, "/scan", scan_qos(5 if profile.name == "turtlebot3" else 10)),
-        }
-        if p["publish_ground_truth"]:
-            self._outputs["truth"] = self.create_lifecycle_publisher(
-                Odometry, "/ground_truth", RELIABLE_10)
-        self._create_inputs(p)
         try:
-            self._tf = SimulatorTf(self, self.simulator, p)
+            self._outputs = SimulatorOutputs(self, self.simulator, p, self.odometry_topic,
+                                             self.realtime)
         except Exception as exc:  # a map that cannot be built: the user's resolution
             self.get_logger().error(f"configure failed: {exc}")
-            self._destroy_all()
+            self.release()
             return TransitionCallbackReturn.FAILURE
-        scan_time = profile.scan_period if self.realtime and profile.scan_period else p["dt"]
-        laser_scan_from_profile(self.simulator.last_scan, profile, stamp=Time(),
-                                frame_id=p["scan_frame"], scan_time=scan_time,
-                                message=self._messages["scan"])
+        self._create_inputs(p)
         x, y, theta = self.simulator.pose
         self.get_logger().info(
             f"configured: world '{world.name}' ({world.source}), start ({x:.3f}, {y:.3f}, "
@@ -203,16 +163,18 @@ class SimulatorNode(GuardedLifecycleNode):
             self._inputs.append(self.create_subscription(
                 PoseStamped, "/pose", self._check_estimated_pose, RELIABLE_10))
 
-    def _destroy_all(self) -> None:
+    def release(self) -> None:
+        """Destroy the real-time timer, the publishers and the inputs; drop the Simulator.
+
+        The run ends; nothing is sent on the way down.
+        """
         self._stop_timer()
-        for publisher in self._outputs.values():
-            self.destroy_lifecycle_publisher(publisher)
+        if self._outputs is not None:
+            self._outputs.destroy()
         for subscription in self._inputs:
             self.destroy_subscription(subscription)
         for message_filter in self._filters:
             message_filter.close()
-        if self._tf is not None:
-            self._tf.destroy()
         self._reset()
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -222,19 +184,14 @@ class SimulatorNode(GuardedLifecycleNode):
         the steady-clock timer that steps every dt. A finished run stays finished.
         """
         result = super().on_activate(state)  # enables the lifecycle publishers
-        self._active = True
         if self._wall_start is None:
             self._wall_start = time.monotonic()
         if self.finished:
             return result
         simulator = self.simulator
-        self._tf.publish_static(seconds_to_time(simulator.time))  # before the first measurement
-        z_scan, z_v, z_w = simulator.measure()  # first measurement: starts a lockstep loop
-        self._publish(z_scan, z_v, z_w, simulator.pose, simulator.pose, True, True)
+        # The first measurement starts a lockstep loop.
+        self._outputs.publish_first(*simulator.measure())
         if self.realtime:
-            profile = simulator.profile
-            self._next_publish = {"odom": simulator.time + (profile.odom_period or 0.0),
-                                  "scan": simulator.time + (profile.scan_period or 0.0)}
             # Steady clock: with use_sim_time a ROS-time timer would wait for our own /clock.
             self._timer = self.create_timer(simulator.dt, self._on_timer,
                                             clock=Clock(clock_type=ClockType.STEADY_TIME))
@@ -251,19 +208,8 @@ class SimulatorNode(GuardedLifecycleNode):
 
         The simulator keeps its state, so a later activate resumes the same run.
         """
-        self._active = False
         self._stop_timer()
         return super().on_deactivate(state)
-
-    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Release the timer, publishers, subscriptions and the Simulator (the run ends)."""
-        self._destroy_all()
-        return TransitionCallbackReturn.SUCCESS
-
-    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """From any state: release everything as in cleanup; sends nothing."""
-        self._destroy_all()
-        return TransitionCallbackReturn.SUCCESS
 
     # --- commands --------------------------------------------------------------------------
     def _finite_command(self, message: Twist | TwistStamped) -> tuple[float, float]:
@@ -275,11 +221,11 @@ class SimulatorNode(GuardedLifecycleNode):
         return 0.0, 0.0
 
     def _on_command(self, message: Twist | TwistStamped) -> None:
-        if self._active and not self.finished:
+        if self.is_active and not self.finished:
             self._advance(*self._finite_command(message))
 
     def _on_command_and_pose(self, command: TwistStamped, pose) -> None:
-        if self._active and not self.finished:
+        if self.is_active and not self.finished:
             self._check_estimated_pose(pose)
             self._advance(*self._finite_command(command))
 
@@ -288,7 +234,7 @@ class SimulatorNode(GuardedLifecycleNode):
         self._command_received = time.monotonic()
 
     def _on_timer(self) -> None:
-        if not self._active or self.finished:
+        if not self.is_active or self.finished:
             return
         v, w = self._command
         timeout = self.params["command_timeout"]
@@ -327,57 +273,16 @@ class SimulatorNode(GuardedLifecycleNode):
         if self.finished:  # a hook ended the run
             return
         if self.realtime:
-            publish_odom = self._due("odom", simulator.profile.odom_period)
-            publish_scan = self._due("scan", simulator.profile.scan_period)
+            publish_odom = self._outputs.due("odom", simulator.profile.odom_period)
+            publish_scan = self._outputs.due("scan", simulator.profile.scan_period)
         else:
             publish_odom = publish_scan = True
-        goal_reached = self._goal_reached(pose)
-        if goal_reached:
+        done = self._check_goal(pose, (v, w) == (0.0, 0.0))
+        if done:
             publish_odom = publish_scan = False  # the loop stops here, as in the template
-        self._publish(z_scan, z_v, z_w, pose_before, pose, publish_odom, publish_scan)
-        if goal_reached:
-            self.get_logger().warning("Congratulations, you reached the goal!")
+        self._outputs.publish(z_scan, z_v, z_w, pose_before, pose, publish_odom, publish_scan)
+        if done:
             self.finish("goal reached")
-
-    def _due(self, sensor: str, period: float | None) -> bool:
-        """Real-time rate of one sensor: due when simulated time reaches its next slot."""
-        now = self.simulator.time
-        if period is None:
-            return True
-        if now + 1e-9 < self._next_publish[sensor]:
-            return False
-        self._next_publish[sensor] += period
-        if self._next_publish[sensor] <= now + 1e-9:  # fell behind: no burst to catch up
-            self._next_publish[sensor] = now + period
-        return True
-
-    def _publish(self, z_scan, z_v: float, z_w: float, pose_before: tuple, pose: tuple,
-                 publish_odom: bool, publish_scan: bool) -> None:
-        simulator, p, messages = self.simulator, self.params, self._messages
-        stamp = seconds_to_time(simulator.time, messages["stamp"])  # shared: publish copies
-        # /clock and /ground_truth only while someone listens (each costs ~40 us per step, a
-        # tenth of a lockstep round trip). /clock first: a use_sim_time subscriber then has
-        # the time before the measurements.
-        if self._outputs["clock"].get_subscription_count() > 0:
-            messages["clock"].clock = stamp
-            self._outputs["clock"].publish(messages["clock"])
-        if "truth" in self._outputs and self._outputs["truth"].get_subscription_count() > 0:
-            velocity = true_velocity(pose_before, pose, simulator.dt)
-            self._outputs["truth"].publish(odometry_message(
-                stamp, p["world_frame"], p["base_frame"], pose, velocity, messages["truth"]))
-        if publish_odom:
-            self._tf.publish(stamp, pose)
-            # The real robot's /odom carries a pose only; /odometry also the twist.
-            twist = (z_v, z_w) if self.odometry_topic == "/odometry" else None
-            self._outputs["odom"].publish(odometry_message(
-                stamp, p["odom_frame"], p["base_frame"], simulator.odometry_pose, twist,
-                messages["odom"]))
-        if publish_scan:
-            # Every other field was filled in on_configure.
-            scan = messages["scan"]
-            scan.header.stamp = stamp
-            scan.ranges = float32_array(z_scan)
-            self._outputs["scan"].publish(scan)
 
     # --- localization and goal -------------------------------------------------------------
     def _check_estimated_pose(self, message) -> None:
@@ -401,11 +306,28 @@ class SimulatorNode(GuardedLifecycleNode):
         else:
             self.get_logger().info(text, throttle_duration_sec=1.0)
 
-    def _goal_reached(self, pose: tuple) -> bool:
-        if self.goal is None or not self.localized:
-            return False
-        return math.hypot(pose[0] - self.goal[0], pose[1] - self.goal[1]) <= \
-            self.params["goal_tolerance"]
+    def _check_goal(self, pose: tuple, resting: bool) -> bool:
+        """Note the goal as reached and say whether the run is over.
+
+        Reached: true position within tolerance while localized. Over: the robot has rested
+        goal_rest_time since.
+        """
+        now = self.simulator.time
+        if self.goal_reached_time is None:
+            if self.goal is None or not self.localized or math.hypot(
+                    pose[0] - self.goal[0], pose[1] - self.goal[1]) > \
+                    self.params["goal_tolerance"]:
+                return False
+            self.goal_reached_time = now
+            self.get_logger().warning(
+                f"Congratulations, you reached the goal! (t = {now:.2f} s; the run ends once "
+                f"the robot has rested {self.params['goal_rest_time']:g} s)")
+        if not resting:
+            self._rest_since = None
+        elif self._rest_since is None:
+            self._rest_since = now - self.simulator.dt  # the zero command began this step
+        rest = 0.0 if self._rest_since is None else now - self._rest_since
+        return rest >= self.params["goal_rest_time"] - 1e-9
 
     def finish(self, reason: str) -> None:
         """Stop stepping (commands are ignored from now on) and log the statistics."""
@@ -433,13 +355,17 @@ class SimulatorNode(GuardedLifecycleNode):
         x, y, theta = simulator.pose
         return {
             "configured": True, "finished": self.finished, "reason": self.finish_reason,
-            "goal_reached": self.finish_reason == "goal reached",
+            "goal_reached": self.goal_reached_time is not None,
+            "goal_reached_time_s": self.goal_reached_time,
+            "stopped_time_s": self._rest_since if self.finish_reason == "goal reached" else None,
             "world": simulator.world.name, "start": list(self._start_pose),
             "profile": simulator.profile.name,
             "mode": self.params["mode"], "steps": int(simulator.steps),
             "sim_time_s": float(simulator.time), "wall_time_s": float(wall),
             "pose": [float(x), float(y), float(theta)],
             "goal": list(self.goal) if self.goal is not None else None,
+            "final_position_error_m": math.hypot(x - self.goal[0], y - self.goal[1])
+            if self.goal is not None else None,
             "localized": self.localized,
             "localization_error": list(self.localization_error)
             if self.localization_error else None,

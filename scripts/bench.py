@@ -9,6 +9,8 @@
   synchronizer       per-add cost (bench_sync.py), vs the reference's exhaustive search
   controller         WallFollower.compute_commands cost, vs the control period dt
   evaluate.py        episode throughput on 1 process vs all cores
+  planning           A* compiled vs the same search in plain Python; navigation episodes in
+                     real-time factors (bench_planning.py)
   localization       particle filter: measurement update rate vs numpy, one full update at
                      2,000 particles, headless localization episode (bench_localization.py)
 Usage: .venv/bin/python scripts/bench.py [--quick] [--only NAME ...] [--json FILE]
@@ -75,11 +77,12 @@ def main(argv=None) -> int:
     parser.add_argument("--quick", action="store_true", help="fewer repetitions")
     parser.add_argument("--only", nargs="*", default=None,
                         choices=["sim", "ros", "sync", "controller", "evaluate",
-                                 "localization"])
+                                 "localization", "planning"])
     parser.add_argument("--json", default=None, help="also write the figures to this file")
     args = parser.parse_args(argv)
     isolate_local_graph()
-    chosen = args.only or ["sim", "ros", "sync", "controller", "evaluate", "localization"]
+    chosen = args.only or ["sim", "ros", "sync", "controller", "evaluate", "localization",
+                           "planning"]
     figures: dict[str, dict] = {}
     if "sim" in chosen:
         import bench_sim
@@ -105,6 +108,10 @@ def main(argv=None) -> int:
     if "localization" in chosen:
         import bench_localization
         figures["localization"] = bench_localization.main(["--quick"] if args.quick else [])
+    if "planning" in chosen:
+        import bench_planning
+        figures["planning"] = bench_planning.measure(args.quick)
+        print(bench_planning.report(figures["planning"]))
     if args.json:
         Path(args.json).write_text(json.dumps(figures, indent=1, default=float))
     return 0

@@ -2,10 +2,14 @@
 """Score a controller on many episodes at once: worlds x starts x profiles x seeds, in parallel.
 
 Each episode runs headless with the same Simulator and controller class as the ROS path
-(amr_evaluation.episode.run_episode). Writes results.json, results.csv and sheet.png (every
-episode's trajectory) to --out, prints a table and a one-line verdict.
-Exit code: 0 no collision, 1 some episode collided or commanded NaN/inf/non-numbers, 2 bad
-options, 3 some episode failed to run (an exception, sys.exit, or its worker process died).
+(amr_evaluation.episode.run_episode). With --goals, navigation episodes (worlds x starts x goals
+x profiles x seeds): the controller explores until the particle filter is localized, then the
+planner and the pure pursuit drive to the goal (amr_evaluation.navigation_episode). Writes
+results.json, results.csv and sheet.png (every episode's trajectory) to --out, prints a table and
+a one-line verdict.
+Exit code: 0 no collision (and every goal reached), 1 some episode collided, commanded
+NaN/inf/non-numbers or missed its goal, 2 bad options, 3 some episode failed to run (an
+exception, sys.exit, or its worker process died).
 
 Examples:
   .venv/bin/python scripts/evaluate.py --worlds lab02 --seeds 0,1,2 --duration 120
@@ -15,6 +19,8 @@ Examples:
   .venv/bin/python scripts/evaluate.py --localize --worlds all --profiles ideal,turtlebot3 \
       --seeds 0-4 --duration 60                      # the particle filter's figures
   .venv/bin/python scripts/evaluate.py --localize --worlds twin_maze --seeds 0-9 --kidnap-at 25
+  .venv/bin/python scripts/evaluate.py --worlds lab02,maze_deadends --goals all \
+      --profiles ideal,turtlebot3 --seeds 0-2 --duration 300   # navigation to named goals
 Options given on the command line override the same keys of --config.
 """
 from __future__ import annotations
@@ -66,6 +72,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--starts", default=None, help="'all', or comma-separated start names "
                         "and X,Y,THETA poses (m, m, rad; a pose applies to every world; default "
                         "all)")
+    parser.add_argument("--goals", default=None, help="navigation episodes: 'all' or "
+                        "comma-separated named goals of the worlds (default: none, wall "
+                        "following)")
+    parser.add_argument("--pose-source", default=None, choices=["filter", "truth"],
+                        help="navigation: the particle filter (default) or the true pose")
     parser.add_argument("--profiles", default=None, help="comma-separated sensor profiles: ideal, "
                         "turtlebot3 (default ideal)")
     parser.add_argument("--seeds", default=None, help="comma-separated seeds or ranges, e.g. "
@@ -109,13 +120,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 def resolve_settings(args: argparse.Namespace) -> dict:
     """Config-file values, overridden by the command-line options that were given."""
-    settings: dict = {"worlds": "lab02", "starts": "all", "profiles": "ideal", "seeds": "0",
+    settings: dict = {"worlds": "lab02", "starts": "all", "goals": None,
+                      "pose_source": "filter", "profiles": "ideal", "seeds": "0",
                       "duration": 600.0, "dt": 0.05, "controller": DEFAULT_CONTROLLER,
                       "params": {}, "jobs": None}
     if args.config:
         settings.update(load_config(args.config))
-    for key in ("worlds", "starts", "profiles", "seeds", "duration", "dt", "controller",
-                "params_file", "jobs"):
+    for key in ("worlds", "starts", "goals", "pose_source", "profiles", "seeds", "duration",
+                "dt", "controller", "params_file", "jobs"):
         value = getattr(args, key)
         if value is not None:
             settings[key] = value
@@ -142,7 +154,8 @@ def episode_specs(settings: dict) -> list:
     """The episodes of resolved settings; the controller built once with its parameters."""
     specs = expand_grid(settings["worlds"], settings["starts"], settings["profiles"],
                         settings["seeds"], duration=settings["duration"], dt=settings["dt"],
-                        controller=settings["controller"], params=settings["params"])
+                        controller=settings["controller"], params=settings["params"],
+                        goals=settings["goals"], pose_source=settings["pose_source"])
     check_controller(settings["controller"], settings["params"], settings["dt"])
     return specs
 
@@ -194,6 +207,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     try:
         settings = resolve_settings(args)
+        if args.localize and settings["goals"]:
+            raise EvaluationError("--goals (navigation) and --localize exclude each other")
         specs = episode_specs(settings)
         started = dt_module.datetime.now(dt_module.timezone.utc)
         out = check_output_folder(args.out or Path("out") / f"evaluate-{started:%Y%m%d-%H%M%S}",
@@ -236,6 +251,7 @@ def run_and_report(args, settings: dict, specs, executor, out: Path, started) ->
             "controller": settings["controller"],
             "params": settings["params"], "params_file": settings["params_file"],
             "duration_s": settings["duration"], "dt_s": settings["dt"],
+            "goals": settings["goals"], "pose_source": settings["pose_source"],
             "config": args.config, "command": " ".join(sys.argv),
             "python": platform.python_version(), "host": platform.node()}
     write_json(out / "results.json", outcomes, meta)

@@ -193,14 +193,44 @@ def make_particle_filter(context, *, world: str, lidar_offset_x_m: float,
     return ParticleFilterNode(context=context, parameter_overrides=overrides_to_parameters(values))
 
 
+def navigating_wall_follower(tuning: dict[str, Any]) -> dict[str, Any]:
+    """Wall follower overrides for a graph that navigates: hand over to the pure pursuit.
+
+    Synchronize /pose and command only while it is not localized (stop_when_localized), unless
+    the caller's tuning says otherwise.
+    """
+    return {"enable_localization": True, "stop_when_localized": True, **tuning}
+
+
+def make_navigators(context, *, world: str, goal: tuple[float, float], wall_follower,
+                    lidar_offset_x_m: float) -> list:
+    """The planner and the pure pursuit, after the wall follower and the particle filter.
+
+    The pursuit commands like the wall follower (simulation or robot mode, dt, data_timeout,
+    /cmd_vel type and angular sign): it takes those from the wall follower node.
+    """
+    from amr_control.pure_pursuit_node import PurePursuitNode
+    from amr_planning.planner_node import PlannerNode
+    same = {name: wall_follower.get_parameter(name).value
+            for name in ("simulation", "dt", "data_timeout", "cmd_vel_stamped", "angular_sign")}
+    return [
+        PlannerNode(context=context, parameter_overrides=overrides_to_parameters(
+            {"world": str(world), "goal": [float(goal[0]), float(goal[1])]})),
+        PurePursuitNode(context=context, parameter_overrides=overrides_to_parameters(
+            {**same, "lidar_offset_x_m": float(lidar_offset_x_m)})),
+    ]
+
+
 def make_robot_graph(context, *, params_file=ROBOT_PARAMS, dt: float | None = None,
                      cmd_vel_stamped: bool | None = None, controller: str | None = None,
                      tuning: dict[str, Any] | None = None, localize_world: str | None = None,
-                     filter_overrides: dict[str, Any] | None = None) -> list:
+                     filter_overrides: dict[str, Any] | None = None,
+                     goal: tuple[float, float] | None = None) -> list:
     """The real-robot graph: /odom -> amr_odometry -> /odometry, wall follower in robot mode.
 
     With `localize_world`, also the particle filter on that map (the Burger's LiDAR position),
-    and the wall follower synchronizes /pose. Returns the lifecycle nodes in startup order.
+    and the wall follower synchronizes /pose; with a `goal` too, the planner and the pure
+    pursuit, which drive once localized. Returns the lifecycle nodes in startup order.
     """
     from amr_turtlebot3.odometry_node import OdometryNode
     overrides: dict[str, Any] = dict(tuning or {})
@@ -212,7 +242,8 @@ def make_robot_graph(context, *, params_file=ROBOT_PARAMS, dt: float | None = No
     if controller is not None:
         overrides["controller"] = controller
     if localize_world is not None:
-        overrides = localizing_wall_follower(overrides)
+        overrides = (navigating_wall_follower if goal is not None else
+                     localizing_wall_follower)(overrides)
     odometry = OdometryNode(context=context)
     wall_follower = make_wall_follower(context, params_file=params_file, overrides=overrides)
     if localize_world is None:
@@ -221,4 +252,7 @@ def make_robot_graph(context, *, params_file=ROBOT_PARAMS, dt: float | None = No
     particle_filter = make_particle_filter(context, world=localize_world,
                                            lidar_offset_x_m=LIDAR_OFFSET_X,
                                            overrides=filter_overrides)
-    return [odometry, wall_follower, particle_filter]
+    navigators = [] if goal is None else make_navigators(
+        context, world=localize_world, goal=goal, wall_follower=wall_follower,
+        lidar_offset_x_m=LIDAR_OFFSET_X)
+    return [odometry, wall_follower, particle_filter, *navigators]

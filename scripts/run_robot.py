@@ -10,18 +10,20 @@ does not change discovery, it prints what it uses.
   .venv/bin/python scripts/run_robot.py --domain-id 30 --cmd-vel twist     # Humble bringup
   .venv/bin/python scripts/run_robot.py --domain-id 30 --foxglove --map course_map.json
   .venv/bin/python scripts/run_robot.py --domain-id 30 --localize --world lab02  # + localization
-Ctrl-C stops the robot: the wall follower publishes a zero command before exiting.
+  .venv/bin/python scripts/run_robot.py --domain-id 30 --world lab02 --goal -1.0,0.6
+With --world and --goal: also the particle filter, the planner and the pure pursuit (robot
+mode): explore until localized, then drive to the goal and stop there.
+Ctrl-C stops the robot: the controllers publish a zero command before exiting.
 """
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from amr_common.ros_env import describe_graph_settings, environment_domain_id  # noqa: E402
-from cli_checks import domain_id_argument  # noqa: E402
+from cli_checks import add_domain_id_option, join_negative_values, use_domain_id  # noqa: E402
 from launch_common import (  # noqa: E402
     ROBOT_PARAMS,
     add_controller_options,
@@ -37,9 +39,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter,
                                      epilog=__doc__.split("\n\n", 1)[1])
-    parser.add_argument("--domain-id", type=domain_id_argument, default=None,
-                        help="ROS_DOMAIN_ID shared with the robot, 0-232 (default: "
-                        "$ROS_DOMAIN_ID)")
+    add_domain_id_option(parser, "ROS_DOMAIN_ID shared with the robot, 0-232 (default: "
+                         "$ROS_DOMAIN_ID)")
     parser.add_argument("--cmd-vel", choices=["stamped", "twist"], default=None,
                         help="/cmd_vel type: stamped = TwistStamped (Jazzy bringup), twist = "
                         "Twist (Humble); default from the params file")
@@ -50,23 +51,31 @@ def parse_args(argv=None) -> argparse.Namespace:
                         "map JSON / world YAML as /map and /map_markers (amr_map_publisher)")
     add_foxglove_options(parser)
     add_localization_options(parser)
-    parser.add_argument("--world", default=None, help="with --localize: the map the robot is "
-                        "in (bundled world name or world YAML / course map JSON; default --map)")
-    args = parser.parse_args(argv)
+    parser.add_argument("--world", default=None, help="with --localize or --goal: the map the "
+                        "robot is in (bundled world name or world YAML / course map JSON; "
+                        "default --map)")
+    parser.add_argument("--goal", default=None, help="navigate to X,Y (metres, negative numbers "
+                        "typed as is) or a named goal of --world: also the particle filter, the "
+                        "planner and the pure pursuit")
+    args = parser.parse_args(join_negative_values(argv, ["--goal"]))
     if args.domain_id is None:
         try:
             environment_domain_id()
         except ValueError as exc:
             parser.error(str(exc))
     check_common_options(parser, args)
+    args.localize = args.localize or args.goal is not None  # navigation needs the filter
     if args.localize and args.world is None:
         args.world = args.map
     if args.localize and args.world is None:
-        parser.error("--localize needs --world (the map the robot drives in)")
+        parser.error(f"{'--goal' if args.goal else '--localize'} needs --world (the map the "
+                     f"robot drives in)")
     if args.world is not None:
         from amr_common.world import World, WorldError
         try:
-            World.load(args.world)
+            world = World.load(args.world)
+            if args.goal is not None:
+                args.goal = world.resolve_goal(args.goal)
         except WorldError as exc:
             parser.error(str(exc))
     return args
@@ -74,8 +83,7 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    if args.domain_id is not None:
-        os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
+    use_domain_id(args)
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
@@ -90,7 +98,7 @@ def main(argv=None) -> int:
                              cmd_vel_stamped=stamped, controller=args.controller,
                              tuning=args.overrides,
                              localize_world=args.world if args.localize else None,
-                             filter_overrides=args.pf_overrides)
+                             filter_overrides=args.pf_overrides, goal=args.goal)
     if args.map:
         from amr_common.map_publisher import MapPublisherNode
         from launch_common import overrides_to_parameters

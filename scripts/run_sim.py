@@ -1,6 +1,9 @@
 #!/usr/bin/env python3
 """Run the simulator and the wall follower on a maze (stands in for the course's launch file).
 
+With `--goal`, also the particle filter, the planner and the pure pursuit: explore until
+localized, plan, follow the path and stop at the goal.
+
 Lockstep (default): the simulator advances one dt per /cmd_vel, as fast as the loop turns.
 `--realtime`: the simulator runs on a wall-clock timer; with `--profile turtlebot3` this is the
 rehearsal of the real robot: /odom (pose only) + 5 Hz /scan, the amr_odometry node and the wall
@@ -20,6 +23,8 @@ Examples:
   .venv/bin/python scripts/run_sim.py --world course_map.json --start -1.0,-1.0,1.57
   .venv/bin/python scripts/run_sim.py --world twin_maze --localize --plot out/loc.png
   .venv/bin/python scripts/run_sim.py --world maze_deadends --localize --kidnap 25,1.4,1,0
+  .venv/bin/python scripts/run_sim.py --world lab02 --goal inner_far --plot out/nav.png
+  .venv/bin/python scripts/run_sim.py --world lab02 --goal -1.0,0.6 --kidnap 40,0.2,1,3.14
 Local runs are isolated: loopback discovery and a free ROS_DOMAIN_ID (printed at startup).
 Ctrl-C ends the whole run: the controller commands zero and the partial report is written,
 marked "interrupted": true (exit code 130).
@@ -35,8 +40,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from amr_common.ros_env import describe_graph_settings, isolate_local_graph  # noqa: E402
 from cli_checks import (  # noqa: E402
+    add_domain_id_option,
     check_output_file,
-    domain_id_argument,
     join_negative_values,
     per_start_path,
     plot_file,
@@ -72,8 +77,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     add_controller_options(parser, None, "wall follower ROS params YAML (default "
                            "params/sim.yaml, or params/turtlebot3.yaml for the realtime "
                            "turtlebot3 rehearsal)")
-    parser.add_argument("--goal", default=None, help="X,Y goal (needs a localization node "
-                        "publishing /pose and --enable-localization)")
+    parser.add_argument("--goal", default=None, help="navigate to X,Y (metres, negative "
+                        "numbers typed as is) or a named goal of the world: adds the particle "
+                        "filter, the planner and the pure pursuit; the run ends when the robot "
+                        "rests at the goal")
     parser.add_argument("--enable-localization", action="store_true",
                         help="the simulator synchronizes /cmd_vel with /pose from a "
                         "localization node of yours (--localize starts the project's)")
@@ -89,9 +96,8 @@ def parse_args(argv=None) -> argparse.Namespace:
                         "file per start with --start all: NAME-START.mcap)")
     parser.add_argument("--gui", action="store_true", help="live view window (pygame)")
     add_foxglove_options(parser)
-    parser.add_argument("--domain-id", type=domain_id_argument, default=None,
-                        help="ROS_DOMAIN_ID, 0-232 (default: $ROS_DOMAIN_ID if set and not 0, "
-                        "else a free one)")
+    add_domain_id_option(parser, "ROS_DOMAIN_ID, 0-232 (default: $ROS_DOMAIN_ID if set and not "
+                         "0, else a free one)")
     args = parser.parse_args(join_negative_values(argv, ["--start", "--goal", "--kidnap"]))
     if not (math.isfinite(args.duration) and args.duration > 0):
         parser.error("--duration must be > 0")
@@ -99,13 +105,6 @@ def parse_args(argv=None) -> argparse.Namespace:
         rehearsal = args.realtime and args.profile == "turtlebot3"
         args.params_file = str(ROBOT_PARAMS if rehearsal else SIM_PARAMS)
     check_common_options(parser, args)
-    if args.goal is not None:
-        try:
-            args.goal = [float(v) for v in args.goal.split(",")]
-        except ValueError:
-            args.goal = []
-        if len(args.goal) != 2 or not all(math.isfinite(v) for v in args.goal):
-            parser.error("--goal must be X,Y in metres")
     from amr_common.world import parse_start
     try:
         if args.start != "all":
@@ -161,6 +160,8 @@ def _prepare(args):
             world.resolve_start(start)  # fail early with the world's own message
         if args.kidnap is not None:
             world.resolve_start(args.kidnap[1:])
+        if args.goal is not None:  # a name or X,Y, checked against the walls
+            args.goal = world.resolve_goal(args.goal)
         starts = [next(iter(world.starts)) if s is None else s for s in starts]
         outputs = _check_outputs(args, [start_label(s) for s in starts])
     except ValueError as exc:  # WorldError, a bad domain id or output path
@@ -222,6 +223,12 @@ def _write_outputs(world, reports, outputs, several_starts: bool) -> None:
         for report in reports:
             title = f"{report['world']} / {report['start']} / {report['profile']}" + \
                 (" (interrupted)" if report["interrupted"] else "")
+            if report.get("goal") is not None:
+                reached = report["goal_reached_time_s"]
+                title += (f" -> goal ({report['goal'][0]:g}, {report['goal'][1]:g}): "
+                          + ("not reached" if reached is None else
+                             f"reached {reached:.1f} s, final error "
+                             f"{report['final_position_error_m'] * 100:.1f} cm"))
             if "estimate" in report:
                 from amr_evaluation.localization_plot import plot_localization
                 written = plot_localization(world, report,

@@ -4,6 +4,9 @@ Lockstep: simulator (lockstep, /odometry with the encoder twist in both profiles
 follower (simulation mode, params/sim.yaml).
 Rehearsal (`--realtime --profile turtlebot3`): simulator (real time) + the robot graph of
 run_robot.py (amr_odometry + wall follower in robot mode, params/turtlebot3.yaml).
+With a goal (`--goal`), both add the particle filter, the planner and the pure pursuit: the wall
+follower explores until /pose is localized, the simulator ends the run once the robot rests at
+the goal.
 """
 from __future__ import annotations
 
@@ -23,10 +26,12 @@ from launch_common import (
     ROBOT_PARAMS,
     SIM_PARAMS,
     localizing_wall_follower,
+    make_navigators,
     make_particle_filter,
     make_robot_graph,
     make_viewer_nodes,
     make_wall_follower,
+    navigating_wall_follower,
     overrides_to_parameters,
 )
 
@@ -109,6 +114,22 @@ def _localization_line(report: dict) -> str:
 
 
 
+def _navigation_line(report: dict) -> str:
+    def when(key: str) -> str:
+        return "never" if report[key] is None else f"{report[key]:.1f} s"
+    path = "no path" if report["path_length_m"] is None else \
+        f"path {report['path_length_m']:.2f} m"
+    factor = report["real_time_factor"]
+    return (f"run_sim: {report['world']} / {report['start']} -> goal "
+            f"({report['goal'][0]:g}, {report['goal'][1]:g}) / {report['profile']} "
+            f"({report['mode']}): localized {when('localized_time_s')}, goal reached "
+            f"{when('goal_reached_time_s')}, stopped {when('stopped_time_s')}, {path}, "
+            f"final error {report['final_position_error_m'] * 100:.1f} cm, collisions "
+            f"{report['collisions']}, min clearance {report['min_clearance_m'] * 100:.1f} "
+            f"cm; {report['sim_time_s']:.1f} s simulated in {report['wall_time_s']:.1f} s "
+            f"({f'{factor}x' if factor else 'n/a'} real time)")
+
+
 class SimSession:
     """One start of a run_sim.py run: the graph in one process, its report and outputs.
 
@@ -129,7 +150,8 @@ class SimSession:
         rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
         self.executor = make_executor(self.context)
 
-        localize = getattr(args, "localize", False)
+        self.navigating = getattr(args, "goal", None) is not None
+        localize = getattr(args, "localize", False) or self.navigating
         sim_values = {"world": args.world, "start": start_label(self.start),
                       "profile": args.profile, "dt": args.dt, "seed": args.seed,
                       "mode": "realtime" if args.realtime else "lockstep",
@@ -152,11 +174,14 @@ class SimSession:
             self.control_nodes = make_robot_graph(
                 self.context, params_file=args.params_file or ROBOT_PARAMS, dt=args.dt,
                 tuning=tuning, localize_world=args.world if localize else None,
-                filter_overrides=filter_overrides)
+                filter_overrides=filter_overrides,
+                goal=args.goal if self.navigating else None)
         else:
             base = {"simulation": True, "dt": args.dt,
                     "enable_localization": args.enable_localization}
-            if localize:
+            if self.navigating:
+                base = navigating_wall_follower(base)
+            elif localize:
                 base = localizing_wall_follower(base)
             tuning = {**base, **tuning}  # -p wins
             params_file = args.params_file or SIM_PARAMS
@@ -165,14 +190,20 @@ class SimSession:
                 self.context, params_file=params_file, overrides=tuning)]
             if localize:
                 from amr_sim.profiles import get_profile
+                lidar_offset_x = get_profile(args.profile).lidar_offset_x
                 self.control_nodes.append(make_particle_filter(
-                    self.context, world=args.world,
-                    lidar_offset_x_m=get_profile(args.profile).lidar_offset_x,
+                    self.context, world=args.world, lidar_offset_x_m=lidar_offset_x,
                     overrides=filter_overrides))
+            if self.navigating:
+                self.control_nodes += make_navigators(
+                    self.context, world=args.world, goal=args.goal,
+                    wall_follower=self.control_nodes[0], lidar_offset_x_m=lidar_offset_x)
         self.wall_follower = next(n for n in self.control_nodes
                                   if n.get_name() == "wall_follower")
         self.particle_filter = next((n for n in self.control_nodes
                                      if n.get_name() == "particle_filter"), None)
+        self.planner_node = next((n for n in self.control_nodes if n.get_name() == "planner"),
+                                 None)
         self.estimate: list[list[float]] = []
         self.particles_snapshot: list[list[float]] = []
         if self.particle_filter is not None:
@@ -303,7 +334,7 @@ class SimSession:
                            "nodes": self.manager.node_startup_order,
                            "controller_mode": "simulation" if self.wall_follower.get_parameter(
                                "simulation").value else "robot (timer)"}) \
-            | self._localization_report()
+            | self._localization_report() | self._navigation_report()
 
     def _localization_report(self) -> dict:
         if self.particle_filter is None:
@@ -314,8 +345,26 @@ class SimSession:
                 "kidnap": kidnap, "estimate": self.estimate,
                 "particles_snapshot": self.particles_snapshot}
 
+    def _navigation_report(self) -> dict:
+        """Goal, time localized, goal reached and stopped times, planned path, final error."""
+        if not self.navigating:
+            return {}
+        summary = self.simulator_node.summary()
+        plan = self.planner_node.last_plan if self.planner_node is not None else None
+        localized = next((row[0] for row in self.estimate if row[4] > 0.5), None)
+        return {
+            "goal": summary["goal"], "localized_time_s": localized,
+            "goal_reached_time_s": summary["goal_reached_time_s"],
+            "stopped_time_s": summary["stopped_time_s"],
+            "final_position_error_m": summary["final_position_error_m"],
+            "path_length_m": plan.length_m if plan is not None else None,
+            "path": plan.points.tolist() if plan is not None else [],
+        }
+
     def summary_line(self, report: dict) -> str:
         """One line for the terminal: where, how long, how fast, how safe."""
+        if self.navigating:
+            return _navigation_line(report)
         laps = report["laps"]
         factor = report["real_time_factor"]
         return (f"run_sim: {report['world']} / {report['start']} / {report['profile']} "

@@ -16,6 +16,9 @@ Options:
   --wall-ahead-at D     a wall across the corridor D metres ahead of the robot's centre at start
                         (default: none, the corridor is open ahead).
   --stop-scan-after S   stop publishing /scan S seconds after start; /odom continues.
+  --scan-clock start|motion  what --stop-scan-after counts from: the emulator's start (default)
+                        or the first command that moves the robot (robust to a slow start of
+                        the graph under test on a loaded machine).
   --range-noise SIGMA   Gaussian range noise in metres (default 0; Gazebo's model uses 0.01).
   --seed N              seed of the range noise (default: random).
   --log FILE            JSON lines, one object per line, flushed at once (see below).
@@ -324,6 +327,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--corridor-width", type=float, default=0.8)
     parser.add_argument("--wall-ahead-at", type=float, default=None)
     parser.add_argument("--stop-scan-after", type=float, default=None)
+    parser.add_argument("--scan-clock", choices=("start", "motion"), default="start")
     parser.add_argument("--range-noise", type=float, default=0.0)
     parser.add_argument("--seed", type=int, default=None)
     parser.add_argument("--log", default=None)
@@ -379,6 +383,8 @@ def main(argv: list[str] | None = None) -> int:
     next_odom = next_scan = start
     last_stamp_ns = time.time_ns()
     scanning = True
+    # When --stop-scan-after starts counting: now, or at the first command that moves the robot.
+    scan_clock_start = start if args.scan_clock == "start" else None
 
     def advance_robot() -> None:
         # Integrate over the wall time actually elapsed, up to each tick and each command, and
@@ -401,8 +407,8 @@ def main(argv: list[str] | None = None) -> int:
                 odom_sent += 1
                 # After a stall (loaded machine) resume the rate instead of sending a burst.
                 next_odom = max(next_odom + ODOM_PERIOD, now)
-            if scanning and args.stop_scan_after is not None \
-                    and now - start >= args.stop_scan_after:
+            if scanning and args.stop_scan_after is not None and scan_clock_start is not None \
+                    and now - scan_clock_start >= args.stop_scan_after:
                 scanning = False
                 log.write("scan_stopped")
             if scanning and now >= next_scan:
@@ -423,6 +429,8 @@ def main(argv: list[str] | None = None) -> int:
                 if math.isfinite(linear[0]) and math.isfinite(angular[2]):
                     advance_robot()
                     robot.v, robot.w = apply_like_turtlebot3(linear[0], angular[2])
+                    if scan_clock_start is None and (robot.v, robot.w) != (0.0, 0.0):
+                        scan_clock_start = time.monotonic()
                 header_stamp = ([sample.header.stamp.sec, sample.header.stamp.nanosec]
                                 if cmd_type is TwistStamped else None)
                 commands += 1

@@ -43,6 +43,16 @@ class RosHarness:
             self.executor.spin_once(timeout_sec=min(0.05, max(timeout - elapsed, 0.001)))
         return time.monotonic() - start
 
+    def bring_up(self, node, discovered: Callable[[], bool], timeout: float = 10.0) -> None:
+        """Configure and activate a lifecycle node, then spin until `discovered()` and a bit.
+
+        `discovered()`: the test's publishers and subscribers matched.
+        """
+        assert node.trigger_configure().name == "SUCCESS"
+        assert node.trigger_activate().name == "SUCCESS"
+        self.spin_until(discovered, timeout, "discovery")
+        self.spin_for(0.2)
+
     def spin_for(self, seconds: float) -> None:
         end = time.monotonic() + seconds
         while time.monotonic() < end:

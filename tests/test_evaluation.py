@@ -350,7 +350,8 @@ def test_ros_params_file_gives_the_controller_what_the_node_gets(tmp_path):
     params = tmp_path / "sim.yaml"
     params.write_text("wall_follower:\n  ros__parameters:\n    kp: 2.5\n    use_sim_time: true\n"
                       "    controller: amr_control.wall_follower:WallFollower\n"
-                      "/**:\n  ros__parameters:\n    kd: 0.5\n")
+                      "/**:\n  ros__parameters:\n    kd: 0.5\n"
+                      "pure_pursuit:\n  ros__parameters:\n    max_linear_speed_mps: 0.1\n")
     assert load_ros_params_file(params, WallFollower) == {"kp": 2.5, "kd": 0.5}
     assert load_ros_params_file(params, RecordingController)["use_sim_time"] is True
     params.write_text("kp: 2.5\n")
@@ -474,3 +475,44 @@ def test_invalid_commands_are_counted_and_fail_the_verdict(kind):
     assert code == 1, line
     assert "INVALID COMMANDS in 1/2 episodes: lab02/outer/ideal/seed 0 (10)" in line
     assert verdict(outcomes[:1])[1] == 0
+
+
+# --- navigation episodes -------------------------------------------------------------------
+
+def test_navigation_grid_is_worlds_x_starts_x_goals():
+    from amr_common.world import World
+    specs = expand_grid("lab02,maze_deadends", "outer,south_west",
+                        goals="inner_far,north_east", pose_source="truth")
+    assert [(s.world, s.start, s.goal, s.pose_source) for s in specs] == [
+        ("lab02", "outer", "inner_far", "truth"),
+        ("maze_deadends", "south_west", "north_east", "truth")]
+    assert specs[0].label == "lab02/outer->inner_far/ideal/seed 0"
+    assert [s.goal for s in expand_grid("lab02", "outer", goals="all")] == \
+        list(World.load("lab02").goals)
+    assert expand_grid("lab02", "outer")[0].goal is None  # no goals: wall following
+    with pytest.raises(EvaluationError, match=r"goal\(s\) kitchen exist in none"):
+        expand_grid("lab02", goals="kitchen,inner_far")
+    with pytest.raises(EvaluationError, match="world 'lab02' has none of the goals kitchen"):
+        expand_grid("lab02", goals="kitchen")
+    with pytest.raises(EvaluationError, match="pose_source must be one of filter, truth"):
+        expand_grid("lab02", goals="all", pose_source="oracle")
+
+
+@pytest.mark.slow
+def test_navigation_episodes_report_goals_and_exit_1_when_one_is_missed(tmp_path):
+    proc, out = _evaluate(tmp_path, "--worlds", "lab02", "--starts", "outer", "--goals",
+                          "inner_far,north_west", "--pose-source", "truth", "--duration", "30",
+                          "--jobs", "1")
+    assert proc.returncode == 1, proc.stdout + proc.stderr  # inner_far needs 42 s
+    data = json.loads((out / "results.json").read_text())
+    far, near = data["episodes"]
+    assert (far["goal"], far["goal_reached"], far["stopped_time_s"]) == ("inner_far", False, None)
+    assert near["goal"] == "north_west" and near["goal_reached"]
+    assert near["final_position_error_m"] < 0.01 and near["path_length_m"] == pytest.approx(
+        3.9, abs=0.1)
+    assert data["meta"]["goals"] == "inner_far,north_west"
+    with open(out / "results.csv", newline="") as stream:
+        assert [r["goal"] for r in csv.DictReader(stream)] == ["inner_far", "north_west"]
+    assert "goal reached in 1/2 episodes" in proc.stdout
+    assert "NOT reached: lab02/outer->inner_far/ideal/seed 0" in proc.stdout
+    assert "final err. cm" in proc.stdout

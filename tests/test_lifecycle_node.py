@@ -22,8 +22,10 @@ from rclpy.parameter import Parameter
 from amr_common.foxglove_bridge import FoxgloveBridgeNode
 from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.map_publisher import MapPublisherNode
+from amr_control.pure_pursuit_node import PurePursuitNode
 from amr_control.wall_follower_node import WallFollowerNode
 from amr_localization.particle_filter_node import ParticleFilterNode
+from amr_planning.planner_node import PlannerNode
 from amr_sim.simulator_node import SimulatorNode
 from amr_turtlebot3.odometry_node import OdometryNode
 from tests.processes import terminate, wait_for
@@ -33,12 +35,14 @@ REPO = Path(__file__).resolve().parent.parent
 NODES = {"amr_simulator": (SimulatorNode, {}), "wall_follower": (WallFollowerNode, {}),
          "amr_odometry": (OdometryNode, {}), "map_publisher": (MapPublisherNode, {}),
          "foxglove_bridge": (FoxgloveBridgeNode, {"port": 0}),  # any free port
-         "particle_filter": (ParticleFilterNode, {})}
+         "particle_filter": (ParticleFilterNode, {}), "planner": (PlannerNode, {}),
+         "pure_pursuit": (PurePursuitNode, {})}
 # ... and its executable with its arguments.
 EXECUTABLES = {"amr_simulator": ["amr_simulator"], "wall_follower": ["amr_wall_follower"],
                "amr_odometry": ["amr_odometry"], "map_publisher": ["amr_map_publisher"],
                "foxglove_bridge": ["amr_foxglove_bridge", "--ros-args", "-p", "port:=0"],
-               "particle_filter": ["amr_particle_filter"]}
+               "particle_filter": ["amr_particle_filter"], "planner": ["amr_planner"],
+               "pure_pursuit": ["amr_pure_pursuit"]}
 
 
 class LifecycleClient:
@@ -150,6 +154,29 @@ def test_a_raising_transition_callback_is_logged_and_answered_error(ros):
     assert node.trigger_configure() == TransitionCallbackReturn.ERROR
     assert any("broken on purpose" in text for text in logged), logged
     assert node._state_machine.current_state[1] == "unconfigured"  # on_error recovered
+
+
+def test_is_active_follows_the_transitions_and_cleanup_and_shutdown_release(ros):
+    class Recording(GuardedLifecycleNode):
+        released = 0
+
+        def release(self):
+            self.released += 1
+
+    node = ros.add(Recording("recording", context=ros.context))
+    assert node.is_active is False
+    assert node.trigger_configure() == TransitionCallbackReturn.SUCCESS
+    assert node.is_active is False
+    assert node.trigger_activate() == TransitionCallbackReturn.SUCCESS
+    assert node.is_active is True
+    assert node.trigger_deactivate() == TransitionCallbackReturn.SUCCESS
+    assert (node.is_active, node.released) == (False, 0)  # kept for a later activate
+    assert node.trigger_cleanup() == TransitionCallbackReturn.SUCCESS
+    assert (node.is_active, node.released) == (False, 1)
+    assert node.trigger_configure() == TransitionCallbackReturn.SUCCESS
+    assert node.trigger_activate() == TransitionCallbackReturn.SUCCESS
+    assert node.trigger_shutdown() == TransitionCallbackReturn.SUCCESS  # from active
+    assert (node.is_active, node.released) == (False, 2)
 
 
 @pytest.mark.slow

@@ -287,3 +287,49 @@ def test_ctrl_c_during_startup_ends_at_once_and_cleanly(ros, tmp_path, moment):
         assert len(reports) == 1 and reports[0]["interrupted"] is True, output
     else:
         assert "interrupted before the simulation started (no report)" in output
+
+
+def test_goal_values_with_signs_and_names_parse():
+    assert run_sim.parse_args(["--goal", "-1.0,0.6"]).goal == "-1.0,0.6"
+    assert run_sim.parse_args(["--goal=-1,-0.2", "--world", "lab02"]).goal == "-1,-0.2"
+    assert run_sim.parse_args(["--goal", "inner_far"]).goal == "inner_far"
+
+
+def test_a_goal_in_a_wall_is_a_clear_error(capsys):
+    assert run_sim.main(["--world", "lab02", "--goal", "0.8,0.2"]) == 2
+    assert "goal (0.8, 0.2) touches a wall" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("world, start, goal, profile", [
+    ("lab02", "outer", "inner_far", "ideal"),
+    ("maze_deadends", "south_west", "3.0,2.2", "turtlebot3"),
+])
+def test_navigate_to_a_goal_with_the_five_node_graph(tmp_path, world, start, goal, profile):
+    pytest.importorskip("amr_localization.particle_filter")
+    report_path, plot_path = tmp_path / "nav.json", tmp_path / "nav.png"
+    exit_code = run_sim.main(["--world", world, "--start", start, "--goal", goal, "--profile",
+                              profile, "--duration", "300", "--report", str(report_path),
+                              "--plot", str(plot_path)])
+    report = json.loads(report_path.read_text())
+    assert exit_code == 0 and report["collisions"] == 0
+    assert report["nodes"] == ["wall_follower", "particle_filter", "planner", "pure_pursuit",
+                               "amr_simulator"]
+    assert report["localized_time_s"] < report["goal_reached_time_s"] < report["stopped_time_s"]
+    assert report["sim_time_s"] < 300.0, "the run ends once the robot rests at the goal"
+    assert report["final_position_error_m"] <= 0.05
+    assert report["path_length_m"] > 1.0 and len(report["path"]) > 50
+    assert plot_path.stat().st_size > 20_000
+
+
+def test_kidnapped_on_the_way_the_graph_relocalizes_replans_and_reaches_the_goal(tmp_path):
+    pytest.importorskip("amr_localization.particle_filter")
+    report_path = tmp_path / "kidnap.json"
+    exit_code = run_sim.main(["--world", "lab02", "--goal", "inner_far", "--kidnap",
+                              "40,0.2,1,3.14", "--duration", "300", "--report",
+                              str(report_path)])
+    report = json.loads(report_path.read_text())
+    assert exit_code == 0 and report["collisions"] == 0
+    assert report["localized_time_s"] < 40.0 < report["goal_reached_time_s"]
+    assert report["localization"]["loss_reported_after_s"] is not None
+    assert report["path"][0] != pytest.approx([-1.0, 0.25], abs=0.1), "replanned from afar"
+    assert report["final_position_error_m"] <= 0.05

@@ -71,7 +71,7 @@ def start_simulator(ros, probe: Probe, activate: bool = True, **parameters) -> S
     assert node.trigger_configure() == TransitionCallbackReturn.SUCCESS
     odom_topic = node.odometry_topic
     ros.spin_until(lambda: all(p.get_subscription_count() > 0
-                               for p in node._outputs.values())
+                               for p in node._outputs.publishers.values())
                    and probe.cmd.get_subscription_count() > 0
                    and probe.node.count_publishers(odom_topic) > 0,
                    timeout=10.0, message="probe and simulator to discover each other")
@@ -349,7 +349,7 @@ def test_goal_reached_while_localized_finishes_the_run_with_a_summary(ros):
         probe.send(0.2, 0.0, odometry.header.stamp)
 
     node = start_simulator(ros, probe, activate=False, enable_localization=True,
-                           goal=[1.0, -0.7], goal_tolerance=0.15)
+                           goal=[1.0, -0.7], goal_tolerance=0.15, goal_rest_time=0.0)
     ros.spin_until(lambda: pose_publisher.get_subscription_count() > 0,
                    message="/pose subscription")
     answered = 0
@@ -379,3 +379,37 @@ def test_goal_reached_while_localized_finishes_the_run_with_a_summary(ros):
     probe.send(0.2, 0.0, seconds_to_time(node.simulator.time))
     ros.spin_for(0.2)
     assert node.simulator.steps == steps and probe.count()["odometry"] == count
+
+
+def test_after_the_goal_the_run_goes_on_until_the_robot_rests(ros):
+    from amr_msgs.msg import PoseStamped
+    probe = Probe(ros)
+    pose_publisher = probe.node.create_publisher(PoseStamped, "/pose", 10)
+    node = start_simulator(ros, probe, activate=False, enable_localization=True,
+                           goal=[1.0, -0.85], goal_tolerance=0.15, goal_rest_time=0.2)
+    ros.spin_until(lambda: pose_publisher.get_subscription_count() > 0,
+                   message="/pose subscription")
+    assert node.trigger_activate() == TransitionCallbackReturn.SUCCESS
+    answered = 0
+    for _ in range(100):
+        ros.spin_until(lambda: len(probe.received["odometry"]) > answered or node.finished,
+                       message="a measurement or the end of the run")
+        if node.finished:
+            break
+        odometry = probe.received["odometry"][answered]
+        estimate = PoseStamped()
+        estimate.header.stamp = odometry.header.stamp
+        estimate.pose.orientation.w = 1.0
+        estimate.localized = True
+        pose_publisher.publish(estimate)
+        # Drive until 5 cm past the goal's y (reached at y >= -1.0), then rest.
+        moving = node.simulator.pose[1] < -0.80
+        probe.send(0.1 if moving else 0.0, 0.0, odometry.header.stamp)
+        answered += 1
+    assert node.finished
+    summary = node.summary()
+    assert summary["goal_reached"] and summary["reason"] == "goal reached"
+    reached, stopped = summary["goal_reached_time_s"], summary["stopped_time_s"]
+    assert reached < stopped and summary["sim_time_s"] == pytest.approx(stopped + 0.2)
+    assert node.simulator.pose[1] == pytest.approx(-0.80, abs=0.01), "drove on after reaching"
+    assert summary["final_position_error_m"] == pytest.approx(0.05, abs=0.01)

@@ -1,0 +1,138 @@
+"""An occupancy grid of a World: free/occupied cells and each cell's distance to the walls.
+
+    grid = OccupancyGrid.from_world(World.load("lab02"), resolution=0.02)
+    row, col = grid.cell_of(1.0, -1.0)
+    grid.clearance[row, col]          # 0.2: the centre of a 0.4 m corridor
+    grid.occupancy_values()           # int8, row-major from the lower-left cell (nav_msgs order)
+
+Layout (as nav_msgs/OccupancyGrid): cell (row, col) covers x in origin_x + [col, col + 1) *
+resolution and y in origin_y + [row, row + 1) * resolution; arrays are indexed [row, col], row 0
+at the bottom (smallest y). Cell CENTRES lie on multiples of the resolution, so walls and
+corridor centre lines on a grid of multiples of it (lab02: 0.4 m) pass exactly through cell
+centres: a 0.4 m corridor has a row of cells on its centre line, 0.2 m from both walls.
+
+- `clearance`: exact Euclidean distance (m) from each cell centre to the nearest wall segment,
+  computed from the segments (not a distance transform of the raster, so no staircase error);
+  0 for centres outside the free space (outside the boundary or inside an obstacle).
+- `in_boundary`: the centre is inside the boundary (beyond its walls: "unknown" on /map).
+- `walls`: a wall passes through the cell (each wall is walked in quarter-cell steps, so every
+  point of every wall lies in such a cell).
+- `free`: the centre is in the free space and no wall passes through the cell.
+
+No planner specifics (inflation, costs) and no rclpy: the planner and the /map raster
+(amr_common.map_raster) share it.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from amr_common.coverage_grid import check_grid_size, inside_polygon_grid
+from amr_common.world import World
+
+FREE, OCCUPIED, UNKNOWN = 0, 100, -1  # nav_msgs/OccupancyGrid values
+
+
+@dataclass(frozen=True)
+class OccupancyGrid:
+    """Cells of a world at one resolution (see the module docstring for the layout)."""
+
+    resolution: float  # m per cell
+    origin: tuple[float, float]  # (x, y) of the lower-left corner of cell (0, 0), m
+    free: np.ndarray  # (height, width) bool
+    clearance: np.ndarray  # (height, width) float64, m; 0 outside the free space
+    in_boundary: np.ndarray  # (height, width) bool
+    walls: np.ndarray  # (height, width) bool: a wall passes through the cell
+
+    @classmethod
+    def from_world(cls, world: World, resolution: float = 0.02,
+                   padding_m: float | None = None) -> "OccupancyGrid":
+        """Rasterize `world`: cells from `padding_m` (default one cell) beyond its walls."""
+        if isinstance(resolution, bool) or not (isinstance(resolution, (int, float))
+                                                and math.isfinite(resolution)
+                                                and resolution > 0):
+            raise ValueError(f"resolution must be a positive number of metres, got {resolution!r}")
+        resolution = float(resolution)
+        pad = 1 if padding_m is None else max(0, math.ceil(round(padding_m / resolution, 6)))
+        xmin, ymin, xmax, ymax = world.bounds
+        # Index of the cell whose centre is at k * resolution; rounding first so that -1.2 / 0.02
+        # (= -60.000000000000014 in floating point) counts as -60.
+        first = [math.floor(round(v / resolution, 6)) - pad for v in (xmin, ymin)]
+        last = [math.ceil(round(v / resolution, 6)) + pad for v in (xmax, ymax)]
+        width, height = last[0] - first[0] + 1, last[1] - first[1] + 1
+        check_grid_size(float(width), float(height), resolution,
+                        f"{world.source}: the occupancy grid", "use a larger resolution")
+        xs = (first[0] + np.arange(width)) * resolution
+        ys = (first[1] + np.arange(height)) * resolution
+        gx, gy = np.meshgrid(xs, ys)
+        centres = np.column_stack([gx.ravel(), gy.ravel()])
+        distance = world.clearances(centres).reshape(height, width)
+        in_boundary = np.ones((height, width), dtype=bool) if world.boundary is None else \
+            inside_polygon_grid(world.boundary, xs, ys)
+        inside = world.contains_points(centres).reshape(height, width)
+        origin = (float(xs[0] - 0.5 * resolution), float(ys[0] - 0.5 * resolution))
+        walls = wall_cells(world.segments, origin, resolution, (height, width))
+        return cls(resolution, origin, inside & ~walls, np.where(inside, distance, 0.0),
+                   in_boundary, walls)
+
+    @property
+    def width(self) -> int:
+        """Number of columns (cells along x)."""
+        return int(self.free.shape[1])
+
+    @property
+    def height(self) -> int:
+        """Number of rows (cells along y)."""
+        return int(self.free.shape[0])
+
+    def cell_of(self, x: float, y: float) -> tuple[int, int]:
+        """(row, col) of the cell containing the point; may lie outside the grid."""
+        return (math.floor((y - self.origin[1]) / self.resolution),
+                math.floor((x - self.origin[0]) / self.resolution))
+
+    def contains_cell(self, row: int, col: int) -> bool:
+        """True if (row, col) is a cell of this grid."""
+        return 0 <= row < self.height and 0 <= col < self.width
+
+    def cell_centre(self, row: int, col: int) -> tuple[float, float]:
+        """(x, y) of a cell's centre."""
+        return (self.origin[0] + (col + 0.5) * self.resolution,
+                self.origin[1] + (row + 0.5) * self.resolution)
+
+    def cell_centres(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """(K, 2) centres of the cells (rows[k], cols[k])."""
+        return np.column_stack([self.origin[0] + (np.asarray(cols) + 0.5) * self.resolution,
+                                self.origin[1] + (np.asarray(rows) + 0.5) * self.resolution])
+
+    def clearance_at(self, x: float, y: float) -> float:
+        """Clearance of the cell containing (x, y) (0 outside the grid)."""
+        row, col = self.cell_of(x, y)
+        return float(self.clearance[row, col]) if self.contains_cell(row, col) else 0.0
+
+    def occupancy_values(self) -> np.ndarray:
+        """Int8 (height, width) cell values: free 0, occupied 100, unknown -1.
+
+        Occupied: walls and obstacles; unknown: beyond the boundary walls.
+        """
+        values = np.where(self.free, FREE, OCCUPIED).astype(np.int8)
+        values[~self.in_boundary & ~self.walls] = UNKNOWN
+        return values
+
+
+def wall_cells(segments: np.ndarray, origin: tuple[float, float], resolution: float,
+               shape: tuple[int, int]) -> np.ndarray:
+    """(height, width) bool: the cells some wall passes through (walked in quarter cells)."""
+    cells = np.zeros(shape, dtype=bool)
+    for x1, y1, x2, y2 in segments:
+        n = max(2, math.ceil(math.hypot(x2 - x1, y2 - y1) / (0.25 * resolution)) + 1)
+        t = np.linspace(0.0, 1.0, n)
+        rows = np.floor((y1 + t * (y2 - y1) - origin[1]) / resolution).astype(int)
+        cols = np.floor((x1 + t * (x2 - x1) - origin[0]) / resolution).astype(int)
+        keep = (rows >= 0) & (rows < shape[0]) & (cols >= 0) & (cols < shape[1])
+        cells[rows[keep], cols[keep]] = True
+    return cells
+
+
+__all__ = ["OccupancyGrid", "FREE", "OCCUPIED", "UNKNOWN", "wall_cells"]

@@ -1,0 +1,267 @@
+"""The `pure_pursuit` lifecycle node: /pose (localized) + /path (+ /scan) -> /cmd_vel.
+
+Thin: the algorithm is amr_control.pure_pursuit.PurePursuit. Handover with the wall follower
+(which commands while /pose is NOT localized):
+- Simulation mode (`simulation: true`, lockstep): EVERY localized /pose gets exactly one /cmd_vel
+  stamped like the pose: zero until a path has come, the pursuit's command while following, zero
+  again once stopped at the path's end. A non-localized /pose gets none (the wall follower
+  answers it), so each step of the loop gets exactly one command.
+- Robot mode (`simulation: false`): the newest /pose is stored and a timer computes every dt;
+  it commands while the newest pose is localized, and zero if that pose is older than
+  `data_timeout` (stale: the robot must not keep moving on old data).
+Losing localization: the pursuit stops commanding (in robot mode after one zero command) and
+forgets its path; the planner replans from the relocalized pose and the new /path is followed.
+/scan gives the footprint clearance for the proximity slow-down (ignored when stale).
+Safety as the wall follower: a zero command on deactivate, cleanup and shutdown (Ctrl-C
+included), never a non-finite value.
+"""
+from __future__ import annotations
+
+import math
+import sys
+from typing import Any
+
+import numpy as np
+from nav_msgs.msg import Path
+from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
+from sensor_msgs.msg import LaserScan
+
+from amr_common.node_runner import run_lifecycle_node
+from amr_common.parameters import declare_parameters, read_parameters
+from amr_common.qos import LATCHED, RELIABLE_10, scan_qos
+from amr_common.ros_conversions import (
+    path_points,
+    pose_from_message,
+    scan_ranges,
+    time_to_nanoseconds,
+)
+from amr_control.command_output import (
+    COMMAND_PARAMETERS,
+    CommandingNode,
+    CommandOutput,
+    command_parameter_problems,
+    limit_command,
+)
+from amr_control.pure_pursuit import PurePursuit, scan_clearance
+
+_NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
+    "simulation": (True, "true: answer each localized /pose (lockstep with the simulator); "
+                         "false: robot mode, compute on a timer every dt with the newest pose"),
+    "dt": (0.05, "Control period in seconds"),
+    **COMMAND_PARAMETERS,
+    "data_timeout": (0.5, "Robot mode: command zero when the newest /pose is older than this; "
+                          "a /scan older than this is not used (seconds)"),
+    "frame_id": ("map", "Frame of /pose and /path"),
+    "pose_topic": ("/pose", "amr_msgs/PoseStamped input (the particle filter's estimate)"),
+    "path_topic": ("/path", "nav_msgs/Path input (transient local, from the planner)"),
+    "scan_topic": ("/scan", "sensor_msgs/LaserScan input for the proximity slow-down"),
+    "cmd_vel_topic": ("/cmd_vel", "Velocity command output"),
+}
+
+
+class PurePursuitNode(CommandingNode):
+    """Follows /path with a regulated pure pursuit while /pose is localized (module docstring).
+
+    Parameters: the node's own (simulation, dt, topics, ...) and every PurePursuit tuning value.
+    Configure creates the PurePursuit, the /cmd_vel lifecycle publisher and the /pose, /path
+    and /scan subscriptions; activate starts commanding (robot mode: a timer every dt);
+    deactivate, cleanup and shutdown each send a zero command (CommandingNode), and cleanup and
+    shutdown then release everything (release()).
+    """
+
+    def __init__(self, node_name: str = "pure_pursuit", **kwargs) -> None:
+        """Declare the parameters; nothing is created before on_configure."""
+        super().__init__(node_name, **kwargs)
+        declare_parameters(self, {**_NODE_PARAMETERS, **PurePursuit.parameter_descriptions()})
+        self._reset_runtime()
+
+    def _reset_runtime(self) -> None:
+        self.pursuit: PurePursuit | None = None
+        self._output: CommandOutput | None = None
+        self._subscriptions: list = []
+        self._timer = None
+        self._localized = False
+        self._latest = None  # robot mode: (pose, stamp ns, arrival Time) of the newest /pose
+        self._last_stamp = None  # newest answered /pose stamp (lockstep)
+        self._path_stamp_ns = -1
+        self._scan: tuple[LaserScan | None, Any] = (None, None)  # (newest, arrival Time)
+
+    # --- lifecycle -------------------------------------------------------------------------
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Check the parameters, then create what the node runs on.
+
+        Builds the PurePursuit, the /cmd_vel lifecycle publisher and the /pose, /path and /scan
+        subscriptions. FAILURE with a logged reason on bad parameters.
+        """
+        p, problems = read_parameters(self, _NODE_PARAMETERS)
+        tuning, tuning_problems = read_parameters(self, PurePursuit.parameter_descriptions())
+        problems += tuning_problems
+        if not problems:
+            problems = command_parameter_problems(p)
+        try:
+            pursuit = PurePursuit(p["dt"] if not problems else 0.05, **tuning)
+        except (TypeError, ValueError) as exc:
+            problems.append(str(exc))
+        if problems:
+            self.get_logger().error("configure failed: " + "; ".join(problems))
+            return TransitionCallbackReturn.FAILURE
+        self.pursuit = pursuit
+        self.simulation = bool(p["simulation"])
+        self.dt = float(p["dt"])
+        self.data_timeout = float(p["data_timeout"])
+        self.frame_id = str(p["frame_id"])
+        from amr_msgs.msg import PoseStamped
+        self._output = CommandOutput(self, p["cmd_vel_topic"],
+                                     self.simulation or bool(p["cmd_vel_stamped"]),
+                                     int(p["angular_sign"]))
+        self._subscriptions = [
+            self.create_subscription(PoseStamped, p["pose_topic"], self._on_pose, RELIABLE_10),
+            self.create_subscription(Path, p["path_topic"], self._on_path, LATCHED),
+            self.create_subscription(LaserScan, p["scan_topic"], self._on_scan, scan_qos(10))]
+        mode = "simulation (lockstep)" if self.simulation else f"robot (timer every {self.dt} s)"
+        self.get_logger().info(f"configured: {mode}, lookahead "
+                               f"{pursuit.params['min_lookahead_m']}-"
+                               f"{pursuit.params['max_lookahead_m']} m, up to "
+                               f"{pursuit.params['max_linear_speed_mps']} m/s")
+        return TransitionCallbackReturn.SUCCESS
+
+    def release(self) -> None:
+        """Destroy what on_configure created; the zero command was sent before (CommandingNode).
+
+        The control timer, the /pose, /path and /scan subscriptions and the /cmd_vel publisher;
+        the pursuit and its path are dropped.
+        """
+        self._stop_timer()
+        for subscription in self._subscriptions:
+            self.destroy_subscription(subscription)
+        if self._output is not None:
+            self._output.destroy()
+        self._reset_runtime()
+
+    # --- inputs ----------------------------------------------------------------------------
+    def _on_path(self, message: Path) -> None:
+        if self.pursuit is None:
+            return
+        if message.header.frame_id not in (self.frame_id, ""):
+            self.get_logger().error(f"/path in frame '{message.header.frame_id}' ignored: "
+                                    f"expected '{self.frame_id}'")
+            return
+        points = path_points(message)
+        self._path_stamp_ns = time_to_nanoseconds(message.header.stamp)
+        if len(points) == 0:
+            self.pursuit.clear_path()
+            self.get_logger().warning("empty /path (no plan): commanding zero while localized")
+            return
+        try:
+            self.pursuit.set_path(points)
+        except ValueError as exc:
+            self.pursuit.clear_path()
+            self.get_logger().error(f"/path rejected ({exc}): commanding zero while localized")
+            return
+        length = float(np.hypot(*np.diff(points, axis=0).T).sum()) if len(points) > 1 else 0.0
+        self.get_logger().info(f"following a new path: {len(points)} poses, {length:.2f} m")
+
+    def _on_scan(self, message: LaserScan) -> None:
+        # Kept as is: the clearance is worked out only when the pursuit commands.
+        self._scan = (message, self.get_clock().now())
+
+    def _scan_clearance(self) -> float | None:
+        """Footprint clearance from the newest /scan; None if none, stale or unusable."""
+        message, arrival = self._scan
+        if message is None or (not self.simulation and (
+                self.get_clock().now() - arrival).nanoseconds * 1e-9 > self.data_timeout):
+            return None  # a stale scan says nothing about the obstacles now
+        geometry = (message.angle_min, message.angle_increment, message.range_min,
+                    message.range_max)
+        if len(message.ranges) == 0 or not all(math.isfinite(v) for v in geometry):
+            return None
+        p = self.pursuit.params
+        return scan_clearance(scan_ranges(message), *geometry, p["lidar_offset_x_m"],
+                              p["robot_radius_m"])
+
+    def _on_pose(self, message) -> None:
+        if not self.is_active or self.pursuit is None:
+            return
+        stamp_ns = time_to_nanoseconds(message.header.stamp)
+        if not message.localized:
+            if self._localized:
+                self._lose_localization(message.header.stamp, stamp_ns)
+            return
+        self._localized = True
+        try:
+            pose = pose_from_message(message.pose)
+        except ValueError as exc:
+            pose = None
+            self.get_logger().warning(f"/pose unusable ({exc}): commanding zero",
+                                      throttle_duration_sec=2.0)
+        if pose is not None and not all(math.isfinite(v) for v in pose):
+            self.get_logger().warning("/pose not finite: commanding zero",
+                                      throttle_duration_sec=2.0)
+            pose = None
+        if not self.simulation:
+            self._latest = (pose, stamp_ns, self.get_clock().now())
+            return
+        # Lockstep: the simulator waits for this answer, so always answer exactly once.
+        if self._last_stamp is not None and stamp_ns < time_to_nanoseconds(self._last_stamp):
+            self.get_logger().warning("/pose older than the previous one (out of order): "
+                                      "commanding zero", throttle_duration_sec=2.0)
+            self._output.publish(0.0, 0.0, message.header.stamp)
+            return
+        self._last_stamp = message.header.stamp
+        v, w = self._compute(pose) if pose is not None else (0.0, 0.0)
+        self._output.publish(v, w, message.header.stamp)
+
+    def _lose_localization(self, stamp, stamp_ns: int) -> None:
+        self._localized = False
+        self._latest = None
+        self.get_logger().warning("localization lost: stopping; the wall follower takes over "
+                                  "until the planner replans from the relocalized pose")
+        if self._path_stamp_ns <= stamp_ns:  # a path planned after this pose stays
+            self.pursuit.clear_path()
+        if not self.simulation:
+            self._output.publish(0.0, 0.0, self.get_clock().now().to_msg())
+
+    def _on_timer(self) -> None:
+        if not self.is_active or self._latest is None or not self._localized:
+            return  # not localized: the wall follower commands
+        pose, _, arrival = self._latest
+        now = self.get_clock().now()
+        age = (now - arrival).nanoseconds * 1e-9
+        if age > self.data_timeout:
+            self.get_logger().warning(f"newest /pose {age:.2f} s old (data_timeout "
+                                      f"{self.data_timeout} s): commanding zero",
+                                      throttle_duration_sec=2.0)
+            self._output.publish(0.0, 0.0, now.to_msg())
+            return
+        v, w = self._compute(pose) if pose is not None else (0.0, 0.0)
+        self._output.publish(v, w, now.to_msg())
+
+    def _compute(self, pose: tuple[float, float, float]) -> tuple[float, float]:
+        state = self.pursuit.state
+        try:
+            clearance = self._scan_clearance() if self.pursuit.path is not None else None
+            v, w = self.pursuit.compute_commands(*pose, clearance)
+        except Exception as exc:  # never take the node down: stop instead
+            self.get_logger().error(f"pure pursuit raised {exc!r}: commanding zero",
+                                    throttle_duration_sec=2.0)
+            return 0.0, 0.0
+        if self.pursuit.state != state:
+            self._log_state(self.pursuit.state)
+        return limit_command(v, w)
+
+    def _log_state(self, state: str) -> None:
+        if state == "arrived":
+            self.get_logger().info("stopped at the end of the path")
+        elif state == "off_path":
+            self.get_logger().warning(
+                f"farther than {self.pursuit.params['max_path_deviation_m']} m from the path: "
+                f"commanding zero until back on it or a new path comes")
+
+
+
+def main(args: list[str] | None = None) -> int:
+    return run_lifecycle_node(PurePursuitNode, args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
