@@ -63,3 +63,16 @@ def test_evaluate_finishes_when_worker_processes_die(capsys, tmp_path):
     episodes = json.loads((out / "results.json").read_text())["episodes"]
     assert ["worker process died" in (e["error"] or "") for e in episodes] == [True, True]
     assert "2 episode(s) FAILED" in capsys.readouterr().out
+
+
+def test_the_local_pool_imports_no_ray(tmp_path):
+    """The default path needs no cluster extra: Ray is imported only with --ray."""
+    import subprocess
+    code = ("import sys; sys.path.insert(0, 'scripts'); import evaluate; "
+            f"code = evaluate.main(['--worlds', 'lab02', '--duration', '1', '--jobs', '2', "
+            f"'--no-sheet', '--out', {str(tmp_path / 'out')!r}]); "
+            "assert 'ray' not in sys.modules, 'ray imported'; sys.exit(code)")
+    proc = subprocess.run([sys.executable, "-c", code], cwd=SCRIPTS.parent, capture_output=True,
+                          text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "on 2 local process(es)" in proc.stdout

@@ -50,10 +50,15 @@ class SlowStanding:
         return 0.0, 0.0
 
 
+TIMINGS = ("wall_time_s", "filter_wall_time_s", "real_time_factor", "plan_time_ms")  # host speed
+
+
+def _without_timings(result) -> dict:
+    return {k: v for k, v in dataclasses.asdict(result).items() if k not in TIMINGS}
+
+
 def _without_wall_time(outcome) -> dict:
-    result = dataclasses.asdict(outcome.result) if outcome.result is not None else None
-    if result:
-        result.pop("wall_time_s")
+    result = _without_timings(outcome.result) if outcome.result is not None else None
     row = outcome_row(outcome)
     row.pop("wall_time_s")
     return {"spec": outcome.spec, "error": outcome.error, "result": result, "row": row}
@@ -84,6 +89,24 @@ def test_a_sweep_on_the_cluster_gives_the_local_pools_results(ray_cluster):
     for full, summary in zip(remote, summaries):
         assert summary.result.trajectory == [] and len(full.result.trajectory) == 401
         assert outcome_row(summary) | {"wall_time_s": 0} == outcome_row(full) | {"wall_time_s": 0}
+
+
+def test_navigation_and_localization_episodes_run_on_the_cluster_alike(ray_cluster):
+    from amr_evaluation.localization_evaluation import LocalizationSpec, run_localization_specs
+    executor = RayExecutor(ray_cluster.address)
+    navigation = expand_grid("lab02", "outer", "ideal", "0", duration=20.0, goals="all",
+                             pose_source="truth")
+    local = run_episodes(navigation, executor=LocalPoolExecutor(2))
+    remote = run_episodes(navigation, executor=executor)
+    assert len(remote) == 3 and all(o.error is None for o in remote)
+    assert [_without_wall_time(o) for o in remote] == [_without_wall_time(o) for o in local]
+    localization = [LocalizationSpec("twin_maze_small", None, profile, 1, duration=10.0)
+                    for profile in ("ideal", "turtlebot3")]
+    local = run_localization_specs(localization, jobs=2)
+    remote = run_localization_specs(localization, executor=executor)
+    assert all(o.error is None for o in remote)
+    assert [_without_timings(o.result) for o in remote] == \
+        [_without_timings(o.result) for o in local]
 
 
 def _table(stdout: str) -> list[str]:
