@@ -2,7 +2,7 @@
 # maze) and `make test` (the ruff linter, then pytest). Each creates .venv if missing, installs
 # the pinned dependencies when requirements.lock or pyproject.toml changed, and rebuilds
 # amr_msgs (and tf2_msgs) when their sources changed. `make test` also installs the cluster
-# extra (Ray, requirements-cluster.lock: ~600 MB, ~25 s) so the Ray tests run; `make run` does
+# extra (Ray, requirements-cluster.lock: ~560 MB, ~30 s) so the Ray tests run; `make run` does
 # not need it.
 PYTHON ?= python3
 VENV := .venv
