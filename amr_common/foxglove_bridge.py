@@ -21,7 +21,6 @@ import queue
 import sys
 from typing import Any
 
-from rcl_interfaces.msg import ParameterType
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 
 from amr_common.introspection import UnknownTypeError, matched_qos, message_class
@@ -32,32 +31,33 @@ from amr_common.mcap_recorder import (
     full_message_definition,
 )
 from amr_common.node_runner import run_lifecycle_node
-from amr_common.parameters import declare_parameters
+from amr_common.parameters import declare_parameters, finite
 from amr_common.qos import RELIABLE_10
 
-_S, _I, _D, _B, _SA = (ParameterType.PARAMETER_STRING, ParameterType.PARAMETER_INTEGER,
-                       ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_BOOL,
-                       ParameterType.PARAMETER_STRING_ARRAY)
-PARAMETERS: dict[str, tuple[Any, int, str]] = {
-    "host": ("127.0.0.1", _S, "Address the WebSocket server listens on (127.0.0.1: this "
-                              "machine only; 0.0.0.0: every interface, e.g. the robot's LAN)"),
-    "port": (8765, _I, "WebSocket port (foxglove_bridge's 8765)"),
-    "discovery_period": (1.0, _D, "Seconds between looks for new topics"),
-    "exclude_topics": (["/parameter_events"], _SA, "Topics never forwarded"),
-    "client_publish": (True, _B, "Let Foxglove publish (2D Pose Estimate, 2D Goal Pose, ...)"),
+PARAMETERS: dict[str, tuple[Any, str]] = {
+    "host": ("127.0.0.1", "Address the WebSocket server listens on (127.0.0.1: this machine "
+                          "only; 0.0.0.0: every interface, e.g. the robot's LAN)"),
+    "port": (8765, "WebSocket port (foxglove_bridge's 8765)"),
+    "discovery_period": (1.0, "Seconds between looks for new topics"),
+    "exclude_topics": (["/parameter_events"], "Topics never forwarded"),
+    "client_publish": (True, "Let Foxglove publish (2D Pose Estimate, 2D Goal Pose, ...)"),
 }
 _WORK_PERIOD_S = 0.05  # how often the executor thread picks up the SDK's requests
 
 
 class FoxgloveBridgeNode(GuardedLifecycleNode):
-    """Forwards the graph's topics to Foxglove clients and publishes what clients send."""
+    """Forwards the graph's topics to Foxglove clients and publishes what clients send.
+
+    Configure starts the WebSocket server; activate creates the work timer (discovery, client
+    requests) and the ROS subscriptions clients ask for; deactivate destroys the timer, every
+    ROS subscription and client publisher (the server and its clients stay); cleanup and
+    shutdown also stop the server (release()). Nothing is sent on the way down.
+    """
 
     def __init__(self, node_name: str = "foxglove_bridge", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
         # Numbers take ints for doubles (-p discovery_period:=2): amr_common.parameters.
-        declare_parameters(self, {name: (default, description) for name, (default, _, description)
-                                  in PARAMETERS.items()},
-                           types={name: type_ for name, (_, type_, _) in PARAMETERS.items()})
+        declare_parameters(self, PARAMETERS)
         self.server = None
         self._requests: queue.SimpleQueue = queue.SimpleQueue()
         self._reset()
@@ -80,8 +80,7 @@ class FoxgloveBridgeNode(GuardedLifecycleNode):
             self.get_logger().error(f"configure failed: port must be 0-65535 (got {p['port']})")
             return TransitionCallbackReturn.FAILURE
         period = p["discovery_period"]
-        if isinstance(period, bool) or not isinstance(period, (int, float)) or \
-                not 0.05 <= period <= 60.0:
+        if not (finite(period) and 0.05 <= period <= 60.0):
             self.get_logger().error(f"configure failed: discovery_period must be 0.05-60 s "
                                     f"(got {period!r})")
             return TransitionCallbackReturn.FAILURE
@@ -119,16 +118,6 @@ class FoxgloveBridgeNode(GuardedLifecycleNode):
         self._release_ros_entities()
         return super().on_deactivate(state)
 
-    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Stop the server (clients are disconnected) and forget every channel."""
-        self._stop()
-        return TransitionCallbackReturn.SUCCESS
-
-    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """As cleanup: nothing to send on the way down."""
-        self._stop()
-        return TransitionCallbackReturn.SUCCESS
-
     def _release_ros_entities(self) -> None:
         if self._timer is not None:
             self.destroy_timer(self._timer)
@@ -140,7 +129,11 @@ class FoxgloveBridgeNode(GuardedLifecycleNode):
             self.destroy_publisher(publisher)
         self._client_publishers.clear()
 
-    def _stop(self) -> None:
+    def release(self) -> None:
+        """Stop the server (clients are disconnected) and forget every channel; sends nothing.
+
+        The timer, every ROS subscription and client publisher go first.
+        """
         self._release_ros_entities()
         for channel, _ in self._channels.values():
             channel.close()

@@ -12,7 +12,13 @@ checks every request against the transitions available in the current state firs
 It also forwards a plain-Python algorithm's logging to the node's logger on request
 (forward_python_logging), until the node is destroyed.
 
-Use it exactly like rclpy.lifecycle.LifecycleNode (on_configure, on_activate, ... overrides).
+The lifecycle shape every node of the project shares is here once:
+- `is_active` is True from activate to deactivate (or shutdown): the node's callbacks drop
+  their input while it is False;
+- cleanup and shutdown call `release()`, which a node overrides to destroy what its on_configure
+  created (and which it may also call itself when configure fails half-way).
+A node overrides on_configure, release() and whatever else its lifecycle needs (calling super()
+in on_activate/on_deactivate/on_cleanup/on_shutdown, as with rclpy's LifecycleNode).
 """
 from __future__ import annotations
 
@@ -37,7 +43,9 @@ class GuardedLifecycleNode(LifecycleNode):
     OdometryNode, ...). The change_state service answers `success: false` for a transition that
     is not possible in the current state, trigger_configure/activate/deactivate/cleanup/shutdown
     return TransitionCallbackReturn.FAILURE for one, and a transition callback that raises is
-    logged with its exception. See the module docstring.
+    logged with its exception. The default callbacks keep `is_active` and call `release()` on
+    cleanup and shutdown; by themselves they send nothing on the way down. See the module
+    docstring.
     """
 
     def __init__(self, node_name: str, **kwargs) -> None:
@@ -50,6 +58,45 @@ class GuardedLifecycleNode(LifecycleNode):
         if service is not None:  # None when created without the communication interface
             service.callback = self._on_change_state_request
         self._log_forwardings: list[Callable[[], None]] = []
+        self._active = False
+
+    # --- the shared lifecycle shape ----------------------------------------------------------
+    @property
+    def is_active(self) -> bool:
+        """True from activate until deactivate or shutdown: input is processed."""
+        return self._active
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Enable the lifecycle publishers; `is_active` becomes True."""
+        result = super().on_activate(state)
+        self._active = True
+        return result
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """`is_active` becomes False, then the lifecycle publishers are disabled.
+
+        What on_configure created stays for a later activate.
+        """
+        self._active = False
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Release what on_configure created (`release()`); back to unconfigured."""
+        self.release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """From any state (Ctrl-C included): `is_active` becomes False, then `release()`."""
+        self._active = False
+        self.release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def release(self) -> None:
+        """Destroy what on_configure created (nothing here); a node overrides it.
+
+        Called by on_cleanup and on_shutdown; must be safe to call again and on a node that
+        was never configured.
+        """
 
     def forward_python_logging(self, logger_name: str) -> Callable[[], None]:
         """Send Python logger `logger_name`'s records to this node's logger.

@@ -10,33 +10,34 @@ from __future__ import annotations
 
 import sys
 
-from rcl_interfaces.msg import ParameterType
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 
 from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.map_messages import MAP_MARKERS_TOPIC, MAP_TOPIC, world_map_messages
 from amr_common.node_runner import run_lifecycle_node
-from amr_common.parameters import declare_parameters
+from amr_common.parameters import declare_parameters, finite
 from amr_common.qos import LATCHED
 from amr_common.world import World
 
 _PARAMETERS = {
-    "world": ("lab02", ParameterType.PARAMETER_STRING,
-              "Bundled world name or path to a world .yaml / the course's map .json"),
-    "resolution": (0.05, ParameterType.PARAMETER_DOUBLE, "Cell size of /map in metres"),
-    "frame_id": ("map", ParameterType.PARAMETER_STRING, "Frame of the map"),
+    "world": ("lab02", "Bundled world name or path to a world .yaml / the course's map .json"),
+    "resolution": (0.05, "Cell size of /map in metres"),
+    "frame_id": ("map", "Frame of the map"),
 }
 
 
 class MapPublisherNode(GuardedLifecycleNode):
-    """Publishes a world's OccupancyGrid on /map and its walls on /map_markers (latched)."""
+    """Publishes a world's OccupancyGrid on /map and its walls on /map_markers (latched).
+
+    Configure loads the world, builds both messages and creates the two latched lifecycle
+    publishers; activate publishes them once; cleanup and shutdown release the publishers
+    (release()). Nothing is sent on the way down.
+    """
 
     def __init__(self, node_name: str = "map_publisher", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
         # -p resolution:=1 is fine: numbers take ints for doubles (amr_common.parameters).
-        declare_parameters(self, {name: (default, description) for name, (default, _, description)
-                                  in _PARAMETERS.items()},
-                           types={name: type_ for name, (_, type_, _) in _PARAMETERS.items()})
+        declare_parameters(self, _PARAMETERS)
         self._outputs: dict = {}
         self._messages = None
 
@@ -44,8 +45,7 @@ class MapPublisherNode(GuardedLifecycleNode):
         """Load the world and build the messages; create the two latched publishers."""
         p = {name: self.get_parameter(name).value for name in _PARAMETERS}
         resolution = p["resolution"]
-        if isinstance(resolution, bool) or not isinstance(resolution, (int, float)) or \
-                not 0.005 <= resolution <= 1.0:
+        if not (finite(resolution) and 0.005 <= resolution <= 1.0):
             self.get_logger().error(f"configure failed: resolution must be a number in "
                                     f"[0.005, 1] m (got {resolution!r})")
             return TransitionCallbackReturn.FAILURE
@@ -73,17 +73,11 @@ class MapPublisherNode(GuardedLifecycleNode):
         self._outputs["markers"].publish(self._messages[1])
         return result
 
-    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Destroy the publishers (late subscribers get no map from now on)."""
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
+    def release(self) -> None:
+        """Destroy the two publishers (late subscribers get no map from now on).
 
-    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Destroy the publishers; nothing to send on the way down."""
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
-
-    def _release(self) -> None:
+        Nothing to send on the way down.
+        """
         for publisher in self._outputs.values():
             self.destroy_lifecycle_publisher(publisher)
         self._outputs = {}

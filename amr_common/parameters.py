@@ -6,7 +6,8 @@ InvalidParameterTypeException in the node's constructor, which kills the executa
 numeric parameters (int, double and double-array defaults) are declared with dynamic typing (the
 descriptor still names the intended type), an integer given for a double is stored as a double,
 and `read_parameters` returns every value in its declared type or names each one that is not, so
-on_configure can fail with a reason instead of the constructor raising.
+on_configure can fail with a reason instead of the constructor raising. The tables are
+amr_common.parameter_table's (plain Python, shared with the algorithms).
 
     PARAMETERS = {"kp": (10.0, "Proportional gain [rad/s/m]"), "side": ("right", "...")}
     declare_parameters(node, PARAMETERS)                     # in __init__
@@ -14,15 +15,13 @@ on_configure can fail with a reason instead of the constructor raising.
 """
 from __future__ import annotations
 
-import math
 from typing import Any, Mapping
 
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-# name -> (default, description)
-ParameterTable = Mapping[str, tuple[Any, str]]
+from amr_common.parameter_table import ParameterTable, finite
 
 _NUMERIC_TYPES = (ParameterType.PARAMETER_INTEGER, ParameterType.PARAMETER_DOUBLE,
                   ParameterType.PARAMETER_DOUBLE_ARRAY)
@@ -93,11 +92,6 @@ def _as_declared(name: str, value: Any, type_: int) -> tuple[Any, str | None]:
             return [float(v) for v in items], None
         return value, f"{name} must be a list of numbers (got {value!r})"
     return value, None  # statically typed: rclpy already refused other types
-
-
-def finite(value: Any) -> bool:
-    """True for a finite int or float (not a bool)."""
-    return (_is_integer(value) or isinstance(value, float)) and math.isfinite(value)
 
 
 __all__ = ["ParameterTable", "parameter_type", "declare_parameters", "read_parameters", "finite"]

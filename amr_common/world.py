@@ -1,35 +1,11 @@
 """Worlds for the simulator: walls as 2D line segments, named start poses and named goals.
 
-Two file formats load with `World.load(name_or_path)`:
-
-1. The project's own YAML world file (bundled ones live in amr_common/worlds/<name>.yaml and
-   load by name, e.g. `World.load("lab02")`; any other file loads by path)::
-
-       name: lab02               # optional, defaults to the file stem
-       description: free text    # optional
-       cell_size: 0.4            # m, > 0: grid used by coverage metrics (corridor pitch)
-       grid_origin: [x, y]       # optional: a point the coverage grid lines pass through
-                                 # (default: the boundary's lower-left corner)
-       boundary: [[x, y], ...]   # REQUIRED closed polyline: the outer walls (>= 3 points)
-       holes:                    # optional closed polylines: obstacles (>= 3 points each)
-         - [[x, y], ...]
-       walls:                    # optional open polylines: free-standing walls (>= 2 points)
-         - [[x, y], ...]
-       starts:                   # optional named start poses [x, y, theta]
-         outer: [1.0, -1.0, pi/2]  # theta in rad: a number or "pi", "pi/2", "3*pi/2", "-pi/4"
-       goals:                    # optional named goals [x, y] (navigation targets)
-         far_corner: [-1.0, 1.0]
-       goal: far_corner          # optional default goal: [x, y] or a name of `goals`;
-                                 # without it the first named goal is the default
-
-   Coordinates are metres in the world frame (REP 103: x east, y north, theta CCW from x).
-   A closed polyline may repeat its first point at the end; it is closed either way.
-   Numbers may be written 1e-6 (YAML 1.1 alone would read that as a string).
-
-2. The course's map JSON, by path: `{"metric": {"boundary": [[x, y], ...], "holes": [[[x, y],
-   ...], ...]}}` (boundary = outer closed polyline, each hole = a closed obstacle polyline).
-   It has no starts; pass a start pose (x, y, theta) explicitly. Its coverage grid (0.4 m)
-   starts at the boundary's lower-left corner.
+`World.load(name_or_path)` reads a bundled world by name ("lab02") or a world YAML / the
+course's map JSON by path (the formats: amr_common/world_file.py), then checks it against its
+walls: no zero-length wall; every start pose and goal inside the boundary, outside every
+obstacle and at least the robot radius from the walls. A World answers the geometric questions
+of the simulator, the planner, the filter and the metrics: clearances, free space, start and
+goal poses, the coverage grid.
 
 Every problem (missing file, unknown name, bad YAML/JSON, missing keys, non-numeric or non-finite
 coordinates, polylines with too few points, zero-length walls, start poses or goals outside the
@@ -38,47 +14,24 @@ the file.
 """
 from __future__ import annotations
 
-import json
 import math
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
-import yaml
 
 from .coverage_grid import CoverageGrid, build_coverage_grid, inside_polygon_points
 from .raycast import clearances_into
 from .robot import ROBOT_RADIUS
-
-WORLDS_DIR = Path(__file__).resolve().parent / "worlds"
-
-_PI_EXPR = re.compile(r"^\s*([+-]?)\s*(\d+(?:\.\d*)?)?\s*\*?\s*pi\s*(?:/\s*(\d+(?:\.\d*)?))?\s*$")
-
-
-class _WorldYamlLoader(yaml.SafeLoader):
-    """yaml.SafeLoader that also reads floats without a dot (1e-6, -2E3) as numbers.
-
-    YAML 1.2 reads them as numbers, YAML 1.1 (PyYAML) as strings.
-    """
-
-
-_WorldYamlLoader.add_implicit_resolver(
-    "tag:yaml.org,2002:float", re.compile(r"^[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)[eE][-+]?[0-9]+$"),
-    list("-+0123456789."))
-
-
-class WorldError(ValueError):
-    """A world file is missing or malformed, or a start pose is invalid.
-
-    The message names the file.
-    """
-
-
-def bundled_worlds() -> list[str]:
-    """Names of the worlds shipped with amr_sim (loadable with World.load(name))."""
-    return sorted(p.stem for p in WORLDS_DIR.glob("*.yaml"))
+from .world_file import (
+    WORLDS_DIR,
+    WorldError,
+    WorldFile,
+    bundled_worlds,
+    point_value,
+    pose_value,
+    read_world_file,
+)
 
 
 @dataclass
@@ -102,96 +55,14 @@ class World:
     @classmethod
     def load(cls, name_or_path: str | Path) -> "World":
         """Load a bundled world by name ("lab02") or a .yaml/.yml/.json file by path."""
-        text = str(name_or_path)
-        path = Path(text).expanduser()
-        looks_like_path = (path.suffix.lower() in (".yaml", ".yml", ".json") or "/" in text
-                           or path.is_file())
-        if not looks_like_path:
-            bundled = WORLDS_DIR / f"{text}.yaml"
-            if not bundled.is_file():
-                raise WorldError(
-                    f"unknown world '{text}': not a bundled world (bundled: "
-                    f"{', '.join(bundled_worlds())}) and not a .yaml/.json file path")
-            path = bundled
-        if not path.is_file():
-            raise WorldError(f"{path}: world file not found")
-        try:
-            raw = path.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as exc:
-            raise WorldError(f"{path}: cannot read world file: {exc}") from exc
-        if path.suffix.lower() == ".json":
-            return cls._from_course_json(raw, path)
-        return cls._from_yaml(raw, path)
+        return cls._from_file(read_world_file(name_or_path))
 
     @classmethod
-    def _from_yaml(cls, raw: str, path: Path) -> "World":
-        try:
-            data = yaml.load(raw, Loader=_WorldYamlLoader)
-        except yaml.YAMLError as exc:
-            raise WorldError(f"{path}: invalid YAML: {exc}") from exc
-        if not isinstance(data, dict):
-            raise WorldError(f"{path}: expected a mapping with keys boundary, holes, walls, "
-                             f"starts, ...")
-        known = {"name", "description", "cell_size", "grid_origin", "boundary", "holes", "walls",
-                 "starts", "goal", "goals"}
-        unknown = set(data) - known
-        if unknown:
-            raise WorldError(f"{path}: unknown key(s) {sorted(unknown)}; allowed: {sorted(known)}")
-        if "boundary" not in data:
-            raise WorldError(f"{path}: missing key 'boundary' (the outer closed polyline)")
-        boundary = _polyline(data["boundary"], path, "boundary", closed=True)
-        holes = [_polyline(h, path, f"holes[{i}]", closed=True)
-                 for i, h in enumerate(_as_list(data.get("holes", []), path, "holes"))]
-        walls = [_polyline(w, path, f"walls[{i}]", closed=False)
-                 for i, w in enumerate(_as_list(data.get("walls", []), path, "walls"))]
-        cell_size = _positive_number(data.get("cell_size", 0.4), path, "cell_size")
-        grid_origin = None
-        if data.get("grid_origin") is not None:
-            grid_origin = _point(data["grid_origin"], path, "grid_origin")
-        starts_raw = data.get("starts", {}) or {}
-        if not isinstance(starts_raw, dict):
-            raise WorldError(f"{path}: 'starts' must be a mapping name: [x, y, theta]")
-        starts = {str(k): _pose(v, path, f"starts.{k}") for k, v in starts_raw.items()}
-        goals_raw = data.get("goals", {}) or {}
-        if not isinstance(goals_raw, dict):
-            raise WorldError(f"{path}: 'goals' must be a mapping name: [x, y]")
-        goals = {str(k): _point(v, path, f"goals.{k}") for k, v in goals_raw.items()}
-        goal = next(iter(goals.values()), None)
-        if isinstance(data.get("goal"), str):
-            if data["goal"] not in goals:
-                raise WorldError(f"{path}: goal '{data['goal']}' is not a name of 'goals' "
-                                 f"({', '.join(goals) or 'none'})")
-            goal = goals[data["goal"]]
-        elif data.get("goal") is not None:
-            goal = _point(data["goal"], path, "goal")
-        name = str(data.get("name") or path.stem)
-        world = cls._build(name, path, boundary, holes, walls, starts, goal, cell_size,
-                           str(data.get("description") or ""), goals)
-        world.grid_origin = grid_origin
-        return world
-
-    @classmethod
-    def _from_course_json(cls, raw: str, path: Path) -> "World":
-        try:
-            data = json.loads(raw)
-        except json.JSONDecodeError as exc:
-            raise WorldError(f"{path}: invalid JSON: {exc}") from exc
-        if not isinstance(data, dict) or not isinstance(data.get("metric"), dict):
-            raise WorldError(f"{path}: missing key 'metric' (expected "
-                             f"{{\"metric\": {{\"boundary\": ..., \"holes\": ...}}}})")
-        metric = data["metric"]
-        if "boundary" not in metric:
-            raise WorldError(f"{path}: missing key 'metric.boundary'")
-        boundary = _polyline(metric["boundary"], path, "metric.boundary", closed=True)
-        holes = [_polyline(h, path, f"metric.holes[{i}]", closed=True)
-                 for i, h in enumerate(_as_list(metric.get("holes", []), path, "metric.holes"))]
-        return cls._build(path.stem, path, boundary, holes, [], {}, None, 0.4, "course map JSON")
-
-    @classmethod
-    def _build(cls, name, path, boundary, holes, walls, starts, goal, cell_size,
-               description, goals=None) -> "World":
-        segs = [_closed_segments(boundary)] + [_closed_segments(h) for h in holes]
-        segs += [np.hstack([w[:-1], w[1:]]) for w in walls]
+    def _from_file(cls, spec: WorldFile) -> "World":
+        """The World of a parsed world file, checked against its walls (WorldError if not)."""
+        path = spec.path
+        segs = [_closed_segments(spec.boundary)] + [_closed_segments(h) for h in spec.holes]
+        segs += [np.hstack([w[:-1], w[1:]]) for w in spec.walls]
         segments = np.ascontiguousarray(np.vstack(segs), dtype=np.float64)
         lengths = np.hypot(segments[:, 2] - segments[:, 0], segments[:, 3] - segments[:, 1])
         bad = np.flatnonzero(lengths < 1e-9)
@@ -199,15 +70,16 @@ class World:
             x1, y1 = segments[bad[0], :2]
             raise WorldError(f"{path}: zero-length wall at ({x1:g}, {y1:g}) (repeated point in "
                              f"a polyline)")
-        world = cls(name=name, source=str(path), segments=segments, starts=starts, goal=goal,
-                    cell_size=cell_size, description=description, boundary=boundary, holes=holes,
-                    goals=dict(goals or {}))
-        for start_name, pose in starts.items():
+        world = cls(name=spec.name, source=str(path), segments=segments, starts=spec.starts,
+                    goal=spec.goal, cell_size=spec.cell_size, description=spec.description,
+                    boundary=spec.boundary, holes=spec.holes, goals=dict(spec.goals),
+                    grid_origin=spec.grid_origin)
+        for start_name, pose in spec.starts.items():
             world._check_pose(pose, f"start '{start_name}'")
         for goal_name, point in world.goals.items():
             world._check_pose((*point, 0.0), f"goal '{goal_name}'")
-        if goal is not None:
-            world._check_pose((*goal, 0.0), "goal")
+        if spec.goal is not None:
+            world._check_pose((*spec.goal, 0.0), "goal")
         return world
 
     # ------------------------------------------------------------------ geometry
@@ -268,7 +140,8 @@ class World:
                 raise WorldError(f"{self.source}: unknown start '{start}' (named starts: "
                                  f"{', '.join(self.starts) or 'none'})")
             return self.starts[start]
-        pose = _pose(list(start) if not isinstance(start, list) else start, self.source, "start")
+        pose = pose_value(list(start) if not isinstance(start, list) else start, self.source,
+                          "start")
         self._check_pose(pose, "start")
         return pose
 
@@ -293,7 +166,7 @@ class World:
             if goal is None:
                 raise WorldError(f"{self.source}: goal is neither a named goal ("
                                  f"{', '.join(self.goals) or 'none'}) nor 'x,y'")
-        point = _point(list(goal), self.source, "goal")
+        point = point_value(list(goal), self.source, "goal")
         self._check_pose((*point, 0.0), "goal")
         return point
 
@@ -389,69 +262,5 @@ def _closed_segments(poly: np.ndarray) -> np.ndarray:
     return np.hstack([poly, np.roll(poly, -1, axis=0)])
 
 
-def _as_list(value: Any, path, what: str) -> list:
-    if value is None:
-        return []
-    if not isinstance(value, list):
-        raise WorldError(f"{path}: '{what}' must be a list of polylines")
-    return value
-
-
-def _number(value: Any, path, what: str) -> float:
-    if isinstance(value, bool):
-        raise WorldError(f"{path}: {what} must be a number, got {value!r}")
-    if isinstance(value, str):
-        m = _PI_EXPR.match(value)
-        if not m:
-            raise WorldError(f"{path}: {what} must be a number, got {value!r}")
-        sign, num, den = m.groups()
-        out = (float(num) if num else 1.0) * math.pi / (float(den) if den else 1.0)
-        return -out if sign == "-" else out
-    try:
-        out = float(value)
-    except (TypeError, ValueError):
-        raise WorldError(f"{path}: {what} must be a number, got {value!r}") from None
-    if not math.isfinite(out):
-        raise WorldError(f"{path}: {what} is not finite ({value!r})")
-    return out
-
-
-def _coordinate(value: Any, path, what: str) -> float:
-    if isinstance(value, str):  # pi expressions are for angles only
-        raise WorldError(f"{path}: {what} must be a number, got {value!r}")
-    return _number(value, path, what)
-
-
-def _positive_number(value: Any, path, what: str) -> float:
-    out = _coordinate(value, path, what)
-    if out <= 0:
-        raise WorldError(f"{path}: {what} must be > 0, got {value!r}")
-    return out
-
-
-def _point(value: Any, path, what: str) -> tuple[float, float]:
-    if not isinstance(value, (list, tuple)) or len(value) != 2:
-        raise WorldError(f"{path}: {what} must be [x, y], got {value!r}")
-    return (_coordinate(value[0], path, f"{what} x"), _coordinate(value[1], path, f"{what} y"))
-
-
-def _pose(value: Any, path, what: str) -> tuple[float, float, float]:
-    if not isinstance(value, (list, tuple)) or len(value) != 3:
-        raise WorldError(f"{path}: {what} must be [x, y, theta], got {value!r}")
-    return (_coordinate(value[0], path, f"{what} x"), _coordinate(value[1], path, f"{what} y"),
-            _number(value[2], path, f"{what} theta"))
-
-
-def _polyline(value: Any, path, what: str, closed: bool) -> np.ndarray:
-    if not isinstance(value, list):
-        raise WorldError(f"{path}: '{what}' must be a list of [x, y] points, got "
-                         f"{type(value).__name__}")
-    pts = [_point(p, path, f"{what}[{i}]") for i, p in enumerate(value)]
-    if closed and len(pts) >= 2 and pts[0] == pts[-1]:
-        pts = pts[:-1]  # explicitly closed: the closing segment is implied
-    need = 3 if closed else 2
-    if len(pts) < need:
-        kind = "closed" if closed else "open"
-        raise WorldError(f"{path}: '{what}' has {len(pts)} point(s); a {kind} polyline needs "
-                         f"at least {need}")
-    return np.array(pts, dtype=np.float64)
+# WorldError, bundled_worlds and WORLDS_DIR live in world_file.py; they are imported from here.
+__all__ = ["WORLDS_DIR", "World", "WorldError", "bundled_worlds", "parse_start", "start_label"]

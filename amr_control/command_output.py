@@ -2,7 +2,7 @@
 
 One publisher, one reused message, the node parameters every commanding node checks the same
 way, the forced final zero a robot without a command timeout needs, and the lifecycle callbacks
-that start and stop commanding (CommandingNode).
+that start and stop commanding (CommandingNode, a GuardedLifecycleNode).
 """
 from __future__ import annotations
 
@@ -13,6 +13,8 @@ from geometry_msgs.msg import Twist, TwistStamped
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.publisher import Publisher
 
+from amr_common.lifecycle_node import GuardedLifecycleNode
+from amr_common.parameter_table import finite
 from amr_common.qos import RELIABLE_10
 from amr_common.robot import MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED
 
@@ -29,13 +31,11 @@ COMMAND_PARAMETERS: dict[str, tuple[Any, str]] = {
 def command_parameter_problems(p: dict[str, Any]) -> list[str]:
     """What is wrong with the commanding parameters dt, angular_sign and data_timeout."""
     problems = []
-    if not (isinstance(p["dt"], (int, float)) and not isinstance(p["dt"], bool)
-            and math.isfinite(p["dt"]) and p["dt"] > 0):
+    if not (finite(p["dt"]) and p["dt"] > 0):
         problems.append(f"dt must be a positive number of seconds (got {p['dt']})")
     if p["angular_sign"] not in (1, -1):
         problems.append(f"angular_sign must be 1 or -1 (got {p['angular_sign']})")
-    if not (isinstance(p["data_timeout"], (int, float)) and math.isfinite(p["data_timeout"])
-            and p["data_timeout"] > 0):
+    if not (finite(p["data_timeout"]) and p["data_timeout"] > 0):
         problems.append(f"data_timeout must be > 0 s (got {p['data_timeout']})")
     return problems
 
@@ -102,14 +102,14 @@ class CommandOutput:
             self.node.destroy_lifecycle_publisher(publisher)
 
 
-class CommandingNode:
-    """The lifecycle callbacks of a node that commands the robot.
+class CommandingNode(GuardedLifecycleNode):
+    """The lifecycle callbacks of a node that commands the robot: zero on the way down.
 
-    A mixin listed before the node's LifecycleNode base. The node's on_configure sets
-    `simulation`, `dt` and `_output` (a CommandOutput); the node keeps `_active`, `_timer`,
-    `_latest` (its newest stored input) and `_last_stamp` (the newest answered stamp in
-    lockstep), and provides `_on_timer` (robot mode) and `_release` (destroys what on_configure
-    created, the timer first).
+    The base of the wall follower and pure pursuit nodes. The node's on_configure sets
+    `simulation`, `dt` and `_output` (a CommandOutput); the node keeps `_timer`, `_latest` (its
+    newest stored input) and `_last_stamp` (the newest answered stamp in lockstep), and provides
+    `_on_timer` (robot mode) and `release()` (destroys what on_configure created, the timer
+    first, e.g. with `_stop_timer()`).
     """
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -119,7 +119,6 @@ class CommandingNode:
         simulation mode each input is answered as it comes.
         """
         result = super().on_activate(state)
-        self._active = True
         self._latest = None
         if not self.simulation:
             self._timer = self.create_timer(self.dt, self._on_timer)
@@ -133,7 +132,6 @@ class CommandingNode:
         """
         self._stop_timer()
         self._publish_zero("deactivating")  # before the publisher goes quiet
-        self._active = False
         return super().on_deactivate(state)
 
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -142,8 +140,7 @@ class CommandingNode:
         The zero is sent even though the publisher is disabled (inactive state).
         """
         self._publish_zero("cleaning up", force=True)
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
+        return super().on_cleanup(state)
 
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
         """From any state (Ctrl-C included): stop, send a final zero command, release all.
@@ -152,8 +149,7 @@ class CommandingNode:
         """
         self._stop_timer()
         self._publish_zero("shutting down", force=True)
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
+        return super().on_shutdown(state)
 
     def _stop_timer(self) -> None:
         if self._timer is not None:

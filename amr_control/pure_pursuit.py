@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from amr_common.geometry import wrap_angle
+from amr_common.parameter_table import finite, table_values
 from amr_common.robot import MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED, ROBOT_RADIUS, TRACK
 
 # name: (default, description with units). The pure_pursuit node declares each as a parameter.
@@ -81,16 +82,10 @@ def check_parameters(overrides: dict[str, Any]) -> dict[str, float]:
     Finite numbers, >= 0 (lidar_offset_x_m any sign), speeds clipped to the Burger's limits.
     ValueError names the problem or unknown names.
     """
-    unknown = sorted(set(overrides) - set(PARAMETERS))
-    if unknown:
-        raise ValueError(f"PurePursuit: unknown parameter(s) {unknown}; known: "
-                         f"{sorted(PARAMETERS)}")
-    values = {name: default for name, (default, _) in PARAMETERS.items()}
-    values.update(overrides)
+    values = table_values(PARAMETERS, overrides, "PurePursuit")
     checked: dict[str, float] = {}
     for name, value in values.items():
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or \
-                not math.isfinite(value) or (value < 0 and name not in _SIGNED):
+        if not finite(value) or (value < 0 and name not in _SIGNED):
             raise ValueError(f"PurePursuit: {name} must be a finite number"
                              f"{'' if name in _SIGNED else ' >= 0'}, got {value!r}")
         checked[name] = float(value)

@@ -26,7 +26,6 @@ from nav_msgs.msg import Path
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import LaserScan
 
-from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameters import declare_parameters, read_parameters
 from amr_common.qos import LATCHED, RELIABLE_10, scan_qos
@@ -60,10 +59,14 @@ _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
 }
 
 
-class PurePursuitNode(CommandingNode, GuardedLifecycleNode):
+class PurePursuitNode(CommandingNode):
     """Follows /path with a regulated pure pursuit while /pose is localized (module docstring).
 
     Parameters: the node's own (simulation, dt, topics, ...) and every PurePursuit tuning value.
+    Configure creates the PurePursuit, the /cmd_vel lifecycle publisher and the /pose, /path
+    and /scan subscriptions; activate starts commanding (robot mode: a timer every dt);
+    deactivate, cleanup and shutdown each send a zero command (CommandingNode), and cleanup and
+    shutdown then release everything (release()).
     """
 
     def __init__(self, node_name: str = "pure_pursuit", **kwargs) -> None:
@@ -77,7 +80,6 @@ class PurePursuitNode(CommandingNode, GuardedLifecycleNode):
         self._output: CommandOutput | None = None
         self._subscriptions: list = []
         self._timer = None
-        self._active = False
         self._localized = False
         self._latest = None  # robot mode: (pose, stamp ns, arrival Time) of the newest /pose
         self._last_stamp = None  # newest answered /pose stamp (lockstep)
@@ -123,7 +125,12 @@ class PurePursuitNode(CommandingNode, GuardedLifecycleNode):
                                f"{pursuit.params['max_linear_speed_mps']} m/s")
         return TransitionCallbackReturn.SUCCESS
 
-    def _release(self) -> None:
+    def release(self) -> None:
+        """Destroy what on_configure created; the zero command was sent before (CommandingNode).
+
+        The control timer, the /pose, /path and /scan subscriptions and the /cmd_vel publisher;
+        the pursuit and its path are dropped.
+        """
         self._stop_timer()
         for subscription in self._subscriptions:
             self.destroy_subscription(subscription)
@@ -173,7 +180,7 @@ class PurePursuitNode(CommandingNode, GuardedLifecycleNode):
                               p["robot_radius_m"])
 
     def _on_pose(self, message) -> None:
-        if not self._active or self.pursuit is None:
+        if not self.is_active or self.pursuit is None:
             return
         stamp_ns = time_to_nanoseconds(message.header.stamp)
         if not message.localized:
@@ -215,7 +222,7 @@ class PurePursuitNode(CommandingNode, GuardedLifecycleNode):
             self._output.publish(0.0, 0.0, self.get_clock().now().to_msg())
 
     def _on_timer(self) -> None:
-        if not self._active or self._latest is None or not self._localized:
+        if not self.is_active or self._latest is None or not self._localized:
             return  # not localized: the wall follower commands
         pose, _, arrival = self._latest
         now = self.get_clock().now()

@@ -106,14 +106,15 @@ def parameter_names(controller_class: type) -> list[str]:
     return sorted({*_NODE_PARAMETERS, *tuning_table(controller_class), "use_sim_time"})
 
 
-class WallFollowerNode(CommandingNode, GuardedLifecycleNode):
+class WallFollowerNode(CommandingNode):
     """The wall follower as a lifecycle node: synchronized /odometry + /scan in, /cmd_vel out.
 
     __init__ declares the node's parameters and, when the controller class describes them
     (`parameter_descriptions()`), its tuning values; nothing else exists until configure.
     Configure creates the controller, the /cmd_vel lifecycle publisher and the synchronized
     subscriptions; activate starts commanding; deactivate, cleanup and shutdown each send a
-    zero command, because the TurtleBot3 keeps its last command forever.
+    zero command, because the TurtleBot3 keeps its last command forever (CommandingNode), and
+    cleanup and shutdown then release everything (release()).
     """
 
     def __init__(self, node_name: str = "wall_follower", **kwargs) -> None:
@@ -142,7 +143,6 @@ class WallFollowerNode(CommandingNode, GuardedLifecycleNode):
         self._latest_in_charge = True  # robot mode: the newest set's verdict
         self._scan_geometry: tuple | None = None
         self._last_stamp = None  # newest measurement's stamp (simulated time in lockstep)
-        self._active = False
         self._stop_log_forwarding = None
         self._computed = False  # the controller has computed a command since it was built
         self._static_listener: StaticTransformListener | None = None
@@ -211,7 +211,12 @@ class WallFollowerNode(CommandingNode, GuardedLifecycleNode):
             f"{'TwistStamped' if self.stamped else 'Twist'}, angular_sign {self.angular_sign}")
         return TransitionCallbackReturn.SUCCESS
 
-    def _release(self) -> None:
+    def release(self) -> None:
+        """Destroy what on_configure created; the zero command was sent before (CommandingNode).
+
+        The control timer, the synchronized subscriptions, the /tf_static listener and the
+        /cmd_vel publisher; the log forwarding stops and the controller is dropped.
+        """
         self._stop_timer()
         for subscriber in self._subscribers:
             subscriber.close()
@@ -251,7 +256,7 @@ class WallFollowerNode(CommandingNode, GuardedLifecycleNode):
         self.get_logger().info(f"LiDAR position from /tf_static: x = {offset.x:.3f} m")
 
     def _on_synchronized(self, odometry: Odometry, scan: LaserScan, pose=None) -> None:
-        if not self._active:
+        if not self.is_active:
             return
         in_charge = pose is None or not pose.localized or not self.stop_when_localized
         measurement = self._measurement(odometry, scan)
@@ -310,7 +315,7 @@ class WallFollowerNode(CommandingNode, GuardedLifecycleNode):
         return np.asarray(scan.ranges, dtype=float), float(z_v), float(z_w)
 
     def _on_timer(self) -> None:
-        if not self._active:
+        if not self.is_active:
             return
         now = self.get_clock().now()
         fresh = self._latest is not None and \

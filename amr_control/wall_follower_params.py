@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from amr_common.parameter_table import table_values
 from amr_common.robot import MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED, ROBOT_RADIUS, TRACK
 
 # name: (default, description). Defaults work in the simulator's "ideal" and "turtlebot3" profiles.
@@ -69,12 +70,7 @@ def check_parameters(overrides: dict[str, Any]) -> dict[str, Any]:
     finite numbers >= 0 (lidar_offset_x_m may be negative). Speeds above the Burger's limits
     are clipped to them. Raises ValueError naming the problem, or unknown names.
     """
-    unknown = sorted(set(overrides) - set(PARAMETERS))
-    if unknown:
-        raise ValueError(f"WallFollower: unknown parameter(s) {unknown}; "
-                         f"known: {sorted(PARAMETERS)}")
-    values = {name: default for name, (default, _) in PARAMETERS.items()}
-    values.update(overrides)
+    values = table_values(PARAMETERS, overrides, "WallFollower")
     side = str(values["follow_side"]).lower()
     if side not in ("right", "left"):
         raise ValueError(f"WallFollower: follow_side must be 'right' or 'left', got {side!r}")

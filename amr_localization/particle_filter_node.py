@@ -36,7 +36,7 @@ from sensor_msgs.msg import LaserScan
 from amr_common import message_filters
 from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.node_runner import run_lifecycle_node
-from amr_common.parameters import declare_parameters, read_parameters
+from amr_common.parameters import declare_parameters, finite, read_parameters
 from amr_common.qos import RELIABLE_10, scan_qos
 from amr_common.ros_conversions import (
     pose_from_message,
@@ -79,6 +79,11 @@ class ParticleFilterNode(GuardedLifecycleNode):
 
     Creates nothing until configured; the filter (with its expected-range table) is built in
     on_configure, so a missing or malformed map fails that transition with the loader's message.
+    Configure also creates the /pose, /amcl_pose and /particles lifecycle publishers, the
+    synchronized /odometry + /scan inputs and the /initialpose subscription; messages are
+    processed while active (deactivate stops processing, the filter keeps its state); cleanup
+    and shutdown release everything (release()). It commands nothing: nothing is sent on the
+    way down.
     """
 
     def __init__(self, node_name: str = "particle_filter", **kwargs) -> None:
@@ -98,7 +103,6 @@ class ParticleFilterNode(GuardedLifecycleNode):
         self._subscribers: list = []
         self._initialpose_subscription = None
         self._synchronizer = None
-        self._active = False
         self._last_odometry_ns: int | None = None
         self._last_ranges: bytes | None = None
         self._last_scan_ns: int | None = None  # newest usable scan
@@ -117,10 +121,8 @@ class ParticleFilterNode(GuardedLifecycleNode):
         filter_values, filter_problems = read_parameters(self, FILTER_PARAMETERS)
         problems += filter_problems
         for name in ("slop", "max_odometry_gap_s", "max_scan_age_s", "particles_period_s"):
-            value = node[name]
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or \
-                    not math.isfinite(value) or value < 0:
-                problems.append(f"{name} must be a number >= 0 (got {value!r})")
+            if not finite(node[name]) or node[name] < 0:
+                problems.append(f"{name} must be a number >= 0 (got {node[name]!r})")
         if not 0.0 <= float(node["min_valid_share"]) <= 1.0:
             problems.append(f"min_valid_share must be in [0, 1] (got {node['min_valid_share']})")
         for name in ("queue_size", "particles_published"):
@@ -181,29 +183,11 @@ class ParticleFilterNode(GuardedLifecycleNode):
             f"{f.table.nbytes / 1e6:.1f} MB, LiDAR at x = {filter_params['lidar_offset_x_m']} m")
         return TransitionCallbackReturn.SUCCESS
 
-    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Enable the publishers; messages are processed from now on."""
-        result = super().on_activate(state)
-        self._active = True
-        return result
+    def release(self) -> None:
+        """Destroy the subscriptions and publishers and drop the filter.
 
-    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Stop processing messages (the filter keeps its state); publishers go quiet."""
-        self._active = False
-        return super().on_deactivate(state)
-
-    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Destroy the subscriptions and publishers and drop the filter."""
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
-
-    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """As on_cleanup (nothing to send on the way down: the node commands nothing)."""
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
-
-    def _release(self) -> None:
-        self._active = False
+        Nothing to send on the way down: the node commands nothing.
+        """
         for subscriber in self._subscribers:
             subscriber.close()
         if self._initialpose_subscription is not None:
@@ -214,7 +198,7 @@ class ParticleFilterNode(GuardedLifecycleNode):
 
     # --- data path -------------------------------------------------------------------------
     def _on_odometry(self, message: Odometry) -> None:
-        if not self._active:
+        if not self.is_active:
             return
         stamp = time_to_nanoseconds(message.header.stamp)
         v, w = message.twist.twist.linear.x, message.twist.twist.angular.z
@@ -238,7 +222,7 @@ class ParticleFilterNode(GuardedLifecycleNode):
         self.filter.predict(float(v), float(w), dt)
 
     def _on_pair(self, odometry: Odometry, scan: LaserScan) -> None:
-        if not self._active:
+        if not self.is_active:
             return
         stamp_ns = time_to_nanoseconds(scan.header.stamp)
         ranges = self._usable_ranges(scan)

@@ -8,6 +8,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from amr_common.parameter_table import finite, table_values
+
 # name: (default, description). The defaults localize in both simulator profiles.
 PARAMETERS: dict[str, tuple[Any, str]] = {
     "lidar_offset_x_m": (0.0, "Forward position of the LiDAR relative to the robot centre [m] "
@@ -86,18 +88,12 @@ def check_parameters(overrides: dict[str, Any] | None = None) -> dict[str, Any]:
     Every parameter's value (defaults updated with `overrides`), checked and normalised
     (floats, ints, tuples; initial_pose None when empty); ValueError naming every bad one.
     """
-    values = {name: default for name, (default, _) in PARAMETERS.items()}
-    unknown = sorted(set(overrides or {}) - set(PARAMETERS))
-    if unknown:
-        raise ValueError(f"unknown particle filter parameter(s) {unknown}; known: "
-                         f"{sorted(PARAMETERS)}")
-    values.update(overrides or {})
+    values = table_values(PARAMETERS, overrides, "ParticleFilter")
     problems = []
     for name, value in values.items():
         if name in _VECTORS:
             continue
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or \
-                not math.isfinite(value):
+        if not finite(value):
             problems.append(f"{name} must be a finite number (got {value!r})")
         elif name in _INTEGERS:
             if int(value) != value or value < (0 if name == "seed" else 1):

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from amr_common.occupancy_grid import OccupancyGrid
+from amr_common.parameter_table import finite, table_values
 from amr_common.raycast import nearest_wall_kernel
 from amr_common.robot import ROBOT_RADIUS
 from amr_common.world import World
@@ -89,11 +90,7 @@ def check_parameters(overrides: dict[str, Any]) -> dict[str, Any]:
 
     ValueError names the problem (unknown names, non-numbers, out-of-range values).
     """
-    unknown = sorted(set(overrides) - set(PARAMETERS))
-    if unknown:
-        raise ValueError(f"Planner: unknown parameter(s) {unknown}; known: {sorted(PARAMETERS)}")
-    values = {name: default for name, (default, _) in PARAMETERS.items()}
-    values.update(overrides)
+    values = table_values(PARAMETERS, overrides, "Planner")
     if values["algorithm"] not in ALGORITHMS:
         raise ValueError(f"Planner: algorithm must be one of {ALGORITHMS}, got "
                          f"{values['algorithm']!r}")
@@ -101,8 +98,7 @@ def check_parameters(overrides: dict[str, Any]) -> dict[str, Any]:
     for name, value in values.items():
         if name in checked:
             continue
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or \
-                not math.isfinite(value) or value < 0:
+        if not finite(value) or value < 0:
             raise ValueError(f"Planner: {name} must be a finite number >= 0, got {value!r}")
         checked[name] = float(value)
     for name in ("resolution_m", "robot_radius_m", "path_spacing_m", "min_turn_radius_m"):

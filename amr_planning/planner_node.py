@@ -25,7 +25,7 @@ from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 
 from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.node_runner import run_lifecycle_node
-from amr_common.parameters import declare_parameters, read_parameters
+from amr_common.parameters import declare_parameters, finite, read_parameters
 from amr_common.qos import LATCHED, RELIABLE_10
 from amr_common.ros_conversions import path_message
 from amr_common.world import World
@@ -46,7 +46,14 @@ _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
 
 
 class PlannerNode(GuardedLifecycleNode):
-    """Plans from the localized /pose to the goal and publishes /path (module docstring)."""
+    """Plans from the localized /pose to the goal and publishes /path (module docstring).
+
+    Configure builds the planner (grid, costs, compiled search), the /path lifecycle publisher
+    and the /pose and /goal_pose subscriptions; activate starts planning with the next
+    localized /pose; deactivate stops planning (the published path stays latched); cleanup and
+    shutdown release everything (release()). It commands no motion: nothing is sent on the way
+    down.
+    """
 
     def __init__(self, node_name: str = "planner", **kwargs) -> None:
         """Declare the parameters; nothing is built before on_configure."""
@@ -60,7 +67,6 @@ class PlannerNode(GuardedLifecycleNode):
         self.last_plan = None
         self._path_publisher = None
         self._subscriptions: list = []
-        self._active = False
         self._localized = False
         self._pose = None  # (x, y) of the newest localized /pose
         self._pose_stamp = None
@@ -105,28 +111,11 @@ class PlannerNode(GuardedLifecycleNode):
             f"{self.planner.inflation_radius:.3f} m, goal {goal}")
         return TransitionCallbackReturn.SUCCESS
 
-    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Enable /path; planning starts with the next localized /pose."""
-        result = super().on_activate(state)
-        self._active = True
-        return result
+    def release(self) -> None:
+        """Destroy the /path publisher and the /pose and /goal_pose subscriptions; drop the grid.
 
-    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Stop planning (the published path stays latched)."""
-        self._active = False
-        return super().on_deactivate(state)
-
-    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Release the publisher, the subscriptions and the grid."""
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
-
-    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Release everything (nothing to stop: the planner commands no motion)."""
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
-
-    def _release(self) -> None:
+        Nothing to send on the way down: the planner commands no motion.
+        """
         for subscription in self._subscriptions:
             self.destroy_subscription(subscription)
         if self._path_publisher is not None:
@@ -135,7 +124,7 @@ class PlannerNode(GuardedLifecycleNode):
 
     # --- inputs ----------------------------------------------------------------------------
     def _on_pose(self, message) -> None:
-        if not self._active:
+        if not self.is_active:
             return
         if not message.localized:
             if self._localized and self.params["replan_on_relocalization"]:
@@ -153,7 +142,7 @@ class PlannerNode(GuardedLifecycleNode):
             self._plan()
 
     def _on_goal_pose(self, message: GoalPoseStamped) -> None:
-        if not self._active:
+        if not self.is_active:
             return
         frame = message.header.frame_id
         x, y = message.pose.position.x, message.pose.position.y
@@ -212,8 +201,7 @@ def _configured_goal(world: World, goal: Any, goal_name: str) -> tuple[float, fl
     Not checked against the walls here: a goal in a wall is reported when planning.
     """
     if goal is not None and len(goal) > 0:
-        if len(goal) != 2 or not all(isinstance(v, (int, float)) and math.isfinite(v)
-                                     for v in goal):
+        if len(goal) != 2 or not all(finite(v) for v in goal):
             raise ValueError(f"goal must be [] or [x, y] with finite numbers (got {list(goal)})")
         return float(goal[0]), float(goal[1])
     if goal_name:

@@ -25,61 +25,36 @@ import math
 import time
 from typing import Any, Callable
 
-from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Twist, TwistStamped
-from nav_msgs.msg import Odometry
 from rclpy.clock import Clock, ClockType
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
-from rosgraph_msgs.msg import Clock as ClockMessage
-from sensor_msgs.msg import LaserScan
 
 from amr_common.geometry import angle_difference
 from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameters import declare_parameters, read_parameters
-from amr_common.qos import RELIABLE_10, scan_qos
-from amr_common.ros_conversions import (
-    command_from_twist,
-    float32_array,
-    laser_scan_from_profile,
-    odometry_message,
-    pose_from_message,
-    seconds_to_time,
-)
+from amr_common.qos import RELIABLE_10
+from amr_common.ros_conversions import command_from_twist, pose_from_message
 from amr_common.world import World
 from amr_sim.simulator import Simulator
-from amr_sim.simulator_params import (
-    DEFAULT_START,
-    PARAMETER_TABLE,
-    PARAMETER_TYPES,
-    check_parameters,
-)
-from amr_sim.simulator_tf import SimulatorTf
-
-
-def true_velocity(before: tuple, after: tuple, dt: float) -> tuple[float, float]:
-    """Body-frame (v, w) that moved the robot from pose `before` to `after` in dt."""
-    d_theta = angle_difference(after[2], before[2])
-    mid_heading = before[2] + 0.5 * d_theta
-    forward = (after[0] - before[0]) * math.cos(mid_heading) + \
-        (after[1] - before[1]) * math.sin(mid_heading)
-    return forward / dt, d_theta / dt
+from amr_sim.simulator_outputs import SimulatorOutputs
+from amr_sim.simulator_params import DEFAULT_START, PARAMETERS, check_parameters
 
 
 class SimulatorNode(GuardedLifecycleNode):
     """The amr_sim Simulator behind the course's topics, as a lifecycle node.
 
     __init__ declares the parameters; configure loads the world, builds the Simulator and
-    creates the publishers and the /cmd_vel (+ /pose) inputs; activate publishes a first
-    measurement (the lockstep loop starts) or starts the real-time timer; deactivate pauses;
-    cleanup and shutdown release everything. It commands no robot, so nothing is sent on the
-    way down: the simulated robot just stops being stepped.
+    creates the publishers (SimulatorOutputs) and the /cmd_vel (+ /pose) inputs; activate
+    publishes a first measurement (the lockstep loop starts) or starts the real-time timer;
+    deactivate pauses; cleanup and shutdown release everything (release()). It commands no
+    robot, so nothing is sent on the way down: the simulated robot just stops being stepped.
     """
 
     def __init__(self, node_name: str = "amr_simulator", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
         # Numbers take ints for doubles (`-p dt:=1`): amr_common.parameters.
-        declare_parameters(self, PARAMETER_TABLE, types=PARAMETER_TYPES)
+        declare_parameters(self, PARAMETERS)
         # Run scripts append callables here; each is called with the simulator after a step.
         self.on_step: list[Callable[[Any], None]] = []
         self._reset()
@@ -94,27 +69,20 @@ class SimulatorNode(GuardedLifecycleNode):
         self.localization_error: tuple[float, float] | None = None  # (m, rad)
         self.goal_reached_time: float | None = None  # simulated s
         self._rest_since: float | None = None  # simulated s the zero commands began
-        self._outputs: dict[str, Any] = {}
-        # One message per output, refilled every step: building Odometry messages dominated
-        # the step time (publish copies the message, so reuse is safe).
-        self._messages = {"clock": ClockMessage(), "truth": Odometry(), "odom": Odometry(),
-                          "scan": LaserScan(), "stamp": Time()}
+        self._outputs: SimulatorOutputs | None = None
         self._inputs: list = []
         self._filters: list = []
         self._synchronizer = None
         self._timer = None
-        self._active = False
         self._wall_start: float | None = None
         self._wall_time = 0.0
         self._command = (0.0, 0.0)
         self._command_received: float | None = None  # monotonic time of the newest command
-        self._next_publish = {"odom": 0.0, "scan": 0.0}
         self._kidnapped = False
-        self._tf: SimulatorTf | None = None
 
     def _read_parameters(self) -> dict[str, Any]:
         """Parameter values, checked; raises ValueError naming every bad one."""
-        values, problems = read_parameters(self, PARAMETER_TABLE, types=PARAMETER_TYPES)
+        values, problems = read_parameters(self, PARAMETERS)
         if problems:
             raise ValueError("; ".join(problems))
         return check_parameters(values)
@@ -156,26 +124,14 @@ class SimulatorNode(GuardedLifecycleNode):
         # the first message and would stall the loop. Real time publishes what the profile's
         # robot publishes (/odom pose-only for the Burger).
         self.odometry_topic = profile.odom_topic if self.realtime else "/odometry"
-        self._outputs = {
-            "clock": self.create_lifecycle_publisher(ClockMessage, "/clock", RELIABLE_10),
-            "odom": self.create_lifecycle_publisher(Odometry, self.odometry_topic, RELIABLE_10),
-            "scan": self.create_lifecycle_publisher(
-                LaserScan, "/scan", scan_qos(5 if profile.name == "turtlebot3" else 10)),
-        }
-        if p["publish_ground_truth"]:
-            self._outputs["truth"] = self.create_lifecycle_publisher(
-                Odometry, "/ground_truth", RELIABLE_10)
-        self._create_inputs(p)
         try:
-            self._tf = SimulatorTf(self, self.simulator, p)
+            self._outputs = SimulatorOutputs(self, self.simulator, p, self.odometry_topic,
+                                             self.realtime)
         except Exception as exc:  # a map that cannot be built: the user's resolution
             self.get_logger().error(f"configure failed: {exc}")
-            self._destroy_all()
+            self.release()
             return TransitionCallbackReturn.FAILURE
-        scan_time = profile.scan_period if self.realtime and profile.scan_period else p["dt"]
-        laser_scan_from_profile(self.simulator.last_scan, profile, stamp=Time(),
-                                frame_id=p["scan_frame"], scan_time=scan_time,
-                                message=self._messages["scan"])
+        self._create_inputs(p)
         x, y, theta = self.simulator.pose
         self.get_logger().info(
             f"configured: world '{world.name}' ({world.source}), start ({x:.3f}, {y:.3f}, "
@@ -207,16 +163,18 @@ class SimulatorNode(GuardedLifecycleNode):
             self._inputs.append(self.create_subscription(
                 PoseStamped, "/pose", self._check_estimated_pose, RELIABLE_10))
 
-    def _destroy_all(self) -> None:
+    def release(self) -> None:
+        """Destroy the real-time timer, the publishers and the inputs; drop the Simulator.
+
+        The run ends; nothing is sent on the way down.
+        """
         self._stop_timer()
-        for publisher in self._outputs.values():
-            self.destroy_lifecycle_publisher(publisher)
+        if self._outputs is not None:
+            self._outputs.destroy()
         for subscription in self._inputs:
             self.destroy_subscription(subscription)
         for message_filter in self._filters:
             message_filter.close()
-        if self._tf is not None:
-            self._tf.destroy()
         self._reset()
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -226,19 +184,14 @@ class SimulatorNode(GuardedLifecycleNode):
         the steady-clock timer that steps every dt. A finished run stays finished.
         """
         result = super().on_activate(state)  # enables the lifecycle publishers
-        self._active = True
         if self._wall_start is None:
             self._wall_start = time.monotonic()
         if self.finished:
             return result
         simulator = self.simulator
-        self._tf.publish_static(seconds_to_time(simulator.time))  # before the first measurement
-        z_scan, z_v, z_w = simulator.measure()  # first measurement: starts a lockstep loop
-        self._publish(z_scan, z_v, z_w, simulator.pose, simulator.pose, True, True)
+        # The first measurement starts a lockstep loop.
+        self._outputs.publish_first(*simulator.measure())
         if self.realtime:
-            profile = simulator.profile
-            self._next_publish = {"odom": simulator.time + (profile.odom_period or 0.0),
-                                  "scan": simulator.time + (profile.scan_period or 0.0)}
             # Steady clock: with use_sim_time a ROS-time timer would wait for our own /clock.
             self._timer = self.create_timer(simulator.dt, self._on_timer,
                                             clock=Clock(clock_type=ClockType.STEADY_TIME))
@@ -255,19 +208,8 @@ class SimulatorNode(GuardedLifecycleNode):
 
         The simulator keeps its state, so a later activate resumes the same run.
         """
-        self._active = False
         self._stop_timer()
         return super().on_deactivate(state)
-
-    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Release the timer, publishers, subscriptions and the Simulator (the run ends)."""
-        self._destroy_all()
-        return TransitionCallbackReturn.SUCCESS
-
-    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """From any state: release everything as in cleanup; sends nothing."""
-        self._destroy_all()
-        return TransitionCallbackReturn.SUCCESS
 
     # --- commands --------------------------------------------------------------------------
     def _finite_command(self, message: Twist | TwistStamped) -> tuple[float, float]:
@@ -279,11 +221,11 @@ class SimulatorNode(GuardedLifecycleNode):
         return 0.0, 0.0
 
     def _on_command(self, message: Twist | TwistStamped) -> None:
-        if self._active and not self.finished:
+        if self.is_active and not self.finished:
             self._advance(*self._finite_command(message))
 
     def _on_command_and_pose(self, command: TwistStamped, pose) -> None:
-        if self._active and not self.finished:
+        if self.is_active and not self.finished:
             self._check_estimated_pose(pose)
             self._advance(*self._finite_command(command))
 
@@ -292,7 +234,7 @@ class SimulatorNode(GuardedLifecycleNode):
         self._command_received = time.monotonic()
 
     def _on_timer(self) -> None:
-        if not self._active or self.finished:
+        if not self.is_active or self.finished:
             return
         v, w = self._command
         timeout = self.params["command_timeout"]
@@ -331,56 +273,16 @@ class SimulatorNode(GuardedLifecycleNode):
         if self.finished:  # a hook ended the run
             return
         if self.realtime:
-            publish_odom = self._due("odom", simulator.profile.odom_period)
-            publish_scan = self._due("scan", simulator.profile.scan_period)
+            publish_odom = self._outputs.due("odom", simulator.profile.odom_period)
+            publish_scan = self._outputs.due("scan", simulator.profile.scan_period)
         else:
             publish_odom = publish_scan = True
         done = self._check_goal(pose, (v, w) == (0.0, 0.0))
         if done:
             publish_odom = publish_scan = False  # the loop stops here, as in the template
-        self._publish(z_scan, z_v, z_w, pose_before, pose, publish_odom, publish_scan)
+        self._outputs.publish(z_scan, z_v, z_w, pose_before, pose, publish_odom, publish_scan)
         if done:
             self.finish("goal reached")
-
-    def _due(self, sensor: str, period: float | None) -> bool:
-        """Real-time rate of one sensor: due when simulated time reaches its next slot."""
-        now = self.simulator.time
-        if period is None:
-            return True
-        if now + 1e-9 < self._next_publish[sensor]:
-            return False
-        self._next_publish[sensor] += period
-        if self._next_publish[sensor] <= now + 1e-9:  # fell behind: no burst to catch up
-            self._next_publish[sensor] = now + period
-        return True
-
-    def _publish(self, z_scan, z_v: float, z_w: float, pose_before: tuple, pose: tuple,
-                 publish_odom: bool, publish_scan: bool) -> None:
-        simulator, p, messages = self.simulator, self.params, self._messages
-        stamp = seconds_to_time(simulator.time, messages["stamp"])  # shared: publish copies
-        # /clock and /ground_truth only while someone listens (each costs ~40 us per step, a
-        # tenth of a lockstep round trip). /clock first: a use_sim_time subscriber then has
-        # the time before the measurements.
-        if self._outputs["clock"].get_subscription_count() > 0:
-            messages["clock"].clock = stamp
-            self._outputs["clock"].publish(messages["clock"])
-        if "truth" in self._outputs and self._outputs["truth"].get_subscription_count() > 0:
-            velocity = true_velocity(pose_before, pose, simulator.dt)
-            self._outputs["truth"].publish(odometry_message(
-                stamp, p["world_frame"], p["base_frame"], pose, velocity, messages["truth"]))
-        if publish_odom:
-            self._tf.publish(stamp, pose)
-            # The real robot's /odom carries a pose only; /odometry also the twist.
-            twist = (z_v, z_w) if self.odometry_topic == "/odometry" else None
-            self._outputs["odom"].publish(odometry_message(
-                stamp, p["odom_frame"], p["base_frame"], simulator.odometry_pose, twist,
-                messages["odom"]))
-        if publish_scan:
-            # Every other field was filled in on_configure.
-            scan = messages["scan"]
-            scan.header.stamp = stamp
-            scan.ranges = float32_array(z_scan)
-            self._outputs["scan"].publish(scan)
 
     # --- localization and goal -------------------------------------------------------------
     def _check_estimated_pose(self, message) -> None:

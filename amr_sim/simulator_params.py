@@ -1,67 +1,59 @@
-"""The `amr_simulator` node's parameters: names, defaults, types, descriptions and checks.
+"""The `amr_simulator` node's parameters: names, defaults, descriptions and checks.
 
-Plain Python: rcl_interfaces' ParameterType constants only, no rclpy.
+Plain Python, no rclpy.
 """
 from __future__ import annotations
 
-import math
 from typing import Any
 
-from rcl_interfaces.msg import ParameterType
-
+from amr_common.parameter_table import finite
 from amr_common.world import parse_start
 
 DEFAULT_START = "outer"  # the course's "outer corridor" start in lab02
-_S, _B, _D, _DA, _I = (ParameterType.PARAMETER_STRING, ParameterType.PARAMETER_BOOL,
-                       ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_DOUBLE_ARRAY,
-                       ParameterType.PARAMETER_INTEGER)
-# name: (default, type, description). Numbers accept ints or doubles (`-p dt:=1` must not kill
-# the process): amr_common.parameters declares them with dynamic typing, on_configure checks.
-PARAMETERS: dict[str, tuple[Any, int, str]] = {
-    "world": ("lab02", _S, "Bundled world name or path to a world .yaml / course map .json"),
-    "start": (DEFAULT_START, _S, "Start pose: a name from the world file or 'x,y,theta' "
-                                 "(m, m, rad); '' or the default 'outer' in a world without "
-                                 "it = the world's first start"),
-    "profile": ("ideal", _S, "Sensor profile: 'ideal' (CoppeliaSim robot) or 'turtlebot3' "
-                             "(the real Burger: LDS-01 at 5 Hz, /odom pose at 20 Hz)"),
-    "dt": (0.05, _D, "Simulation step in seconds (0 < dt <= 1)"),
-    "seed": (0, _I, "Seed of the sensor noise: the same seed gives the same run"),
-    "mode": ("lockstep", _S, "'lockstep': each /cmd_vel advances one dt; 'realtime': a "
-                             "wall-clock timer advances one dt with the newest command"),
-    "cmd_vel_stamped": (True, _B, "Subscribe /cmd_vel as geometry_msgs/TwistStamped (Jazzy); "
-                                  "false = geometry_msgs/Twist as a Humble robot"),
-    "command_timeout": (0.5, _D, "Realtime mode: a command older than this (s) counts as zero; "
-                                 "0 = never (the real turtlebot3_node keeps the last command)"),
-    "goal": ([], _DA, "Goal [x, y] in metres; [] = the world's goal, if it has one"),
-    "goal_rest_time": (0.5, _D, "Once the goal is reached, the run ends when the robot has been "
-                                "commanded to rest (zero) this long (s), so the final error is "
-                                "measured where it stops; 0 = end at once (the course "
-                                "template)"),
-    "goal_tolerance": (0.15, _D, "Distance (m) of the true position to the goal that counts "
-                                 "as reached"),
-    "enable_localization": (False, _B, "Synchronize /pose (amr_msgs/PoseStamped) with /cmd_vel, "
-                                       "log its error and finish at the goal once localized"),
-    "kidnap": ([], _DA, "Kidnapping event [t, x, y, theta] (s, m, m, rad): at simulated time t "
-                        "the robot is teleported to (x, y, theta); encoders and odometry see no "
-                        "motion (tests a localization node's recovery); [] = none"),
-    "odom_frame": ("odom", _S, "Frame of the odometry pose"),
-    "base_frame": ("base_footprint", _S, "Robot frame (child frame of odometry)"),
-    "scan_frame": ("base_scan", _S, "Frame of the LaserScan"),
-    "world_frame": ("map", _S, "Frame of /ground_truth and /map"),
-    "publish_ground_truth": (True, _B, "Publish the true pose and velocities on /ground_truth"),
-    "truth_frame": ("base_footprint_truth", _S, "Frame of the true robot pose on /tf "
-                                                "(world_frame -> truth_frame, for comparison)"),
-    "map_to_odom_from_truth": (False, _B, "Publish world_frame -> odom_frame on /tf from the "
-                                          "true pose (perfect localization, for viewers when "
-                                          "no localization node sends it)"),
-    "publish_map": (True, _B, "Publish the world as /map (nav_msgs/OccupancyGrid) and "
-                              "/map_markers (walls) once, latched"),
-    "map_resolution": (0.05, _D, "Cell size of /map in metres (0.005 to 1)"),
+# name: (default, description); the default's type is the parameter's ([] = a double array).
+# Numbers accept ints or doubles (`-p dt:=1` must not kill the process): amr_common.parameters
+# declares them with dynamic typing, on_configure checks.
+PARAMETERS: dict[str, tuple[Any, str]] = {
+    "world": ("lab02", "Bundled world name or path to a world .yaml / course map .json"),
+    "start": (DEFAULT_START, "Start pose: a name from the world file or 'x,y,theta' "
+                             "(m, m, rad); '' or the default 'outer' in a world without "
+                             "it = the world's first start"),
+    "profile": ("ideal", "Sensor profile: 'ideal' (CoppeliaSim robot) or 'turtlebot3' "
+                         "(the real Burger: LDS-01 at 5 Hz, /odom pose at 20 Hz)"),
+    "dt": (0.05, "Simulation step in seconds (0 < dt <= 1)"),
+    "seed": (0, "Seed of the sensor noise: the same seed gives the same run"),
+    "mode": ("lockstep", "'lockstep': each /cmd_vel advances one dt; 'realtime': a "
+                         "wall-clock timer advances one dt with the newest command"),
+    "cmd_vel_stamped": (True, "Subscribe /cmd_vel as geometry_msgs/TwistStamped (Jazzy); "
+                              "false = geometry_msgs/Twist as a Humble robot"),
+    "command_timeout": (0.5, "Realtime mode: a command older than this (s) counts as zero; "
+                             "0 = never (the real turtlebot3_node keeps the last command)"),
+    "goal": ([], "Goal [x, y] in metres; [] = the world's goal, if it has one"),
+    "goal_rest_time": (0.5, "Once the goal is reached, the run ends when the robot has been "
+                            "commanded to rest (zero) this long (s), so the final error is "
+                            "measured where it stops; 0 = end at once (the course "
+                            "template)"),
+    "goal_tolerance": (0.15, "Distance (m) of the true position to the goal that counts "
+                             "as reached"),
+    "enable_localization": (False, "Synchronize /pose (amr_msgs/PoseStamped) with /cmd_vel, "
+                                   "log its error and finish at the goal once localized"),
+    "kidnap": ([], "Kidnapping event [t, x, y, theta] (s, m, m, rad): at simulated time t "
+                   "the robot is teleported to (x, y, theta); encoders and odometry see no "
+                   "motion (tests a localization node's recovery); [] = none"),
+    "odom_frame": ("odom", "Frame of the odometry pose"),
+    "base_frame": ("base_footprint", "Robot frame (child frame of odometry)"),
+    "scan_frame": ("base_scan", "Frame of the LaserScan"),
+    "world_frame": ("map", "Frame of /ground_truth and /map"),
+    "publish_ground_truth": (True, "Publish the true pose and velocities on /ground_truth"),
+    "truth_frame": ("base_footprint_truth", "Frame of the true robot pose on /tf "
+                                            "(world_frame -> truth_frame, for comparison)"),
+    "map_to_odom_from_truth": (False, "Publish world_frame -> odom_frame on /tf from the "
+                                      "true pose (perfect localization, for viewers when "
+                                      "no localization node sends it)"),
+    "publish_map": (True, "Publish the world as /map (nav_msgs/OccupancyGrid) and "
+                          "/map_markers (walls) once, latched"),
+    "map_resolution": (0.05, "Cell size of /map in metres (0.005 to 1)"),
 }
-# The forms amr_common.parameters declares and reads.
-PARAMETER_TABLE = {name: (default, description)
-                   for name, (default, _, description) in PARAMETERS.items()}
-PARAMETER_TYPES = {name: type_ for name, (_, type_, _) in PARAMETERS.items()}
 
 
 def check_parameters(values: dict[str, Any]) -> dict[str, Any]:
@@ -75,8 +67,7 @@ def check_parameters(values: dict[str, Any]) -> dict[str, Any]:
 
     def number(name: str, low: float, high: float) -> None:
         value = p[name]
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or \
-                not (math.isfinite(value) and low <= value <= high):
+        if not (finite(value) and low <= value <= high):
             problems.append(f"{name} must be a number in [{low}, {high}] (got {value!r})")
         else:
             p[name] = float(value)
@@ -93,18 +84,15 @@ def check_parameters(values: dict[str, Any]) -> dict[str, Any]:
     goal = p["goal"]
     if goal is None or (hasattr(goal, "__len__") and len(goal) == 0):
         p["goal"] = None
-    elif isinstance(goal, (list, tuple)) and len(goal) == 2 and all(
-            isinstance(g, (int, float)) and not isinstance(g, bool) and math.isfinite(g)
-            for g in goal):
+    elif isinstance(goal, (list, tuple)) and len(goal) == 2 and all(finite(g) for g in goal):
         p["goal"] = (float(goal[0]), float(goal[1]))
     else:
         problems.append(f"goal must be [] or [x, y] with finite numbers (got {goal!r})")
     kidnap = p["kidnap"]
     if kidnap is None or (hasattr(kidnap, "__len__") and len(kidnap) == 0):
         p["kidnap"] = None
-    elif isinstance(kidnap, (list, tuple)) and len(kidnap) == 4 and all(
-            isinstance(k, (int, float)) and not isinstance(k, bool) and math.isfinite(k)
-            for k in kidnap) and kidnap[0] >= 0:
+    elif isinstance(kidnap, (list, tuple)) and len(kidnap) == 4 and \
+            all(finite(k) for k in kidnap) and kidnap[0] >= 0:
         p["kidnap"] = tuple(float(k) for k in kidnap)
     else:
         problems.append(f"kidnap must be [] or [t, x, y, theta] with finite numbers and t >= 0 "

@@ -45,9 +45,10 @@ class OdometryNode(GuardedLifecycleNode):
     """The real robot's /odom (pose only) in, /odometry (pose + estimated twist) out.
 
     __init__ declares the parameters; configure creates the VelocityEstimator, the output
-    lifecycle publisher and the input subscription; activate starts republishing;
-    cleanup and shutdown release them. The node commands nothing, so nothing is sent on the
-    way down: /odometry just stops, and the wall follower's data timeout commands zero.
+    lifecycle publisher and the input subscription; activate starts republishing (deactivate
+    stops it; everything stays for a later activate); cleanup and shutdown release them
+    (release()). The node commands nothing, so nothing is sent on the way down: /odometry just
+    stops, and the wall follower's data timeout commands zero.
     """
 
     def __init__(self, node_name: str = "amr_odometry", **kwargs) -> None:
@@ -58,7 +59,6 @@ class OdometryNode(GuardedLifecycleNode):
         self.estimator: VelocityEstimator | None = None
         self._publisher = None
         self._subscription = None
-        self._active = False
 
     # --- lifecycle -------------------------------------------------------------------------
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -91,7 +91,7 @@ class OdometryNode(GuardedLifecycleNode):
                 Odometry, p["input_topic"], self._on_odom, RELIABLE_10)
         except Exception as exc:  # e.g. an invalid topic name
             self.get_logger().error(f"configure failed: {exc}")
-            self._release()
+            self.release()
             return TransitionCallbackReturn.FAILURE
         self.get_logger().info(
             f"{p['input_topic']} -> {p['output_topic']}: max_gap {max_gap} s, smoothing "
@@ -101,26 +101,10 @@ class OdometryNode(GuardedLifecycleNode):
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Reset the estimator and enable the publisher: /odom is republished from now on."""
         self.estimator.reset()  # poses seen before an inactive period are stale
-        self._active = True
         return super().on_activate(state)
 
-    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Ignore /odom and disable the publisher; everything stays for a later activate."""
-        self._active = False
-        return super().on_deactivate(state)
-
-    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Release the subscription, the publisher and the estimator."""
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
-
-    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """From any state: stop republishing and release as in cleanup; sends nothing."""
-        self._active = False
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
-
-    def _release(self) -> None:
+    def release(self) -> None:
+        """Destroy the subscription and the publisher and drop the estimator; sends nothing."""
         if self._subscription is not None:
             self.destroy_subscription(self._subscription)
             self._subscription = None
@@ -131,7 +115,7 @@ class OdometryNode(GuardedLifecycleNode):
 
     # --- data ------------------------------------------------------------------------------
     def _on_odom(self, msg: Odometry) -> None:
-        if not self._active or self.estimator is None or self._publisher is None:
+        if not self.is_active or self.estimator is None or self._publisher is None:
             return
         position, orientation = msg.pose.pose.position, msg.pose.pose.orientation
         stamp_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec

@@ -49,6 +49,18 @@ def domain_id_argument(text: str) -> int:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def add_domain_id_option(parser: argparse.ArgumentParser,
+                         help: str = "ROS_DOMAIN_ID (default: the environment's)") -> None:
+    """--domain-id N (0-232) of a script that joins an existing graph; see use_domain_id."""
+    parser.add_argument("--domain-id", type=domain_id_argument, default=None, help=help)
+
+
+def use_domain_id(args: argparse.Namespace) -> None:
+    """Join the --domain-id graph (sets ROS_DOMAIN_ID; call before rclpy.init); else keep it."""
+    if args.domain_id is not None:
+        os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
+
+
 def check_output_file(path: str | os.PathLike, what: str) -> Path:
     """`path` if a file can be written there after the run; ValueError (one line) if not.
 

@@ -12,20 +12,19 @@ current ROS_DOMAIN_ID (or --domain-id). Exit code 1 when the node does not answe
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from amr_common.introspection import GraphProbe  # noqa: E402
+from cli_checks import add_domain_id_option, use_domain_id  # noqa: E402
 
 
 def parse_args(argv=None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter,
                                      epilog=__doc__.split("\n", 1)[1])
-    parser.add_argument("--domain-id", type=int, default=None,
-                        help="ROS_DOMAIN_ID (default: the environment's)")
+    add_domain_id_option(parser)
     timeout = argparse.ArgumentParser(add_help=False)
     timeout.add_argument("--timeout", type=float, default=5.0,
                          help="seconds to wait for the node's services (default 5)")
@@ -81,8 +80,7 @@ class LifecycleClient(GraphProbe):
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    if args.domain_id is not None:
-        os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
+    use_domain_id(args)
     from lifecycle_msgs.msg import Transition
     from lifecycle_msgs.srv import ChangeState, GetAvailableTransitions, GetState
     tool = LifecycleClient(args.timeout)

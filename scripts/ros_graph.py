@@ -21,6 +21,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from graph_drawing import RosGraph, draw, to_dot  # noqa: E402
 
+from cli_checks import add_domain_id_option, use_domain_id  # noqa: E402
+
 DEBUG_TOPICS = ("/rosout", "/parameter_events")
 
 
@@ -34,8 +36,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--all", action="store_true", help="also debug topics and hidden nodes")
     parser.add_argument("--wait", type=float, default=3.0, help="seconds of discovery (default 3)")
     parser.add_argument("--title", default=None, help="title above the picture")
-    parser.add_argument("--domain-id", type=int, default=None,
-                        help="ROS_DOMAIN_ID (default: the environment's)")
+    add_domain_id_option(parser)
     args = parser.parse_args(argv)
     for out in args.out:
         if Path(out).suffix.lower() not in (".png", ".svg", ".dot"):
@@ -107,8 +108,7 @@ def write_outputs(graph: RosGraph, outputs: list[str], show_qos: bool,
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    if args.domain_id is not None:
-        os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
+    use_domain_id(args)
     graph = collect_graph(args.wait, args.all)
     if not graph.nodes:
         print(f"ros_graph: no node found on ROS_DOMAIN_ID="

@@ -18,13 +18,12 @@ Ctrl-C stops the robot: the controllers publish a zero command before exiting.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from amr_common.ros_env import describe_graph_settings, environment_domain_id  # noqa: E402
-from cli_checks import domain_id_argument, join_negative_values  # noqa: E402
+from cli_checks import add_domain_id_option, join_negative_values, use_domain_id  # noqa: E402
 from launch_common import (  # noqa: E402
     ROBOT_PARAMS,
     add_controller_options,
@@ -40,9 +39,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter,
                                      epilog=__doc__.split("\n\n", 1)[1])
-    parser.add_argument("--domain-id", type=domain_id_argument, default=None,
-                        help="ROS_DOMAIN_ID shared with the robot, 0-232 (default: "
-                        "$ROS_DOMAIN_ID)")
+    add_domain_id_option(parser, "ROS_DOMAIN_ID shared with the robot, 0-232 (default: "
+                         "$ROS_DOMAIN_ID)")
     parser.add_argument("--cmd-vel", choices=["stamped", "twist"], default=None,
                         help="/cmd_vel type: stamped = TwistStamped (Jazzy bringup), twist = "
                         "Twist (Humble); default from the params file")
@@ -85,8 +83,7 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    if args.domain_id is not None:
-        os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
+    use_domain_id(args)
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 

@@ -40,8 +40,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from amr_common.ros_env import describe_graph_settings, isolate_local_graph  # noqa: E402
 from cli_checks import (  # noqa: E402
+    add_domain_id_option,
     check_output_file,
-    domain_id_argument,
     join_negative_values,
     per_start_path,
     plot_file,
@@ -96,9 +96,8 @@ def parse_args(argv=None) -> argparse.Namespace:
                         "file per start with --start all: NAME-START.mcap)")
     parser.add_argument("--gui", action="store_true", help="live view window (pygame)")
     add_foxglove_options(parser)
-    parser.add_argument("--domain-id", type=domain_id_argument, default=None,
-                        help="ROS_DOMAIN_ID, 0-232 (default: $ROS_DOMAIN_ID if set and not 0, "
-                        "else a free one)")
+    add_domain_id_option(parser, "ROS_DOMAIN_ID, 0-232 (default: $ROS_DOMAIN_ID if set and not "
+                         "0, else a free one)")
     args = parser.parse_args(join_negative_values(argv, ["--start", "--goal", "--kidnap"]))
     if not (math.isfinite(args.duration) and args.duration > 0):
         parser.error("--duration must be > 0")

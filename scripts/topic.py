@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import csv
 import math
-import os
 import sys
 import time
 from pathlib import Path
@@ -32,14 +31,14 @@ from amr_common.introspection import (  # noqa: E402
     to_data,
     to_yaml,
 )
+from cli_checks import add_domain_id_option, use_domain_id  # noqa: E402
 
 
 def parse_args(argv=None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter,
                                      epilog=__doc__.split("\n", 1)[1])
-    parser.add_argument("--domain-id", type=int, default=None,
-                        help="ROS_DOMAIN_ID (default: the environment's)")
+    add_domain_id_option(parser)
     commands = parser.add_subparsers(dest="command", required=True)
     listing = commands.add_parser("list", help="topics of the graph")
     listing.add_argument("-t", "--show-types", action="store_true")
@@ -227,8 +226,7 @@ def run_hz(graph: Graph, args) -> int:
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    if args.domain_id is not None:
-        os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
+    use_domain_id(args)
     graph = Graph()
     try:
         return {"list": run_list, "info": run_info, "echo": run_echo,

@@ -1,7 +1,8 @@
 """Option checks (cli_checks.py, launch_common.py) as run_sim.py and run_robot.py use them.
 
-Start poses, -p names and values, output paths, domain ids, params files and controllers: every
-mistake is a one-line error with exit code 2, found before anything runs.
+Start poses, -p names and values, output paths, domain ids (also topic.py's, lifecycle.py's and
+ros_graph.py's), params files and controllers: every mistake is a one-line error with exit code
+2, found before anything runs.
 """
 from __future__ import annotations
 
@@ -12,8 +13,11 @@ import pytest
 
 SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
 sys.path.insert(0, str(SCRIPTS))
+import lifecycle  # noqa: E402
+import ros_graph  # noqa: E402
 import run_robot  # noqa: E402
 import run_sim  # noqa: E402
+import topic  # noqa: E402
 
 
 def _fails_with(capsys, argv, message):
@@ -72,11 +76,11 @@ def test_bad_output_paths_are_found_before_simulating(capsys, tmp_path):
 
 # --- domain ids and bad files -------------------------------------------------------------
 
-@pytest.mark.parametrize("script", [run_sim, run_robot])
+@pytest.mark.parametrize("script", [run_sim, run_robot, topic, lifecycle, ros_graph])
 @pytest.mark.parametrize("domain_id", ["-1", "233", "500", "x"])
 def test_domain_ids_outside_0_232_are_refused(capsys, script, domain_id):
     with pytest.raises(SystemExit) as exit_info:
-        script.parse_args([f"--domain-id={domain_id}"])
+        script.parse_args([f"--domain-id={domain_id}", "list"])  # `list`: topic, lifecycle
     assert exit_info.value.code == 2
     assert "0-232" in capsys.readouterr().err
 

@@ -156,6 +156,29 @@ def test_a_raising_transition_callback_is_logged_and_answered_error(ros):
     assert node._state_machine.current_state[1] == "unconfigured"  # on_error recovered
 
 
+def test_is_active_follows_the_transitions_and_cleanup_and_shutdown_release(ros):
+    class Recording(GuardedLifecycleNode):
+        released = 0
+
+        def release(self):
+            self.released += 1
+
+    node = ros.add(Recording("recording", context=ros.context))
+    assert node.is_active is False
+    assert node.trigger_configure() == TransitionCallbackReturn.SUCCESS
+    assert node.is_active is False
+    assert node.trigger_activate() == TransitionCallbackReturn.SUCCESS
+    assert node.is_active is True
+    assert node.trigger_deactivate() == TransitionCallbackReturn.SUCCESS
+    assert (node.is_active, node.released) == (False, 0)  # kept for a later activate
+    assert node.trigger_cleanup() == TransitionCallbackReturn.SUCCESS
+    assert (node.is_active, node.released) == (False, 1)
+    assert node.trigger_configure() == TransitionCallbackReturn.SUCCESS
+    assert node.trigger_activate() == TransitionCallbackReturn.SUCCESS
+    assert node.trigger_shutdown() == TransitionCallbackReturn.SUCCESS  # from active
+    assert (node.is_active, node.released) == (False, 2)
+
+
 @pytest.mark.slow
 def test_every_executable_survives_out_of_order_requests(ros):
     """The process keeps running and answering after each refused request."""

@@ -71,7 +71,7 @@ def start_simulator(ros, probe: Probe, activate: bool = True, **parameters) -> S
     assert node.trigger_configure() == TransitionCallbackReturn.SUCCESS
     odom_topic = node.odometry_topic
     ros.spin_until(lambda: all(p.get_subscription_count() > 0
-                               for p in node._outputs.values())
+                               for p in node._outputs.publishers.values())
                    and probe.cmd.get_subscription_count() > 0
                    and probe.node.count_publishers(odom_topic) > 0,
                    timeout=10.0, message="probe and simulator to discover each other")

@@ -48,7 +48,7 @@ class FrameProbe:
 def start_with_frames(ros, **parameters):
     probe, frames = Probe(ros), FrameProbe(ros)
     node = start_simulator(ros, probe, activate=False, **parameters)
-    ros.spin_until(lambda: node._tf._tf.get_subscription_count() > 0,
+    ros.spin_until(lambda: node._outputs.tf._tf.get_subscription_count() > 0,
                    message="the /tf subscriber to be matched")
     assert node.trigger_activate() == TransitionCallbackReturn.SUCCESS
     return node, probe, frames

@@ -1,0 +1,253 @@
+"""World files: the project's YAML worlds and the course's map JSON, read into a WorldFile.
+
+Two file formats load with `World.load(name_or_path)` (through `read_world_file`):
+
+1. The project's own YAML world file (bundled ones live in amr_common/worlds/<name>.yaml and
+   load by name, e.g. `World.load("lab02")`; any other file loads by path)::
+
+       name: lab02               # optional, defaults to the file stem
+       description: free text    # optional
+       cell_size: 0.4            # m, > 0: grid used by coverage metrics (corridor pitch)
+       grid_origin: [x, y]       # optional: a point the coverage grid lines pass through
+                                 # (default: the boundary's lower-left corner)
+       boundary: [[x, y], ...]   # REQUIRED closed polyline: the outer walls (>= 3 points)
+       holes:                    # optional closed polylines: obstacles (>= 3 points each)
+         - [[x, y], ...]
+       walls:                    # optional open polylines: free-standing walls (>= 2 points)
+         - [[x, y], ...]
+       starts:                   # optional named start poses [x, y, theta]
+         outer: [1.0, -1.0, pi/2]  # theta in rad: a number or "pi", "pi/2", "3*pi/2", "-pi/4"
+       goals:                    # optional named goals [x, y] (navigation targets)
+         far_corner: [-1.0, 1.0]
+       goal: far_corner          # optional default goal: [x, y] or a name of `goals`;
+                                 # without it the first named goal is the default
+
+   Coordinates are metres in the world frame (REP 103: x east, y north, theta CCW from x).
+   A closed polyline may repeat its first point at the end; it is closed either way.
+   Numbers may be written 1e-6 (YAML 1.1 alone would read that as a string).
+
+2. The course's map JSON, by path: `{"metric": {"boundary": [[x, y], ...], "holes": [[[x, y],
+   ...], ...]}}` (boundary = outer closed polyline, each hole = a closed obstacle polyline).
+   It has no starts; pass a start pose (x, y, theta) explicitly. Its coverage grid (0.4 m)
+   starts at the boundary's lower-left corner.
+
+Every problem (missing file, unknown name, bad YAML/JSON, missing keys, non-numeric or non-finite
+coordinates, polylines with too few points, zero-length walls, start poses or goals outside the
+boundary, inside an obstacle or closer to a wall than the robot radius) raises WorldError naming
+the file; the checks against the walls (starts and goals in the free space, no zero-length
+wall) are World's (amr_common.world).
+"""
+from __future__ import annotations
+
+import json
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+WORLDS_DIR = Path(__file__).resolve().parent / "worlds"
+
+_PI_EXPR = re.compile(r"^\s*([+-]?)\s*(\d+(?:\.\d*)?)?\s*\*?\s*pi\s*(?:/\s*(\d+(?:\.\d*)?))?\s*$")
+
+
+class _WorldYamlLoader(yaml.SafeLoader):
+    """yaml.SafeLoader that also reads floats without a dot (1e-6, -2E3) as numbers.
+
+    YAML 1.2 reads them as numbers, YAML 1.1 (PyYAML) as strings.
+    """
+
+
+_WorldYamlLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float", re.compile(r"^[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."))
+
+
+class WorldError(ValueError):
+    """A world file is missing or malformed, or a start pose is invalid.
+
+    The message names the file.
+    """
+
+
+def bundled_worlds() -> list[str]:
+    """Names of the worlds shipped with amr_sim (loadable with World.load(name))."""
+    return sorted(p.stem for p in WORLDS_DIR.glob("*.yaml"))
+
+
+@dataclass
+class WorldFile:
+    """What a world file says, each value parsed and checked on its own."""
+
+    name: str
+    path: Path
+    boundary: np.ndarray  # (K, 2) outer closed polyline
+    holes: list[np.ndarray] = field(default_factory=list)  # closed obstacle polylines
+    walls: list[np.ndarray] = field(default_factory=list)  # open polylines
+    starts: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+    goals: dict[str, tuple[float, float]] = field(default_factory=dict)
+    goal: tuple[float, float] | None = None  # the `goal` key, else the first named goal
+    cell_size: float = 0.4
+    description: str = ""
+    grid_origin: tuple[float, float] | None = None
+
+
+def read_world_file(name_or_path: str | Path) -> WorldFile:
+    """Read a bundled world by name ("lab02") or a .yaml/.yml/.json file by path."""
+    text = str(name_or_path)
+    path = Path(text).expanduser()
+    looks_like_path = (path.suffix.lower() in (".yaml", ".yml", ".json") or "/" in text
+                       or path.is_file())
+    if not looks_like_path:
+        bundled = WORLDS_DIR / f"{text}.yaml"
+        if not bundled.is_file():
+            raise WorldError(
+                f"unknown world '{text}': not a bundled world (bundled: "
+                f"{', '.join(bundled_worlds())}) and not a .yaml/.json file path")
+        path = bundled
+    if not path.is_file():
+        raise WorldError(f"{path}: world file not found")
+    try:
+        raw = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise WorldError(f"{path}: cannot read world file: {exc}") from exc
+    if path.suffix.lower() == ".json":
+        return _from_course_json(raw, path)
+    return _from_yaml(raw, path)
+
+
+def _from_yaml(raw: str, path: Path) -> WorldFile:
+    try:
+        data = yaml.load(raw, Loader=_WorldYamlLoader)
+    except yaml.YAMLError as exc:
+        raise WorldError(f"{path}: invalid YAML: {exc}") from exc
+    if not isinstance(data, dict):
+        raise WorldError(f"{path}: expected a mapping with keys boundary, holes, walls, "
+                         f"starts, ...")
+    known = {"name", "description", "cell_size", "grid_origin", "boundary", "holes", "walls",
+             "starts", "goal", "goals"}
+    unknown = set(data) - known
+    if unknown:
+        raise WorldError(f"{path}: unknown key(s) {sorted(unknown)}; allowed: {sorted(known)}")
+    if "boundary" not in data:
+        raise WorldError(f"{path}: missing key 'boundary' (the outer closed polyline)")
+    boundary = _polyline(data["boundary"], path, "boundary", closed=True)
+    holes = [_polyline(h, path, f"holes[{i}]", closed=True)
+             for i, h in enumerate(_as_list(data.get("holes", []), path, "holes"))]
+    walls = [_polyline(w, path, f"walls[{i}]", closed=False)
+             for i, w in enumerate(_as_list(data.get("walls", []), path, "walls"))]
+    cell_size = _positive_number(data.get("cell_size", 0.4), path, "cell_size")
+    grid_origin = None
+    if data.get("grid_origin") is not None:
+        grid_origin = point_value(data["grid_origin"], path, "grid_origin")
+    starts_raw = data.get("starts", {}) or {}
+    if not isinstance(starts_raw, dict):
+        raise WorldError(f"{path}: 'starts' must be a mapping name: [x, y, theta]")
+    starts = {str(k): pose_value(v, path, f"starts.{k}") for k, v in starts_raw.items()}
+    goals_raw = data.get("goals", {}) or {}
+    if not isinstance(goals_raw, dict):
+        raise WorldError(f"{path}: 'goals' must be a mapping name: [x, y]")
+    goals = {str(k): point_value(v, path, f"goals.{k}") for k, v in goals_raw.items()}
+    goal = next(iter(goals.values()), None)
+    if isinstance(data.get("goal"), str):
+        if data["goal"] not in goals:
+            raise WorldError(f"{path}: goal '{data['goal']}' is not a name of 'goals' "
+                             f"({', '.join(goals) or 'none'})")
+        goal = goals[data["goal"]]
+    elif data.get("goal") is not None:
+        goal = point_value(data["goal"], path, "goal")
+    return WorldFile(name=str(data.get("name") or path.stem), path=path, boundary=boundary,
+                     holes=holes, walls=walls, starts=starts, goals=goals, goal=goal,
+                     cell_size=cell_size, description=str(data.get("description") or ""),
+                     grid_origin=grid_origin)
+
+
+def _from_course_json(raw: str, path: Path) -> WorldFile:
+    try:
+        data = json.loads(raw)
+    except json.JSONDecodeError as exc:
+        raise WorldError(f"{path}: invalid JSON: {exc}") from exc
+    if not isinstance(data, dict) or not isinstance(data.get("metric"), dict):
+        raise WorldError(f"{path}: missing key 'metric' (expected "
+                         f"{{\"metric\": {{\"boundary\": ..., \"holes\": ...}}}})")
+    metric = data["metric"]
+    if "boundary" not in metric:
+        raise WorldError(f"{path}: missing key 'metric.boundary'")
+    boundary = _polyline(metric["boundary"], path, "metric.boundary", closed=True)
+    holes = [_polyline(h, path, f"metric.holes[{i}]", closed=True)
+             for i, h in enumerate(_as_list(metric.get("holes", []), path, "metric.holes"))]
+    return WorldFile(name=path.stem, path=path, boundary=boundary, holes=holes,
+                     description="course map JSON")
+
+
+def _as_list(value: Any, path, what: str) -> list:
+    if value is None:
+        return []
+    if not isinstance(value, list):
+        raise WorldError(f"{path}: '{what}' must be a list of polylines")
+    return value
+
+
+def _number(value: Any, path, what: str) -> float:
+    if isinstance(value, bool):
+        raise WorldError(f"{path}: {what} must be a number, got {value!r}")
+    if isinstance(value, str):
+        m = _PI_EXPR.match(value)
+        if not m:
+            raise WorldError(f"{path}: {what} must be a number, got {value!r}")
+        sign, num, den = m.groups()
+        out = (float(num) if num else 1.0) * math.pi / (float(den) if den else 1.0)
+        return -out if sign == "-" else out
+    try:
+        out = float(value)
+    except (TypeError, ValueError):
+        raise WorldError(f"{path}: {what} must be a number, got {value!r}") from None
+    if not math.isfinite(out):
+        raise WorldError(f"{path}: {what} is not finite ({value!r})")
+    return out
+
+
+def _coordinate(value: Any, path, what: str) -> float:
+    if isinstance(value, str):  # pi expressions are for angles only
+        raise WorldError(f"{path}: {what} must be a number, got {value!r}")
+    return _number(value, path, what)
+
+
+def _positive_number(value: Any, path, what: str) -> float:
+    out = _coordinate(value, path, what)
+    if out <= 0:
+        raise WorldError(f"{path}: {what} must be > 0, got {value!r}")
+    return out
+
+
+def point_value(value: Any, path, what: str) -> tuple[float, float]:
+    """[x, y] as two finite floats; WorldError naming `path` and `what` if it is not."""
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise WorldError(f"{path}: {what} must be [x, y], got {value!r}")
+    return (_coordinate(value[0], path, f"{what} x"), _coordinate(value[1], path, f"{what} y"))
+
+
+def pose_value(value: Any, path, what: str) -> tuple[float, float, float]:
+    """[x, y, theta] as three finite floats (theta may be "pi/2" etc.); WorldError if not."""
+    if not isinstance(value, (list, tuple)) or len(value) != 3:
+        raise WorldError(f"{path}: {what} must be [x, y, theta], got {value!r}")
+    return (_coordinate(value[0], path, f"{what} x"), _coordinate(value[1], path, f"{what} y"),
+            _number(value[2], path, f"{what} theta"))
+
+
+def _polyline(value: Any, path, what: str, closed: bool) -> np.ndarray:
+    if not isinstance(value, list):
+        raise WorldError(f"{path}: '{what}' must be a list of [x, y] points, got "
+                         f"{type(value).__name__}")
+    pts = [point_value(p, path, f"{what}[{i}]") for i, p in enumerate(value)]
+    if closed and len(pts) >= 2 and pts[0] == pts[-1]:
+        pts = pts[:-1]  # explicitly closed: the closing segment is implied
+    need = 3 if closed else 2
+    if len(pts) < need:
+        kind = "closed" if closed else "open"
+        raise WorldError(f"{path}: '{what}' has {len(pts)} point(s); a {kind} polyline needs "
+                         f"at least {need}")
+    return np.array(pts, dtype=np.float64)

@@ -1,0 +1,221 @@
+"""Everything the simulator node publishes: its measurements, frames and map.
+
+SimulatorOutputs: /clock, the odometry topic, /scan and /ground_truth, each refilled into one
+reused message per step, on the profile's rates in real time; SimulatorTf: /tf, /tf_static,
+/map and /map_markers. What the real Burger's bringup publishes (robot_state_publisher's
+base_footprint -> base_scan, turtlebot3_node's odom -> base_footprint with each /odom) plus what
+only a simulator knows: the true pose on /ground_truth and as map -> base_footprint_truth and,
+for viewers when no localization node runs, the perfect map -> odom (`map_to_odom_from_truth`).
+The world is published as /map and /map_markers, latched. Publishers are lifecycle publishers
+of the simulator node, created in its on_configure and destroyed by `destroy()`.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from builtin_interfaces.msg import Time
+from nav_msgs.msg import Odometry
+from rosgraph_msgs.msg import Clock as ClockMessage
+from sensor_msgs.msg import LaserScan
+from tf2_msgs.msg import TFMessage
+
+from amr_common.coverage_grid import GridTooLargeError
+from amr_common.geometry import angle_difference
+from amr_common.map_messages import MAP_MARKERS_TOPIC, MAP_TOPIC, world_map_messages
+from amr_common.qos import LATCHED, RELIABLE_10, scan_qos
+from amr_common.robot import LIDAR_HEIGHT
+from amr_common.ros_conversions import (
+    float32_array,
+    laser_scan_from_profile,
+    odometry_message,
+    seconds_to_time,
+)
+from amr_common.tf import (
+    TF_QOS,
+    TF_TOPIC,
+    StaticTransformBroadcaster,
+    map_to_odom,
+    planar_transform,
+)
+
+
+def true_velocity(before: tuple, after: tuple, dt: float) -> tuple[float, float]:
+    """Body-frame (v, w) that moved the robot from pose `before` to `after` in dt."""
+    d_theta = angle_difference(after[2], before[2])
+    mid_heading = before[2] + 0.5 * d_theta
+    forward = (after[0] - before[0]) * math.cos(mid_heading) + \
+        (after[1] - before[1]) * math.sin(mid_heading)
+    return forward / dt, d_theta / dt
+
+
+class SimulatorOutputs:
+    """The simulator node's lifecycle publishers and the messages they reuse.
+
+    Creates /clock, the odometry topic, /scan, /ground_truth (with publish_ground_truth) in
+    `publishers` and the SimulatorTf (`tf`) on construction (in on_configure); `destroy()`
+    releases them all. If the map cannot be built, what was created is released and the
+    exception propagates.
+    """
+
+    def __init__(self, node, simulator, p: dict[str, Any], odometry_topic: str,
+                 realtime: bool) -> None:
+        self._node = node
+        self._simulator = simulator
+        self._params = p
+        self._realtime = realtime
+        self.odometry_topic = odometry_topic
+        profile = simulator.profile
+        # One message per output, refilled every step: building Odometry messages dominated
+        # the step time (publish copies the message, so reuse is safe).
+        self._messages = {"clock": ClockMessage(), "truth": Odometry(), "odom": Odometry(),
+                          "scan": LaserScan(), "stamp": Time()}
+        create = node.create_lifecycle_publisher
+        self.publishers = {
+            "clock": create(ClockMessage, "/clock", RELIABLE_10),
+            "odom": create(Odometry, odometry_topic, RELIABLE_10),
+            "scan": create(LaserScan, "/scan",
+                           scan_qos(5 if profile.name == "turtlebot3" else 10)),
+        }
+        if p["publish_ground_truth"]:
+            self.publishers["truth"] = create(Odometry, "/ground_truth", RELIABLE_10)
+        self.tf: SimulatorTf | None = None
+        try:
+            self.tf = SimulatorTf(node, simulator, p)
+        except Exception:  # a map that cannot be built: release what exists, then report
+            self.destroy()
+            raise
+        scan_time = profile.scan_period if realtime and profile.scan_period else p["dt"]
+        laser_scan_from_profile(simulator.last_scan, profile, stamp=Time(),
+                                frame_id=p["scan_frame"], scan_time=scan_time,
+                                message=self._messages["scan"])
+        self._next_publish = {"odom": 0.0, "scan": 0.0}
+
+    def publish_first(self, z_scan, z_v: float, z_w: float) -> None:
+        """/tf_static and the map, then the current measurement (it starts a lockstep loop).
+
+        In real time each sensor's schedule restarts from now.
+        """
+        simulator = self._simulator
+        self.tf.publish_static(seconds_to_time(simulator.time))  # before the measurement
+        self.publish(z_scan, z_v, z_w, simulator.pose, simulator.pose, True, True)
+        if self._realtime:
+            profile = simulator.profile
+            self._next_publish = {"odom": simulator.time + (profile.odom_period or 0.0),
+                                  "scan": simulator.time + (profile.scan_period or 0.0)}
+
+    def due(self, sensor: str, period: float | None) -> bool:
+        """Real-time rate of one sensor: due when simulated time reaches its next slot."""
+        now = self._simulator.time
+        if period is None:
+            return True
+        if now + 1e-9 < self._next_publish[sensor]:
+            return False
+        self._next_publish[sensor] += period
+        if self._next_publish[sensor] <= now + 1e-9:  # fell behind: no burst to catch up
+            self._next_publish[sensor] = now + period
+        return True
+
+    def publish(self, z_scan, z_v: float, z_w: float, pose_before: tuple, pose: tuple,
+                publish_odom: bool, publish_scan: bool) -> None:
+        """One step's messages, stamped with the simulated time.
+
+        /clock and /ground_truth always (while anyone subscribes), /tf and the odometry topic
+        if `publish_odom`, /scan if `publish_scan`.
+        """
+        simulator, p, messages = self._simulator, self._params, self._messages
+        publishers = self.publishers
+        stamp = seconds_to_time(simulator.time, messages["stamp"])  # shared: publish copies
+        # /clock and /ground_truth only while someone listens (each costs ~40 us per step, a
+        # tenth of a lockstep round trip). /clock first: a use_sim_time subscriber then has
+        # the time before the measurements.
+        if publishers["clock"].get_subscription_count() > 0:
+            messages["clock"].clock = stamp
+            publishers["clock"].publish(messages["clock"])
+        if "truth" in publishers and publishers["truth"].get_subscription_count() > 0:
+            velocity = true_velocity(pose_before, pose, simulator.dt)
+            publishers["truth"].publish(odometry_message(
+                stamp, p["world_frame"], p["base_frame"], pose, velocity, messages["truth"]))
+        if publish_odom:
+            self.tf.publish(stamp, pose)
+            # The real robot's /odom carries a pose only; /odometry also the twist.
+            twist = (z_v, z_w) if self.odometry_topic == "/odometry" else None
+            publishers["odom"].publish(odometry_message(
+                stamp, p["odom_frame"], p["base_frame"], simulator.odometry_pose, twist,
+                messages["odom"]))
+        if publish_scan:
+            # Every other field was filled in on construction.
+            scan = messages["scan"]
+            scan.header.stamp = stamp
+            scan.ranges = float32_array(z_scan)
+            publishers["scan"].publish(scan)
+
+    def destroy(self) -> None:
+        """Destroy every publisher this object created. Idempotent."""
+        for publisher in self.publishers.values():
+            self._node.destroy_lifecycle_publisher(publisher)
+        self.publishers = {}
+        if self.tf is not None:
+            self.tf.destroy()
+            self.tf = None
+
+
+class SimulatorTf:
+    """Creates the publishers on construction (in on_configure); `destroy()` releases them."""
+
+    def __init__(self, node, simulator, p: dict[str, Any]) -> None:
+        self._node = node
+        self._simulator = simulator
+        self._frames = (p["world_frame"], p["odom_frame"], p["base_frame"], p["truth_frame"])
+        self._map_to_odom = bool(p["map_to_odom_from_truth"])
+        self._scan_frame = p["scan_frame"]
+        self._map_messages = None
+        if p["publish_map"]:
+            try:
+                self._map_messages = world_map_messages(simulator.world, p["map_resolution"],
+                                                        p["world_frame"])
+            except GridTooLargeError as exc:  # a huge world still simulates, without /map
+                node.get_logger().warning(f"no /map: {exc}")
+        create = node.create_lifecycle_publisher
+        self._tf = create(TFMessage, TF_TOPIC, TF_QOS)
+        self._static = StaticTransformBroadcaster(node, create)
+        self._map_publishers = [] if self._map_messages is None else [
+            create(type(message), topic, LATCHED)
+            for message, topic in zip(self._map_messages, (MAP_TOPIC, MAP_MARKERS_TOPIC))]
+        # Reused every step (publish copies): odom -> base, map -> truth[, map -> odom].
+        self._message = TFMessage(transforms=[
+            planar_transform(None, "", "", 0.0, 0.0, 0.0)
+            for _ in range(3 if self._map_to_odom else 2)])
+
+    def publish_static(self, stamp) -> None:
+        """base_footprint -> base_scan at the profile's LiDAR position, then the map."""
+        lidar_x = self._simulator.profile.lidar_offset_x
+        self._static.send([planar_transform(stamp, self._frames[2], self._scan_frame,
+                                            lidar_x, 0.0, 0.0, LIDAR_HEIGHT)])
+        if self._map_messages is not None:
+            grid, markers = self._map_messages
+            grid.header.stamp = grid.info.map_load_time = stamp
+            for marker in markers.markers:
+                marker.header.stamp = stamp
+            for publisher, message in zip(self._map_publishers, self._map_messages):
+                publisher.publish(message)
+
+    def publish(self, stamp, true_pose: tuple[float, float, float]) -> None:
+        """The moving frames at `stamp`, while anyone subscribes to /tf (cheap otherwise)."""
+        if self._tf.get_subscription_count() == 0:
+            return
+        world, odom, base, truth = self._frames
+        odometry_pose = self._simulator.odometry_pose
+        transforms = self._message.transforms
+        planar_transform(stamp, odom, base, *odometry_pose, message=transforms[0])
+        planar_transform(stamp, world, truth, *true_pose, message=transforms[1])
+        if self._map_to_odom:
+            planar_transform(stamp, world, odom, *map_to_odom(true_pose, odometry_pose),
+                             message=transforms[2])
+        self._tf.publish(self._message)
+
+    def destroy(self) -> None:
+        """Destroy every publisher this object created."""
+        for publisher in [self._tf, self._static.publisher, *self._map_publishers]:
+            self._node.destroy_lifecycle_publisher(publisher)
+        self._map_publishers = []
