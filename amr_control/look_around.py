@@ -2,9 +2,10 @@
 
 The wall follower aims its in-place turns at its heading memory (the direction of the last
 well-fitted wall). When that memory is wrong (the robot was carried, or slipped) every quarter
-turn can face a wall's corner, so the robot would turn between blocked directions for ever. It
-then turns once around in place, and this records, at every step of that turn, the free path
-ahead and the direction of the followed wall whenever a straight wall is fitted beside it.
+turn can face a wall's corner, so the robot would turn between blocked directions for ever.
+IdleTurns notices (too many turns in a row without driving); the robot then turns once around
+in place, and LookAround records, at every step of that turn, the free path ahead and the
+direction of the followed wall whenever a straight wall is fitted beside it.
 
 `choose()` picks where to go on: the walls' direction (their circular mean modulo a quarter turn,
 the course's mazes being rectilinear) turned by the quarter turn whose path ahead was longest,
@@ -22,6 +23,34 @@ from amr_common.geometry import wrap_angle
 # A fit this good (m of RMS residual, m of extent) gives the walls' direction (as WallFollower).
 FIT_MAX_RESIDUAL_M = 0.02
 FIT_MIN_SPAN_M = 0.15
+# More in-place turns than this in a row, each after less than IDLE_PROGRESS_M of driving, mean
+# the turns lead nowhere.
+IDLE_TURNS = 4
+IDLE_PROGRESS_M = 0.02
+
+
+class IdleTurns:
+    """Counts in-place turns made without driving in between.
+
+    Each turn is aimed relative to the heading memory, which every turn renews and which only
+    driving ages: a wrong memory (the robot was carried) could otherwise keep a robot that never
+    drives turning between two blocked directions for ever.
+    """
+
+    def __init__(self) -> None:
+        self._count = 0
+        self._odometer = -math.inf  # at the start of the last turn
+
+    def lead_nowhere(self, odometer: float) -> bool:
+        """Count a turn starting at `odometer` (m); True if it is one too many in a row."""
+        if odometer - self._odometer >= IDLE_PROGRESS_M:
+            self._count = 0
+        self._odometer = odometer
+        self._count += 1
+        if self._count <= IDLE_TURNS:
+            return False
+        self._count = 0
+        return True
 
 
 class LookAround:

@@ -24,7 +24,7 @@ States (the `state` attribute):
   taken after the turn (the real LDS-01 smears scans taken while turning).
 - find_wall: no wall on the followed side within reach: drive straight.
 - no_data: the newest scan had no valid reading at all: stop until data returns.
-- turn_clear, turn_free: the turns lead nowhere (_turns_lead_nowhere: the heading memory is
+- turn_clear, turn_free: the turns lead nowhere (look_around.IdleTurns: the heading memory is
   wrong): forget it, turn once around in place (look_around), then turn to the walls' direction
   with the longest free path seen, and settle.
 
@@ -48,18 +48,12 @@ from amr_common.robot import (
     MAX_PLAUSIBLE_ANGULAR_SPEED,
     MAX_PLAUSIBLE_LINEAR_SPEED,
 )
-from amr_control.look_around import LookAround
+from amr_control.look_around import IdleTurns, LookAround
 from amr_control.pose_trail import PoseTrail
 from amr_control.scan_sectors import LocalPointCloud, Perception, PerceptionSpec, ScanGeometry
 from amr_control.wall_follower_params import PARAMETERS, check_parameters
 
 _LOG = logging.getLogger(__name__)
-
-# More in-place turns than this in a row, each after less than _STUCK_PROGRESS_M of driving, mean
-# the turns lead nowhere: the heading memory they are aligned with is wrong (the robot was carried
-# or slipped), so every quarter turn faces a wall corner again and the robot would turn forever.
-_STUCK_TURNS = 4
-_STUCK_PROGRESS_M = 0.02
 
 
 class WallFollower:
@@ -109,8 +103,7 @@ class WallFollower:
         self._turn_goal = 0.0           # rad, heading that ends the current turn
         self._turn_direction = 1.0
         self._advance_target = 0.0      # m for outer_corner
-        self._idle_turns = 0            # turns in a row with little driving in between
-        self._turn_odometer = -math.inf  # odometer at the start of the last turn
+        self._idle_turns = IdleTurns()  # do the turns lead anywhere?
         self._look = LookAround()       # what turn_clear saw
         self._scan_had_data = False
         self._last_turn: str | None = None   # the last in-place turn, until following resumes
@@ -232,7 +225,7 @@ class WallFollower:
         So that turns snap back to the walls' directions instead of accumulating heading errors.
         If the turns lead nowhere, a clearing turn instead (turn_clear).
         """
-        if self._turns_lead_nowhere():
+        if self._idle_turns.lead_nowhere(self._odometer):
             # The heading memory is wrong, and so are the poses of the loop detection's trail
             # (the odometry no longer matches the walls): forget both and look around.
             self._reference_odometer = -math.inf
@@ -333,22 +326,6 @@ class WallFollower:
                 return None
             return self._hold_heading(self.max_linear_speed_mps)
         return self._decide(allow_approach=True)
-
-    def _turns_lead_nowhere(self) -> bool:
-        """Count a new turn; True if it is one too many in a row without driving in between.
-
-        Each turn is aimed relative to the heading memory (_reference), which every turn renews
-        and which only driving ages: a wrong memory (the robot was carried) could otherwise keep
-        a robot that never drives turning between two blocked directions for ever.
-        """
-        if self._odometer - self._turn_odometer >= _STUCK_PROGRESS_M:
-            self._idle_turns = 0
-        self._turn_odometer = self._odometer
-        self._idle_turns += 1
-        if self._idle_turns <= _STUCK_TURNS:
-            return False
-        self._idle_turns = 0
-        return True
 
     def _run_clearing_turn(self) -> tuple[float, float] | None:
         """Once around toward the followed side, then a turn to where look_around chooses."""
