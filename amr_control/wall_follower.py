@@ -24,6 +24,9 @@ States (the `state` attribute):
   taken after the turn (the real LDS-01 smears scans taken while turning).
 - find_wall: no wall on the followed side within reach: drive straight.
 - no_data: the newest scan had no valid reading at all: stop until data returns.
+- turn_clear, turn_free: the turns lead nowhere (look_around.IdleTurns: the heading memory is
+  wrong): forget it, turn once around in place (look_around), then turn to the walls' direction
+  with the longest free path seen, and settle.
 
 Turns are in place (the Burger is round: turning never reduces its clearance), measured by
 integrating the odometry's angular velocity, and aimed relative to the direction of the last
@@ -45,6 +48,7 @@ from amr_common.robot import (
     MAX_PLAUSIBLE_ANGULAR_SPEED,
     MAX_PLAUSIBLE_LINEAR_SPEED,
 )
+from amr_control.look_around import IdleTurns, LookAround
 from amr_control.pose_trail import PoseTrail
 from amr_control.scan_sectors import LocalPointCloud, Perception, PerceptionSpec, ScanGeometry
 from amr_control.wall_follower_params import PARAMETERS, check_parameters
@@ -99,6 +103,8 @@ class WallFollower:
         self._turn_goal = 0.0           # rad, heading that ends the current turn
         self._turn_direction = 1.0
         self._advance_target = 0.0      # m for outer_corner
+        self._idle_turns = IdleTurns()  # do the turns lead anywhere?
+        self._look = LookAround()       # what turn_clear saw
         self._scan_had_data = False
         self._last_turn: str | None = None   # the last in-place turn, until following resumes
         self._odometer = 0.0            # m driven in total (odometry)
@@ -217,7 +223,19 @@ class WallFollower:
         """Turn in place by angle_rad relative to the reference heading.
 
         So that turns snap back to the walls' directions instead of accumulating heading errors.
+        If the turns lead nowhere, a clearing turn instead (turn_clear).
         """
+        if self._idle_turns.lead_nowhere(self._odometer):
+            # The heading memory is wrong, and so are the poses of the loop detection's trail
+            # (the odometry no longer matches the walls): forget both and look around.
+            self._reference_odometer = -math.inf
+            self._trail.clear()
+            self._enter("turn_clear")
+            self._turn_direction = self._side
+            self._turn_goal = self._heading + self._side * 2.0 * math.pi
+            self._look = LookAround()
+            self._last_turn = "turn_clear"
+            return
         reference = self._reference()
         base = reference if reference is not None else self._heading
         self._enter(state)
@@ -309,7 +327,20 @@ class WallFollower:
             return self._hold_heading(self.max_linear_speed_mps)
         return self._decide(allow_approach=True)
 
+    def _run_clearing_turn(self) -> tuple[float, float] | None:
+        """Once around toward the followed side, then a turn to where look_around chooses."""
+        self._look.observe(self._heading, self._perception.path_m, self._perception.fit)
+        if self._turn_direction * (self._turn_goal - self._heading) > 0.0:
+            return 0.0, self._turn_direction * self.turn_speed_radps
+        delta = wrap_angle(self._look.choose() - self._heading)
+        self._enter("turn_free")   # an ordinary turn: its goal becomes the heading memory
+        self._turn_goal = self._heading + delta
+        self._turn_direction = 1.0 if delta > 0.0 else -1.0
+        return None
+
     def _run_turn(self) -> tuple[float, float] | None:
+        if self.state == "turn_clear":
+            return self._run_clearing_turn()
         direction = self._turn_direction
         remaining = (direction * (self._turn_goal - self._heading)) % (2.0 * math.pi)
         if remaining > 1.5 * math.pi:       # overshot the goal

@@ -1,7 +1,9 @@
-"""The expected-range table of the beam model.
+"""The expected-range table of the beam model, on the world's occupancy grid.
 
-For every cell of a fine grid over the map and every one of `angles` directions, the range (mm,
-uint16) a LiDAR at the cell centre would measure.
+For every cell of amr_common.occupancy_grid.OccupancyGrid (the grid the planner and /map use:
+cell centres on multiples of the resolution, so a 0.4 m corridor's centre line runs through cell
+centres) and every one of `angles` directions, the range (mm, uint16) a LiDAR at the cell centre
+would measure.
 
 Built once per world with the simulator's own ray-casting kernel (amr_common.raycast), so the
 filter's idea of a range is exactly the simulated LiDAR's. Cells where the LiDAR cannot be (outside
@@ -22,9 +24,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from amr_common.jit import HAVE_NUMBA, jit
+from amr_common.occupancy_grid import OccupancyGrid
 from amr_common.raycast import scan_kernel, scan_numpy
+from amr_common.robot import ROBOT_RADIUS
 from amr_common.world import World
-from amr_localization.map_grid import MapGrid, build_map_grid
 
 NO_RANGE_MM = 65535  # a ray that hits nothing (or beyond 65.5 m)
 _CACHE: dict[tuple, "ExpectedRangeTable"] = {}
@@ -36,28 +39,69 @@ _CACHE_SIZE = 8
 class ExpectedRangeTable:
     """Expected ranges (mm) per grid cell and world direction.
 
-    ranges[cell, k]: expected range in mm from the centre of grid cell `cell` along the world
-    direction k * 2 pi / angles (k = 0 is +x).
+    ranges[cell, k]: expected range in mm from the centre of grid cell `cell` (row-major,
+    row * width + col, as the grid's arrays) along the world direction k * 2 pi / angles (k = 0
+    is +x).
     """
 
-    grid: MapGrid
+    grid: OccupancyGrid
     angles: int
-    ranges: np.ndarray  # (grid.size, angles) uint16, mm
+    ranges: np.ndarray  # (cells, angles) uint16, mm
+
+    # The grid in the terms of the compiled kernels: lower-left corner, cell size, columns, rows.
+    @property
+    def x0(self) -> float:
+        """The x of the grid's lower-left corner (m)."""
+        return self.grid.origin[0]
+
+    @property
+    def y0(self) -> float:
+        """The y of the grid's lower-left corner (m)."""
+        return self.grid.origin[1]
+
+    @property
+    def resolution(self) -> float:
+        """Cell size (m)."""
+        return self.grid.resolution
+
+    @property
+    def nx(self) -> int:
+        """Columns (cells along x)."""
+        return self.grid.width
+
+    @property
+    def ny(self) -> int:
+        """Rows (cells along y)."""
+        return self.grid.height
 
     @property
     def nbytes(self) -> int:
         """Memory of the table (bytes)."""
         return int(self.ranges.nbytes)
 
+    def cell_index(self, x: float, y: float) -> int:
+        """Row-major index of the cell holding (x, y), or -1 off the grid (or not finite)."""
+        if not (math.isfinite(x) and math.isfinite(y)):
+            return -1
+        row, col = self.grid.cell_of(x, y)
+        return row * self.nx + col if self.grid.contains_cell(row, col) else -1
+
+    def cell_centres(self) -> np.ndarray:
+        """(cells, 2) cell centres in row-major order."""
+        rows, cols = np.divmod(np.arange(self.ranges.shape[0]), self.nx)
+        return self.grid.cell_centres(rows, cols)
+
+    def robot_cells(self, radius: float = ROBOT_RADIUS, slack: float = 0.0) -> np.ndarray:
+        """(cells,) uint8: 1 where a robot centre may be (clearance >= radius - slack > 0)."""
+        return (self.grid.clearance.ravel() >= max(radius - slack, 1e-9)).astype(np.uint8)
+
     def lookup(self, x: float, y: float, direction: float) -> float:
         """Expected range (m) from (x, y) along a world direction (rad); nan outside the grid."""
-        g = self.grid
-        i = int(math.floor((x - g.x0) / g.resolution))
-        j = int(math.floor((y - g.y0) / g.resolution))
-        if not (0 <= i < g.nx and 0 <= j < g.ny):
+        cell = self.cell_index(x, y)
+        if cell < 0:
             return math.nan
         k = int(round(direction % (2.0 * math.pi) / (2.0 * math.pi) * self.angles)) % self.angles
-        return float(self.ranges[j * g.nx + i, k]) * 1e-3
+        return float(self.ranges[cell, k]) * 1e-3
 
 
 def _fill_python(segments, centres, cells, base_cos, base_sin, out):
@@ -92,14 +136,17 @@ def build_expected_range_table(world: World, resolution: float = 0.02, angles: i
     """Build the table (uncached); see expected_range_table() for the cached one."""
     if not (isinstance(angles, int) and 8 <= angles <= 4096):
         raise ValueError(f"table angles must be an integer in [8, 4096], got {angles!r}")
-    grid = build_map_grid(world, resolution)
+    if not (math.isfinite(resolution) and resolution > 0.0):
+        raise ValueError(f"grid resolution must be > 0 m, got {resolution}")
+    grid = OccupancyGrid.from_world(world, resolution)
     directions = np.arange(angles) * (2.0 * math.pi / angles)
     base_cos, base_sin = np.cos(directions), np.sin(directions)
-    cells = np.flatnonzero(grid.inside & (grid.clearance >= min_clearance)).astype(np.int64)
-    ranges = np.zeros((grid.size, angles), dtype=np.uint16)
+    cells = np.flatnonzero(grid.clearance.ravel() >= min_clearance).astype(np.int64)
+    ranges = np.zeros((grid.clearance.size, angles), dtype=np.uint16)
+    table = ExpectedRangeTable(grid, angles, ranges)
     fill = _fill_kernel if HAVE_NUMBA else _fill_numpy
-    fill(world.segments, grid.centres(), cells, base_cos, base_sin, ranges)
-    return ExpectedRangeTable(grid, angles, ranges)
+    fill(world.segments, table.cell_centres(), cells, base_cos, base_sin, ranges)
+    return table
 
 
 def expected_range_table(world: World, resolution: float = 0.02,

@@ -9,8 +9,10 @@
 
 Global localization (uniform over the free space, all headings) is the default; an initial pose
 tracks from there. Predict: motion_model. Correct: beam model on the expected-range table
-(beam_model, expected_ranges), low-variance resampling when the effective sample size drops,
-with a KLD-sized particle count (resampling). The localized flag: localization_check.
+(beam_model, expected_ranges, scan_beams; weights flattened while searching: weighting),
+low-variance resampling when the effective sample size drops, with a KLD-sized particle count
+(resampling). Particles are drawn by particle_sets. The localized flag: localization_check,
+with the exhaustive pose search (pose_search) and the rival tracks (ambiguity).
 """
 from __future__ import annotations
 
@@ -23,12 +25,7 @@ import numpy as np
 from amr_common.robot import ROBOT_RADIUS
 from amr_common.world import World
 from amr_localization.ambiguity import TRACK_ANGLE_RAD, TRACK_DISTANCE_M, AmbiguityGuard
-from amr_localization.beam_model import (
-    log_likelihood_table,
-    log_likelihoods,
-    reading_to_mm,
-    split_beams,
-)
+from amr_localization.beam_model import BeamModel
 from amr_localization.expected_ranges import expected_range_table
 from amr_localization.localization_check import (
     CheckSettings,
@@ -36,16 +33,13 @@ from amr_localization.localization_check import (
     ScanMatcher,
     dominant_cluster,
 )
-from amr_localization.map_grid import sample_free_poses
 from amr_localization.motion_model import MotionNoise, sample_motion
 from amr_localization.particle_filter_params import check_parameters
+from amr_localization.particle_sets import gaussian_poses, sample_free_poses
 from amr_localization.pose_search import PoseSearch, refine
-from amr_localization.resampling import (
-    effective_sample_size,
-    kld_count,
-    occupied_bins,
-    resample,
-)
+from amr_localization.resampling import KldResampler, effective_sample_size
+from amr_localization.scan_beams import ScanBeams
+from amr_localization.weighting import updated_weights
 
 log = logging.getLogger("amr_localization.particle_filter")
 
@@ -63,25 +57,24 @@ class ParticleFilter:
         self.params = p
         self.rng = np.random.default_rng(p["seed"])
         self.table = expected_range_table(self.world, p["table_resolution_m"], p["table_angles"])
-        grid = self.table.grid
-        self._robot_ok = grid.robot_cells(slack=_WALL_SLACK_M)
+        self._robot_ok = self.table.robot_cells(slack=_WALL_SLACK_M)
+        self.model = BeamModel(self.table, self._robot_ok, p["lidar_offset_x_m"],
+                               p["sigma_hit_m"], p["z_random"])
         self.noise = MotionNoise(p["noise_v_per_v"], p["noise_v_per_w"], p["noise_w_per_w"],
                                  p["noise_w_per_v"])
-        self._lut = log_likelihood_table(p["sigma_hit_m"], p["z_random"])
         self.check = LocalizedDecision(CheckSettings(**{
             name: p[name] for name in CheckSettings.__dataclass_fields__}))
-        kb, kt = p["kld_bin_xy_m"], p["kld_bin_theta_rad"]
-        self._kld_shape = (int(math.ceil(grid.nx * grid.resolution / kb)) + 1,
-                           int(math.ceil(grid.ny * grid.resolution / kb)) + 1,
-                           int(math.ceil(2.0 * math.pi / kt)) + 1)
-        self._kld_seen = np.zeros(int(np.prod(self._kld_shape)), dtype=np.uint8)
+        t = self.table
+        self.resampler = KldResampler(t.x0, t.y0, t.nx * t.resolution, t.ny * t.resolution,
+                                      p["kld_bin_xy_m"], p["kld_bin_theta_rad"],
+                                      p["kld_epsilon"], p["kld_z"], p["min_particles"],
+                                      p["max_particles"])
         self.matcher: ScanMatcher | None = None
-        self.search = PoseSearch(self.table, self._robot_ok)
+        self.beams: ScanBeams | None = None
+        self.search = PoseSearch(self.table, self._robot_ok, p["lidar_offset_x_m"])
         self.guard = AmbiguityGuard(p["ambiguity_match_fraction"], p["localize_match_fraction"])
         self.last_alternatives: list = []
         self._last_doubt = -10**9  # total_updates at the last search for a better pose
-        self._beams = np.zeros(0, dtype=np.int64)
-        self._beam_bins = np.zeros(0)
         self.particles = np.zeros((0, 3))
         self.weights = np.zeros(0)
         self.estimate: tuple[float, float, float] = (math.nan, math.nan, math.nan)
@@ -123,13 +116,9 @@ class ParticleFilter:
         p = self.params
         count = p["max_particles"]
         seeded = int(round(count * (1.0 - p["seed_uniform_share"])))
-        range_min, range_max = self._range_limits
-        poses = self.search.best_poses(
-            seeded, self._beam_bins, reading_to_mm(ranges[self._beams], range_min, range_max),
-            (int(math.ceil(range_min * 1000.0)), int(range_max * 1000.0)),
-            p["lidar_offset_x_m"], self.rng)
-        free = self.world.clearances(poses[:, :2]) >= ROBOT_RADIUS
-        poses = poses[free]
+        poses = self.search.best_poses(seeded, self.beams, self.beams.readings_mm(ranges),
+                                       self.rng)
+        poses = poses[self.world.clearances(poses[:, :2]) >= ROBOT_RADIUS]
         uniform = sample_free_poses(self.world, self.table.grid, count - len(poses), self.rng)
         self._set_particles(np.concatenate([poses, uniform]))
         self._seed_pending = False
@@ -145,11 +134,8 @@ class ParticleFilter:
                                           else self.params["initial_pose_sigma"]))
         if not all(math.isfinite(v) for v in (x, y, theta, sx, sy, st)):
             raise ValueError(f"initial pose {pose} / sigma {sigma} is not finite")
-        count = self.params["tracking_particles"]
-        particles = np.column_stack([self.rng.normal(x, sx, count), self.rng.normal(y, sy, count),
-                                     self.rng.normal(theta, st, count)])
-        particles[:, 2] = np.remainder(particles[:, 2] + math.pi, 2.0 * math.pi) - math.pi
-        self._set_particles(particles)
+        self._set_particles(gaussian_poses([(x, y, theta)], (sx, sy, st),
+                                           self.params["tracking_particles"], self.rng))
         self.estimate = (x, y, math.atan2(math.sin(theta), math.cos(theta)))
         self.events.append(("pose", self.total_updates))
 
@@ -174,20 +160,8 @@ class ParticleFilter:
         Where the scan's rays point (rad, counter-clockwise from angle_min), how many there
         are and the valid range limits (m). Call again whenever they change.
         """
-        if not (math.isfinite(angle_min) and math.isfinite(angle_increment)
-                and angle_increment != 0.0 and rays >= 1):
-            raise ValueError(f"unusable scan geometry: angle_min {angle_min}, increment "
-                             f"{angle_increment}, {rays} rays")
-        if not (math.isfinite(range_min) and math.isfinite(range_max) and
-                0.0 <= range_min < range_max):
-            raise ValueError(f"unusable scan limits: range_min {range_min}, range_max {range_max}")
-        beams = min(self.params["beams"], rays)
-        self._beams = np.unique(np.round(np.linspace(0, rays, beams, endpoint=False))
-                                .astype(np.int64))
-        angles = angle_min + angle_increment * self._beams
-        bins_per_rad = self.table.angles / (2.0 * math.pi)
-        self._beam_bins = np.remainder(angles * bins_per_rad, self.table.angles)
-        self._range_limits = (range_min, range_max)
+        self.beams = ScanBeams.from_geometry(angle_min, angle_increment, rays, range_min,
+                                             range_max, self.params["beams"], self.table.angles)
         self.matcher = ScanMatcher(self.world.segments, angle_min, angle_increment, rays,
                                    range_min, range_max, self.params["lidar_offset_x_m"],
                                    allowed=self.robot_can_be_at)
@@ -198,7 +172,7 @@ class ParticleFilter:
         True if a particle's centre at (x, y) is in the free space, clear of the walls
         (robot radius, less the grid's slack).
         """
-        cell = self.table.grid.cell_of(x, y)
+        cell = self.table.cell_index(x, y)
         return cell >= 0 and bool(self._robot_ok[cell])
 
     @property
@@ -303,16 +277,10 @@ class ParticleFilter:
 
     def _searcher(self, ranges: np.ndarray):
         """best_near(pose) of PoseSearch for this scan, over a rival track's neighbourhood."""
-        p = self.params
-        range_min, range_max = self._range_limits
-        z_mm = reading_to_mm(ranges[self._beams], range_min, range_max)
-        limits = (int(math.ceil(range_min * 1000.0)), int(range_max * 1000.0))
-
-        def search(pose):
-            return self.search.best_near(pose, TRACK_DISTANCE_M, TRACK_ANGLE_RAD,
-                                         self._beam_bins, z_mm, limits, p["lidar_offset_x_m"],
-                                         self.matcher, ranges, p["match_tolerance_m"])
-        return search
+        z_mm = self.beams.readings_mm(ranges)
+        return lambda pose: self.search.best_near(
+            pose, TRACK_DISTANCE_M, TRACK_ANGLE_RAD, self.beams, z_mm, self.matcher, ranges,
+            self.params["match_tolerance_m"])
 
     def _check_ambiguity(self, ranges: np.ndarray) -> str:
         """Declare the candidate only if no other pose explains the scan as well.
@@ -335,13 +303,9 @@ class ParticleFilter:
 
     def _alternatives(self, ranges: np.ndarray) -> list:
         """The best poses away from the estimate for this scan (PoseSearch.alternatives)."""
-        p = self.params
-        range_min, range_max = self._range_limits
-        z_mm = reading_to_mm(ranges[self._beams], range_min, range_max)
         self.last_alternatives = self.search.alternatives(
-            self.estimate, self._beam_bins, z_mm,
-            (int(math.ceil(range_min * 1000.0)), int(range_max * 1000.0)), p["lidar_offset_x_m"],
-            self.matcher, ranges, p["match_tolerance_m"])
+            self.estimate, self.beams, self.beams.readings_mm(ranges), self.matcher, ranges,
+            self.params["match_tolerance_m"])
         return self.last_alternatives
 
     def _move_to(self, pose) -> None:
@@ -351,10 +315,7 @@ class ParticleFilter:
         estimate did), the rival tracks kept: not localized.
         """
         count = len(self.particles)
-        sigma = np.array([0.02, 0.02, 0.03])
-        particles = np.asarray(pose) + self.rng.standard_normal((count, 3)) * sigma
-        particles[:, 2] = np.remainder(particles[:, 2] + math.pi, 2.0 * math.pi) - math.pi
-        self.particles = particles
+        self.particles = gaussian_poses([pose], (0.02, 0.02, 0.03), count, self.rng)
         self.weights = np.full(count, 1.0 / count)
         self.check.reset()
         self.estimate = tuple(float(v) for v in pose)
@@ -364,86 +325,29 @@ class ParticleFilter:
         p = self.params
         per_pose = max(int(p["inject_share"] * len(self.particles) / len(poses)), 1)
         sx, sy, st = p["initial_pose_sigma"]
-        sigma = np.array([min(sx, 0.03), min(sy, 0.03), min(st, 0.05)])
-        new = np.concatenate([np.asarray(pose) + self.rng.standard_normal((per_pose, 3)) * sigma
-                              for pose in poses])
-        new[:, 2] = np.remainder(new[:, 2] + math.pi, 2.0 * math.pi) - math.pi
+        new = gaussian_poses(poses, (min(sx, 0.03), min(sy, 0.03), min(st, 0.05)), per_pose,
+                             self.rng)
         replace = self.rng.choice(len(self.particles), size=min(len(new), len(self.particles)),
                                   replace=False)
         self.particles[replace] = new[:len(replace)]
         self.weights = np.full(len(self.particles), 1.0 / len(self.particles))
 
     def _weigh(self, ranges: np.ndarray) -> None:
-        grid, table = self.table.grid, self.table
-        range_min, range_max = self._range_limits
-        z_mm = reading_to_mm(ranges[self._beams], range_min, range_max)
-        scores = np.empty(len(self.particles))
-        log_likelihoods(self.particles, len(self.particles), table.ranges, table.angles,
-                        grid.x0, grid.y0, grid.resolution, grid.nx, grid.ny, self._robot_ok,
-                        self.params["lidar_offset_x_m"], *split_beams(self._beam_bins, z_mm),
-                        self._lut, int(math.ceil(range_min * 1000.0)), int(range_max * 1000.0),
-                        scores)
-        best = scores.max()
-        if not np.isfinite(best):  # every particle inside a wall or off the map
+        beams = self.beams
+        scores = self.model.scores(self.particles, beams.split(beams.readings_mm(ranges)),
+                                   beams.limits_mm)
+        weights = updated_weights(self.weights, scores, None if self.localized
+                                  else self.params["search_ess_fraction"])
+        if weights is None:  # every particle inside a wall or off the map
             log.info("every particle is in a wall or off the map (an impossible hypothesis): "
                      "global search")
             self.initialize_global()
             return
-        scores -= best
-        if not self.localized:
-            scores *= self._temper(scores)
-        weights = self.weights * np.exp(scores)
-        total = weights.sum()
-        if not total > 0.0:  # the old weights underflowed against the new scores
-            weights = np.exp(scores)
-            total = weights.sum()
-        self.weights = weights / total
-
-    def _temper(self, scores: np.ndarray) -> float:
-        """Flatten the likelihood while searching: the exponent beta in (0, 1].
-
-        The exponent beta in (0, 1] of the likelihood that keeps the effective sample size
-        of the new weights at search_ess_fraction of the particles (1 if it already is).
-
-        While searching, the particles are far sparser than the likelihood is narrow: the full
-        likelihood would keep only the few luckiest particles, and in a symmetric maze the
-        luckiest may sit at a rotated copy of the true pose. Flattening it keeps every
-        hypothesis that roughly fits alive until later scans decide.
-        """
-        target = self.params["search_ess_fraction"] * len(scores)
-        finite = np.isfinite(scores)
-        prior = self.weights
-
-        def ess(beta: float) -> float:
-            w = np.where(finite, prior * np.exp(beta * np.where(finite, scores, 0.0)), 0.0)
-            total = w.sum()
-            return float(total * total / np.dot(w, w)) if total > 0 else 0.0
-
-        if ess(1.0) >= target:
-            return 1.0
-        low, high = 0.0, 1.0
-        for _ in range(10):
-            mid = 0.5 * (low + high)
-            if ess(mid) >= target:
-                low = mid
-            else:
-                high = mid
-        return max(low, 1e-3)
+        self.weights = weights
 
     def _resample(self) -> None:
-        p = self.params
-        count = len(self.particles)
-        drawn = resample(self.particles, self.weights, count, self.rng)
-        nbx, nby, nbt = self._kld_shape
-        bins = occupied_bins(drawn, count, self.table.grid.x0, self.table.grid.y0,
-                             p["kld_bin_xy_m"], p["kld_bin_theta_rad"], nbx, nby, nbt,
-                             self._kld_seen)
-        wanted = min(max(kld_count(bins, p["kld_epsilon"], p["kld_z"]), p["min_particles"]),
-                     p["max_particles"])
-        if wanted != count:
-            drawn = resample(self.particles, self.weights, wanted, self.rng)
-        self.particles = np.ascontiguousarray(drawn)
-        self.weights = np.full(len(drawn), 1.0 / len(drawn))
+        self.particles = self.resampler(self.particles, self.weights, self.rng)
+        self.weights = np.full(len(self.particles), 1.0 / len(self.particles))
 
     # --- results ---------------------------------------------------------------------------
     @property

@@ -19,6 +19,7 @@ import numpy as np
 from amr_common.jit import HAVE_NUMBA, jit
 from amr_localization.expected_ranges import ExpectedRangeTable
 from amr_localization.localization_check import ScanMatcher
+from amr_localization.scan_beams import ScanBeams
 
 SEARCH_BEAMS = 30
 
@@ -117,40 +118,43 @@ def interleaved_order(count: int) -> np.ndarray:
 class PoseSearch:
     """Coarse exhaustive scoring + exact refinement of the best distinct candidates."""
 
-    def __init__(self, table: ExpectedRangeTable, robot_ok: np.ndarray, stride: int = 2,
-                 headings: int = 120, tolerance_m: float = 0.06, candidates: int = 8,
-                 miss_share: float = 0.25) -> None:
-        grid = table.grid
-        keep = robot_ok.astype(bool).reshape(grid.ny, grid.nx)
+    def __init__(self, table: ExpectedRangeTable, robot_ok: np.ndarray, lidar_offset: float,
+                 stride: int = 2, headings: int = 120, tolerance_m: float = 0.06,
+                 candidates: int = 8, miss_share: float = 0.25) -> None:
+        keep = robot_ok.astype(bool).reshape(table.ny, table.nx)
         mask = np.zeros_like(keep)
-        mask[::stride, ::stride] = True  # a sub-grid of robot-centre cells
+        # A sub-grid of robot-centre cells: every `stride`-th cell counted from the cell centred
+        # on (0, 0), so it holds the centre lines of corridors on a grid of stride cells.
+        first_col, first_row = (round(v / table.resolution + 0.5) for v in (table.x0, table.y0))
+        mask[-first_row % stride::stride, -first_col % stride::stride] = True
         self.cells = np.flatnonzero((keep & mask).ravel()).astype(np.int64)
-        self.centres = grid.centres()
+        self.centres = table.cell_centres()
         self.table = table
+        self.lidar_offset = float(lidar_offset)
         self.headings = int(headings)
         self.tolerance_mm = int(round(tolerance_m * 1000.0))
         self.candidates = int(candidates)
         self.miss_share = float(miss_share)
-        self.step = (stride * grid.resolution, 2.0 * math.pi / headings)
+        self.step = (stride * table.resolution, 2.0 * math.pi / headings)
         self._scores = np.empty((len(self.cells), self.headings), dtype=np.int32)
 
-    def _score(self, beam_bins, z_mm, range_limits_mm, lidar_offset: float) -> np.ndarray:
+    def _score(self, beams: ScanBeams, z_mm: np.ndarray) -> np.ndarray:
         """Scores of every (cell, heading) of the coarse grid, flattened (cell-major)."""
-        grid, table = self.table.grid, self.table
+        table, beam_bins, range_limits_mm = self.table, beams.bins, beams.limits_mm
         # At most SEARCH_BEAMS beams, spread around: a coarse ranking (the candidates are then
         # refined with every ray), and half the lookups of 60 beams.
         keep = np.arange(0, len(beam_bins), max(1, -(-len(beam_bins) // SEARCH_BEAMS)))
         beam_bins, z_mm = beam_bins[keep], z_mm[keep]
         order = interleaved_order(len(beam_bins))
         score_poses(self.cells, self.centres, self.headings, table.ranges, table.angles,
-                    grid.x0, grid.y0, grid.resolution, grid.nx, lidar_offset,
+                    table.x0, table.y0, table.resolution, table.nx, self.lidar_offset,
                     np.ascontiguousarray(beam_bins[order]), np.ascontiguousarray(z_mm[order]),
                     self.tolerance_mm, range_limits_mm[0], range_limits_mm[1],
                     int(self.miss_share * len(beam_bins)), self._scores)
         self.scored_beams = len(beam_bins)
         return self._scores.ravel()
 
-    def best_poses(self, count: int, beam_bins, z_mm, range_limits_mm, lidar_offset: float,
+    def best_poses(self, count: int, beams: ScanBeams, z_mm: np.ndarray,
                    rng: np.random.Generator) -> np.ndarray:
         """The best-fitting grid poses for this scan, jittered: a global search's particles.
 
@@ -158,7 +162,7 @@ class PoseSearch:
         uniformly within its grid step (the particles of a global search, so that every pose
         that fits the first scan, the true one and its symmetric copies alike, is represented).
         """
-        scores = self._score(beam_bins, z_mm, range_limits_mm, lidar_offset)
+        scores = self._score(beams, z_mm)
         count = min(int(count), scores.size)
         flat = np.argpartition(-scores, count - 1)[:count]
         cells, headings = np.divmod(flat, self.headings)
@@ -170,9 +174,9 @@ class PoseSearch:
         poses[:, 2] = np.remainder(theta + math.pi, 2.0 * math.pi) - math.pi
         return poses
 
-    def best_near(self, pose, radius: float, angle: float, beam_bins, z_mm, range_limits_mm,
-                  lidar_offset: float, matcher: ScanMatcher, ranges: np.ndarray,
-                  match_tolerance: float) -> Alternative:
+    def best_near(self, pose, radius: float, angle: float, beams: ScanBeams, z_mm: np.ndarray,
+                  matcher: ScanMatcher, ranges: np.ndarray, match_tolerance: float
+                  ) -> Alternative:
         """The pose near `pose` that explains the scan best.
 
         The pose within `radius` (m) and `angle` (rad) of `pose` that explains the scan best:
@@ -180,7 +184,7 @@ class PoseSearch:
         `pose` itself) refined exactly. Used before calling a hypothesis refuted: refuted must
         mean that NO pose near it explains the scan, not that its current pose drifted.
         """
-        grid, table = self.table.grid, self.table
+        table, beam_bins, range_limits_mm = self.table, beams.bins, beams.limits_mm
         centres = self.centres[self.cells]
         near = np.flatnonzero(np.hypot(centres[:, 0] - pose[0], centres[:, 1] - pose[1])
                               <= radius)
@@ -190,7 +194,7 @@ class PoseSearch:
             scores = np.empty((len(cells), self.headings), dtype=np.int32)
             order = interleaved_order(len(beam_bins))
             score_poses(cells, self.centres, self.headings, table.ranges, table.angles,
-                        grid.x0, grid.y0, grid.resolution, grid.nx, lidar_offset,
+                        table.x0, table.y0, table.resolution, table.nx, self.lidar_offset,
                         np.ascontiguousarray(beam_bins[order]),
                         np.ascontiguousarray(z_mm[order]), self.tolerance_mm,
                         range_limits_mm[0], range_limits_mm[1], len(beam_bins), scores)
@@ -209,7 +213,7 @@ class PoseSearch:
         refined = [refine(c, matcher, ranges, match_tolerance, self.step) for c in candidates]
         return max(refined, key=lambda a: a.match_fraction)
 
-    def alternatives(self, estimate, beam_bins, z_mm, range_limits_mm, lidar_offset: float,
+    def alternatives(self, estimate, beams: ScanBeams, z_mm: np.ndarray,
                      matcher: ScanMatcher, ranges: np.ndarray, match_tolerance: float,
                      exclusion_m: float = 0.15,
                      exclusion_rad: float = math.radians(15.0)) -> list[Alternative]:
@@ -218,7 +222,7 @@ class PoseSearch:
         The best distinct poses farther than exclusion_m / exclusion_rad from `estimate`,
         each refined locally, best first.
         """
-        scores = self._score(beam_bins, z_mm, range_limits_mm, lidar_offset)
+        scores = self._score(beams, z_mm)
         # Candidates: the poses within a few beams of the best (a rival explaining >= 90 % of
         # the rays matches nearly every beam at this tolerance), best first.
         best = np.flatnonzero(scores >= scores.max() - max(self.scored_beams // 6, 2))

@@ -85,3 +85,34 @@ def kld_count(bins: int, epsilon: float, z: float) -> int:
 def effective_sample_size(weights: np.ndarray) -> float:
     """1 / sum(w^2) of normalised weights: N for uniform weights, 1 for a single carrier."""
     return float(1.0 / np.dot(weights, weights))
+
+
+class KldResampler:
+    """Low-variance resampling to the KLD-sized count, within [min_count, max_count].
+
+    Bins of bin_xy (m) x bin_xy x bin_theta (rad) over a map whose lower-left corner is
+    (x0, y0) and extent (width, height) m.
+    """
+
+    def __init__(self, x0: float, y0: float, width: float, height: float, bin_xy: float,
+                 bin_theta: float, epsilon: float, z: float, min_count: int,
+                 max_count: int) -> None:
+        self.origin = (float(x0), float(y0))
+        self.bin_xy, self.bin_theta = float(bin_xy), float(bin_theta)
+        self.shape = (int(math.ceil(width / bin_xy)) + 1, int(math.ceil(height / bin_xy)) + 1,
+                      int(math.ceil(2.0 * math.pi / bin_theta)) + 1)
+        self.epsilon, self.z = float(epsilon), float(z)
+        self.min_count, self.max_count = int(min_count), int(max_count)
+        self._seen = np.zeros(int(np.prod(self.shape)), dtype=np.uint8)
+
+    def __call__(self, particles: np.ndarray, weights: np.ndarray,
+                 rng: np.random.Generator) -> np.ndarray:
+        """The resampled particles (equal weights), as many as the KLD bound asks for."""
+        count = len(particles)
+        drawn = resample(particles, weights, count, rng)
+        bins = occupied_bins(drawn, count, *self.origin, self.bin_xy, self.bin_theta,
+                             *self.shape, self._seen)
+        wanted = min(max(kld_count(bins, self.epsilon, self.z), self.min_count), self.max_count)
+        if wanted != count:
+            drawn = resample(particles, weights, wanted, rng)
+        return np.ascontiguousarray(drawn)

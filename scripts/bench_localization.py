@@ -5,7 +5,7 @@
    particle updates per second on one core, numba kernel vs the plain numpy version of the same
    model (target >= 5 M/s), for particles spread over the whole map (a global search: every
    particle reads its own 720-byte table row, so memory bound) and gathered around one pose
-   (tracking: the rows stay in cache).
+   (tracking: the rows stay in cache); the median of several rounds, with best and worst.
 2. One full filter update (move, weigh, resample, cluster, scan check) at 2,000 particles x 60
    beams (target <= 1 ms), vs the measurement model alone.
 3. Headless localization episode (simulator + wall follower + filter) in simulated seconds per
@@ -13,7 +13,7 @@
 Rates are per CPU second of this process (time.process_time: on a shared machine the
 wall-clock figure also counts waiting for a CPU); wall-clock figures are printed alongside.
 
-Usage: .venv/bin/python scripts/bench_localization.py [--quick]
+Usage: .venv/bin/python scripts/bench_localization.py [--quick] [--measurement-only]
 """
 from __future__ import annotations
 
@@ -49,39 +49,50 @@ def _timed(function, repeats: int) -> tuple[float, float]:
     return best_cpu, best_wall
 
 
-def bench_measurement(particles: int, repeats: int) -> dict:
+def bench_measurement(particles: int, repeats: int, rounds: int) -> dict:
+    """Measurement updates per CPU second, numba vs numpy; best and median over `rounds`.
+
+    Each round times every case in turn (best of `repeats` calls), so a burst of load on the
+    shared machine hits all of them alike; the spread over rounds shows how noisy it was.
+    """
     world = World.load("lab02")
-    pf = ParticleFilter(world, max_particles=particles)
+    pf = ParticleFilter(world, max_particles=particles, lidar_offset_x_m=-0.032)
     pf.set_scan_geometry(0.0, 2 * math.pi / 360, 360, 0.12, 3.5)
     lidar = Lidar(world.segments, 360, 0.0, 2 * math.pi / 360, 0.12, 3.5, 0.0)
     ranges = lidar.scan(1.0 - 0.032, -1.0, math.pi / 2)
-    table, grid = pf.table, pf.table.grid
-    z_mm = beam_model.reading_to_mm(ranges[pf._beams], 0.12, 3.5)
-    out = np.empty(particles)
-    beams = beam_model.split_beams(pf._beam_bins, z_mm)
-
-    def run(kernel, count):
-        return lambda: kernel(pf.particles, count, table.ranges, table.angles, grid.x0,
-                              grid.y0, grid.resolution, grid.nx, grid.ny, pf._robot_ok, -0.032,
-                              *beams, pf._lut, 120, 3500, out)
-
-    run(beam_model.log_likelihoods_kernel, 16)()  # compile / load from cache
-    jit_cpu, jit_wall = _timed(run(beam_model.log_likelihoods_kernel, particles), repeats)
+    readings = pf.beams.split(pf.beams.readings_mm(ranges))
     spread = pf.particles
     rng = np.random.default_rng(0)
-    pf.particles = np.column_stack([rng.normal(1.0, 0.02, particles),
-                                    rng.normal(-1.0, 0.02, particles),
-                                    rng.normal(math.pi / 2, 0.05, particles)])
-    tracking_cpu, _ = _timed(run(beam_model.log_likelihoods_kernel, particles), repeats)
-    pf.particles = spread
+    gathered = np.column_stack([rng.normal(1.0, 0.02, particles),
+                                rng.normal(-1.0, 0.02, particles),
+                                rng.normal(math.pi / 2, 0.05, particles)])
     small = min(particles, 20000)
-    np_cpu, np_wall = _timed(run(beam_model.log_likelihoods_numpy, small), max(repeats // 4, 2))
-    figures = {"particles": particles, "beams": len(pf._beams),
-               "numba_updates_per_s": particles / jit_cpu,
-               "numba_updates_per_s_wall": particles / jit_wall,
-               "numba_tracking_updates_per_s": particles / tracking_cpu,
-               "numpy_updates_per_s": small / np_cpu,
-               "numba_over_numpy": (particles / jit_cpu) / (small / np_cpu)}
+
+    def run(kernel, poses):
+        return lambda: pf.model.scores(poses, readings, pf.beams.limits_mm, kernel)
+
+    cases = {"numba": (run(beam_model.log_likelihoods_kernel, spread), particles),
+             "numba_tracking": (run(beam_model.log_likelihoods_kernel, gathered), particles),
+             "numpy": (run(beam_model.log_likelihoods_numpy, spread[:small]), small)}
+    run(beam_model.log_likelihoods_kernel, spread[:16])()  # compile / load from cache
+    rates: dict[str, list[float]] = {name: [] for name in cases}
+    walls: list[float] = []
+    for _ in range(rounds):
+        for name, (function, count) in cases.items():
+            cpu, wall = _timed(function, repeats if name != "numpy" else max(repeats // 4, 2))
+            rates[name].append(count / cpu)
+            if name == "numba":
+                walls.append(count / wall)
+    best = {name: max(values) for name, values in rates.items()}
+    median = {name: float(np.median(values)) for name, values in rates.items()}
+    figures = {"particles": particles, "beams": pf.beams.count, "rounds": rounds,
+               "numba_updates_per_s": median["numba"],
+               "numba_updates_per_s_best": best["numba"],
+               "numba_updates_per_s_worst": min(rates["numba"]),
+               "numba_updates_per_s_wall": float(np.median(walls)),
+               "numba_tracking_updates_per_s": median["numba_tracking"],
+               "numpy_updates_per_s": median["numpy"],
+               "numba_over_numpy": median["numba"] / median["numpy"]}
     figures["beam_evaluations_per_s"] = figures["numba_updates_per_s"] * figures["beams"]
     return figures
 
@@ -112,7 +123,7 @@ def bench_full_update(particles: int, updates: int) -> dict:
             times_cpu.append(time.process_time() - cpu)
             times_wall.append(time.perf_counter() - wall)
     assert pf.particle_count == particles
-    return {"particles": particles, "beams": len(pf._beams), "localized": pf.localized,
+    return {"particles": particles, "beams": pf.beams.count, "localized": pf.localized,
             "update_ms_median": 1e3 * float(np.median(times_cpu)),
             "update_ms_p90": 1e3 * float(np.percentile(times_cpu, 90)),
             "update_ms_median_wall": 1e3 * float(np.median(times_wall))}
@@ -144,15 +155,23 @@ def bench_episode(duration: float) -> dict:
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--measurement-only", action="store_true",
+                        help="only the measurement update (1.)")
     args = parser.parse_args(argv)
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    m = bench_measurement(50000, 5 if args.quick else 20)
+    m = bench_measurement(50000, 5 if args.quick else 10, 3 if args.quick else 7)
     print(f"measurement update: {m['numba_updates_per_s'] / 1e6:.1f} M particle updates/s at "
-          f"{m['beams']} beams spread over the map ({m['beam_evaluations_per_s'] / 1e6:.0f} M "
-          f"beams/s; wall {m['numba_updates_per_s_wall'] / 1e6:.1f} M/s), "
+          f"{m['beams']} beams spread over the map (median of {m['rounds']} rounds, best "
+          f"{m['numba_updates_per_s_best'] / 1e6:.1f}, worst "
+          f"{m['numba_updates_per_s_worst'] / 1e6:.1f}; "
+          f"{m['beam_evaluations_per_s'] / 1e6:.0f} M beams/s; wall "
+          f"{m['numba_updates_per_s_wall'] / 1e6:.1f} M/s), "
           f"{m['numba_tracking_updates_per_s'] / 1e6:.1f} M/s gathered (tracking) vs numpy "
           f"{m['numpy_updates_per_s'] / 1e6:.2f} M/s: {m['numba_over_numpy']:.0f}x "
           f"(target >= {TARGET_UPDATES_PER_S / 1e6:.0f} M/s)")
+    if args.measurement_only:
+        print(f"load average {load:.1f} on {os.cpu_count()} cores")
+        return {"measurement": m, "load": load}
     u = bench_full_update(2000, 50 if args.quick else 300)
     print(f"full update (move, weigh, resample, cluster, scan check), {u['particles']} particles "
           f"x {u['beams']} beams: median {u['update_ms_median']:.2f} ms, p90 "

@@ -20,10 +20,11 @@ from amr_localization.localization_check import (
     ScanMatcher,
     dominant_cluster,
 )
-from amr_localization.map_grid import sample_free_poses
 from amr_localization.motion_model import MotionNoise, sample_motion
 from amr_localization.particle_filter import ParticleFilter
 from amr_localization.particle_filter_params import check_parameters
+from amr_localization.particle_sets import sample_free_poses
+from amr_localization.scan_beams import ScanBeams, reading_to_mm
 from amr_sim.lidar import Lidar
 
 
@@ -141,32 +142,26 @@ def test_expected_range_table_is_the_simulators_lidar_at_cell_centres():
     table = build_expected_range_table(world, resolution=0.02, angles=360)
     lidar = Lidar(world.segments, 360, 0.0, 2 * math.pi / 360, 0.0, 100.0, math.nan)
     rng = np.random.default_rng(5)
-    inside = np.flatnonzero(table.grid.inside & (table.grid.clearance > 0.05))
+    inside = np.flatnonzero(table.grid.clearance.ravel() > 0.05)
     for cell in rng.choice(inside, 20, replace=False):
-        x, y = table.grid.centres()[cell]
+        x, y = table.cell_centres()[cell]
         np.testing.assert_allclose(table.ranges[cell] / 1000.0, lidar.scan(x, y, 0.0),
                                    atol=0.0006)
 
 
 # --- measurement model ----------------------------------------------------------------------
 
-def _scores(world, poses, scan_pose, kernel, lidar_offset=0.0, rays=240):
+def _scores(world, poses, scan_pose, kernel, lidar_offset=0.0, rays=240, angle_min=0.0):
     table = expected_range_table(world)
-    grid = table.grid
-    angles = 2 * math.pi / rays * np.arange(rays)
-    beams = np.arange(0, rays, rays // 60)
-    lidar = Lidar(world.segments, rays, 0.0, 2 * math.pi / rays, 0.016, 8.0, math.nan)
+    model = beam_model.BeamModel(table, table.robot_cells(slack=0.02), lidar_offset, 0.03, 0.05)
+    beams = ScanBeams.from_geometry(angle_min, 2 * math.pi / rays, rays, 0.016, 8.0, 60,
+                                    table.angles)
+    lidar = Lidar(world.segments, rays, angle_min, 2 * math.pi / rays, 0.016, 8.0, math.nan)
     x, y, theta = scan_pose
     ranges = lidar.scan(x + lidar_offset * math.cos(theta), y + lidar_offset * math.sin(theta),
                         theta)
-    z_mm = beam_model.reading_to_mm(ranges[beams], 0.016, 8.0)
-    bins = np.remainder(angles[beams] * table.angles / (2 * math.pi), table.angles)
-    out = np.empty(len(poses))
-    kernel(np.asarray(poses, float), len(poses), table.ranges, table.angles, grid.x0, grid.y0,
-           grid.resolution, grid.nx, grid.ny, grid.robot_cells(slack=0.02), lidar_offset,
-           *beam_model.split_beams(bins, z_mm), beam_model.log_likelihood_table(0.03, 0.05), 16,
-           8000, out)
-    return out
+    return model.scores(np.asarray(poses, float), beams.split(beams.readings_mm(ranges)),
+                        beams.limits_mm, kernel)
 
 
 def test_beam_model_ranks_the_true_pose_above_rotated_poses_on_a_symmetric_corridor(corridor):
@@ -184,39 +179,56 @@ def test_beam_model_ranks_the_true_pose_above_rotated_poses_on_a_symmetric_corri
     assert twin_scores[1] < twin_scores[0] - 20.0
 
 
-def test_beam_model_paths_agree_and_walls_get_no_weight():
+@pytest.mark.parametrize("rays, angle_min", [(240, 0.0), (230, -3.1)])  # whole / fractional bins
+def test_beam_model_paths_agree_and_walls_get_no_weight(rays, angle_min):
     world = World.load("lab02")
     rng = np.random.default_rng(6)
     poses = np.column_stack([rng.uniform(-1.3, 1.3, 3000), rng.uniform(-1.3, 1.3, 3000),
-                             rng.uniform(-math.pi, math.pi, 3000)])
+                             rng.uniform(-3 * math.pi, 3 * math.pi, 3000)])
     poses[0] = (0.0, -0.8, 0.0)  # on a wall
     poses[1] = (5.0, 5.0, 0.0)  # off the map
     poses[2] = (math.nan, 0.0, 0.0)
-    jit = _scores(world, poses, (1.0, -1.0, math.pi / 2), beam_model.log_likelihoods_kernel,
-                  lidar_offset=-0.032)
-    numpy = _scores(world, poses, (1.0, -1.0, math.pi / 2), beam_model.log_likelihoods_numpy,
-                    lidar_offset=-0.032)
-    np.testing.assert_allclose(jit, numpy, rtol=1e-9, atol=1e-9)
+    poses[3] = (1.0, -1.0, math.pi / 2)  # the scan's own pose
+    scores = {kernel: _scores(world, poses, (1.0, -1.0, math.pi / 2), kernel, lidar_offset=-0.032,
+                              rays=rays, angle_min=angle_min)
+              for kernel in (beam_model.log_likelihoods_kernel, beam_model.log_likelihoods_python,
+                             beam_model.log_likelihoods_numpy)}
+    jit = scores[beam_model.log_likelihoods_kernel]
+    for other in scores.values():  # the same integer sums: equal to the last bit
+        np.testing.assert_array_equal(jit, other)
     assert np.all(np.isneginf(jit[:3]))
-    clear = world.clearances(poses[3:, :2]) < ROBOT_RADIUS - 0.05
-    assert np.all(np.isneginf(jit[3:][clear]))
+    assert jit[3] == np.nanmax(jit[np.isfinite(jit)]) and jit[3] > -0.2 * 60
+    clear = world.clearances(poses[4:, :2]) < ROBOT_RADIUS - 0.05
+    assert np.all(np.isneginf(jit[4:][clear]))
+
+
+def test_scan_beams_fall_on_whole_table_bins_for_the_course_scans():
+    for rays in (240, 360):
+        beams = ScanBeams.from_geometry(0.0, 2 * math.pi / rays, rays, 0.12, 3.5, 60, 360)
+        assert beams.count == 60 and not beams.fractional
+        assert np.array_equal(beams.whole, np.arange(0, 360, 6))
+    odd = ScanBeams.from_geometry(-3.1, 2 * math.pi / 230, 230, 0.12, 3.5, 60, 360)
+    assert odd.fractional and np.allclose(odd.whole + odd.fraction, odd.bins)
+    assert np.all((odd.fraction >= 0) & (odd.fraction < 1)) and odd.limits_mm == (120, 3500)
+    z_mm = reading_to_mm(np.array([0.0, math.nan, math.inf, 0.1, 0.5, 3.6, 3.5]), 0.12, 3.5)
+    assert z_mm.tolist() == [-1, -1, -1, -1, 500, -1, 3500]
+    with pytest.raises(ValueError, match="geometry"):
+        ScanBeams.from_geometry(0.0, 0.0, 360, 0.12, 3.5, 60, 360)
 
 
 def test_pose_scores_paths_agree():
     world = World.load("twin_maze_small")
     table = expected_range_table(world)
-    grid = table.grid
-    search = pose_search.PoseSearch(table, grid.robot_cells(slack=0.02), headings=36)
+    search = pose_search.PoseSearch(table, table.robot_cells(slack=0.02), 0.0, headings=36)
     lidar = Lidar(world.segments, 240, 0.0, 2 * math.pi / 240, 0.016, 8.0, math.nan)
     ranges = lidar.scan(1.8, 0.2, math.pi)
-    beams = np.arange(0, 240, 4)
-    z_mm = beam_model.reading_to_mm(ranges[beams], 0.016, 8.0)
-    bins = np.remainder(2 * math.pi / 240 * beams * table.angles / (2 * math.pi), table.angles)
+    beams = ScanBeams.from_geometry(0.0, 2 * math.pi / 240, 240, 0.016, 8.0, 60, table.angles)
+    z_mm = beams.readings_mm(ranges)
     outputs = []
     for kernel in (pose_search.score_poses_kernel, pose_search.score_poses_numpy):
         out = np.empty((len(search.cells), 36), dtype=np.int32)
-        kernel(search.cells, search.centres, 36, table.ranges, table.angles, grid.x0, grid.y0,
-               grid.resolution, grid.nx, 0.0, bins, z_mm, 60, 16, 8000, 15, out)
+        kernel(search.cells, search.centres, 36, table.ranges, table.angles, table.x0, table.y0,
+               table.resolution, table.nx, 0.0, beams.bins, z_mm, 60, 16, 8000, 15, out)
         outputs.append(out)
     assert np.array_equal(outputs[0], outputs[1])
     assert outputs[0].max() == 60

@@ -324,12 +324,18 @@ def test_navigate_to_a_goal_with_the_five_node_graph(tmp_path, world, start, goa
 def test_kidnapped_on_the_way_the_graph_relocalizes_replans_and_reaches_the_goal(tmp_path):
     pytest.importorskip("amr_localization.particle_filter")
     report_path = tmp_path / "kidnap.json"
+    # Carried into the inner maze: relocalized there within seconds, far from where the first
+    # path started (lab02's ring opening, about (-1.0, 0.25)). A kidnapping into the ring would
+    # relocalize at that same opening again (the only place that tells the ring's sides apart),
+    # so a replanned path would start within centimetres of the first one, whatever the seed.
     exit_code = run_sim.main(["--world", "lab02", "--goal", "inner_far", "--kidnap",
-                              "40,0.2,1,3.14", "--duration", "300", "--report",
+                              "40,-0.6,0.6,0", "--duration", "300", "--report",
                               str(report_path)])
     report = json.loads(report_path.read_text())
     assert exit_code == 0 and report["collisions"] == 0
     assert report["localized_time_s"] < 40.0 < report["goal_reached_time_s"]
     assert report["localization"]["loss_reported_after_s"] is not None
+    assert report["localization"]["relocalization_times_s"][0] > 40.0
     assert report["path"][0] != pytest.approx([-1.0, 0.25], abs=0.1), "replanned from afar"
+    assert report["path"][0] == pytest.approx([-0.6, 0.6], abs=0.3), "from where it was carried"
     assert report["final_position_error_m"] <= 0.05

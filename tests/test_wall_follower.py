@@ -385,3 +385,56 @@ def test_repeated_bad_scans_and_geometry_warn_once_per_kind(caplog):
     messages = [r.getMessage() for r in caplog.records]
     assert sum("geometry" in m for m in messages) == 1, messages
     assert sum("readings" in m for m in messages) == 1, messages
+
+
+# ---- a wrong heading memory (kidnapping) must not leave the robot turning on the spot -------
+def test_kidnapped_into_a_junction_the_robot_drives_on_instead_of_turning_for_ever():
+    """A robot carried into a junction drives on (twin_maze, north_east -> centre at 30 s).
+
+    Before the fix, the turns aimed at the old heading memory faced two blocked diagonals at
+    (1.19, 1.39) for ever.
+    """
+    from amr_common.world import World
+    from amr_evaluation.episode import default_controller
+    from amr_sim.profiles import get_profile
+    from amr_sim.simulator import Simulator
+
+    world = World.load("twin_maze")
+    sim = Simulator(world, start="north_east", dt=DT, profile="ideal", seed=0)
+    wf = default_controller(DT, get_profile("ideal"))
+    z_scan, z_v, z_w = sim.measure()
+    distance_at = {}
+    for k in range(int(60.0 / DT)):
+        if k == int(30.0 / DT):
+            sim.teleport((1.4, 1.0, math.pi))
+        z_scan, z_v, z_w = sim.step(*wf.compute_commands(z_scan, z_v, z_w))
+        distance_at[k + 1] = sim.distance
+    assert sim.collisions == 0
+    # Stuck from about 36 s; the look-around ends by 48 s; then it follows walls again.
+    driven = distance_at[int(60.0 / DT)] - distance_at[int(50.0 / DT)]
+    assert driven > 1.0, f"drove {driven:.2f} m in the last 10 s"
+
+
+def test_look_around_chooses_the_open_wall_direction_or_the_longest_path():
+    from amr_control.look_around import LookAround
+    from amr_control.scan_sectors import WallFit
+
+    look = LookAround()
+    headings = np.linspace(0.0, 2.0 * math.pi, 84, endpoint=False)
+    walls = math.radians(40.0)   # the walls run at 40 deg (+ quarter turns) in this frame
+    for heading in headings:
+        # Longest path along 220 deg, a longer one still on a diagonal (85 deg).
+        path = 1.5 if abs(math.remainder(heading - math.radians(220.0), 2 * math.pi)) < 0.04 \
+            else 2.0 if abs(math.remainder(heading - math.radians(85.0), 2 * math.pi)) < 0.04 \
+            else 0.2
+        fit = WallFit(0.2, math.remainder(walls - heading, 0.5 * math.pi), 0.005, 0.3, 20)
+        look.observe(heading, path, fit)
+    assert look.saw_walls
+    assert math.remainder(look.choose() - math.radians(220.0), 2 * math.pi) == \
+        pytest.approx(0.0, abs=1e-9)
+    blind = LookAround()
+    for heading in headings:
+        blind.observe(heading, 2.0 if abs(heading - math.radians(85.0)) < 0.04 else 0.2)
+    assert not blind.saw_walls
+    assert abs(blind.choose() - math.radians(85.0)) < 0.04
+    assert math.isnan(LookAround().choose())
