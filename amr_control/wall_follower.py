@@ -32,6 +32,8 @@ Turns are in place (the Burger is round: turning never reduces its clearance), m
 integrating the odometry's angular velocity, and aimed relative to the direction of the last
 well-fitted wall so heading errors do not accumulate. Between scans (the LDS-01 refreshes at
 5 Hz, the controller runs at 20 Hz) the scan points are carried along with the odometry.
+Input checks and the output limits live in wall_follower_inputs.py; what is left here is the
+one state machine (a little over 400 lines, kept together so its transitions read in one place).
 """
 from __future__ import annotations
 
@@ -39,18 +41,12 @@ import logging
 import math
 from typing import Any
 
-import numpy as np
-
 from amr_common.geometry import wrap_angle
 from amr_common.python_logging import ThrottledLogger
-from amr_common.robot import (
-    MAX_LINEAR_SPEED,
-    MAX_PLAUSIBLE_ANGULAR_SPEED,
-    MAX_PLAUSIBLE_LINEAR_SPEED,
-)
 from amr_control.look_around import IdleTurns, LookAround
 from amr_control.pose_trail import PoseTrail
 from amr_control.scan_sectors import LocalPointCloud, Perception, PerceptionSpec, ScanGeometry
+from amr_control.wall_follower_inputs import as_ranges, checked_odometry, limit_command
 from amr_control.wall_follower_params import PARAMETERS, check_parameters
 
 _LOG = logging.getLogger(__name__)
@@ -146,26 +142,11 @@ class WallFollower:
             (v, w): linear [m/s] and angular [rad/s] velocity commands, always finite and within
             the robot's limits.
         """
-        z_v, z_w = self._checked_odometry(z_v, z_w)
+        z_v, z_w = checked_odometry(z_v, z_w, (self._last_v, self._last_w), self._log)
         self._observe(z_scan, z_v, z_w)
         v, w = self._step_state_machine()
         v, w = self._limit(v, w)
         self._last_v, self._last_w = v, w
-        return v, w
-
-    def _checked_odometry(self, z_v: Any, z_w: Any) -> tuple[float, float]:
-        """The odometry twist, each bad value replaced by the last command's.
-
-        Bad: not a finite number, or physically impossible (a corrupt message: it would poison
-        the integrated heading and position that turns and loop detection rely on).
-        """
-        v = float(z_v) if _is_finite_number(z_v) else self._last_v
-        w = float(z_w) if _is_finite_number(z_w) else self._last_w
-        if abs(v) > MAX_PLAUSIBLE_LINEAR_SPEED or abs(w) > MAX_PLAUSIBLE_ANGULAR_SPEED:
-            self._log.warning("odometry", "WallFollower: physically impossible odometry (v=%r "
-                              "m/s, w=%r rad/s) ignored", z_v, z_w)
-            v = v if abs(v) <= MAX_PLAUSIBLE_LINEAR_SPEED else self._last_v
-            w = w if abs(w) <= MAX_PLAUSIBLE_ANGULAR_SPEED else self._last_w
         return v, w
 
     # ---- perception ----------------------------------------------------------------------
@@ -179,7 +160,7 @@ class WallFollower:
         self._y += z_v * dt * math.sin(mid_heading)
         self._heading += z_w * dt
         self._winding += self._side * z_w * dt
-        ranges = _as_ranges(z_scan, self._log)
+        ranges = as_ranges(z_scan, self._log)
         geometry = None
         if ranges is not None:
             geometry = self._geometry or ScanGeometry(0.0, 2.0 * math.pi / ranges.size,
@@ -438,39 +419,10 @@ class WallFollower:
 
     # ---- safety --------------------------------------------------------------------------
     def _limit(self, v: float, w: float) -> tuple[float, float]:
-        if not (math.isfinite(v) and math.isfinite(w)):
-            return 0.0, 0.0
-        w = max(-self.max_angular_speed_radps, min(self.max_angular_speed_radps, w))
-        if v > 0.0:
-            path = self.distances.get("path", math.inf)
-            ramp = (path - self.front_stop_distance_m) / max(self.front_slowdown_distance_m, 1e-3)
-            v = min(v, self.max_linear_speed_mps * max(0.0, min(1.0, ramp)))
-        # Keep both wheels within the linear speed limit, giving priority to the rotation.
-        v_max = max(0.0, MAX_LINEAR_SPEED - abs(w) * 0.5 * self.track_m)
-        v = max(-v_max, min(v_max, v))
-        return float(v), float(w)
+        return limit_command(v, w, self.distances.get("path", math.inf),
+                             self.front_stop_distance_m, self.front_slowdown_distance_m,
+                             self.max_linear_speed_mps, self.max_angular_speed_radps,
+                             self.track_m)
 
 
 _SECTOR_CENTRES = {"front": 0.0, "left": 0.5 * math.pi, "right": -0.5 * math.pi, "back": math.pi}
-
-
-def _is_finite_number(value: Any) -> bool:
-    try:
-        return math.isfinite(float(value))
-    except (TypeError, ValueError):
-        return False
-
-
-def _as_ranges(z_scan: Any, log: ThrottledLogger) -> np.ndarray | None:
-    """The scan as a 1-D float array, or None (with a warning) if it is not one."""
-    try:
-        # A copy as a contiguous float64 array: the one array type the kernels are compiled
-        # for, and the controller may keep it (the caller may reuse its own array).
-        ranges = np.array(z_scan, dtype=np.float64).ravel()
-    except (TypeError, ValueError):
-        log.warning("scan", "WallFollower: scan is not a sequence of numbers; ignored")
-        return None
-    if ranges.size < 4:
-        log.warning("readings", "WallFollower: scan has %d readings; ignored", ranges.size)
-        return None
-    return ranges

@@ -3,7 +3,7 @@
 End to end without ROS: the wall follower explores, the particle filter localizes (the same
 classes as the nodes). Global localization on every bundled world in both profiles, the exactly
 symmetric world that must never be declared, and kidnapping. The large sweep behind the
-README's figures is scripts/evaluate_localization.py; these runs are its small, fixed sample.
+README's figures is `scripts/evaluate.py --localize`; these runs are its small, fixed sample.
 """
 from __future__ import annotations
 
@@ -19,6 +19,7 @@ from amr_evaluation.localization_episode import localization_metrics, run_locali
 STARTS = {"lab02": "inner", "maze_deadends": "centre", "room_obstacles": "north_east",
           "wide_maze": "middle", "twin_maze": "south_west", "twin_maze_small": "north_west"}
 DURATION_S = 40.0
+SEEDS = range(5)
 TRACKING_MEAN_M = {"ideal": 0.02, "turtlebot3": 0.04}
 
 
@@ -31,12 +32,12 @@ def test_every_bundled_world_is_covered():
 def test_global_localization_is_fast_accurate_and_never_wrong(world):
     results = [run_localization_episode(world, STARTS[world], profile=profile, seed=seed,
                                         duration=DURATION_S, record=False)
-               for profile in ("ideal", "turtlebot3") for seed in (0, 1)]
+               for profile in ("ideal", "turtlebot3") for seed in SEEDS]
     summaries = "\n".join(r.summary() for r in results)
     assert all(r.false_localizations == 0 for r in results), summaries
     within = [r for r in results if r.time_to_localized_s is not None
               and r.time_to_localized_s <= 30.0]
-    assert len(within) >= 3, f"localized within 30 s in most runs:\n{summaries}"
+    assert len(within) >= 0.8 * len(results), f"localized within 30 s in most runs:\n{summaries}"
     for r in results:
         if r.tracking_error_mean_m is not None:
             assert r.tracking_error_mean_m <= TRACKING_MEAN_M[r.profile], summaries
@@ -65,15 +66,15 @@ def test_kidnapping_is_reported_and_recovered(profile):
     """Kidnapping is reported within 2 s and recovered within 30 s.
 
     Kidnapped at 20 s from maze_deadends' south-west start to its centre (turned): the loss
-    is reported within 2 s and the filter relocalizes within 30 s, in at least 9 of 10 runs
-    over both profiles (5 seeds each here).
+    is reported within 2 s and the filter relocalizes within 30 s, in at least 9 of 10 seeds
+    of each profile.
     """
     world = World.load("maze_deadends")
     x, y, theta = world.starts["centre"]
     kidnap = (20.0, x, y, math.remainder(theta + math.pi / 2, 2 * math.pi))
     results = [run_localization_episode(world, "south_west", profile=profile, seed=seed,
                                         duration=55.0, kidnap=kidnap, record=False)
-               for seed in range(5)]
+               for seed in range(10)]
     summaries = "\n".join(r.summary() for r in results)
     assert all(r.time_to_localized_s is not None and r.time_to_localized_s < 20.0
                for r in results), summaries
@@ -81,7 +82,7 @@ def test_kidnapping_is_reported_and_recovered(profile):
                for r in results), summaries
     relocalized = [r for r in results if r.relocalized_after_s is not None
                    and r.relocalized_after_s <= 30.0]
-    assert len(relocalized) >= 4, summaries  # 9 of 10 over the two profiles at worst
+    assert len(relocalized) >= 9, summaries
     assert all(r.false_localizations == 0 for r in results), summaries
 
 

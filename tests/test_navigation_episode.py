@@ -84,7 +84,6 @@ def course_episodes(name: str) -> list[tuple[str, str, int]]:
 @pytest.mark.parametrize("profile", ["ideal", "turtlebot3"])
 @pytest.mark.parametrize("name", COURSE_STYLE)
 def test_explore_localize_plan_and_stop_on_the_goal_with_the_particle_filter(name, profile):
-    pytest.importorskip("amr_localization.particle_filter")
     world = World.load(name)
     planner = Planner(world)
     for start, goal, seed in course_episodes(name):
@@ -102,7 +101,6 @@ def test_explore_localize_plan_and_stop_on_the_goal_with_the_particle_filter(nam
 @pytest.mark.parametrize("profile, kidnap", [("ideal", (35.0, -1.0, -1.0, 0.0)),
                                              ("turtlebot3", (40.0, 0.2, 1.0, 3.14159))])
 def test_a_robot_kidnapped_on_the_way_relocalizes_replans_and_reaches_the_goal(profile, kidnap):
-    pytest.importorskip("amr_localization.particle_filter")
     result = run_navigation_episode("lab02", "outer", "inner_far", profile=profile,
                                     pose_source="filter", kidnap=kidnap, duration=300.0,
                                     record_trajectory=False)

@@ -305,7 +305,6 @@ def test_a_goal_in_a_wall_is_a_clear_error(capsys):
     ("maze_deadends", "south_west", "3.0,2.2", "turtlebot3"),
 ])
 def test_navigate_to_a_goal_with_the_five_node_graph(tmp_path, world, start, goal, profile):
-    pytest.importorskip("amr_localization.particle_filter")
     report_path, plot_path = tmp_path / "nav.json", tmp_path / "nav.png"
     exit_code = run_sim.main(["--world", world, "--start", start, "--goal", goal, "--profile",
                               profile, "--duration", "300", "--report", str(report_path),
@@ -322,7 +321,6 @@ def test_navigate_to_a_goal_with_the_five_node_graph(tmp_path, world, start, goa
 
 
 def test_kidnapped_on_the_way_the_graph_relocalizes_replans_and_reaches_the_goal(tmp_path):
-    pytest.importorskip("amr_localization.particle_filter")
     report_path = tmp_path / "kidnap.json"
     # Carried into the inner maze: relocalized there within seconds, far from where the first
     # path started (lab02's ring opening, about (-1.0, 0.25)). A kidnapping into the ring would

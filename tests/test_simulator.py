@@ -161,7 +161,6 @@ def test_explored_fraction_counts_cells_whose_centre_was_passed():
 
 
 def test_episode_with_default_wall_follower():
-    pytest.importorskip("amr_control.wall_follower")
     result = run_episode("lab02", "outer", duration=20.0)
     assert result.steps == 400 and "WallFollower" in result.controller
     assert result.distance_m > 0.5
