@@ -142,7 +142,12 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.quick:
         args.episodes, args.duration, args.rounds = 8, 120.0, 1
-    figures = measure_sweeps(args.episodes, args.duration, args.rounds, args.jobs)
+    from amr_evaluation.ray_executor import RaySetupError
+    try:
+        figures = measure_sweeps(args.episodes, args.duration, args.rounds, args.jobs)
+    except RaySetupError as exc:
+        print(f"bench_ray: {exc}", file=sys.stderr)
+        return 2
     figures.update(measure_overhead(args.jobs))
     figures.update(measure_result_size(args.duration))
     print(report(figures))
