@@ -46,7 +46,7 @@ from amr_common.python_logging import ThrottledLogger
 from amr_control.look_around import IdleTurns, LookAround
 from amr_control.pose_trail import PoseTrail
 from amr_control.scan_sectors import LocalPointCloud, Perception, PerceptionSpec, ScanGeometry
-from amr_control.wall_follower_inputs import as_ranges, checked_odometry, limit_command
+from amr_control.wall_follower_inputs import as_ranges, checked_odometry, limit_to_free_path
 from amr_control.wall_follower_params import PARAMETERS, check_parameters
 
 _LOG = logging.getLogger(__name__)
@@ -419,7 +419,7 @@ class WallFollower:
 
     # ---- safety --------------------------------------------------------------------------
     def _limit(self, v: float, w: float) -> tuple[float, float]:
-        return limit_command(v, w, self.distances.get("path", math.inf),
+        return limit_to_free_path(v, w, self.distances.get("path", math.inf),
                              self.front_stop_distance_m, self.front_slowdown_distance_m,
                              self.max_linear_speed_mps, self.max_angular_speed_radps,
                              self.track_m)

@@ -57,7 +57,7 @@ def as_ranges(z_scan: Any, log: ThrottledLogger) -> np.ndarray | None:
     return ranges
 
 
-def limit_command(v: float, w: float, path_m: float, stop_distance_m: float,
+def limit_to_free_path(v: float, w: float, path_m: float, stop_distance_m: float,
                   slowdown_distance_m: float, max_linear: float, max_angular: float,
                   track_m: float) -> tuple[float, float]:
     """(v, w) within the limits.
