@@ -162,9 +162,29 @@ class ParticleFilter:
         """
         self.beams = ScanBeams.from_geometry(angle_min, angle_increment, rays, range_min,
                                              range_max, self.params["beams"], self.table.angles)
+        self._scan_geometry = (angle_min, angle_increment, rays, range_min, range_max)
         self.matcher = ScanMatcher(self.world.segments, angle_min, angle_increment, rays,
                                    range_min, range_max, self.params["lidar_offset_x_m"],
                                    allowed=self.robot_can_be_at)
+
+    def set_lidar_offset(self, offset_m: float) -> None:
+        """Place the LiDAR `offset_m` metres ahead of the robot centre (behind if negative).
+
+        For a position learnt at run time (the node reads it from /tf_static): the models that
+        depend on it are rebuilt; the particles and the expected-range table stay.
+        """
+        offset_m = float(offset_m)
+        if not (math.isfinite(offset_m) and abs(offset_m) <= 1.0):
+            raise ValueError(f"LiDAR offset must be within +-1 m of the centre, got {offset_m!r}")
+        p = self.params
+        if offset_m == p["lidar_offset_x_m"]:
+            return
+        p["lidar_offset_x_m"] = offset_m
+        self.model = BeamModel(self.table, self._robot_ok, offset_m, p["sigma_hit_m"],
+                               p["z_random"])
+        self.search = PoseSearch(self.table, self._robot_ok, offset_m)
+        if self.matcher is not None:
+            self.set_scan_geometry(*self._scan_geometry)
 
     def robot_can_be_at(self, x: float, y: float) -> bool:
         """True if a particle's centre at (x, y) is where the robot can be.

@@ -1,7 +1,8 @@
 """The `particle_filter` lifecycle node: /odometry + /scan -> /pose.
 
-Outputs /pose (amr_msgs/PoseStamped with `localized`), /amcl_pose and /particles, on the world
-map of the simulator (one loader).
+Outputs /pose (amr_msgs/PoseStamped with `localized`), /amcl_pose, /particles and map -> odom on
+/tf, on the world map of the simulator (one loader); reads the LiDAR position from /tf_static
+(localization_tf.py).
 
 Thin: messages become ParticleFilter.predict / correct calls and results become messages.
 - Every /odometry message moves the particles by its twist over the time since the previous one
@@ -45,6 +46,7 @@ from amr_common.ros_conversions import (
     yaw_to_quaternion,
 )
 from amr_common.world import World, WorldError
+from amr_localization.localization_tf import LocalizationTf
 from amr_localization.particle_filter import ParticleFilter
 from amr_localization.particle_filter_params import PARAMETERS as FILTER_PARAMETERS
 from amr_localization.particle_filter_params import check_parameters
@@ -64,6 +66,13 @@ _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
                                 "/pose)"),
     "particles_published": (500, "Most particles in one /particles message (evenly picked)"),
     "map_frame": ("map", "Frame of /pose, /amcl_pose and /particles"),
+    "odom_frame": ("odom", "Odometry frame: map -> odom_frame goes on /tf"),
+    "base_frame": ("base_footprint", "Robot frame: the LiDAR position is read from /tf_static "
+                                     "as base_frame -> scan_frame"),
+    "scan_frame": ("base_scan", "LiDAR frame; without it on /tf_static, lidar_offset_x_m is "
+                                "used"),
+    "publish_tf": (True, "Publish map -> odom on /tf with every /pose (off when another node "
+                         "does, e.g. a simulator's ground truth)"),
     "odometry_topic": ("/odometry", "nav_msgs/Odometry input with twist filled"),
     "scan_topic": ("/scan", "sensor_msgs/LaserScan input (subscribed best effort)"),
     "pose_topic": ("/pose", "amr_msgs/PoseStamped output (with localized)"),
@@ -79,11 +88,11 @@ class ParticleFilterNode(GuardedLifecycleNode):
 
     Creates nothing until configured; the filter (with its expected-range table) is built in
     on_configure, so a missing or malformed map fails that transition with the loader's message.
-    Configure also creates the /pose, /amcl_pose and /particles lifecycle publishers, the
-    synchronized /odometry + /scan inputs and the /initialpose subscription; messages are
-    processed while active (deactivate stops processing, the filter keeps its state); cleanup
-    and shutdown release everything (release()). It commands nothing: nothing is sent on the
-    way down.
+    Configure also creates the /pose, /amcl_pose, /particles (and /tf) lifecycle publishers,
+    the synchronized /odometry + /scan inputs, the /initialpose and /tf_static subscriptions;
+    messages are processed while active (deactivate stops processing, the filter keeps its
+    state); cleanup and shutdown release everything (release()). It commands nothing: nothing
+    is sent on the way down.
     """
 
     def __init__(self, node_name: str = "particle_filter", **kwargs) -> None:
@@ -108,6 +117,7 @@ class ParticleFilterNode(GuardedLifecycleNode):
         self._last_scan_ns: int | None = None  # newest usable scan
         self._last_particles_ns: int | None = None
         self._scan_key: tuple | None = None
+        self._tf: LocalizationTf | None = None
         self.pose_count = 0  # /pose messages published (tests, run scripts)
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -174,6 +184,9 @@ class ParticleFilterNode(GuardedLifecycleNode):
         self._initialpose_subscription = self.create_subscription(
             PoseWithCovarianceStamped, node["initialpose_topic"], self._on_initial_pose,
             RELIABLE_10)
+        if node["publish_tf"]:
+            self._tf = LocalizationTf(self, {name: node[name] for name in (
+                "map_frame", "odom_frame", "base_frame", "scan_frame")}, self._on_lidar_offset)
         f = self.filter
         mode = "tracking from initial_pose" if filter_params["initial_pose"] else \
             "global localization"
@@ -192,6 +205,8 @@ class ParticleFilterNode(GuardedLifecycleNode):
             subscriber.close()
         if self._initialpose_subscription is not None:
             self.destroy_subscription(self._initialpose_subscription)
+        if self._tf is not None:
+            self._tf.close()
         for publisher in self._outputs.values():
             self.destroy_lifecycle_publisher(publisher)
         self._reset_runtime()
@@ -240,7 +255,18 @@ class ParticleFilterNode(GuardedLifecycleNode):
                 self.get_logger().error(f"measurement update failed: {exc!r}",
                                         throttle_duration_sec=2.0)
         self._publish_pose(scan.header.stamp, stamp_ns)
+        if self._tf is not None:
+            self._tf.publish_map_to_odom(self.filter.estimate, odometry, scan.header.stamp)
         self._publish_particles(scan.header.stamp, stamp_ns)
+
+    def _on_lidar_offset(self, offset_m: float) -> None:
+        """Use the LiDAR position /tf_static gives (the parameter is the fallback)."""
+        if self.filter is None or offset_m == self.filter.params["lidar_offset_x_m"]:
+            return
+        self.filter.set_lidar_offset(offset_m)
+        self.get_logger().info(f"LiDAR at x = {offset_m:+.3f} m from /tf_static "
+                               f"({self.node_params['base_frame']} -> "
+                               f"{self.node_params['scan_frame']})")
 
     def _usable_ranges(self, scan: LaserScan) -> np.ndarray | None:
         """The scan's ranges if the message is usable, else None.

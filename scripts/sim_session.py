@@ -156,9 +156,9 @@ class SimSession:
                       "profile": args.profile, "dt": args.dt, "seed": args.seed,
                       "mode": "realtime" if args.realtime else "lockstep",
                       "enable_localization": args.enable_localization or localize,
-                      # Viewers get a whole TF tree; a localization node sends its own map -> odom
-                      # (the particle filter does not: the truth stands in for it).
-                      "map_to_odom_from_truth": not args.enable_localization}
+                      # Viewers get a whole TF tree: the particle filter sends map -> odom when
+                      # it runs; without it (or a user's own localization node) the truth does.
+                      "map_to_odom_from_truth": not (args.enable_localization or localize)}
         if args.goal:
             sim_values["goal"] = list(args.goal)
         if getattr(args, "kidnap", None):

@@ -53,6 +53,7 @@ class FakeGraph:
         sim = self.sim
         stamp = seconds_to_time(sim.time)
         _, z_v, z_w = sim.measure()
+        self.last_odometry_pose = sim.odometry_pose
         self.odometry.publish(odometry_message(stamp, "odom", "base_footprint",
                                                sim.odometry_pose, (z_v, z_w)))
         scan = laser_scan_from_profile(sim.last_scan, sim.profile, stamp=stamp,
@@ -230,3 +231,50 @@ def test_the_executable_answers_with_autostart_and_exits_cleanly_on_ctrl_c(ros, 
     output = (tmp_path / "pf.log").read_text()
     assert process.returncode == 0, output
     assert "configured: world 'twin_maze_small'" in output
+
+
+def test_map_to_odom_on_tf_and_the_lidar_position_from_tf_static(ros):
+    """REP 105 frames: map -> odom out, the LiDAR position in.
+
+    map -> odom composes with the odometry pose to the estimate; /tf_static's base_footprint ->
+    base_scan tells the filter where the LiDAR sits (the parameter is the fallback).
+    """
+    from tf2_msgs.msg import TFMessage
+
+    from amr_common.tf import TF_STATIC_QOS, compose, planar_transform
+    node = make_node(ros, world="lab02", lidar_offset_x_m=0.0)
+    graph = FakeGraph(ros, profile="turtlebot3")  # its LiDAR is 32 mm behind the centre
+    transforms = []
+    graph.node.create_subscription(TFMessage, "/tf", transforms.append, 100)
+    static = graph.node.create_publisher(TFMessage, "/tf_static", TF_STATIC_QOS)
+    static.publish(TFMessage(transforms=[planar_transform(
+        seconds_to_time(0.0), "base_footprint", "base_scan", -0.032, 0.0, 0.0, z=0.182)]))
+    bring_up(ros, node, graph)
+    ros.spin_until(lambda: node.filter.params["lidar_offset_x_m"] == -0.032, 5.0,
+                   "the LiDAR position from /tf_static")
+    step_lockstep(ros, graph, 8)
+    ros.spin_until(lambda: len(transforms) >= 8, 5.0, "map -> odom with every /pose")
+    last = transforms[-1].transforms[0]
+    assert (last.header.frame_id, last.child_frame_id) == ("map", "odom")
+    assert last.header.stamp == graph.poses[-1].header.stamp
+    map_to_odom = (last.transform.translation.x, last.transform.translation.y,
+                   2.0 * math.atan2(last.transform.rotation.z, last.transform.rotation.w))
+    # The odometry pose of the last published pair: the simulator has stepped once since.
+    odom_pose = graph.last_odometry_pose
+    x, y, theta = compose(map_to_odom, odom_pose)
+    estimate = graph.poses[-1].pose
+    assert (x, y) == pytest.approx((estimate.position.x, estimate.position.y), abs=1e-6)
+    assert math.cos(theta - 2.0 * math.atan2(estimate.orientation.z, estimate.orientation.w)) \
+        == pytest.approx(1.0, abs=1e-9)
+
+
+def test_publish_tf_false_sends_no_transform(ros):
+    from tf2_msgs.msg import TFMessage
+    node = make_node(ros, world="lab02", publish_tf=False)
+    graph = FakeGraph(ros, profile="ideal")
+    transforms = []
+    graph.node.create_subscription(TFMessage, "/tf", transforms.append, 100)
+    bring_up(ros, node, graph)
+    step_lockstep(ros, graph, 5)
+    ros.spin_for(0.3)
+    assert transforms == [] and node.count_publishers("/tf") == 0

@@ -64,7 +64,15 @@ def test_record_holds_pose_and_particles(tmp_path):
     with AnyReader([record], default_typestore=typestore) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
         types = {c.topic: c.msgtype for c in reader.connections}
+        map_to_odom = []  # the filter's, once per /pose; the simulator's truth would double it
+        for connection, _, raw in reader.messages([c for c in reader.connections
+                                                    if c.topic == "/tf"]):
+            message = reader.deserialize(raw, connection.msgtype)
+            map_to_odom += [t for t in message.transforms
+                            if (t.header.frame_id, t.child_frame_id) == ("map", "odom")]
     assert 59 <= counts["/pose"] <= 61 and types["/pose"] == "amr_msgs/msg/PoseStamped"
+    # The filter sends map -> odom with each /pose; the simulator's perfect one is off.
+    assert 59 <= len(map_to_odom) <= 61
     assert counts["/particles"] >= 6 and types["/particles"] == "geometry_msgs/msg/PoseArray"
     assert counts["/amcl_pose"] >= 1
 
