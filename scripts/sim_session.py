@@ -177,8 +177,10 @@ class SimSession:
                 filter_overrides=filter_overrides,
                 goal=args.goal if self.navigating else None)
         else:
-            base = {"simulation": True, "dt": args.dt,
-                    "enable_localization": args.enable_localization}
+            base = {"simulation": True, "dt": args.dt}
+            if args.enable_localization:  # a localization node of the user's
+                base["enable_localization"] = True
+            # (Not False otherwise: the graphs with the filter below synchronize /pose.)
             if self.navigating:
                 base = navigating_wall_follower(base)
             elif localize:

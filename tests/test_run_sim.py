@@ -111,6 +111,21 @@ def test_record_writes_an_mcap_that_an_independent_reader_opens(tmp_path):
     assert max(max(times) for times in log_times.values()) <= 5 * 10**9
 
 
+def _commands_per_stamp(path) -> dict[int, int]:
+    """How many /cmd_vel messages of a recording carry each stamp (ns)."""
+    from collections import Counter
+
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+    counts: Counter = Counter()
+    with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+        for connection, _, raw in reader.messages([c for c in reader.connections
+                                                    if c.topic == "/cmd_vel"]):
+            stamp = reader.deserialize(raw, connection.msgtype).header.stamp
+            counts[stamp.sec * 10**9 + stamp.nanosec] += 1
+    return dict(counts)
+
+
 def _log_times(path):
     from rosbags.highlevel import AnyReader
     with AnyReader([path]) as reader:
@@ -306,10 +321,19 @@ def test_a_goal_in_a_wall_is_a_clear_error(capsys):
 ])
 def test_navigate_to_a_goal_with_the_five_node_graph(tmp_path, world, start, goal, profile):
     report_path, plot_path = tmp_path / "nav.json", tmp_path / "nav.png"
+    record = tmp_path / "nav.mcap"
     exit_code = run_sim.main(["--world", world, "--start", start, "--goal", goal, "--profile",
                               profile, "--duration", "300", "--report", str(report_path),
-                              "--plot", str(plot_path)])
+                              "--plot", str(plot_path), "--record", str(record)])
     report = json.loads(report_path.read_text())
+    # The handover: every lockstep step got exactly one command, from the wall follower until
+    # localized, then from the pure pursuit (the last stamp also carries both nodes' final
+    # zeros on the way down).
+    per_stamp = _commands_per_stamp(record)
+    assert len(per_stamp) == report["steps"], "one stamp per step, no step without a command"
+    last = max(per_stamp)
+    assert all(n == 1 for stamp, n in per_stamp.items() if stamp != last), \
+        {stamp: n for stamp, n in per_stamp.items() if n != 1}
     assert exit_code == 0 and report["collisions"] == 0
     assert report["nodes"] == ["wall_follower", "particle_filter", "planner", "pure_pursuit",
                                "amr_simulator"]
