@@ -70,3 +70,13 @@ def parse_overrides(items: list[str] | None) -> dict[str, Any]:
             raise ControllerSpecError(f"override '{item}' must look like name:=value")
         overrides[name.strip()] = parse_value(value)
     return overrides
+
+
+def described_parameters(controller_class: Any) -> dict[str, tuple[Any, str]] | None:
+    """The class's tuning parameters: name -> (default, description).
+
+    From its `parameter_descriptions()`; None if the class describes none (then any keyword
+    may be valid).
+    """
+    described = getattr(controller_class, "parameter_descriptions", None)
+    return dict(described()) if callable(described) else None

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from transforms3d.euler import quat2euler
 
 _MIN_QUATERNION_NORM = 1e-6
@@ -20,6 +21,22 @@ def wrap_angle(angle: float) -> float:
 def angle_difference(a: float, b: float) -> float:
     """A - b taken the short way round, in (-pi, pi]."""
     return wrap_angle(a - b)
+
+
+def wrap_angles(angles: np.ndarray) -> np.ndarray:
+    """Angles of an array wrapped to [-pi, pi) (numpy's remainder: pi becomes -pi)."""
+    return np.remainder(angles + math.pi, 2.0 * math.pi) - math.pi
+
+
+def polyline_length(points: np.ndarray) -> float:
+    """Length (m) of the polyline through (N, 2) points; 0 for fewer than two."""
+    return float(np.hypot(*np.diff(points, axis=0).T).sum()) if len(points) > 1 else 0.0
+
+
+def without_repeats(points: np.ndarray, tolerance: float = 1e-9) -> np.ndarray:
+    """The (N, 2) points without those closer than `tolerance` to the point before (N >= 1)."""
+    steps = np.hypot(*np.diff(points, axis=0).T)
+    return points[np.concatenate([[True], steps > tolerance])]
 
 
 def yaw_to_quaternion(yaw: float) -> tuple[float, float, float, float]:
@@ -45,4 +62,5 @@ def quaternion_to_yaw(x: float, y: float, z: float, w: float) -> float:
     return float(yaw)
 
 
-__all__ = ["wrap_angle", "angle_difference", "yaw_to_quaternion", "quaternion_to_yaw"]
+__all__ = ["wrap_angle", "angle_difference", "wrap_angles", "polyline_length", "without_repeats",
+           "yaw_to_quaternion", "quaternion_to_yaw"]

@@ -35,6 +35,7 @@ from amr_common import message_filters
 from amr_common.controller_loader import (
     DEFAULT_CONTROLLER,
     ControllerSpecError,
+    described_parameters,
     load_controller_class,
 )
 from amr_common.lifecycle_node import GuardedLifecycleNode
@@ -95,8 +96,7 @@ def tuning_table(controller_class: type) -> dict[str, tuple[Any, str]]:
 
     From the class's `parameter_descriptions()`, if it has one.
     """
-    described = getattr(controller_class, "parameter_descriptions", None)
-    table = described() if callable(described) else {}
+    table = described_parameters(controller_class) or {}
     return {name: spec for name, spec in table.items()
             if name not in _NODE_PARAMETERS and name != "use_sim_time"}
 

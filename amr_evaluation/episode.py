@@ -37,6 +37,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from amr_common.controller_loader import described_parameters
 from amr_common.coverage_grid import GridTooLargeError
 from amr_common.world import WORLDS_DIR, World
 from amr_sim.profiles import SensorProfile, get_profile
@@ -111,8 +112,7 @@ def robot_parameters(controller_class: Any, profile: SensorProfile) -> dict[str,
     Only parameters the class lists in `parameter_descriptions()` (`lidar_offset_x_m`). The run
     scripts apply these unless the user set the parameter (-p or a params file).
     """
-    described = getattr(controller_class, "parameter_descriptions", None)
-    names = described() if callable(described) else {}
+    names = described_parameters(controller_class) or {}
     return {"lidar_offset_x_m": profile.lidar_offset_x} if "lidar_offset_x_m" in names else {}
 
 

@@ -13,6 +13,8 @@ import re
 from pathlib import Path
 from typing import Any, Sequence
 
+from amr_common.controller_loader import described_parameters
+
 CONFIG_KEYS = ("worlds", "starts", "goals", "pose_source", "profiles", "seeds", "duration", "dt",
                "controller", "params_file", "params", "jobs")
 POSE_SOURCES = ("filter", "truth")
@@ -223,8 +225,7 @@ def load_ros_params_file(path: str | os.PathLike,
     params: dict[str, Any] = {}
     for section in sections:
         params.update(section)
-    known = getattr(controller_class, "parameter_descriptions", None)
-    if callable(known):
-        names = set(known())
+    names = described_parameters(controller_class)
+    if names is not None:
         params = {k: v for k, v in params.items() if k in names}
     return params

@@ -31,7 +31,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
-from amr_common.controller_loader import load_controller_class, parse_value
+from amr_common.controller_loader import (
+    described_parameters,
+    load_controller_class,
+    parse_value,
+)
 from amr_evaluation.evaluation import EpisodeSpec, EvaluationError, run_one
 
 __all__ = ["SEARCHES", "Dimension", "parse_space", "grid_size", "safe_exploration",
@@ -81,8 +85,7 @@ def parse_space(items: Sequence[str], controller: str) -> list[Dimension]:
 
 
 def _described(controller: str) -> dict[str, tuple[Any, str]]:
-    described = getattr(load_controller_class(controller), "parameter_descriptions", None)
-    return dict(described()) if callable(described) else {}
+    return described_parameters(load_controller_class(controller)) or {}
 
 
 def _dimension(name: str, spec: str, default: Any) -> Dimension:

@@ -7,7 +7,15 @@ import numpy as np
 import pytest
 from transforms3d.euler import euler2quat, quat2euler
 
-from amr_common.geometry import angle_difference, quaternion_to_yaw, wrap_angle, yaw_to_quaternion
+from amr_common.geometry import (
+    angle_difference,
+    polyline_length,
+    quaternion_to_yaw,
+    without_repeats,
+    wrap_angle,
+    wrap_angles,
+    yaw_to_quaternion,
+)
 
 
 def test_wrap_angle_range_and_edges():
@@ -54,3 +62,20 @@ def test_non_unit_quaternions_keep_their_yaw(scale):
 def test_unusable_quaternions_raise(q):
     with pytest.raises(ValueError, match="quaternion"):
         quaternion_to_yaw(*q)
+
+
+def test_wrap_angles_of_arrays():
+    angles = np.random.default_rng(2).uniform(-50, 50, 2000)
+    wrapped = wrap_angles(angles)
+    assert np.all(wrapped >= -math.pi) and np.all(wrapped < math.pi)
+    np.testing.assert_allclose(np.cos(wrapped), np.cos(angles), atol=1e-12)
+    np.testing.assert_allclose(np.sin(wrapped), np.sin(angles), atol=1e-12)
+    assert wrap_angles(np.array([math.pi]))[0] == -math.pi
+
+
+def test_polyline_length_and_repeated_points():
+    path = np.array([[0.0, 0.0], [3.0, 4.0], [3.0, 4.0], [3.0, 5.0]])
+    assert polyline_length(path) == pytest.approx(6.0)
+    assert polyline_length(path[:1]) == 0.0 and polyline_length(path[:0]) == 0.0
+    np.testing.assert_array_equal(without_repeats(path), path[[0, 1, 3]])
+    np.testing.assert_array_equal(without_repeats(path[:1]), path[:1])
