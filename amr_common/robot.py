@@ -27,8 +27,9 @@ MAX_PLAUSIBLE_LINEAR_SPEED = PLAUSIBLE_SPEED_MARGIN * MAX_LINEAR_SPEED  # 0.66 m
 MAX_PLAUSIBLE_ANGULAR_SPEED = PLAUSIBLE_SPEED_MARGIN * MAX_ANGULAR_SPEED  # 8.52 rad/s
 
 _HALF_TRACK = TRACK / 2.0
-# Commands beyond this are absurd; clipping first keeps v +- w * TRACK / 2 finite.
-_COMMAND_CLIP = 1.0e6
+# Commands beyond this are absurd (simulator, kinematics); clipping first keeps v +- w * TRACK / 2
+# finite.
+COMMAND_CLIP = 1.0e6
 
 
 def is_plausible_twist(v: float, w: float) -> bool:
@@ -44,8 +45,8 @@ def inverse_kinematics(v: float, w: float) -> tuple[float, float]:
 
     Saturated at WHEEL_SPEED_MAX.
     """
-    v = min(max(v, -_COMMAND_CLIP), _COMMAND_CLIP)
-    w = min(max(w, -_COMMAND_CLIP), _COMMAND_CLIP)
+    v = min(max(v, -COMMAND_CLIP), COMMAND_CLIP)
+    w = min(max(w, -COMMAND_CLIP), COMMAND_CLIP)
     w_right = (v + w * TRACK / 2.0) / WHEEL_RADIUS
     w_left = (v - w * TRACK / 2.0) / WHEEL_RADIUS
     fastest = max(abs(w_left), abs(w_right))

@@ -33,6 +33,7 @@ from amr_common import robot
 from amr_common.geometry import wrap_angle
 from amr_common.jit import jit
 from amr_common.raycast import nearest_wall, segment_offset
+from amr_common.robot import COMMAND_CLIP  # |v|, |w| beyond this are absurd
 from amr_common.world import World
 from amr_sim.lidar import Lidar
 from amr_sim.profiles import SensorProfile, get_profile
@@ -78,7 +79,6 @@ _ROBOT_TYPE = 1
 _WALL_TYPE = 2
 ALLOWED_PENETRATION = 0.0005  # m: resting contact depth, below collision_slop so it is stable
 _ROBOT_RADIUS = robot.ROBOT_RADIUS
-_COMMAND_CLIP = 1.0e6  # |v|, |w| beyond this are absurd
 _WARN_INTERVAL = 5.0  # s of wall time between repeated bad-command warnings
 
 
@@ -154,8 +154,8 @@ class Simulator:
 
     def step(self, v: float, w: float) -> tuple[np.ndarray, float, float]:
         """Advance one dt with the command (v m/s, w rad/s); return (z_scan, z_v, z_w)."""
-        if not (type(v) is float and type(w) is float and -_COMMAND_CLIP < v < _COMMAND_CLIP
-                and -_COMMAND_CLIP < w < _COMMAND_CLIP):  # NaN fails the comparisons
+        if not (type(v) is float and type(w) is float and -COMMAND_CLIP < v < COMMAND_CLIP
+                and -COMMAND_CLIP < w < COMMAND_CLIP):  # NaN fails the comparisons
             v, w = self._clean_command(v, w)
         p = self._profile
         if self._quantum:  # turtlebot3_node sends int(v * 100): truncation toward zero
@@ -258,8 +258,8 @@ class Simulator:
             v, w = math.nan, math.nan
         if math.isfinite(v) and math.isfinite(w):
             # Absurd magnitudes are saturated later; clipping keeps v * 100 etc. finite.
-            return (min(max(v, -_COMMAND_CLIP), _COMMAND_CLIP),
-                    min(max(w, -_COMMAND_CLIP), _COMMAND_CLIP))
+            return (min(max(v, -COMMAND_CLIP), COMMAND_CLIP),
+                    min(max(w, -COMMAND_CLIP), COMMAND_CLIP))
         self._bad_commands += 1
         now = _time.monotonic()
         if now - self._last_warning >= _WARN_INTERVAL:
