@@ -1,4 +1,4 @@
-"""Episodes as Ray tasks: on a local Ray instance started here, or on a running Ray cluster.
+"""Episodes on Ray: on a local Ray instance started here, or on a running Ray cluster.
 
     with RayExecutor() as executor:              # a local instance on 127.0.0.1, stopped after
         outcomes = run_episodes(specs, executor=executor)
@@ -9,23 +9,40 @@ Needs the optional `cluster` extra (`pip install -e .[cluster]`, or requirements
 nothing else in the project imports Ray. Every node's workers must import this project from the
 same venv path (or a runtime_env that installs it): see README "Sweep on a cluster".
 
-Each episode is one task of 1 CPU. A task whose worker process or node died is retried once
-(Ray's max_retries); a second loss, or an error Ray raises for the task (its arguments could
-not be unpickled on the worker, ...), becomes that episode's TaskLost with the reason. While no
-node with a CPU is alive for `no_worker_timeout_s`, the episodes left are reported lost instead
-of waiting forever. Exceptions inside an episode are its own error outcome already (run_one),
-never retried: episodes are deterministic.
+Episodes run on EpisodeWorker actors of 1 CPU each (amr_evaluation/ray_workers.py), one
+episode at a time per worker, as many workers as the cluster has CPUs. Joining a running
+cluster, the workers are warm: they stay `keep_workers_s` (60 s) after the run, imported and
+ready for the next run from the same checkout, and never run code older than the files. An
+episode whose worker process or node died is run once more (RETRIES) on another worker; a
+second loss, or an error Ray raises for the task (its arguments could not be unpickled on the
+worker, ...), becomes that episode's TaskLost with the reason. While no node with a CPU is
+alive for `no_worker_timeout_s`, the episodes left are reported lost instead of waiting
+forever. Exceptions inside an episode are its own error outcome already (run_one), never
+retried: episodes are deterministic.
 """
 from __future__ import annotations
 
 import logging
+import math
 import os
 import time
 import traceback
+import uuid
+from collections import deque
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterator, Mapping, Sequence
 
 from amr_evaluation.executors import TaskLost
+from amr_evaluation.ray_workers import (
+    NAMESPACE,
+    STALE,
+    WARM_PREFIX,
+    EpisodeWorker,
+    release_idle_warm_workers,
+    warm_workers,
+    worker_key,
+)
 
 __all__ = ["RayExecutor", "RaySetupError", "LOCAL_RAY_ENV"]
 
@@ -36,17 +53,11 @@ __all__ = ["RayExecutor", "RaySetupError", "LOCAL_RAY_ENV"]
 LOCAL_RAY_ENV = {"RAY_USAGE_STATS_ENABLED": "0", "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "0",
                  "RAY_AUTH_MODE": "token"}
 RETRIES = 1
+QUEUED = 2  # episodes sent ahead to each worker
 
 
 class RaySetupError(RuntimeError):
     """Ray is missing or the cluster cannot be reached; the message says which and what to do."""
-
-
-def _run_task(task: Callable[[Any], Any], preload: Sequence[str], spec: Any) -> Any:
-    """What a Ray worker runs: the episode task (preloading its modules the first time)."""
-    from amr_evaluation.executors import _preload
-    _preload(preload)
-    return task(spec)
 
 
 def _on_loopback(address: str) -> bool:
@@ -77,19 +88,26 @@ class RayExecutor:
     joins the cluster whose head listens there; "ray://HOST:10001" connects through Ray Client.
     If this process is already connected to Ray (ray.init), that connection is used and left
     open. `runtime_env`: Ray's runtime environment for the workers (e.g. a wheel of the
-    project in py_modules).
+    project in py_modules). `keep_workers_s`: on a cluster joined (an address), how long the
+    workers stay idle after a run for the next one (0: they end with the run).
     """
 
     def __init__(self, address: str | None = None, num_cpus: int | None = None,
                  runtime_env: Mapping[str, Any] | None = None,
-                 no_worker_timeout_s: float = 60.0) -> None:
+                 no_worker_timeout_s: float = 60.0, keep_workers_s: float = 60.0) -> None:
         self.address = address or None
         self.num_cpus = num_cpus
         self.runtime_env = dict(runtime_env) if runtime_env else None
         self.no_worker_timeout_s = float(no_worker_timeout_s)
+        if not math.isfinite(keep_workers_s) or keep_workers_s < 0:
+            raise ValueError(f"keep_workers_s must be a finite number >= 0, got "
+                             f"{keep_workers_s}")
+        # Warm workers only on a cluster that outlives this run (not an instance started here).
+        self.keep_workers_s = float(keep_workers_s) if self.address else 0.0
         self._ray: Any = None
         self._owned = False
-        self._remote: Any = None
+        self._worker_class: Any = None
+        self._workers: _WorkerSet | None = None
 
     # --- connection ----------------------------------------------------------------------
 
@@ -139,14 +157,21 @@ class RayExecutor:
                 raise RaySetupError(f"cannot {where}: {' '.join(detail.split())}{hint}") \
                     from None
             self._ray, self._owned = ray, True
-        self._remote = self._ray.remote(num_cpus=1, max_retries=RETRIES,
-                                        retry_exceptions=False)(_run_task)
+        self._worker_class = self._ray.remote(
+            num_cpus=1, max_restarts=0, max_task_retries=0,
+            concurrency_groups={"control": 1})(EpisodeWorker)
+        if self.address:  # idle warm workers this run does not use free their CPUs
+            release_idle_warm_workers(
+                self._ray, keep_key=worker_key(self.runtime_env) if self.keep_workers_s else None)
 
     def close(self) -> None:
-        """Stop the local instance this executor started, or disconnect from the cluster."""
+        """End the workers (warm ones stay), stop the local instance started here, or leave."""
+        if self._workers is not None:
+            self._workers.leave()
+            self._workers = None
         if self._ray is not None and self._owned:
             self._ray.shutdown()
-        self._ray, self._owned, self._remote = None, False, None
+        self._ray, self._owned, self._worker_class = None, False, None
 
     def cluster_cpus(self) -> int:
         """CPUs of the cluster's alive nodes."""
@@ -169,79 +194,237 @@ class RayExecutor:
 
     def run(self, task: Callable[[Any], Any], specs: Sequence[Any],
             preload: Sequence[str] = ()) -> Iterator[tuple[int, Any]]:
-        """Yield (index, outcome or TaskLost) as tasks finish.
+        """Yield (index, outcome or TaskLost) as episodes finish.
 
-        At most a window of a few tasks per CPU is submitted ahead, so one `ray.wait` stays
-        cheap for sweeps of thousands and an interrupted sweep has little to cancel.
+        Workers are those of an earlier run with this key (warm) plus new ones up to the
+        cluster's CPUs (checked every 2 s: nodes come and go). Each has QUEUED episodes sent
+        ahead, so the next one starts without a round trip to this driver. An episode whose
+        worker died is run once more (RETRIES); one whose worker's code changed on disk, or
+        that waited behind a lost one, is run again without counting.
         """
         self.connect()
-        ray = self._ray
-        task_ref = ray.put(task)
-        preload = tuple(preload)
-        waiting = list(enumerate(specs))[::-1]  # popped from the end: spec order
-        running: dict[Any, tuple[int, float]] = {}  # ref -> (index, submitted at)
+        if self._workers is None:  # kept for later runs of this executor (close() ends them)
+            self._workers = _WorkerSet(self)
+        pool = self._workers
+        pool.new_run(tuple(preload))
+        waiting = deque(enumerate(specs))
+        tries = [0] * len(specs)
+        running: dict[Any, tuple[Any, int, float]] = {}  # ref -> (worker, index, submitted)
+        queues: dict[Any, deque] = {}  # worker's actor id -> its refs, in submission order
         no_cpu_since: float | None = None
-        window, window_checked = 16, 0.0
         try:
             while waiting or running:
-                if time.monotonic() - window_checked > 2.0:  # nodes may come and go
-                    window, window_checked = max(16, 4 * self.cluster_cpus()), time.monotonic()
-                while waiting and len(running) < window:
-                    index, spec = waiting.pop()
-                    ref = self._remote.remote(task_ref, preload, spec)
-                    running[ref] = (index, time.perf_counter())
-                ready, _ = ray.wait(list(running), num_returns=1, timeout=1.0,
-                                    fetch_local=False)
+                pool.top_up(len(waiting) + len(running))
+                for worker in pool.ready:
+                    queue = queues.setdefault(worker._actor_id, deque())
+                    while waiting and len(queue) < QUEUED:
+                        index, spec = waiting.popleft()
+                        ref = worker.run.remote(task, pool.preload, spec)
+                        running[ref] = (worker, index, time.perf_counter())
+                        queue.append(ref)
+                ready, _ = self._ray.wait([*running, *pool.starting], num_returns=1,
+                                          timeout=1.0, fetch_local=False)
                 if ready:  # and every other one finished by now
-                    ready, _ = ray.wait(list(running), num_returns=len(running), timeout=0,
-                                        fetch_local=False)
+                    ready, _ = self._ray.wait([*running, *pool.starting],
+                                              num_returns=len(running) + len(pool.starting),
+                                              timeout=0, fetch_local=False)
                 for ref in ready:
-                    index, submitted = running.pop(ref)
-                    yield index, self._fetch(ref, time.perf_counter() - submitted)
-                if ready or self.cluster_cpus() > 0:
+                    if ref in pool.starting:
+                        pool.started(ref)
+                        continue
+                    if ref not in running:
+                        continue  # it waited behind a lost episode: queued again already
+                    worker, index, submitted = running.pop(ref)
+                    queue = queues[worker._actor_id]
+                    outcome = self._fetch(ref, time.perf_counter() - submitted)
+                    if not isinstance(outcome, _WorkerLost):
+                        queue.remove(ref)
+                        yield index, outcome
+                        continue
+                    # The worker ran its queue in order: the first one was running when it
+                    # ended (one try), the others never started.
+                    pool.discard(worker)
+                    again = []
+                    for k, lost_ref in enumerate(queues.pop(worker._actor_id)):
+                        _, lost_index, _ = running.pop(lost_ref, (None, index, None))
+                        if k == 0 and not outcome.code_changed:
+                            tries[lost_index] += 1
+                            if tries[lost_index] > RETRIES:
+                                yield lost_index, TaskLost(
+                                    outcome.why(pool, worker, tries[lost_index]),
+                                    outcome.wall_time_s)
+                                continue
+                        again.append((lost_index, specs[lost_index]))
+                    waiting.extendleft(reversed(again))
+                if pool.failure and not pool.ready and not pool.starting and not running:
+                    for index, _ in waiting:  # no worker can be created: say why, do not wait
+                        yield index, TaskLost(pool.failure)
+                    waiting.clear()
+                if ready or pool.ready or self.cluster_cpus() > 0:
                     no_cpu_since = None
                     continue
                 no_cpu_since = no_cpu_since or time.monotonic()
                 if time.monotonic() - no_cpu_since >= self.no_worker_timeout_s:
                     lost = (f"no Ray node with a CPU was alive for {self.no_worker_timeout_s:g} s "
                             "(the cluster lost its worker nodes): the episode did not run")
-                    for ref, (index, submitted) in list(running.items()):
-                        ray.cancel(ref, force=True)
+                    for ref, (worker, index, submitted) in list(running.items()):
                         yield index, TaskLost(lost, time.perf_counter() - submitted)
                     running.clear()
+                    queues.clear()
                     while waiting:
-                        yield waiting.pop()[0], TaskLost(lost)
+                        yield waiting.popleft()[0], TaskLost(lost)
         finally:
             for ref in running:  # interrupted (Ctrl-C, an exception in the consumer)
                 try:
-                    ray.cancel(ref, force=True)
+                    self._ray.cancel(ref)
                 except Exception:  # noqa: BLE001 - best effort while leaving
                     pass
 
     def _fetch(self, ref: Any, wall_time_s: float) -> Any:
-        """The task's outcome, or TaskLost saying what Ray reported."""
+        """The episode's outcome; _WorkerLost if its worker died or is stale; else TaskLost."""
         from ray import exceptions as rex
         try:
-            return self._ray.get(ref)
-        except rex.WorkerCrashedError:
-            why = ("the Ray worker process died during this episode (tried "
-                   f"{RETRIES + 1} times): the controller or the simulator ended the process "
-                   "(os._exit, a crash, out of memory)")
+            outcome = self._ray.get(ref)
+        except (rex.RayActorError, rex.NodeDiedError, rex.LocalRayletDiedError,
+                rex.ObjectLostError) as exc:  # the process or the node went away
+            return _WorkerLost(wall_time_s, node_lost=not isinstance(exc, rex.RayActorError))
         except rex.OutOfMemoryError:
-            why = f"Ray's memory monitor killed the episode's worker (tried {RETRIES + 1} times)"
-        except (rex.NodeDiedError, rex.LocalRayletDiedError, rex.ObjectLostError) as exc:
-            why = (f"the Ray node running this episode was lost (tried {RETRIES + 1} times): "
-                   f"{type(exc).__name__}")
+            why = "Ray's memory monitor killed the episode's worker"
         except rex.TaskCancelledError:
             why = "the episode's Ray task was cancelled"
         except rex.RayTaskError as exc:  # raised outside the episode: on the worker's side
             cause = getattr(exc, "cause", None) or exc
             detail = traceback.format_exception_only(type(cause), cause)[-1].strip()
-            hint = (" (do the cluster's workers import this project? see README 'Sweep on a "
-                    "cluster')") if isinstance(cause, ImportError) else ""
-            why = f"the Ray task failed on the worker: {detail}{hint}"
+            why = f"the Ray task failed on the worker: {detail}{_import_hint(cause)}"
         except rex.RayError as exc:  # RuntimeEnvSetupError, ...: its first and last lines
-            lines = [line.strip() for line in str(exc).splitlines() if line.strip()] or [""]
-            detail = lines[0] if len(lines) == 1 else f"{lines[0]} ... {lines[-1]}"
-            why = f"Ray could not run the episode: {type(exc).__name__}: {detail[:400]}"
+            why = f"Ray could not run the episode: {type(exc).__name__}: {_two_lines(exc)}"
+        else:
+            if isinstance(outcome, str) and outcome == STALE:
+                return _WorkerLost(wall_time_s, code_changed=True)
+            return outcome
         return TaskLost(" ".join(why.split()), wall_time_s)
+
+
+def _import_hint(cause: BaseException | str) -> str:
+    """A hint when the workers cannot import this project."""
+    text = cause if isinstance(cause, str) else type(cause).__name__
+    return (" (do the cluster's workers import this project? see README 'Sweep on a "
+            "cluster')") if ("ImportError" in text or "ModuleNotFoundError" in text) else ""
+
+
+def _two_lines(exc: BaseException) -> str:
+    """The first and last non-empty lines of a (long) Ray error message."""
+    lines = [line.strip() for line in str(exc).splitlines() if line.strip()] or [""]
+    detail = lines[0] if len(lines) == 1 else f"{lines[0]} ... {lines[-1]}"
+    return detail[:400]
+
+
+@dataclass(frozen=True)
+class _WorkerLost:
+    """An episode that did not finish because its worker ended (or found its code changed)."""
+
+    wall_time_s: float
+    node_lost: bool = False
+    code_changed: bool = False
+
+    def why(self, pool: "_WorkerSet", worker: Any, tries: int) -> str:
+        """The episode's error after its last try."""
+        if self.node_lost or not pool.node_alive(worker):
+            return f"the Ray node running this episode was lost (tried {tries} times)"
+        return (f"the Ray worker process died during this episode (tried {tries} times): the "
+                "controller or the simulator ended the process (os._exit, a crash, out of "
+                "memory)")
+
+
+class _WorkerSet:
+    """The EpisodeWorkers of one run: ready, starting, and the node each one runs on."""
+
+    def __init__(self, executor: RayExecutor) -> None:
+        self.ray, self.preload = executor._ray, ()
+        self._executor = executor
+        self._class = executor._worker_class
+        self._keep_s = executor.keep_workers_s
+        self._key = worker_key(executor.runtime_env)
+        self.ready: list[Any] = []  # started, alive
+        self.starting: dict[Any, Any] = {}  # ready() ref -> worker
+        self._node: dict[Any, str | None] = {}  # worker's actor id -> node id; all members
+        self._handles: dict[Any, Any] = {}  # actor id -> worker
+        self._failed_in_a_row = 0  # worker creations
+        self.failure: str | None = None  # why no worker can be created
+        self._checked, self._cpus = 0.0, 0
+        if self._keep_s:
+            for worker in warm_workers(self.ray, self._key).values():
+                self._join(worker)
+
+    def new_run(self, preload: tuple[str, ...]) -> None:
+        """A run begins: its modules to preload; creation failures of earlier runs forgotten."""
+        self.preload, self.failure, self._failed_in_a_row = preload, None, 0
+
+    def _join(self, worker: Any) -> None:
+        self._handles[worker._actor_id] = worker
+        self._node[worker._actor_id] = None
+        self.starting[worker.ready.remote()] = worker
+
+    def top_up(self, episodes_left: int) -> None:
+        """Create workers up to the cluster's CPUs (at most one per episode left)."""
+        if self.failure:
+            return
+        if time.monotonic() - self._checked > 2.0:  # nodes may come and go
+            self._cpus, self._checked = self._executor.cluster_cpus(), time.monotonic()
+        while len(self._handles) < min(self._cpus, episodes_left):
+            if self._keep_s:
+                worker = self._class.options(
+                    name=f"{WARM_PREFIX}{self._key}-{uuid.uuid4().hex[:8]}", namespace=NAMESPACE,
+                    lifetime="detached").remote(self.preload, self._keep_s)
+            else:
+                worker = self._class.remote(self.preload)
+            self._join(worker)
+
+    def started(self, ref: Any) -> None:
+        """A worker answered ready(): ready now; or its creation failed (noted in `failure`)."""
+        worker = self.starting.pop(ref)
+        try:
+            _, node = self.ray.get(ref)
+        except Exception as exc:  # noqa: BLE001 - creation failed (import, runtime_env, ...)
+            self._forget(worker)
+            self._failed_in_a_row += 1
+            if self._failed_in_a_row >= 3:
+                text = _two_lines(exc)
+                self.failure = " ".join(
+                    f"the Ray workers cannot start an episode worker: {text}"
+                    f"{_import_hint(text)}".split())
+            return
+        self._failed_in_a_row = 0
+        self._node[worker._actor_id] = node
+        self.ready.append(worker)
+
+    def node_alive(self, worker: Any) -> bool:
+        """Whether the node the worker ran on is alive (True if unknown)."""
+        node = self._node.get(worker._actor_id)
+        if node is None:
+            return True
+        return any(n.get("NodeID") == node and n.get("Alive") for n in self.ray.nodes())
+
+    def discard(self, worker: Any) -> None:
+        """A worker that died or is stale: ended for good, no longer a member."""
+        try:
+            self.ray.kill(worker, no_restart=True)
+        except Exception:  # noqa: BLE001 - already gone
+            pass
+        if worker in self.ready:
+            self.ready.remove(worker)
+        self._forget(worker)
+
+    def _forget(self, worker: Any) -> None:
+        self._handles.pop(worker._actor_id, None)
+
+    def leave(self) -> None:
+        """Warm workers stay (they end when idle), others are ended now."""
+        if self._keep_s:
+            return
+        for worker in list(self._handles.values()):
+            try:
+                self.ray.kill(worker, no_restart=True)
+            except Exception:  # noqa: BLE001 - already gone
+                pass
+        self._handles.clear()

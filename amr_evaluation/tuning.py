@@ -239,6 +239,9 @@ def run_search(specs: Sequence[EpisodeSpec], dims: Sequence[Dimension], search: 
         raise EvaluationError(f"--search must be one of {', '.join(SEARCHES)}, got {search!r}")
     if not ray.is_initialized():
         raise EvaluationError("run_search needs a Ray connection (RayExecutor.connect())")
+    # Trials need the CPUs that idle warm episode workers of evaluate.py runs still hold.
+    from amr_evaluation.ray_workers import release_idle_warm_workers
+    release_idle_warm_workers(ray)
     # Tune's own tables and hints off (verbose=0 with its classic reporter): progress() reports.
     os.environ.setdefault("RAY_AIR_NEW_OUTPUT", "0")
     total = grid_size(dims) if search == "grid" else int(samples)

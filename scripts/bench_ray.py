@@ -3,16 +3,18 @@
 
 The same episodes (default 24 of 300 s: README's baseline, lab02, maze_deadends and
 room_obstacles from every start with the turtlebot3 profile, seeds 0-2) are run by whole
-`evaluate.py` processes, as a user runs them, in three ways:
+`evaluate.py` processes, as a user runs them, in four ways:
 - `evaluate.py` (the local pool of --jobs processes),
 - `evaluate.py --ray` (starts a local Ray instance of --jobs CPUs, stops it at the end),
 - `evaluate.py --ray ADDRESS` joining a local Ray instance that is already running (as after
-  `ray start --head`: the run still starts its own worker processes, Ray's per-job workers).
-Each round runs the three in a rotating order, so the host's drifting speed (a shared machine)
-hits all alike; ratios are taken per round, then the median. Also measured: per-episode
-dispatch overhead (1-step episodes, in this process) and the size of one episode's result with
-its trajectory and as a summary. Needs the cluster extra (requirements-cluster.lock). Prints
-figures; asserts nothing.
+  `ray start --head`), twice in a row: the first run starts the episode workers (cold: the
+  warm ones of earlier runs are ended first), the second finds them warm (left by the first
+  for --ray-keep-workers, 60 s), as a user's next run within a minute does.
+Each round runs the pool, --ray and the two joins in a rotating order, so the host's drifting
+speed (a shared machine) hits all alike; ratios are taken per round, then the median. Also
+measured: per-episode dispatch overhead (1-step episodes, in this process) and the size of one
+episode's result with its trajectory and as a summary. Needs the cluster extra
+(requirements-cluster.lock). Prints figures; asserts nothing.
 """
 from __future__ import annotations
 
@@ -34,8 +36,10 @@ if str(REPO) not in sys.path:
 from amr_evaluation.evaluation import EpisodeSpec, run_episodes, run_one  # noqa: E402
 from amr_evaluation.executors import LocalPoolExecutor  # noqa: E402
 from amr_evaluation.ray_executor import RayExecutor  # noqa: E402
+from amr_evaluation.ray_workers import release_idle_warm_workers  # noqa: E402
 
-WAYS = ("pool", "ray_started", "ray_joined")
+WAYS = ("pool", "ray_started", "ray_joined_cold", "ray_joined_warm")
+SLOTS = (("pool",), ("ray_started",), ("ray_joined_cold", "ray_joined_warm"))  # rotated
 
 
 def evaluate_args(episodes: int, duration: float) -> list[str]:
@@ -66,17 +70,22 @@ def measure_sweeps(episodes: int, duration: float, rounds: int, jobs: int) -> di
     running.connect()
     address = running._ray.get_runtime_context().gcs_address
     times: dict[str, list[float]] = {way: [] for way in WAYS}
-    extra = {"pool": [], "ray_started": ["--ray"], "ray_joined": ["--ray", address]}
+    extra = {"pool": [], "ray_started": ["--ray"], "ray_joined_cold": ["--ray", address],
+             "ray_joined_warm": ["--ray", address]}
     try:
         with tempfile.TemporaryDirectory() as tmp:
             run_evaluate([*args, "--duration", "1"], Path(tmp) / "warm")  # kernels cached
             for r in range(rounds):
-                for k in range(len(WAYS)):
-                    way = WAYS[(r + k) % len(WAYS)]
-                    times[way].append(run_evaluate(args + extra[way],
-                                                   Path(tmp) / f"{way}-{r}"))
-                    print(f"  round {r + 1}: {way} {times[way][-1]:.2f} s", flush=True)
+                for k in range(len(SLOTS)):
+                    for way in SLOTS[(r + k) % len(SLOTS)]:
+                        if way == "ray_joined_cold":  # no workers left by an earlier run
+                            release_idle_warm_workers(running._ray)
+                            time.sleep(1.0)  # their CPUs back
+                        times[way].append(run_evaluate(args + extra[way],
+                                                       Path(tmp) / f"{way}-{r}"))
+                        print(f"  round {r + 1}: {way} {times[way][-1]:.2f} s", flush=True)
     finally:
+        release_idle_warm_workers(running._ray)
         running.close()
     median = statistics.median
     figures: dict = {"episodes": episodes, "duration_s": duration, "jobs": jobs,
@@ -117,7 +126,7 @@ def report(f: dict) -> str:
     lines = [f"evaluate.py --no-sheet, {f['episodes']} episodes of {f['duration_s']:g} s on "
              f"{f['jobs']} CPUs, whole processes ({f['rounds']} rounds, medians):"]
     names = {"pool": "local pool", "ray_started": "--ray (starts Ray)",
-             "ray_joined": "--ray ADDRESS (running)"}
+             "ray_joined_cold": "--ray ADDRESS, 1st run", "ray_joined_warm": "--ray ADDRESS, next"}
     for way in WAYS:
         ratio = "" if way == "pool" else f"  ratio to the pool {f[way + '_over_pool']:.2f}"
         lines.append(f"  {names[way]:24s} {med(f['sweep_s'][way]):6.2f} s  "

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import datetime as dt_module
+import math
 import platform
 import sys
 import textwrap
@@ -104,6 +105,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--ray-runtime-env", default=None, metavar="JSON|FILE",
                         help="with --ray: Ray runtime_env for the workers, as JSON text or a "
                         "JSON/YAML file (e.g. a wheel of the project in py_modules)")
+    parser.add_argument("--ray-keep-workers", type=float, default=None, metavar="SECONDS",
+                        help="with --ray ADDRESS: the workers (one per CPU, each holding it) "
+                        "stay this long after the run, imported and ready for the next run "
+                        "from this checkout (default 60; 0: they end with the run)")
     parser.add_argument("--out", default=None,
                         help="output folder (default out/evaluate-<UTC time>)")
     parser.add_argument("--no-sheet", action="store_true", help="skip sheet.png")
@@ -164,20 +169,29 @@ def make_executor(args: argparse.Namespace, jobs: int | None, episodes: int):
     """The local pool (default), or Ray with --ray; ValueError with a reason for bad options."""
     from amr_evaluation.executors import InProcessExecutor, local_executor
     if args.ray is None:
-        if args.ray_runtime_env:
-            raise EvaluationError("--ray-runtime-env needs --ray")
+        for option, value in (("--ray-runtime-env", args.ray_runtime_env),
+                              ("--ray-keep-workers", args.ray_keep_workers)):
+            if value is not None:
+                raise EvaluationError(f"{option} needs --ray")
         return InProcessExecutor() if episodes == 1 else local_executor(jobs)
-    return ray_executor(args.ray, jobs, args.ray_runtime_env)
+    keep = 60.0 if args.ray_keep_workers is None else args.ray_keep_workers
+    return ray_executor(args.ray, jobs, args.ray_runtime_env, keep)
 
 
-def ray_executor(address: str | None, jobs: int | None, runtime_env: str | None):
+def ray_executor(address: str | None, jobs: int | None, runtime_env: str | None,
+                 keep_workers_s: float = 0.0):
     """A connected RayExecutor: address ''/None starts a local instance of `jobs` CPUs.
 
-    `runtime_env`: --ray-runtime-env's JSON text or file. EvaluationError with the reason.
+    `runtime_env`: --ray-runtime-env's JSON text or file; `keep_workers_s`:
+    --ray-keep-workers. EvaluationError with the reason.
     """
     from amr_evaluation.ray_executor import RayExecutor, RaySetupError
+    if not math.isfinite(keep_workers_s) or keep_workers_s < 0:
+        raise EvaluationError(f"--ray-keep-workers must be a number of seconds >= 0, got "
+                              f"{keep_workers_s:g}")
     executor = RayExecutor(address or None, num_cpus=jobs,
-                           runtime_env=read_runtime_env(runtime_env) if runtime_env else None)
+                           runtime_env=read_runtime_env(runtime_env) if runtime_env else None,
+                           keep_workers_s=keep_workers_s)
     try:
         executor.connect()
     except RaySetupError as exc:

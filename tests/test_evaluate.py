@@ -45,7 +45,12 @@ def test_bad_inputs_are_one_line_errors_with_exit_code_2(capsys, tmp_path, monke
              (["--config", str(tmp_path)], "cannot read config"),
              (["--params-file", str(broken)], "not valid YAML"),
              (["--controller", "broken_ctrl:C"], "cannot import module 'broken_ctrl': "
-                                                 "SyntaxError")]
+                                                 "SyntaxError"),
+             (["--ray-keep-workers", "30"], "--ray-keep-workers needs --ray"),
+             (["--ray", "127.0.0.1:1", "--ray-keep-workers", "-1"],
+              "--ray-keep-workers must be a number of seconds >= 0, got -1"),
+             (["--ray", "127.0.0.1:1", "--ray-keep-workers", "nan"],
+              "--ray-keep-workers must be a number of seconds >= 0, got nan")]
     for argv, message in cases:
         code, out, err = _evaluate(capsys, "--worlds", "lab02", *argv)
         assert code == 2, (argv, err)
