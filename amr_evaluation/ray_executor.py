@@ -197,10 +197,10 @@ class RayExecutor:
         """Yield (index, outcome or TaskLost) as episodes finish.
 
         Workers are those of an earlier run with this key (warm) plus new ones up to the
-        cluster's CPUs (checked every 2 s: nodes come and go). Each has QUEUED episodes sent
-        ahead, so the next one starts without a round trip to this driver. An episode whose
-        worker died is run once more (RETRIES); one whose worker's code changed on disk, or
-        that waited behind a lost one, is run again without counting.
+        cluster's CPUs (checked every 2 s: nodes come and go). While many are left, each has
+        QUEUED episodes sent ahead, so the next one starts without a round trip to this
+        driver. An episode whose worker died is run once more (RETRIES); one whose worker's
+        code changed on disk, or that waited behind a lost one, is run again without counting.
         """
         self.connect()
         if self._workers is None:  # kept for later runs of this executor (close() ends them)
@@ -215,9 +215,13 @@ class RayExecutor:
         try:
             while waiting or running:
                 pool.top_up(len(waiting) + len(running))
+                # Sent ahead only while there is plenty left: the last ones go to whichever
+                # worker is free first, and a worker still starting gets its share.
+                members = len(pool.ready) + len(pool.starting)
+                depth = QUEUED if len(waiting) > QUEUED * members else 1
                 for worker in pool.ready:
                     queue = queues.setdefault(worker._actor_id, deque())
-                    while waiting and len(queue) < QUEUED:
+                    while waiting and len(queue) < depth:
                         index, spec = waiting.popleft()
                         ref = worker.run.remote(task, pool.preload, spec)
                         running[ref] = (worker, index, time.perf_counter())

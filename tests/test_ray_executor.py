@@ -25,6 +25,7 @@ from amr_evaluation.evaluation import EpisodeSpec, expand_grid, run_episodes
 from amr_evaluation.evaluation_report import outcome_row
 from amr_evaluation.executors import LocalPoolExecutor
 from amr_evaluation.ray_executor import RayExecutor
+from amr_evaluation.ray_workers import release_idle_warm_workers
 
 pytestmark = pytest.mark.slow
 
@@ -189,6 +190,9 @@ def test_a_worker_killed_mid_episode_is_retried_and_a_second_death_reported(ray_
 
 
 def test_a_worker_node_lost_mid_sweep_is_survived(ray_cluster, tmp_path):
+    # Every worker starts now (none warm from earlier tests), so each of the three CPUs,
+    # the new node's too, gets one of the first three episodes.
+    release_idle_warm_workers(ray_cluster.ray)
     extra = ray_cluster.add_worker(1)
     started = tmp_path / "started"
     started.mkdir()
