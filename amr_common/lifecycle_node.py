@@ -30,7 +30,6 @@ from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackRet
 
 from amr_common.python_logging import forward_to_ros_logger
 
-_PRIMARY_STATES = ("unconfigured", "inactive", "active")
 _SHUTDOWN_TRANSITIONS = (Transition.TRANSITION_UNCONFIGURED_SHUTDOWN,
                          Transition.TRANSITION_INACTIVE_SHUTDOWN,
                          Transition.TRANSITION_ACTIVE_SHUTDOWN)

@@ -95,13 +95,6 @@ class ExpectedRangeTable:
         """(cells,) uint8: 1 where a robot centre may be (clearance >= radius - slack > 0)."""
         return (self.grid.clearance.ravel() >= max(radius - slack, 1e-9)).astype(np.uint8)
 
-    def lookup(self, x: float, y: float, direction: float) -> float:
-        """Expected range (m) from (x, y) along a world direction (rad); nan outside the grid."""
-        cell = self.cell_index(x, y)
-        if cell < 0:
-            return math.nan
-        k = int(round(direction % (2.0 * math.pi) / (2.0 * math.pi) * self.angles)) % self.angles
-        return float(self.ranges[cell, k]) * 1e-3
 
 
 def _fill_python(segments, centres, cells, base_cos, base_sin, out):
@@ -153,8 +146,7 @@ def expected_range_table(world: World, resolution: float = 0.02,
                          angles: int = 360) -> ExpectedRangeTable:
     """The table for `world`, built on first use and cached in this process.
 
-    The table for `world`, built on first use and cached in this process (keyed by the world
-    file, its walls, the resolution and the number of angles).
+    Keyed by the world file, its walls, the resolution and the number of angles.
     """
     key = (world.source, world.segments.tobytes(), float(resolution), int(angles))
     with _CACHE_LOCK:

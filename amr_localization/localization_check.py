@@ -76,15 +76,6 @@ class ScanMatcher:
         self._expected = np.empty(rays)
         self._zeros = np.zeros(rays)
 
-    def expected(self, pose: tuple[float, float, float]) -> np.ndarray:
-        """The scan a LiDAR on the robot at `pose` reads (NaN = no return), as a new array."""
-        x, y, theta = pose
-        ox = x + self.lidar_offset * math.cos(theta)
-        oy = y + self.lidar_offset * math.sin(theta)
-        scan_into(self.segments, ox, oy, theta, self.base_cos, self.base_sin, self.range_min,
-                  self.range_max, math.nan, self._zeros, self._expected)
-        return self._expected.copy()
-
     def match_fraction(self, pose: tuple[float, float, float], ranges: np.ndarray,
                        tolerance: float) -> float:
         """Share of rays where reading and expectation agree.

@@ -195,11 +195,6 @@ class ParticleFilter:
         cell = self.table.cell_index(x, y)
         return cell >= 0 and bool(self._robot_ok[cell])
 
-    @property
-    def scan_rays(self) -> int:
-        """Rays the current scan geometry expects (0 before set_scan_geometry)."""
-        return 0 if self.matcher is None else self.matcher.rays
-
     # --- the filter cycle ------------------------------------------------------------------
     def predict(self, v: float, w: float, dt: float) -> None:
         """Move every particle by the odometry twist (v m/s, w rad/s) over dt s, with noise."""

@@ -149,11 +149,6 @@ class Planner:
         """Each tuning parameter: name -> (default, description with units)."""
         return dict(PARAMETERS)
 
-    @property
-    def traversable(self) -> np.ndarray:
-        """(height, width) bool: cells a path may use."""
-        return np.isfinite(self.cost).reshape(self.grid.free.shape)
-
     def warm_up(self) -> None:
         """Run every compiled kernel once on tiny inputs.
 
