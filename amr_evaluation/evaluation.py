@@ -36,7 +36,6 @@ from amr_evaluation.evaluation_config import (
 )
 from amr_evaluation.executors import (
     Executor,
-    InProcessExecutor,
     TaskLost,
     local_executor,
     run_tasks,
@@ -269,10 +268,8 @@ def run_episodes(specs: Sequence[EpisodeSpec], jobs: int | None = None,
         return []
     if executor is None:
         try:
-            executor = local_executor(jobs)
+            executor = local_executor(jobs, len(specs))
         except ValueError as exc:
             raise EvaluationError(str(exc)) from None
-        if len(specs) == 1:
-            executor = InProcessExecutor()
     return run_tasks(run_one if trajectory else run_summary, specs, executor, lost_episode,
                      progress, preload=EPISODE_MODULES)

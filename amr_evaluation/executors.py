@@ -124,10 +124,15 @@ class LocalPoolExecutor:
         yield from _WorkerPool(task, specs, self.workers(len(specs)), tuple(preload)).run()
 
 
-def local_executor(jobs: int | None) -> InProcessExecutor | LocalPoolExecutor:
-    """This process for jobs=1, else a local pool of `jobs` processes (None: all cores)."""
+def local_executor(jobs: int | None,
+                   episodes: int | None = None) -> InProcessExecutor | LocalPoolExecutor:
+    """This process for jobs=1 or at most one episode, else a pool of `jobs` processes.
+
+    jobs None: all cores; ValueError for jobs < 1 (checked in every case).
+    """
     pool = LocalPoolExecutor(jobs)
-    return InProcessExecutor() if pool.jobs == 1 else pool
+    return InProcessExecutor() if pool.jobs == 1 or (episodes is not None and episodes <= 1) \
+        else pool
 
 
 # --- the local pool ------------------------------------------------------------------------

@@ -104,12 +104,10 @@ def run_localization_specs(specs: Sequence[LocalizationSpec], jobs: int | None =
     On `executor` (amr_evaluation.executors, e.g. a RayExecutor), else on `jobs` local
     processes (None: all cores).
     """
-    from amr_evaluation.executors import InProcessExecutor, local_executor, run_tasks
+    from amr_evaluation.executors import local_executor, run_tasks
     specs = list(specs)
     if executor is None:
-        executor = local_executor(max(int(jobs), 1) if jobs is not None else None)
-        if len(specs) <= 1:
-            executor = InProcessExecutor()
+        executor = local_executor(max(int(jobs), 1) if jobs is not None else None, len(specs))
     return run_tasks(run_one, specs, executor, lost_localization, progress,
                      preload=("amr_evaluation.localization_episode",))
 

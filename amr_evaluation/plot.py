@@ -209,7 +209,9 @@ def plot_episodes_sheet(results: Sequence[Any], path: str | Path, columns: int |
     worlds: dict[str, World] = {}
     for i, res in enumerate(items):
         ax = fig.add_subplot(rows, columns, i + 1)
-        world = worlds.setdefault(res.world, World.load(res.world))
+        if res.world not in worlds:  # one load per world, not per episode
+            worlds[res.world] = World.load(res.world)
+        world = worlds[res.world]
         figures = draw_episode(ax, world, res, colourbar=False, small=True,
                                planned_path=getattr(res, "path", None),
                                goal=getattr(res, "goal", None))

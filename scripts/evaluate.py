@@ -167,13 +167,13 @@ def episode_specs(settings: dict) -> list:
 
 def make_executor(args: argparse.Namespace, jobs: int | None, episodes: int):
     """The local pool (default), or Ray with --ray; ValueError with a reason for bad options."""
-    from amr_evaluation.executors import InProcessExecutor, local_executor
+    from amr_evaluation.executors import local_executor
     if args.ray is None:
         for option, value in (("--ray-runtime-env", args.ray_runtime_env),
                               ("--ray-keep-workers", args.ray_keep_workers)):
             if value is not None:
                 raise EvaluationError(f"{option} needs --ray")
-        return InProcessExecutor() if episodes == 1 else local_executor(jobs)
+        return local_executor(jobs, episodes)
     keep = 60.0 if args.ray_keep_workers is None else args.ray_keep_workers
     return ray_executor(args.ray, jobs, args.ray_runtime_env, keep)
 

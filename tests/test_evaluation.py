@@ -516,3 +516,13 @@ def test_navigation_episodes_report_goals_and_exit_1_when_one_is_missed(tmp_path
     assert "goal reached in 1/2 episodes" in proc.stdout
     assert "NOT reached: lab02/outer->inner_far/ideal/seed 0" in proc.stdout
     assert "final err. cm" in proc.stdout
+
+
+def test_one_episode_or_one_job_runs_in_this_process_and_bad_jobs_are_refused():
+    from amr_evaluation.executors import InProcessExecutor, LocalPoolExecutor, local_executor
+    assert isinstance(local_executor(4, 1), InProcessExecutor)
+    assert isinstance(local_executor(1, 5), InProcessExecutor)
+    assert isinstance(local_executor(2, 5), LocalPoolExecutor)
+    assert isinstance(local_executor(2), LocalPoolExecutor)
+    with pytest.raises(ValueError, match="jobs must be >= 1"):
+        local_executor(0, 1)
