@@ -26,6 +26,7 @@ from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameters import declare_parameters, read_parameters
 from amr_common.qos import RELIABLE_10
+from amr_common.ros_conversions import time_to_nanoseconds
 from amr_turtlebot3.velocity_estimator import Status, VelocityEstimator
 
 WARNING_PERIOD = 5.0  # seconds between repeated warnings of one kind
@@ -118,9 +119,9 @@ class OdometryNode(GuardedLifecycleNode):
         if not self.is_active or self.estimator is None or self._publisher is None:
             return
         position, orientation = msg.pose.pose.position, msg.pose.pose.orientation
-        stamp_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
         result = self.estimator.update(position.x, position.y, orientation.x, orientation.y,
-                                       orientation.z, orientation.w, stamp_ns)
+                                       orientation.z, orientation.w,
+                                       time_to_nanoseconds(msg.header.stamp))
         if result.ok:
             msg.twist.twist.linear.x = result.v
             msg.twist.twist.angular.z = result.w

@@ -28,6 +28,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from amr_common.robot import LIDAR_OFFSET_X  # noqa: E402
 from amr_common.world import World  # noqa: E402
 from amr_localization import beam_model  # noqa: E402
 from amr_localization.particle_filter import ParticleFilter  # noqa: E402
@@ -37,6 +38,12 @@ TARGET_UPDATES_PER_S = 5e6
 TARGET_UPDATE_MS = 1.0
 TARGET_REAL_TIME = 200.0
 
+
+
+def scan_from_robot(lidar: Lidar, x: float, y: float, theta: float) -> np.ndarray:
+    """The Burger's LiDAR scan (LIDAR_OFFSET_X along the heading) at robot pose x, y, theta."""
+    return lidar.scan(x + LIDAR_OFFSET_X * math.cos(theta),
+                      y + LIDAR_OFFSET_X * math.sin(theta), theta)
 
 def _timed(function, repeats: int) -> tuple[float, float]:
     """Best (CPU seconds, wall seconds) per call over `repeats` calls."""
@@ -56,10 +63,10 @@ def bench_measurement(particles: int, repeats: int, rounds: int) -> dict:
     shared machine hits all of them alike; the spread over rounds shows how noisy it was.
     """
     world = World.load("lab02")
-    pf = ParticleFilter(world, max_particles=particles, lidar_offset_x_m=-0.032)
+    pf = ParticleFilter(world, max_particles=particles, lidar_offset_x_m=LIDAR_OFFSET_X)
     pf.set_scan_geometry(0.0, 2 * math.pi / 360, 360, 0.12, 3.5)
     lidar = Lidar(world.segments, 360, 0.0, 2 * math.pi / 360, 0.12, 3.5, 0.0)
-    ranges = lidar.scan(1.0 - 0.032, -1.0, math.pi / 2)
+    ranges = scan_from_robot(lidar, 1.0, -1.0, math.pi / 2)
     readings = pf.beams.split(pf.beams.readings_mm(ranges))
     spread = pf.particles
     rng = np.random.default_rng(0)
@@ -103,7 +110,7 @@ def bench_full_update(particles: int, updates: int) -> dict:
     pose = (0.6, -0.6, math.pi)
     pf = ParticleFilter(world, initial_pose=list(pose), tracking_particles=particles,
                         min_particles=particles, max_particles=particles,
-                        initial_pose_sigma=[0.02, 0.02, 0.05], lidar_offset_x_m=-0.032)
+                        initial_pose_sigma=[0.02, 0.02, 0.05], lidar_offset_x_m=LIDAR_OFFSET_X)
     pf.set_scan_geometry(0.0, 2 * math.pi / 360, 360, 0.12, 3.5)
     lidar = Lidar(world.segments, 360, 0.0, 2 * math.pi / 360, 0.12, 3.5, 0.0)
     v, w, dt = 0.1, 0.1, 0.05
@@ -114,7 +121,7 @@ def bench_full_update(particles: int, updates: int) -> dict:
         x, y, theta = x + v * dt * math.cos(mid), y + v * dt * math.sin(mid), theta + w * dt
         if k % 40 == 39:
             w = -w  # wiggle: stay within the inner maze's corridor
-        ranges = lidar.scan(x - 0.032 * math.cos(theta), y - 0.032 * math.sin(theta), theta)
+        ranges = scan_from_robot(lidar, x, y, theta)
         cpu, wall = time.process_time(), time.perf_counter()
         pf.predict(v, w, dt)
         pf.correct(ranges, force=True)

@@ -183,12 +183,10 @@ def localizing_wall_follower(tuning: dict[str, Any]) -> dict[str, Any]:
 
 
 def make_particle_filter(context, *, world: str, lidar_offset_x_m: float,
-                         overrides: dict[str, Any] | None = None, slop: float | None = None):
+                         overrides: dict[str, Any] | None = None):
     """The particle filter on `world`, told where the LiDAR sits (overrides win)."""
     from amr_localization.particle_filter_node import ParticleFilterNode
     values: dict[str, Any] = {"world": str(world), "lidar_offset_x_m": float(lidar_offset_x_m)}
-    if slop is not None:
-        values["slop"] = float(slop)
     values.update(overrides or {})
     return ParticleFilterNode(context=context, parameter_overrides=overrides_to_parameters(values))
 
