@@ -20,9 +20,6 @@ import numpy as np
 
 from amr_common.geometry import wrap_angle
 
-# A fit this good (m of RMS residual, m of extent) gives the walls' direction (as WallFollower).
-FIT_MAX_RESIDUAL_M = 0.02
-FIT_MIN_SPAN_M = 0.15
 # More in-place turns than this in a row, each after less than IDLE_PROGRESS_M of driving, mean
 # the turns lead nowhere.
 IDLE_TURNS = 4
@@ -68,8 +65,7 @@ class LookAround:
         """
         self._headings.append(float(heading))
         self._paths.append(float(path_m))
-        if fit is not None and fit.residual_m < FIT_MAX_RESIDUAL_M and \
-                fit.span_m >= FIT_MIN_SPAN_M:
+        if fit is not None and fit.gives_direction:
             self._wall += complex(math.cos(4.0 * (heading + fit.angle_rad)),
                                   math.sin(4.0 * (heading + fit.angle_rad)))
 

@@ -54,6 +54,11 @@ class WallFit(NamedTuple):
     span_m: float
     points: int
 
+    @property
+    def gives_direction(self) -> bool:
+        """Good enough (under 2 cm RMS, at least 15 cm long) to take the walls' direction from."""
+        return self.residual_m < 0.02 and self.span_m >= 0.15
+
 
 class PerceptionSpec:
     """What the controller wants perceived each step: named sectors and the followed side.

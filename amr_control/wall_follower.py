@@ -403,7 +403,7 @@ class WallFollower:
         if fit is not None:
             error = fit.distance_m - self.wall_distance_m
             rate = side * self.max_linear_speed_mps * math.sin(fit.angle_rad)
-            if fit.residual_m < 0.02 and fit.span_m >= 0.15:
+            if fit.gives_direction:
                 self.wall_distance_error = error
                 self._set_reference(self._heading + fit.angle_rad)
                 # Only poses taken beside a well-fitted wall are on the wall's contour.

@@ -18,6 +18,7 @@ from amr_common.robot import (
     MAX_LINEAR_SPEED,
     MAX_PLAUSIBLE_ANGULAR_SPEED,
     MAX_PLAUSIBLE_LINEAR_SPEED,
+    is_plausible_twist,
 )
 
 
@@ -34,7 +35,7 @@ def checked_odometry(z_v: Any, z_w: Any, fallback: tuple[float, float],
     """The odometry twist (m/s, rad/s), each bad value replaced by `fallback`'s (v, w)."""
     v = float(z_v) if is_finite_number(z_v) else fallback[0]
     w = float(z_w) if is_finite_number(z_w) else fallback[1]
-    if abs(v) > MAX_PLAUSIBLE_LINEAR_SPEED or abs(w) > MAX_PLAUSIBLE_ANGULAR_SPEED:
+    if not is_plausible_twist(v, w):  # finite here
         log.warning("odometry", "WallFollower: physically impossible odometry (v=%r "
                     "m/s, w=%r rad/s) ignored", z_v, z_w)
         v = v if abs(v) <= MAX_PLAUSIBLE_LINEAR_SPEED else fallback[0]
