@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from amr_common.geometry import wrap_angle
+from amr_common.geometry import wrap_angle, wrap_angles
 
 # More in-place turns than this in a row, each after less than IDLE_PROGRESS_M of driving, mean
 # the turns lead nowhere.
@@ -85,7 +85,7 @@ class LookAround:
         best, best_path = math.nan, -math.inf
         for quarter in range(4):
             direction = walls + quarter * 0.5 * math.pi
-            off = np.abs(np.remainder(headings - direction + math.pi, 2.0 * math.pi) - math.pi)
+            off = np.abs(wrap_angles(headings - direction))
             path = float(paths[int(np.argmin(off))])
             if path > best_path:
                 best, best_path = wrap_angle(direction), path

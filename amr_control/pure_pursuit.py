@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from amr_common.geometry import wrap_angle
+from amr_common.geometry import without_repeats, wrap_angle
 from amr_common.parameter_table import finite, table_values
 from amr_common.robot import MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED, ROBOT_RADIUS, TRACK
 
@@ -167,9 +167,8 @@ class PurePursuit:
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
         if len(pts) == 0 or not np.isfinite(pts).all():
             raise ValueError("PurePursuit: a path needs at least one point, all finite")
-        keep = np.concatenate([[True], np.hypot(*np.diff(pts, axis=0).T) > 1e-9])
         self.clear_path()
-        self._points = pts[keep]
+        self._points = without_repeats(pts)
         self.state = "rotate"
         if len(self._points) >= 2:
             self._prepare()

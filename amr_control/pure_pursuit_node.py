@@ -21,11 +21,11 @@ import math
 import sys
 from typing import Any
 
-import numpy as np
 from nav_msgs.msg import Path
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import LaserScan
 
+from amr_common.geometry import polyline_length
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameters import declare_parameters, read_parameters
 from amr_common.qos import LATCHED, RELIABLE_10, scan_qos
@@ -158,7 +158,7 @@ class PurePursuitNode(CommandingNode):
             self.pursuit.clear_path()
             self.get_logger().error(f"/path rejected ({exc}): commanding zero while localized")
             return
-        length = float(np.hypot(*np.diff(points, axis=0).T).sum()) if len(points) > 1 else 0.0
+        length = polyline_length(points)
         self.get_logger().info(f"following a new path: {len(points)} poses, {length:.2f} m")
 
     def _on_scan(self, message: LaserScan) -> None:

@@ -39,6 +39,7 @@ import numpy as np
 
 from amr_common.controller_loader import described_parameters
 from amr_common.coverage_grid import GridTooLargeError
+from amr_common.geometry import wrap_angles
 from amr_common.world import WORLDS_DIR, World
 from amr_sim.profiles import SensorProfile, get_profile
 from amr_sim.simulator import Simulator
@@ -226,7 +227,7 @@ def count_laps(world: World, positions: np.ndarray) -> int:
         return 0
     cx, cy = world.free_space_centroid()
     bearings = np.arctan2(pos[:, 1] - cy, pos[:, 0] - cx)
-    winding = np.remainder(np.diff(bearings) + math.pi, 2.0 * math.pi) - math.pi
+    winding = wrap_angles(np.diff(bearings))
     return int(abs(float(np.sum(winding))) // (2.0 * math.pi))
 
 

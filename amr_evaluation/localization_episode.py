@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from amr_common.geometry import wrap_angles
 from amr_common.world import World
 from amr_evaluation.episode import default_controller
 from amr_localization.particle_filter import ParticleFilter
@@ -217,8 +218,7 @@ def metrics_from_rows(trajectory, estimate, kidnap=None) -> dict[str, Any]:
 def pose_errors(truth: np.ndarray, estimate: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Position (m) and absolute heading (rad) errors of estimate rows against truth rows."""
     position = np.hypot(estimate[:, 1] - truth[:, 1], estimate[:, 2] - truth[:, 2])
-    heading = np.abs(np.remainder(estimate[:, 3] - truth[:, 3] + math.pi, 2.0 * math.pi)
-                     - math.pi)
+    heading = np.abs(wrap_angles(estimate[:, 3] - truth[:, 3]))
     return position, heading
 
 

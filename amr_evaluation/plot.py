@@ -14,6 +14,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 
+from amr_common.geometry import polyline_length
 from amr_common.robot import ROBOT_RADIUS
 from amr_common.world import World
 
@@ -158,7 +159,7 @@ def _figures(world: World, traj: np.ndarray, points: list, result) -> dict[str, 
     if len(traj) == 0:
         return {"collisions": len(points), "min_clearance": math.nan, "distance": 0.0, "time": 0.0}
     clearance = float(world.clearances(traj[:, 1:3]).min() - ROBOT_RADIUS)
-    distance = float(np.hypot(*np.diff(traj[:, 1:3], axis=0).T).sum()) if len(traj) > 1 else 0.0
+    distance = polyline_length(traj[:, 1:3])
     return {"collisions": len(points), "min_clearance": clearance, "distance": distance,
             "time": float(traj[-1, 0])}
 

@@ -22,6 +22,7 @@ from typing import Callable
 
 import numpy as np
 
+from amr_common.geometry import wrap_angles
 from amr_localization.localization_check import ScanMatcher, weighted_pose_mean
 from amr_localization.pose_search import Alternative, close_poses, refine
 
@@ -139,7 +140,7 @@ class AmbiguityGuard:
     def _anchor(pose, particles: np.ndarray, weights: np.ndarray):
         near = ((particles[:, 0] - pose[0]) ** 2 + (particles[:, 1] - pose[1]) ** 2
                 <= ANCHOR_DISTANCE_M ** 2) & \
-            (np.abs(np.remainder(particles[:, 2] - pose[2] + math.pi, 2.0 * math.pi) - math.pi)
+            (np.abs(wrap_angles(particles[:, 2] - pose[2]))
              <= ANCHOR_ANGLE_RAD)
         if np.count_nonzero(near) < ANCHOR_MIN_PARTICLES:
             return pose

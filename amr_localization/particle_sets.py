@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 
+from amr_common.geometry import wrap_angles
 from amr_common.occupancy_grid import OccupancyGrid
 from amr_common.robot import ROBOT_RADIUS
 from amr_common.world import World
@@ -18,7 +19,7 @@ from amr_common.world import World
 
 def wrap_headings(particles: np.ndarray) -> np.ndarray:
     """Wrap column 2 (theta) of (N, 3) particles into [-pi, pi), in place; returns them."""
-    particles[:, 2] = np.remainder(particles[:, 2] + math.pi, 2.0 * math.pi) - math.pi
+    particles[:, 2] = wrap_angles(particles[:, 2])
     return particles
 
 

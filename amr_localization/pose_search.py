@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from amr_common.geometry import wrap_angles
 from amr_common.jit import HAVE_NUMBA, jit
 from amr_localization.expected_ranges import ExpectedRangeTable
 from amr_localization.localization_check import ScanMatcher
@@ -171,7 +172,7 @@ class PoseSearch:
         poses = np.empty((count, 3))
         poses[:, :2] = centres + rng.uniform(-half_xy, half_xy, (count, 2))
         theta = headings * self.step[1] + rng.uniform(-half_theta, half_theta, count)
-        poses[:, 2] = np.remainder(theta + math.pi, 2.0 * math.pi) - math.pi
+        poses[:, 2] = wrap_angles(theta)
         return poses
 
     def best_near(self, pose, radius: float, angle: float, beams: ScanBeams, z_mm: np.ndarray,
@@ -199,7 +200,7 @@ class PoseSearch:
                         np.ascontiguousarray(z_mm[order]), self.tolerance_mm,
                         range_limits_mm[0], range_limits_mm[1], len(beam_bins), scores)
             headings = np.arange(self.headings) * self.step[1]
-            off = np.abs(np.remainder(headings - pose[2] + math.pi, 2.0 * math.pi) - math.pi)
+            off = np.abs(wrap_angles(headings - pose[2]))
             scores[:, off > angle] = -1
             for flat in np.argsort(-scores.ravel(), kind="stable")[:64]:
                 c, h = divmod(int(flat), self.headings)

@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from amr_common.geometry import polyline_length, without_repeats
 from amr_common.occupancy_grid import OccupancyGrid
 from amr_common.parameter_table import finite, table_values
 from amr_common.raycast import nearest_wall_kernel
@@ -183,7 +184,7 @@ class Planner:
         width = self.grid.width
         grid_path = self.grid.cell_centres(cells // width, cells % width)
         points = np.vstack([start, grid_path, goal])
-        points = points[np.concatenate([[True], np.hypot(*np.diff(points, axis=0).T) > 1e-9])]
+        points = without_repeats(points)
         ds = 0.5 * self.grid.resolution
         if p["smooth"]:
             cap, floor, tol = (p["preferred_clearance_m"], self.inflation_radius,
@@ -193,7 +194,7 @@ class Planner:
                 self.segments, corners, p["path_spacing_m"], p["min_turn_radius_m"],
                 p["max_turn_radius_m"], cap, floor, tol, ds)
         clearance = self.world.clearances(points)
-        length = float(np.hypot(*np.diff(points, axis=0).T).sum()) if len(points) > 1 else 0.0
+        length = polyline_length(points)
         return Plan(points=points, length_m=length, min_clearance_m=float(clearance.min()),
                     cost=cost, grid_path=grid_path, expanded=expanded,
                     search_time_s=search_time, total_time_s=time.perf_counter() - began,
