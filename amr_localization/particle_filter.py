@@ -147,6 +147,10 @@ class ParticleFilter:
         self.guard.clear()
         self.updates = 0
         self._since_update = [math.inf, math.inf, math.inf]
+        self._estimate_from_cluster()
+
+    def _estimate_from_cluster(self) -> None:
+        """Estimate, cluster share and covariance from the particles' dominant cluster."""
         cluster = dominant_cluster(self.particles, self.weights, self.params["cluster_radius_m"],
                                    self.params["cluster_angle_rad"])
         self.estimate, self.cluster_share = cluster.pose, cluster.share
@@ -245,10 +249,7 @@ class ParticleFilter:
         self._since_update = [0.0, 0.0, 0.0]
         self.updates += 1
         self.total_updates += 1
-        cluster = dominant_cluster(self.particles, self.weights, self.params["cluster_radius_m"],
-                                   self.params["cluster_angle_rad"])
-        self.estimate, self.cluster_share = cluster.pose, cluster.share
-        self.covariance = cluster.covariance
+        self._estimate_from_cluster()
         tolerance = self.params["match_tolerance_m"]
         self.match_fraction = self.matcher.match_fraction(self.estimate, ranges, tolerance)
         if not self.localized and self.cluster_share >= self.params["cluster_min_share"] and \
