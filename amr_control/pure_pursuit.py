@@ -137,8 +137,7 @@ class PurePursuit:
 
     def __init__(self, dt: float, **params: Any) -> None:
         """dt: control period [s]; params: names of `parameter_descriptions()`."""
-        if isinstance(dt, bool) or not isinstance(dt, (int, float)) or \
-                not (math.isfinite(dt) and dt > 0):
+        if not (finite(dt) and dt > 0):
             raise ValueError(f"PurePursuit: dt must be a positive number of seconds, got {dt!r}")
         self.dt = float(dt)
         self.params = check_parameters(params)

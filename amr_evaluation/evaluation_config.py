@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from amr_common.controller_loader import described_parameters
+from amr_common.parameter_table import finite
 
 CONFIG_KEYS = ("worlds", "starts", "goals", "pose_source", "profiles", "seeds", "duration", "dt",
                "controller", "params_file", "params", "jobs")
@@ -92,8 +93,7 @@ def _number_or_name(text: str) -> str | float:
 
 
 def _explicit_pose(item: Sequence[Any]) -> tuple[float, float, float]:
-    if len(item) != 3 or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
-                                 and math.isfinite(v) for v in item):
+    if len(item) != 3 or not all(finite(v) for v in item):
         raise EvaluationError(f"start pose {list(item)!r} is not [x, y, theta] with finite "
                               "numbers")
     return (float(item[0]), float(item[1]), float(item[2]))
