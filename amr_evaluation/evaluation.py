@@ -132,6 +132,7 @@ def expand_grid(worlds: str | Sequence[str], starts: str | Sequence[str] = "all"
     poses = [s for s in start_list if not isinstance(s, str)]
     start_names = [s for s in start_list if isinstance(s, str)]
     loaded: dict[str, list[str | tuple[float, float, float]]] = {}
+    goals_of: dict[str, list[str]] = {}  # each world's goal names (one load per world)
     for name in world_names:
         try:
             world = World.load(name)
@@ -140,6 +141,7 @@ def expand_grid(worlds: str | Sequence[str], starts: str | Sequence[str] = "all"
         except WorldError as exc:
             raise EvaluationError(str(exc)) from None
         available = list(world.starts)
+        goals_of[name] = list(world.goals)
         everything = "all" in start_names
         named = available if everything else [s for s in start_names if s in available]
         if everything and not named and not poses:
@@ -156,7 +158,7 @@ def expand_grid(worlds: str | Sequence[str], starts: str | Sequence[str] = "all"
         raise EvaluationError(f"start(s) {', '.join(unused)} exist in none of the worlds "
                               f"{', '.join(world_names)}")
     goal_names = parse_name_list(goals)
-    world_goals = {w: _world_goals(w, goal_names) for w in world_names}
+    world_goals = {w: _world_goals(w, goals_of[w], goal_names) for w in world_names}
     missing = [g for g in goal_names if g != "all" and not any(g in v for v in
                                                                 world_goals.values())]
     if missing:
@@ -175,12 +177,11 @@ def expand_grid(worlds: str | Sequence[str], starts: str | Sequence[str] = "all"
     return specs
 
 
-def _world_goals(world_name: str, goal_names: list[str]) -> list[str | None]:
+def _world_goals(world_name: str, available: list[str],
+                 goal_names: list[str]) -> list[str | None]:
     """The goals of one world an episode grid uses: [None] without goals (wall following)."""
     if not goal_names:
         return [None]
-    from amr_common.world import World
-    available = list(World.load(world_name).goals)
     chosen = available if goal_names == ["all"] else [g for g in goal_names if g in available]
     if not chosen:
         raise EvaluationError(f"world '{world_name}' has none of the goals "
