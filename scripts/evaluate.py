@@ -98,7 +98,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="worker processes (default: all cores); with --ray and no address, "
                         "the local Ray instance's CPUs")
     parser.add_argument("--ray", nargs="?", const="", default=None, metavar="ADDRESS",
-                        help="run the episodes as Ray tasks: no ADDRESS starts a local Ray "
+                        help="run the episodes on Ray: no ADDRESS starts a local Ray "
                         "instance (127.0.0.1, stopped at the end); 'auto' joins the cluster "
                         "this machine is a node of; HOST:PORT the cluster whose head is there "
                         "(needs the cluster extra: requirements-cluster.lock)")
