@@ -156,24 +156,29 @@ def warm_workers(ray: Any, key: str | None = None) -> dict[str, Any]:
 
 def release_idle_warm_workers(ray: Any, keep_key: str | None = None,
                               timeout_s: float = 5.0) -> int:
-    """End the idle warm workers (all, or all but `keep_key`'s): their CPUs free at once.
+    """End the idle warm workers (all, or all but `keep_key`'s) and wait until they are gone.
 
-    Busy ones (another run's episode) are left to end by themselves. Returns how many ended.
+    Their CPUs are free when this returns (within `timeout_s` for the answers and again for
+    the ends). Busy ones (another run's episode) are left to end by themselves. Returns how
+    many ended.
     """
-    handles = [handle for name, handle in warm_workers(ray).items()
-               if not keep_key or not name.startswith(f"{WARM_PREFIX}{keep_key}-")]
-    if not handles:
+    named = {name: handle for name, handle in warm_workers(ray).items()
+             if not keep_key or not name.startswith(f"{WARM_PREFIX}{keep_key}-")}
+    if not named:
         return 0
-    refs = {handle.idle_s.options(concurrency_group="control").remote(): handle
-            for handle in handles}
+    refs = {handle.idle_s.options(concurrency_group="control").remote(): name
+            for name, handle in named.items()}
     ready, _ = ray.wait(list(refs), num_returns=len(refs), timeout=timeout_s)
-    ended = 0
+    ended = set()
     for ref in ready:
         try:
             busy = ray.get(ref) < 0
         except Exception:  # noqa: BLE001 - gone already
             continue
         if not busy:
-            ray.kill(refs[ref], no_restart=True)
-            ended += 1
-    return ended
+            ray.kill(named[refs[ref]], no_restart=True)
+            ended.add(refs[ref])
+    deadline = time.monotonic() + timeout_s  # ray.kill returns before the process ends
+    while ended & set(warm_workers(ray)) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return len(ended)

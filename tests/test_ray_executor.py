@@ -25,7 +25,7 @@ from amr_evaluation.evaluation import EpisodeSpec, expand_grid, run_episodes
 from amr_evaluation.evaluation_report import outcome_row
 from amr_evaluation.executors import LocalPoolExecutor
 from amr_evaluation.ray_executor import RayExecutor
-from amr_evaluation.ray_workers import release_idle_warm_workers
+from amr_evaluation.ray_workers import release_idle_warm_workers, warm_workers
 
 pytestmark = pytest.mark.slow
 
@@ -190,17 +190,22 @@ def test_a_worker_killed_mid_episode_is_retried_and_a_second_death_reported(ray_
 
 
 def test_a_worker_node_lost_mid_sweep_is_survived(ray_cluster, tmp_path):
-    # Every worker starts now (none warm from earlier tests), so each of the three CPUs,
-    # the new node's too, gets one of the first three episodes.
-    release_idle_warm_workers(ray_cluster.ray)
+    ray = ray_cluster.ray
+    release_idle_warm_workers(ray)
     extra = ray_cluster.add_worker(1)
+    executor = RayExecutor(ray_cluster.address)
+    assert executor.cluster_cpus() == 3
+    # A first run leaves a warm worker on each of the three CPUs, the new node's too, so the
+    # sweep below starts its first three episodes at once, one on the node that is lost.
+    run_episodes([EpisodeSpec("lab02", "outer", seed=k, duration=0.5) for k in range(3)],
+                 executor=RayExecutor(ray_cluster.address))
+    ray.get([worker.ready.remote() for worker in warm_workers(ray).values()], timeout=60)
+    assert len(warm_workers(ray)) == 3
     started = tmp_path / "started"
     started.mkdir()
     specs = [EpisodeSpec("lab02", start, seed=seed, duration=30.0,
                          controller=f"{__name__}:SlowStanding", params={"folder": str(started)})
              for start in ("outer", "inner") for seed in range(2)]
-    executor = RayExecutor(ray_cluster.address)
-    assert executor.cluster_cpus() == 3
     killer = threading.Thread(target=lambda: (_wait_for_files(started, 3),
                                               ray_cluster.kill_worker(extra)))
     killer.start()
@@ -217,7 +222,8 @@ def test_a_worker_node_lost_mid_sweep_is_survived(ray_cluster, tmp_path):
 def test_a_cluster_without_cpus_ends_the_sweep_with_errors_not_a_hang(ray_cluster, tmp_path):
     started = tmp_path / "started"
     started.mkdir()
-    specs = [EpisodeSpec("lab02", "outer", seed=seed, duration=30.0,
+    # Long enough (2,400 steps of 3 ms) that the node is lost mid-episode on a loaded machine.
+    specs = [EpisodeSpec("lab02", "outer", seed=seed, duration=120.0,
                          controller=f"{__name__}:SlowStanding", params={"folder": str(started)})
              for seed in range(3)]
     (node,) = ray_cluster.workers
