@@ -187,7 +187,7 @@ class RayExecutor:
         return f"{where}: {self.cluster_cpus()} CPUs on {nodes} node(s)"
 
     def workers(self, episodes: int) -> int:
-        """Episodes that can run at once: the cluster's CPUs (each task takes one)."""
+        """Episodes that can run at once: the cluster's CPUs (each worker takes one)."""
         return max(1, min(self.cluster_cpus(), episodes))
 
     # --- running -------------------------------------------------------------------------
@@ -351,8 +351,9 @@ class _WorkerSet:
         self._key = worker_key(executor.runtime_env)
         self.ready: list[Any] = []  # started, alive
         self.starting: dict[Any, Any] = {}  # ready() ref -> worker
-        self._node: dict[Any, str | None] = {}  # worker's actor id -> node id; all members
-        self._handles: dict[Any, Any] = {}  # actor id -> worker
+        # actor id -> node id, kept after a worker is discarded (its loss message asks)
+        self._node: dict[Any, str | None] = {}
+        self._handles: dict[Any, Any] = {}  # actor id -> worker: the members
         self._failed_in_a_row = 0  # worker creations
         self.failure: str | None = None  # why no worker can be created
         self._checked, self._cpus = 0.0, 0
