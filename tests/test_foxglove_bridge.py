@@ -11,8 +11,11 @@ from __future__ import annotations
 import importlib
 import json
 import math
+import signal
+import socket
 import ssl
 import struct
+import subprocess
 import sys
 from pathlib import Path
 
@@ -32,6 +35,7 @@ from amr_common.foxglove_bridge import FoxgloveBridgeNode
 from amr_common.map_messages import occupancy_grid
 from amr_common.qos import LATCHED, scan_qos
 from amr_common.ros_conversions import laser_scan, seconds_to_time
+from tests.processes import terminate, wait_for
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "scripts"))
 
@@ -349,6 +353,88 @@ def test_a_taken_port_fails_configure_with_a_message(ros, bridge):
     second = ros.add(FoxgloveBridgeNode("second_bridge", context=ros.context,
                                         parameter_overrides=taken))
     assert second.trigger_configure() == TransitionCallbackReturn.FAILURE
+
+
+JS_CLIENT = Path(__file__).resolve().parent / "foxglove_js"
+
+
+@pytest.fixture(scope="session")
+def foxglove_js():
+    """tests/foxglove_js with its pinned packages (npm ci from the npm registry, once)."""
+    lock = JS_CLIENT / "package-lock.json"
+    stamp = JS_CLIENT / "node_modules" / ".amr-installed"
+    if not stamp.is_file() or stamp.read_text() != lock.read_text():
+        subprocess.run(["npm", "ci", "--no-audit", "--no-fund", "--loglevel=error"],
+                       cwd=JS_CLIENT, check=True, timeout=300)
+        stamp.write_text(lock.read_text())
+    return JS_CLIENT / "client.mjs"
+
+
+@pytest.mark.slow
+def test_foxgloves_own_javascript_client_decodes_and_publishes(ros, bridge, foxglove_js):
+    """@foxglove/ws-protocol's FoxgloveClient (foxglove.websocket.v1 only, as Lichtblick)."""
+    talker = ros.node("js_talker")
+    scans = talker.create_publisher(LaserScan, "/scan", scan_qos(5))
+    grids = talker.create_publisher(OccupancyGrid, "/map", LATCHED)
+    grids.publish(occupancy_grid([[0, 100], [-1, 0]], 0.05, (-1.0, 2.0), "map"))
+    talker.create_timer(0.05, lambda: scans.publish(laser_scan(
+        [0.5, math.nan, 2.0], stamp=seconds_to_time(7.25), frame_id="base_scan",
+        angle_min=-0.5, angle_increment=0.5, range_min=0.1, range_max=3.5, scan_time=0.05)))
+    poses = []
+    talker.create_subscription(PoseWithCovarianceStamped, "/initialpose", poses.append, 10)
+    client = subprocess.Popen(["node", str(foxglove_js), f"ws://127.0.0.1:{bridge.port}"],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        ros.spin_until(lambda: poses or client.poll() is not None, 30.0,
+                       "the JavaScript client's /initialpose")
+    finally:
+        terminate(client, 2.0)
+    out, err = client.communicate()
+    assert poses, f"exit {client.returncode}: {err}"
+    decoded = {line["topic"]: line["message"] for line in map(json.loads, out.splitlines()[:2])}
+    assert decoded["/scan"] == {"frame_id": "base_scan",
+                                "stamp": {"sec": 7, "nanosec": 250_000_000},
+                                "angle_min": -0.5, "angle_increment": 0.5,
+                                "ranges": [0.5, None, 2.0]}
+    assert decoded["/map"] == {"width": 2, "height": 2, "data": [0, 100, -1, 0]}
+    assert poses[0].header.frame_id == "map"
+    assert (poses[0].pose.pose.position.x, poses[0].pose.pose.position.y) == (0.75, -0.5)
+
+
+def free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("ending", [signal.SIGINT, signal.SIGKILL])
+def test_the_gate_process_ends_with_the_bridge(ending):
+    """Ctrl-C or a crash of the bridge's process: its gate process ends and frees the port."""
+    port = free_port()
+    bridge = subprocess.Popen([str(Path(sys.executable).parent / "amr_foxglove_bridge"),
+                               "--ros-args", "-p", "autostart:=true", "-p", f"port:={port}"],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        def opens() -> bool:
+            try:
+                with connect(f"ws://127.0.0.1:{port}", subprotocols=[SUBPROTOCOL], proxy=None,
+                             open_timeout=2.0):
+                    return True
+            except (OSError, InvalidHandshake):
+                return False
+
+        wait_for(opens, 60.0, "the bridge's WebSocket")
+        bridge.send_signal(ending)
+        bridge.wait(timeout=30.0)
+
+        def refused() -> bool:
+            with socket.socket() as probe:
+                return probe.connect_ex(("127.0.0.1", port)) != 0
+
+        wait_for(refused, 10.0, "the gate to stop listening")
+    finally:
+        terminate(bridge, 2.0)
 
 
 @pytest.mark.parametrize("script", ["run_sim", "run_robot"])
