@@ -164,6 +164,29 @@ def test_client_decodes_the_published_laser_scan_and_a_latched_map(ros, bridge, 
     assert list(grid.data) == [0, 100, -1, 0]
 
 
+@pytest.mark.slow
+def test_fifty_idle_clients_and_silent_sockets_leave_the_bridge_serving(ros, bridge):
+    """Clients that never read and sockets that never send a request cost the others nothing."""
+    idle = [connect(f"ws://127.0.0.1:{bridge.port}", subprotocols=[SUBPROTOCOL], proxy=None,
+                    open_timeout=10.0, legacy=True) for _ in range(50)]
+    silent = [socket.create_connection(("127.0.0.1", bridge.port)) for _ in range(20)]
+    talker = ros.node("busy_scan_talker")
+    scans = talker.create_publisher(LaserScan, "/scan", scan_qos(5))
+    talker.create_timer(0.05, lambda: scans.publish(laser_scan(
+        [1.0] * 360, stamp=seconds_to_time(1.0), frame_id="base_scan", angle_min=0.0,
+        angle_increment=0.0174, range_min=0.12, range_max=3.5, scan_time=0.05)))
+    client = FoxgloveClient(ros, bridge.port)
+    try:
+        client.subscribe("/scan", 5)
+        client.wait(lambda: len(client.messages.get(5, [])) >= 20, what="20 scans")
+    finally:
+        client.close()
+        for connection in idle:
+            connection.close()
+        for raw in silent:
+            raw.close()
+
+
 def initial_pose(x: float, y: float) -> PoseWithCovarianceStamped:
     pose = PoseWithCovarianceStamped()
     pose.header.frame_id = "map"
