@@ -84,10 +84,11 @@ def client_message_type(schema_name: str) -> tuple[str, type] | None:
 class FoxgloveBridgeNode(GuardedLifecycleNode):
     """Forwards the graph's topics to Foxglove clients and publishes what clients send.
 
-    Configure starts the WebSocket server; activate creates the work timer (discovery, client
-    requests) and the ROS subscriptions clients ask for; deactivate destroys the timer, every
-    ROS subscription and client publisher (the server and its clients stay); cleanup and
-    shutdown also stop the server (release()). Nothing is sent on the way down.
+    Configure starts the SDK's server (loopback, TLS) and the gate process in front of it on
+    host:port; activate creates the work timer (discovery, client requests) and the ROS
+    subscriptions clients ask for; deactivate destroys the timer, every ROS subscription and
+    client publisher (the servers and their clients stay); cleanup and shutdown also stop the
+    gate and the server (release()). Nothing is sent on the way down.
     """
 
     def __init__(self, node_name: str = "foxglove_bridge", **kwargs) -> None:
@@ -113,7 +114,7 @@ class FoxgloveBridgeNode(GuardedLifecycleNode):
 
     # --- lifecycle -------------------------------------------------------------------------
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Start the WebSocket server (FAILURE if the port is taken or the SDK is missing)."""
+        """Start the servers (FAILURE: port taken, origin malformed, SDK missing)."""
         p = {name: self.get_parameter(name).value for name in PARAMETERS}
         port = p["port"]
         if isinstance(port, bool) or not (isinstance(port, int) and 0 <= port <= 65535):
@@ -189,7 +190,7 @@ class FoxgloveBridgeNode(GuardedLifecycleNode):
         self._client_publishers.clear()
 
     def release(self) -> None:
-        """Stop the server (clients are disconnected) and forget every channel; sends nothing.
+        """Stop the gate and the server (clients leave), forget every channel; sends nothing.
 
         The timer, every ROS subscription and client publisher go first.
         """

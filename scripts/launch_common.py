@@ -63,8 +63,9 @@ def make_viewer_nodes(context, args, *, use_sim_time: bool = False) -> list:
         return []
     from amr_common.foxglove_bridge import FoxgloveBridgeNode
     values = {"port": args.foxglove_port, "host": args.foxglove_host,
-              "client_teleop": args.foxglove_teleop, "use_sim_time": use_sim_time}
-    if args.foxglove_origin:
+              "client_teleop": getattr(args, "foxglove_teleop", False),
+              "use_sim_time": use_sim_time}
+    if getattr(args, "foxglove_origin", None):
         values["allowed_origins"] = list(args.foxglove_origin)
     return [FoxgloveBridgeNode(context=context,
                                parameter_overrides=overrides_to_parameters(values))]

@@ -82,6 +82,9 @@ class FoxgloveClient:
         self.ros.spin_until(lambda: (self.poll(), condition())[1], timeout=timeout,
                             message=what)
 
+    def wait_for_server_info(self) -> None:
+        self.wait(lambda: self.server_info is not None, what="serverInfo")
+
     def subscribe(self, topic: str, subscription_id: int) -> dict:
         self.wait(lambda: topic in self.channels, what=f"{topic} to be advertised")
         channel = self.channels[topic]
@@ -135,7 +138,7 @@ def test_client_decodes_the_published_laser_scan_and_a_latched_map(ros, bridge, 
     client = FoxgloveClient(ros, bridge.port, subprotocol)
     try:
         assert client.socket.subprotocol == subprotocol  # the name the client offered
-        client.wait(lambda: client.server_info is not None, what="serverInfo")
+        client.wait_for_server_info()
         assert "clientPublish" in client.server_info["capabilities"]
         scan_channel = client.subscribe("/scan", 7)
         map_channel = client.subscribe("/map", 8)
@@ -195,21 +198,28 @@ def initial_pose(x: float, y: float) -> PoseWithCovarianceStamped:
     return pose
 
 
+def publish_until_received(client, channel: int, message, received: list,
+                           also: tuple = ()) -> None:
+    """Send `message` (and each of `also`: (channel, message)) until `received` has one."""
+    def arrived() -> bool:
+        for other_channel, other in also:
+            client.publish(other_channel, other)
+        client.publish(channel, message)
+        return bool(received)
+
+    client.wait(arrived, what=f"the client's message on channel {channel} in the graph")
+
+
 def test_client_publishes_an_initial_pose_into_the_graph(ros, bridge):
     listener = ros.node("initialpose_listener")
     received = []
     listener.create_subscription(PoseWithCovarianceStamped, "/initialpose", received.append, 10)
     client = FoxgloveClient(ros, bridge.port)
     try:
-        client.wait(lambda: client.server_info is not None, what="serverInfo")
+        client.wait_for_server_info()
         client.advertise(3, "/initialpose", "geometry_msgs/msg/PoseWithCovarianceStamped")
         pose = initial_pose(1.5, -0.25)
-
-        def arrived() -> bool:
-            client.publish(3, pose)
-            return bool(received)
-
-        client.wait(arrived, what="the client's /initialpose in the graph")
+        publish_until_received(client, 3, pose, received)
     finally:
         client.close()
     assert received[0] == pose
@@ -232,7 +242,7 @@ def test_a_web_page_of_another_origin_cannot_open_the_bridge(ros, bridge, origin
 def test_native_clients_the_foxglove_app_and_local_pages_open_the_bridge(ros, bridge, origin):
     client = FoxgloveClient(ros, bridge.port, origin=origin)
     try:
-        client.wait(lambda: client.server_info is not None, what="serverInfo")
+        client.wait_for_server_info()
     finally:
         client.close()
 
@@ -241,7 +251,7 @@ def test_an_origin_added_by_the_user_opens_the_bridge(ros):
     node = start_bridge(ros, allowed_origins=["https://lichtblick.example.org"])
     try:
         client = FoxgloveClient(ros, node.port, origin="https://lichtblick.example.org")
-        client.wait(lambda: client.server_info is not None, what="serverInfo")
+        client.wait_for_server_info()
         client.close()
         with pytest.raises(InvalidStatus):
             FoxgloveClient(ros, node.port, origin="https://other.example.org")
@@ -267,16 +277,6 @@ def test_the_sdk_server_behind_the_gate_cannot_be_opened_by_a_browser(ros, bridg
                 proxy=None, ssl=ssl.create_default_context())
 
 
-def publish_until_initial_pose_arrives(client, channel, pose, received, also=()) -> None:
-    def arrived() -> bool:
-        for other_channel, message in also:
-            client.publish(other_channel, message)
-        client.publish(channel, pose)
-        return bool(received)
-
-    client.wait(arrived, what="the client's /initialpose in the graph")
-
-
 def test_a_client_cannot_publish_outside_the_allow_list(ros, bridge):
     """/cmd_vel (it would drive the robot) and any other topic are refused; /initialpose goes."""
     listener = ros.node("allow_list_listener")
@@ -286,13 +286,13 @@ def test_a_client_cannot_publish_outside_the_allow_list(ros, bridge):
     listener.create_subscription(PoseStamped, "/some_topic", others.append, 10)
     client = FoxgloveClient(ros, bridge.port)
     try:
-        client.wait(lambda: client.server_info is not None, what="serverInfo")
+        client.wait_for_server_info()
         client.advertise(1, "/cmd_vel", "geometry_msgs/msg/Twist")
         client.advertise(2, "/some_topic", "geometry_msgs/msg/PoseStamped")
         client.advertise(3, "/initialpose", "geometry_msgs/msg/PoseWithCovarianceStamped")
         drive = Twist()
         drive.linear.x = 0.2
-        publish_until_initial_pose_arrives(client, 3, initial_pose(0.5, 0.5), poses,
+        publish_until_received(client, 3, initial_pose(0.5, 0.5), poses,
                                            also=[(1, drive), (2, PoseStamped())])
         for _ in range(10):  # the refused channels had every chance
             client.publish(1, drive)
@@ -313,16 +313,11 @@ def test_the_teleop_option_lets_a_client_publish_cmd_vel(ros):
     listener.create_subscription(Twist, "/cmd_vel", commands.append, 10)
     client = FoxgloveClient(ros, node.port)
     try:
-        client.wait(lambda: client.server_info is not None, what="serverInfo")
+        client.wait_for_server_info()
         client.advertise(1, "/cmd_vel", "geometry_msgs/Twist")  # Foxglove's short form
         drive = Twist()
         drive.angular.z = 0.5
-
-        def arrived() -> bool:
-            client.publish(1, drive)
-            return bool(commands)
-
-        client.wait(arrived, what="the teleop /cmd_vel in the graph")
+        publish_until_received(client, 1, drive, commands)
     finally:
         client.close()
         node.trigger_shutdown()
@@ -341,12 +336,12 @@ def test_a_schema_name_never_imports_a_module(ros, bridge, tmp_path, monkeypatch
     listener.create_subscription(PoseWithCovarianceStamped, "/initialpose", poses.append, 10)
     client = FoxgloveClient(ros, bridge.port)
     try:
-        client.wait(lambda: client.server_info is not None, what="serverInfo")
+        client.wait_for_server_info()
         client.advertise(1, "/initialpose", "amr_hostile_probe/msg/PoseWithCovarianceStamped")
         client.advertise(2, "/goal_pose", "amr_hostile_probe/PoseStamped")
         client.advertise(3, "/initialpose", "geometry_msgs/msg/PoseStamped")  # wrong type
         client.advertise(4, "/initialpose", "geometry_msgs/msg/PoseWithCovarianceStamped")
-        publish_until_initial_pose_arrives(client, 4, initial_pose(1.0, 2.0), poses,
+        publish_until_received(client, 4, initial_pose(1.0, 2.0), poses,
                                            also=[(1, initial_pose(9.0, 9.0))])
         ros.spin_for(0.3)
     finally:
@@ -361,11 +356,11 @@ def test_malformed_client_data_is_dropped(ros, bridge):
     listener.create_subscription(PoseWithCovarianceStamped, "/initialpose", poses.append, 10)
     client = FoxgloveClient(ros, bridge.port)
     try:
-        client.wait(lambda: client.server_info is not None, what="serverInfo")
+        client.wait_for_server_info()
         client.advertise(4, "/initialpose", "geometry_msgs/msg/PoseWithCovarianceStamped")
         for garbage in (b"", b"\x00\x01\x00\x00", b"\xff" * 7):
             client.socket.send(struct.pack("<BI", CLIENT_MESSAGE_DATA, 4) + garbage)
-        publish_until_initial_pose_arrives(client, 4, initial_pose(1.0, 2.0), poses)
+        publish_until_received(client, 4, initial_pose(1.0, 2.0), poses)
     finally:
         client.close()
     assert poses[0] == initial_pose(1.0, 2.0)
