@@ -58,6 +58,7 @@ ALLOWED_ORIGINS = ("allowed_origins", "WebSocket Origins allowed besides no Orig
                    "https://app.foxglove.dev, file:// and http(s)://localhost, 127.0.0.1, "
                    "[::1] (any port), e.g. ['https://lichtblick.example.org']")
 _WORK_PERIOD_S = 0.05  # how often the executor thread picks up the SDK's requests
+_MAX_PENDING_REQUESTS = 1000  # client messages beyond are dropped (clients' own data only)
 
 # What clients may publish: topic -> the types accepted there. Schema names are looked up in
 # this table (client_message_type), never imported.
@@ -160,7 +161,7 @@ class FoxgloveBridgeNode(GuardedLifecycleNode):
             server_listener=_Listener(self._requests), tls_cert=certificate, tls_key=key)
         self.sdk_port = self.server.port
         self.gate = FoxgloveGate(p["host"], p["port"], self.sdk_port, certificate, extra_origins,
-                                 on_refused=lambda text: self._requests.put(("refused", text)))
+                                 on_refused=self._log_refused_handshake)
         self.gate.start()
         self.port = self.gate.port
 
@@ -315,7 +316,8 @@ class FoxgloveBridgeNode(GuardedLifecycleNode):
         if self.server is not None:
             self.server.publish_status(text, self._foxglove.StatusLevel.Warning)
 
-    def _handle_refused(self, text: str) -> None:
+    def _log_refused_handshake(self, text: str) -> None:
+        """From the gate's report thread: logged at once (a flood is throttled, not queued)."""
         self.get_logger().warning(text, throttle_duration_sec=2.0)
 
     def _handle_unadvertise(self, client_id: int, channel_id: int) -> None:
@@ -358,7 +360,8 @@ class _Listener:
         self._requests.put(("unadvertise", client.id, client_channel_id))
 
     def on_message_data(self, client, client_channel_id: int, data: bytes) -> None:
-        self._requests.put(("data", client.id, client_channel_id, data))
+        if self._requests.qsize() < _MAX_PENDING_REQUESTS:  # a flood, or while inactive
+            self._requests.put(("data", client.id, client_channel_id, data))
 
 
 def main(args: list[str] | None = None) -> int:

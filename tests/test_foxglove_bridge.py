@@ -350,6 +350,25 @@ def test_a_schema_name_never_imports_a_module(ros, bridge, tmp_path, monkeypatch
     assert all(p.pose.pose.position.x == 1.0 for p in poses)
 
 
+def test_a_flood_of_client_messages_is_bounded_while_the_bridge_is_inactive(ros, bridge):
+    client = FoxgloveClient(ros, bridge.port)
+    try:
+        client.wait_for_server_info()
+        client.advertise(4, "/initialpose", "geometry_msgs/msg/PoseWithCovarianceStamped")
+        ros.spin_until(lambda: bridge._client_publishers, message="the client channel")
+        assert bridge.trigger_deactivate() == TransitionCallbackReturn.SUCCESS
+        for _ in range(5000):
+            client.publish(4, initial_pose(1.0, 2.0))
+        sizes = [-1, bridge._requests.qsize()]
+        while sizes[-1] != sizes[-2]:  # until the SDK has handed over all it will
+            ros.spin_for(0.3)
+            sizes.append(bridge._requests.qsize())
+        assert 500 <= sizes[-1] <= 1000
+        assert bridge.trigger_activate() == TransitionCallbackReturn.SUCCESS
+    finally:
+        client.close()
+
+
 def test_malformed_client_data_is_dropped(ros, bridge):
     listener = ros.node("malformed_listener")
     poses = []
