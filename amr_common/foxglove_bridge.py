@@ -7,13 +7,17 @@ foxglove_bridge's. Topics are found by name every `discovery_period` s (nodes th
 such as a particle filter or a planner, appear by themselves); a ROS subscription exists only
 while a Foxglove client subscribes to the topic (nothing is received otherwise), with a QoS
 matched to the publishers (best effort for /scan, transient local for /map and /tf_static).
-Client publishing ("2D Pose Estimate" -> /initialpose, "2D Goal Pose" -> /goal_pose, the Publish
-panel): CDR messages from the client are published as they are.
+Clients may publish only on an allow-list, each topic with its types from a fixed table (a
+schema name is looked up there, never imported): "2D Pose Estimate" -> /initialpose, "2D Goal
+Pose" -> /goal_pose, and /cmd_vel (the Teleop panel) only with `client_teleop`; a client's CDR
+message is published if it deserializes as that type. Each handshake passes the gate first
+(amr_common/foxglove_gate.py: known Origins only, both names of the protocol), which relays to
+the SDK's server on a loopback TLS port.
 
     .venv/bin/amr_foxglove_bridge --ros-args -p autostart:=true     # ws://127.0.0.1:8765
 
-The SDK calls the listener from its own thread: requests are queued and carried out by a timer
-in the executor's thread (rclpy entities are created and destroyed there only).
+The SDK and the gate call back from their own threads: requests are queued and carried out by a
+timer in the executor's thread (rclpy entities are created and destroyed there only).
 """
 from __future__ import annotations
 
@@ -21,8 +25,12 @@ import queue
 import sys
 from typing import Any
 
+from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
+from rclpy.parameter import Parameter
+from rclpy.serialization import deserialize_message
 
+from amr_common.foxglove_gate import FoxgloveGate, normalize_origin, self_signed_certificate
 from amr_common.introspection import UnknownTypeError, matched_qos, message_class
 from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.mcap_recorder import (
@@ -40,25 +48,59 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     "port": (8765, "WebSocket port (foxglove_bridge's 8765)"),
     "discovery_period": (1.0, "Seconds between looks for new topics"),
     "exclude_topics": (["/parameter_events"], "Topics never forwarded"),
-    "client_publish": (True, "Let Foxglove publish (2D Pose Estimate, 2D Goal Pose, ...)"),
+    "client_publish": (True, "Let Foxglove publish /initialpose and /goal_pose (2D Pose "
+                             "Estimate, 2D Goal Pose)"),
+    "client_teleop": (False, "Also let Foxglove publish /cmd_vel (the Teleop panel): a client "
+                             "then drives the robot"),
 }
+# A string array without a default (rclpy cannot type an empty list): declared on its own.
+ALLOWED_ORIGINS = ("allowed_origins", "WebSocket Origins allowed besides no Origin, "
+                   "https://app.foxglove.dev, file:// and http(s)://localhost, 127.0.0.1, "
+                   "[::1] (any port), e.g. ['https://lichtblick.example.org']")
 _WORK_PERIOD_S = 0.05  # how often the executor thread picks up the SDK's requests
+_MAX_PENDING_REQUESTS = 1000  # client messages beyond are dropped (clients' own data only)
+
+# What clients may publish: topic -> the types accepted there. Schema names are looked up in
+# this table (client_message_type), never imported.
+CLIENT_TOPICS = {
+    "/initialpose": ("geometry_msgs/msg/PoseWithCovarianceStamped",),
+    "/goal_pose": ("geometry_msgs/msg/PoseStamped",),
+}
+TELEOP_TOPICS = {"/cmd_vel": ("geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped")}
+
+
+def client_message_type(schema_name: str) -> tuple[str, type] | None:
+    """(full type name, class) of a client's schema name among the known ones, else None.
+
+    "geometry_msgs/msg/Twist" and Foxglove's short "geometry_msgs/Twist" are the same type.
+    """
+    from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped, Twist, TwistStamped
+    known = {f"geometry_msgs/msg/{c.__name__}": c
+             for c in (PoseStamped, PoseWithCovarianceStamped, Twist, TwistStamped)}
+    parts = schema_name.split("/")
+    full = "/".join([parts[0], "msg", parts[1]]) if len(parts) == 2 else schema_name
+    return (full, known[full]) if full in known else None
 
 
 class FoxgloveBridgeNode(GuardedLifecycleNode):
     """Forwards the graph's topics to Foxglove clients and publishes what clients send.
 
-    Configure starts the WebSocket server; activate creates the work timer (discovery, client
-    requests) and the ROS subscriptions clients ask for; deactivate destroys the timer, every
-    ROS subscription and client publisher (the server and its clients stay); cleanup and
-    shutdown also stop the server (release()). Nothing is sent on the way down.
+    Configure starts the SDK's server (loopback, TLS) and the gate process in front of it on
+    host:port; activate creates the work timer (discovery, client requests) and the ROS
+    subscriptions clients ask for; deactivate destroys the timer, every ROS subscription and
+    client publisher (the servers and their clients stay); cleanup and shutdown also stop the
+    gate and the server (release()). Nothing is sent on the way down.
     """
 
     def __init__(self, node_name: str = "foxglove_bridge", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
         # Numbers take ints for doubles (-p discovery_period:=2): amr_common.parameters.
         declare_parameters(self, PARAMETERS)
+        self.declare_parameter(ALLOWED_ORIGINS[0], Parameter.Type.STRING_ARRAY,
+                               ParameterDescriptor(description=ALLOWED_ORIGINS[1]))
         self.server = None
+        self.gate = None
+        self.port = self.sdk_port = None
         self._requests: queue.SimpleQueue = queue.SimpleQueue()
         self._reset()
 
@@ -67,13 +109,13 @@ class FoxgloveBridgeNode(GuardedLifecycleNode):
         self._unusable: set[str] = set()                  # topics whose type cannot be sent
         self._forwarding: dict[str, Any] = {}          # topic -> rclpy raw subscription
         self._subscribers: dict[str, int] = {}            # topic -> subscribed clients
-        self._client_publishers: dict[tuple[int, int], Any] = {}
+        self._client_publishers: dict[tuple[int, int], tuple[Any, type]] = {}
         self._timer = None
         self._ticks = 0
 
     # --- lifecycle -------------------------------------------------------------------------
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Start the WebSocket server (FAILURE if the port is taken or the SDK is missing)."""
+        """Start the servers (FAILURE: port taken, origin malformed, SDK missing)."""
         p = {name: self.get_parameter(name).value for name in PARAMETERS}
         port = p["port"]
         if isinstance(port, bool) or not (isinstance(port, int) and 0 <= port <= 65535):
@@ -85,24 +127,43 @@ class FoxgloveBridgeNode(GuardedLifecycleNode):
                                     f"(got {period!r})")
             return TransitionCallbackReturn.FAILURE
         try:
-            import foxglove
-            from foxglove.websocket import Capability
-            capabilities = [Capability.ClientPublish] if p["client_publish"] else []
-            self.server = foxglove.start_server(
-                name=f"amr ({self.get_fully_qualified_name()})", host=p["host"],
-                port=p["port"], capabilities=capabilities, supported_encodings=["cdr"],
-                server_listener=_Listener(self._requests))
+            extra_origins = frozenset(normalize_origin(o) for o in self.get_parameter_or(
+                ALLOWED_ORIGINS[0], Parameter(ALLOWED_ORIGINS[0], value=[])).value)
+        except ValueError as exc:
+            self.get_logger().error(f"configure failed: allowed_origins: {exc}")
+            return TransitionCallbackReturn.FAILURE
+        self._client_topics = {**CLIENT_TOPICS, **(TELEOP_TOPICS if p["client_teleop"] else {})}
+        try:
+            self._start_servers(p, extra_origins)
         except Exception as exc:  # port in use, bad host, SDK missing
             self.get_logger().error(f"configure failed: cannot start the Foxglove server on "
                                     f"{p['host']}:{p['port']}: {exc}")
+            self.release()
             return TransitionCallbackReturn.FAILURE
-        self._foxglove = foxglove
         self._exclude = set(p["exclude_topics"])
         self._discovery_ticks = max(1, round(period / _WORK_PERIOD_S))
-        self.port = self.server.port
-        self.get_logger().info(f"Foxglove WebSocket server on ws://{p['host']}:{self.port} "
-                               f"(open it in Foxglove: Open connection -> Foxglove WebSocket)")
+        self.get_logger().info(
+            f"Foxglove WebSocket server on ws://{p['host']}:{self.port} (open it in Foxglove: "
+            f"Open connection -> Foxglove WebSocket); clients may publish "
+            f"{', '.join(self._client_topics) if p['client_publish'] else 'nothing'}")
         return TransitionCallbackReturn.SUCCESS
+
+    def _start_servers(self, p: dict[str, Any], extra_origins: frozenset[str]) -> None:
+        """The SDK's server on a loopback TLS port, then the gate on host:port in front of it."""
+        import foxglove
+        from foxglove.websocket import Capability
+        self._foxglove = foxglove
+        certificate, key = self_signed_certificate()
+        capabilities = [Capability.ClientPublish] if p["client_publish"] else []
+        self.server = foxglove.start_server(
+            name=f"amr ({self.get_fully_qualified_name()})", host="127.0.0.1", port=0,
+            capabilities=capabilities, supported_encodings=["cdr"],
+            server_listener=_Listener(self._requests), tls_cert=certificate, tls_key=key)
+        self.sdk_port = self.server.port
+        self.gate = FoxgloveGate(p["host"], p["port"], self.sdk_port, certificate, extra_origins,
+                                 on_refused=self._log_refused_handshake)
+        self.gate.start()
+        self.port = self.gate.port
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Look for topics now and then every discovery_period; serve client requests."""
@@ -125,18 +186,21 @@ class FoxgloveBridgeNode(GuardedLifecycleNode):
         for subscription in self._forwarding.values():
             self.destroy_subscription(subscription)
         self._forwarding.clear()
-        for publisher in self._client_publishers.values():
+        for publisher, _ in self._client_publishers.values():
             self.destroy_publisher(publisher)
         self._client_publishers.clear()
 
     def release(self) -> None:
-        """Stop the server (clients are disconnected) and forget every channel; sends nothing.
+        """Stop the gate and the server (clients leave), forget every channel; sends nothing.
 
         The timer, every ROS subscription and client publisher go first.
         """
         self._release_ros_entities()
         for channel, _ in self._channels.values():
             channel.close()
+        if self.gate is not None:
+            self.gate.stop()
+            self.gate = None
         if self.server is not None:
             self.server.stop()
             self.server = None
@@ -219,23 +283,61 @@ class FoxgloveBridgeNode(GuardedLifecycleNode):
 
     def _handle_advertise(self, client_id: int, channel_id: int, topic: str, schema_name: str,
                           encoding: str) -> None:
-        if encoding != "cdr":
-            self.get_logger().warning(f"client channel {topic} uses encoding '{encoding}': only "
-                                      "cdr is published")
+        """A publisher for a client channel on an allowed topic with a known type."""
+        self._handle_unadvertise(client_id, channel_id)  # a channel id advertised again
+        refused = f"refused a client channel on {topic[:80]!r}"
+        accepted = self._client_topics.get(topic)
+        if accepted is None:
+            teleop = "" if "/cmd_vel" in self._client_topics else \
+                " (/cmd_vel only with --foxglove-teleop / client_teleop)"
+            self._refuse_channel(f"{refused}: clients may publish on "
+                                 f"{', '.join(self._client_topics)}{teleop}")
             return
-        publisher = self.create_publisher(message_class(schema_name), topic, RELIABLE_10)
-        self._client_publishers[(client_id, channel_id)] = publisher
-        self.get_logger().info(f"a Foxglove client publishes {schema_name} on {topic}")
+        known = client_message_type(schema_name)
+        if known is None or known[0] not in accepted:
+            self._refuse_channel(f"{refused}: schema {schema_name[:80]!r} is not "
+                                 f"{' or '.join(accepted)}")
+            return
+        if encoding != "cdr":
+            self._refuse_channel(f"{refused}: encoding {encoding[:20]!r} (only cdr is published)")
+            return
+        in_graph = dict(self.get_topic_names_and_types()).get(topic, [])
+        if in_graph and known[0] not in in_graph:
+            self._refuse_channel(f"{refused}: {known[0]}, but the graph carries "
+                                 f"{', '.join(in_graph)} there")
+            return
+        publisher = self.create_publisher(known[1], topic, RELIABLE_10)
+        self._client_publishers[(client_id, channel_id)] = (publisher, known[1])
+        self.get_logger().info(f"a Foxglove client publishes {known[0]} on {topic}")
+
+    def _refuse_channel(self, text: str) -> None:
+        """Tell the log and the clients (Foxglove lists it among its problems)."""
+        self.get_logger().warning(text, throttle_duration_sec=2.0)
+        if self.server is not None:
+            self.server.publish_status(text, self._foxglove.StatusLevel.Warning)
+
+    def _log_refused_handshake(self, text: str) -> None:
+        """From the gate's report thread: logged at once (a flood is throttled, not queued)."""
+        self.get_logger().warning(text, throttle_duration_sec=2.0)
 
     def _handle_unadvertise(self, client_id: int, channel_id: int) -> None:
-        publisher = self._client_publishers.pop((client_id, channel_id), None)
-        if publisher is not None:
-            self.destroy_publisher(publisher)
+        entry = self._client_publishers.pop((client_id, channel_id), None)
+        if entry is not None:
+            self.destroy_publisher(entry[0])
 
     def _handle_data(self, client_id: int, channel_id: int, data: bytes) -> None:
-        publisher = self._client_publishers.get((client_id, channel_id))
-        if publisher is not None:
-            publisher.publish(bytes(data))
+        entry = self._client_publishers.get((client_id, channel_id))
+        if entry is None:
+            return  # a refused or unknown channel
+        publisher, message_type = entry
+        try:
+            message = deserialize_message(bytes(data), message_type)
+        except Exception:  # rclpy raises its own error types for a malformed CDR buffer
+            self.get_logger().warning(f"dropped a malformed {message_type.__name__} from a "
+                                      f"Foxglove client on {publisher.topic_name}",
+                                      throttle_duration_sec=2.0)
+            return
+        publisher.publish(message)
 
 
 class _Listener:
@@ -258,7 +360,8 @@ class _Listener:
         self._requests.put(("unadvertise", client.id, client_channel_id))
 
     def on_message_data(self, client, client_channel_id: int, data: bytes) -> None:
-        self._requests.put(("data", client.id, client_channel_id, data))
+        if self._requests.qsize() < _MAX_PENDING_REQUESTS:  # a flood, or while inactive
+            self._requests.put(("data", client.id, client_channel_id, data))
 
 
 def main(args: list[str] | None = None) -> int:

@@ -1,15 +1,17 @@
 """Command-line checks the scripts share: negative pose values, domain ids, output paths.
 
-Output paths are checked before a run instead of failing after it.
+Output paths are checked before a run instead of failing after it; numbers (number_argument)
+and ROS names (ros_name_argument) as argparse types.
 """
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import re
 import sys
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 REPO = Path(__file__).resolve().parent.parent
 if str(REPO) not in sys.path:  # run from a checkout without installing
@@ -47,6 +49,44 @@ def domain_id_argument(text: str) -> int:
         return check_domain_id(text, "the domain id")
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def number_argument(kind: type = float, minimum: float = 0.0, *, above: bool = False,
+                    maximum: float = math.inf) -> Callable[[str], float]:
+    """An argparse type: a finite `kind` (int or float) >= minimum (> if `above`), <= maximum.
+
+    -1, nan or inf for a timeout or a count become a one-line error before anything runs.
+    """
+    def parse(text: str) -> float:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"'{text}' is not {'an integer' if kind is int else 'a number'}") from None
+        low = f"> {minimum:g}" if above else f">= {minimum:g}"
+        if not (math.isfinite(value) and (value > minimum if above else value >= minimum)
+                and value <= maximum):
+            high = "" if maximum == math.inf else f" and <= {maximum:g}"
+            raise argparse.ArgumentTypeError(f"must be {low}{high} (got '{text}')")
+        return value
+
+    return parse
+
+
+def ros_name_argument(what: str) -> Callable[[str], str]:
+    """An argparse type: a ROS topic (or node, as its services' prefix) name, made absolute."""
+    def parse(text: str) -> str:
+        from rclpy.exceptions import InvalidTopicNameException
+        from rclpy.validate_full_topic_name import validate_full_topic_name
+        name = text if text.startswith("/") else "/" + text
+        try:
+            validate_full_topic_name(name)
+        except InvalidTopicNameException as exc:
+            reason = str(exc).split(":", 1)[-1].split("\n")[0].strip().rstrip(":")
+            raise argparse.ArgumentTypeError(f"'{text}' is not a {what} name: {reason}") from None
+        return name
+
+    return parse
 
 
 def add_domain_id_option(parser: argparse.ArgumentParser,

@@ -29,13 +29,29 @@ def add_controller_options(parser, params_file_default, params_file_help: str) -
 
 
 def add_foxglove_options(parser) -> None:
-    """--foxglove, --foxglove-port, --foxglove-host: a live Foxglove view (amr_foxglove_bridge)."""
+    """--foxglove and its --foxglove-* options: a live Foxglove view (amr_foxglove_bridge)."""
     parser.add_argument("--foxglove", action="store_true", help="serve the graph's topics to "
                         "Foxglove (Open connection -> Foxglove WebSocket -> ws://HOST:PORT)")
     parser.add_argument("--foxglove-port", type=int, default=8765,
                         help="Foxglove WebSocket port (default 8765, as foxglove_bridge)")
     parser.add_argument("--foxglove-host", default="127.0.0.1", help="address to listen on "
                         "(default 127.0.0.1: this machine only; 0.0.0.0 for other machines)")
+    parser.add_argument("--foxglove-origin", action="append", default=[], type=_origin,
+                        metavar="ORIGIN", help="also accept WebSocket handshakes from this web "
+                        "page origin, e.g. https://lichtblick.example.org (repeatable; built in: "
+                        "none, https://app.foxglove.dev, file://, http(s)://localhost)")
+    parser.add_argument("--foxglove-teleop", action="store_true", help="let Foxglove clients "
+                        "publish /cmd_vel (the Teleop panel drives the robot)")
+
+
+def _origin(text: str) -> str:
+    import argparse
+
+    from amr_common.foxglove_gate import normalize_origin
+    try:
+        return normalize_origin(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def make_viewer_nodes(context, args, *, use_sim_time: bool = False) -> list:
@@ -46,8 +62,15 @@ def make_viewer_nodes(context, args, *, use_sim_time: bool = False) -> list:
     if not getattr(args, "foxglove", False):
         return []
     from amr_common.foxglove_bridge import FoxgloveBridgeNode
-    return [FoxgloveBridgeNode(context=context, parameter_overrides=overrides_to_parameters({
-        "port": args.foxglove_port, "host": args.foxglove_host, "use_sim_time": use_sim_time}))]
+    values = {"port": args.foxglove_port, "host": args.foxglove_host,
+              "client_teleop": getattr(args, "foxglove_teleop", False),
+              "use_sim_time": use_sim_time}
+    if getattr(args, "foxglove_origin", None):
+        values["allowed_origins"] = list(args.foxglove_origin)
+    return [FoxgloveBridgeNode(context=context,
+                               parameter_overrides=overrides_to_parameters(values))]
+
+
 def add_localization_options(parser) -> None:
     """--localize and the particle filter's --pf-param NAME:=VALUE, shared by the run scripts."""
     parser.add_argument("--localize", action="store_true", help="also run the particle filter "
@@ -77,6 +100,9 @@ def check_common_options(parser, args) -> None:
     if getattr(args, "foxglove_port", 0) is not None and \
             not 0 <= getattr(args, "foxglove_port", 0) <= 65535:
         parser.error("--foxglove-port must be within 0-65535")
+    if (getattr(args, "foxglove_teleop", False) or getattr(args, "foxglove_origin", [])) \
+            and not args.foxglove:
+        parser.error("--foxglove-teleop and --foxglove-origin need --foxglove")
     try:
         args.overrides = parse_overrides(args.param)
         args.pf_overrides = parse_overrides(getattr(args, "pf_param", []))

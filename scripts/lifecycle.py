@@ -7,7 +7,7 @@
   .venv/bin/python scripts/lifecycle.py set wall_follower deactivate
 Transitions by label (configure, activate, deactivate, cleanup, shutdown) or id. Uses the
 current ROS_DOMAIN_ID (or --domain-id). Exit code 1 when the node does not answer within
---timeout or refuses the transition.
+--timeout or refuses the transition, 2 for a mistake in the command line.
 """
 from __future__ import annotations
 
@@ -17,7 +17,12 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from amr_common.introspection import GraphProbe  # noqa: E402
-from cli_checks import add_domain_id_option, use_domain_id  # noqa: E402
+from cli_checks import (  # noqa: E402
+    add_domain_id_option,
+    number_argument,
+    ros_name_argument,
+    use_domain_id,
+)
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -26,19 +31,18 @@ def parse_args(argv=None) -> argparse.Namespace:
                                      epilog=__doc__.split("\n", 1)[1])
     add_domain_id_option(parser)
     timeout = argparse.ArgumentParser(add_help=False)
-    timeout.add_argument("--timeout", type=float, default=5.0,
-                         help="seconds to wait for the node's services (default 5)")
+    timeout.add_argument("--timeout", type=number_argument(float, 0.0, above=True, maximum=3600),
+                         default=5.0, help="seconds to wait for the node's services (default 5)")
     commands = parser.add_subparsers(dest="command", required=True)
     commands.add_parser("nodes", help="nodes offering lifecycle services", parents=[timeout])
+    node_name = ros_name_argument("node")
     for name, text in (("get", "current state"), ("list", "available transitions")):
-        commands.add_parser(name, help=text, parents=[timeout]).add_argument("node")
+        commands.add_parser(name, help=text, parents=[timeout]).add_argument("node",
+                                                                             type=node_name)
     setter = commands.add_parser("set", help="trigger a transition", parents=[timeout])
-    setter.add_argument("node")
+    setter.add_argument("node", type=node_name)
     setter.add_argument("transition", help="label (configure, activate, ...) or id")
-    args = parser.parse_args(argv)
-    if getattr(args, "node", None):
-        args.node = args.node if args.node.startswith("/") else "/" + args.node
-    return args
+    return parser.parse_args(argv)
 
 
 class LifecycleClient(GraphProbe):

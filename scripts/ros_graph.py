@@ -21,7 +21,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from graph_drawing import RosGraph, draw, to_dot  # noqa: E402
 
-from cli_checks import add_domain_id_option, use_domain_id  # noqa: E402
+from cli_checks import (  # noqa: E402
+    add_domain_id_option,
+    check_output_file,
+    number_argument,
+    use_domain_id,
+)
 
 DEBUG_TOPICS = ("/rosout", "/parameter_events")
 
@@ -34,13 +39,19 @@ def parse_args(argv=None) -> argparse.Namespace:
                         help="FILE.png, FILE.svg or FILE.dot (repeatable)")
     parser.add_argument("--qos", action="store_true", help="label arrows with their QoS")
     parser.add_argument("--all", action="store_true", help="also debug topics and hidden nodes")
-    parser.add_argument("--wait", type=float, default=3.0, help="seconds of discovery (default 3)")
+    parser.add_argument("--wait", type=number_argument(float, 0.0, maximum=3600), default=3.0,
+                        help="seconds of discovery (default 3)")
     parser.add_argument("--title", default=None, help="title above the picture")
     add_domain_id_option(parser)
     args = parser.parse_args(argv)
     for out in args.out:
         if Path(out).suffix.lower() not in (".png", ".svg", ".dot"):
             parser.error(f"--out {out}: the file must end in .png, .svg or .dot")
+        try:  # before the discovery: the picture and the DOT file beside it
+            for path in {Path(out), Path(out).with_suffix(".dot")}:
+                check_output_file(path, "--out")
+        except ValueError as exc:
+            parser.error(str(exc))
     return args
 
 
@@ -114,7 +125,13 @@ def main(argv=None) -> int:
         print(f"ros_graph: no node found on ROS_DOMAIN_ID="
               f"{os.environ.get('ROS_DOMAIN_ID', '0')} within {args.wait} s", file=sys.stderr)
         return 1
-    for path in write_outputs(graph, args.out, args.qos, args.title):
+    try:
+        written = write_outputs(graph, args.out, args.qos, args.title)
+    except OSError as exc:  # e.g. the disk filled up during the discovery
+        print(f"ros_graph: cannot write {exc.filename or ''}: {exc.strerror or exc}",
+              file=sys.stderr)
+        return 1
+    for path in written:
         print(f"ros_graph: wrote {path}")
     print(f"ros_graph: {len(graph.nodes)} nodes, {len(graph.topics)} topics, "
           f"{len(graph.publishes)} publisher and {len(graph.subscribes)} subscriber edges")

@@ -9,7 +9,8 @@
 Types are resolved at run time from the graph; the subscription's QoS is matched to the
 publishers (best effort for a LiDAR, transient local for maps). Set ROS_DOMAIN_ID (or
 --domain-id) and, for a robot on the LAN, leave discovery at its default. Exit code 1 when the
-topic does not appear within --timeout.
+topic does not appear within --timeout; 2 for a mistake in the command line, including a --type
+that is not the topic's.
 """
 from __future__ import annotations
 
@@ -31,7 +32,12 @@ from amr_common.introspection import (  # noqa: E402
     to_data,
     to_yaml,
 )
-from cli_checks import add_domain_id_option, use_domain_id  # noqa: E402
+from cli_checks import (  # noqa: E402
+    add_domain_id_option,
+    number_argument,
+    ros_name_argument,
+    use_domain_id,
+)
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -43,29 +49,48 @@ def parse_args(argv=None) -> argparse.Namespace:
     listing = commands.add_parser("list", help="topics of the graph")
     listing.add_argument("-t", "--show-types", action="store_true")
     info = commands.add_parser("info", help="type, publishers and subscribers of a topic")
-    info.add_argument("topic")
     info.add_argument("-v", "--verbose", action="store_true", help="every endpoint with QoS")
     echo = commands.add_parser("echo", help="print messages as YAML (or CSV)")
-    echo.add_argument("topic")
-    echo.add_argument("--once", action="store_true", help="print one message and exit")
-    echo.add_argument("--count", type=int, default=0, help="exit after N messages")
+    how_many = echo.add_mutually_exclusive_group()
+    how_many.add_argument("--once", action="store_true", help="print one message and exit")
+    how_many.add_argument("--count", type=number_argument(int, 1), default=None,
+                          help="exit after N messages (default: until Ctrl-C)")
     echo.add_argument("--csv", action="store_true", help="a header row, then a row per message")
     echo.add_argument("--no-arr", action="store_true", help="print array lengths, not values")
     hz = commands.add_parser("hz", help="message rate")
-    hz.add_argument("topic")
-    hz.add_argument("--window", type=int, default=100, help="messages in the statistics")
-    hz.add_argument("--period", type=float, default=1.0, help="seconds between reports")
+    hz.add_argument("--window", type=number_argument(int, 1), default=100,
+                    help="messages in the statistics")
+    hz.add_argument("--period", type=number_argument(float, 0.0, above=True), default=1.0,
+                    help="seconds between reports")
     hz.add_argument("--once", action="store_true", help="print one report and exit")
     for sub in (info, echo, hz):
-        sub.add_argument("--timeout", type=float, default=5.0,
+        sub.add_argument("topic", type=ros_name_argument("topic"))
+        sub.add_argument("--timeout", type=number_argument(float, 0.0), default=5.0,
                          help="seconds to wait for the topic to appear (default 5)")
-        sub.add_argument("--type", default=None, help="message type, if no publisher exists")
-    listing.add_argument("--timeout", type=float, default=3.0,
+    for sub in (echo, hz):
+        sub.add_argument("--type", default=None, type=_message_type,
+                         help="message type, if no publisher exists yet (must be the topic's)")
+    listing.add_argument("--timeout", type=number_argument(float, 0.0), default=3.0,
                          help="seconds of discovery before listing (default 3)")
-    args = parser.parse_args(argv)
-    if args.command in ("echo", "hz", "info") and not args.topic.startswith("/"):
-        args.topic = "/" + args.topic
-    return args
+    return parser.parse_args(argv)
+
+
+def _message_type(text: str) -> str:
+    """--type as "pkg/msg/Type", if this environment has it (a one-line error if not)."""
+    try:
+        message_class(text)
+    except UnknownTypeError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    parts = text.strip().split("/")
+    return "/".join([parts[0], "msg", parts[1]]) if len(parts) == 2 else text.strip()
+
+
+class ToolError(Exception):
+    """A one-line message for stderr and the exit code."""
+
+    def __init__(self, message: str, code: int = 1) -> None:
+        super().__init__(message)
+        self.code = code
 
 
 class Graph(GraphProbe):
@@ -89,21 +114,24 @@ class Graph(GraphProbe):
             self.spin(0.05)
 
 
-def resolve_type(graph: Graph, args) -> type | None:
+def resolve_type(graph: Graph, args) -> type:
+    """The topic's message class; ToolError if it is missing or --type is not its type."""
     types = graph.wait_for(args.topic, args.timeout)
-    type_name = args.type or (types[0] if types else None)
-    if type_name is None:
-        print(f"topic {args.topic} not found within {args.timeout} s (try --type or a longer "
-              f"--timeout)", file=sys.stderr)
-        return None
-    if types and len(types) > 1 and not args.type:
-        print(f"topic {args.topic} has several types {types}: using {type_name}",
+    if args.type is not None:
+        if types and args.type not in types:  # a subscription of another type hears nothing
+            raise ToolError(f"topic {args.topic} carries {', '.join(types)}, not --type "
+                            f"{args.type}", 2)
+        return message_class(args.type)
+    if not types:
+        raise ToolError(f"topic {args.topic} not found within {args.timeout:g} s (try --type "
+                        "or a longer --timeout)")
+    if len(types) > 1:
+        print(f"topic {args.topic} has several types {types}: using {types[0]}",
               file=sys.stderr)
     try:
-        return message_class(type_name)
+        return message_class(types[0])
     except UnknownTypeError as exc:
-        print(str(exc), file=sys.stderr)
-        return None
+        raise ToolError(str(exc)) from None
 
 
 def run_list(graph: Graph, args) -> int:
@@ -116,8 +144,7 @@ def run_list(graph: Graph, args) -> int:
 def run_info(graph: Graph, args) -> int:
     types = graph.wait_for(args.topic, args.timeout)
     if not types:
-        print(f"topic {args.topic} not found within {args.timeout} s", file=sys.stderr)
-        return 1
+        raise ToolError(f"topic {args.topic} not found within {args.timeout:g} s")
     node = graph.node
     if args.verbose:  # node names come with a later discovery message than the endpoints
         end = time.monotonic() + args.timeout
@@ -153,8 +180,6 @@ def _abbreviate_arrays(data):
 
 def run_echo(graph: Graph, args) -> int:
     msg_type = resolve_type(graph, args)
-    if msg_type is None:
-        return 1
     limit = 1 if args.once else args.count
     printed = 0
     writer = csv.writer(sys.stdout) if args.csv else None
@@ -179,7 +204,7 @@ def run_echo(graph: Graph, args) -> int:
 
     qos = matched_qos(graph.node.get_publishers_info_by_topic(args.topic))
     graph.node.create_subscription(msg_type, args.topic, show, qos)
-    while graph.ok() and not (limit and printed >= limit):
+    while graph.ok() and not (limit is not None and printed >= limit):
         graph.executor.spin_once(timeout_sec=0.1)
     return 0
 
@@ -196,8 +221,6 @@ def rate_statistics(arrivals: list[float]) -> tuple[float, float, float, float] 
 
 def run_hz(graph: Graph, args) -> int:
     msg_type = resolve_type(graph, args)
-    if msg_type is None:
-        return 1
     arrivals: list[float] = []
 
     def arrived(_data) -> None:
@@ -231,6 +254,9 @@ def main(argv=None) -> int:
     try:
         return {"list": run_list, "info": run_info, "echo": run_echo,
                 "hz": run_hz}[args.command](graph, args)
+    except ToolError as exc:
+        print(f"topic.py: {exc}", file=sys.stderr)
+        return exc.code
     except KeyboardInterrupt:
         return 0
     finally:

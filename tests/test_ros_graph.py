@@ -1,6 +1,7 @@
 """scripts/ros_graph.py finds the nodes and edges of a simulation and draws them."""
 from __future__ import annotations
 
+import subprocess
 import sys
 
 import pytest
@@ -41,3 +42,31 @@ def test_ros_graph_finds_the_simulation_and_draws_it(ros, tmp_path):
     assert "<svg" in (tmp_path / "g.svg").read_text()[:400]
     dot = (tmp_path / "g.dot").read_text()
     assert '"n:/amr_simulator" -> "t:/scan"' in dot and '"t:/scan" -> "n:/wall_follower"' in dot
+
+
+@pytest.mark.parametrize("mistake", ["--wait -1", "--out FILE/g.png"])
+def test_mistakes_that_ended_in_tracebacks_are_one_line_errors(tmp_path, mistake):
+    (tmp_path / "FILE").write_text("a regular file")
+    argv = ["--out", str(tmp_path / "g.png"), "--wait", "0"]
+    option, value = mistake.split()
+    argv += [option, str(tmp_path / value) if option == "--out" else value]
+    process = subprocess.run([sys.executable, "scripts/ros_graph.py", *argv], cwd=REPO,
+                             capture_output=True, text=True, timeout=60)
+    assert process.returncode == 2 and "Traceback" not in process.stderr
+    assert process.stderr.splitlines()[-1].startswith("ros_graph.py: error: ")
+    assert not (tmp_path / "g.png").exists()  # nothing ran
+
+
+@pytest.mark.parametrize("argv", [
+    ["--wait", "nan"], ["--wait", "inf"], ["--wait", "1e9"], ["--out", "{d}/folder.png"],
+    ["--out", "{d}/picture.png"], ["--out", "{d}/g.txt"]])
+def test_wait_and_out_are_checked_before_the_discovery(tmp_path, argv, capsys):
+    (tmp_path / "folder.png").mkdir()
+    (tmp_path / "picture.dot").mkdir()  # where picture.png's DOT file would go
+    argv = [a.format(d=tmp_path) for a in argv]
+    if "--out" not in argv:
+        argv += ["--out", str(tmp_path / "g.png")]
+    with pytest.raises(SystemExit) as stopped:
+        ros_graph.parse_args(argv)
+    assert stopped.value.code == 2
+    assert ": error: " in capsys.readouterr().err.splitlines()[-1]

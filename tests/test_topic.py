@@ -14,10 +14,10 @@ from sensor_msgs.msg import LaserScan
 from amr_common.map_messages import occupancy_grid
 from amr_common.qos import LATCHED, RELIABLE_10, scan_qos
 from amr_common.ros_conversions import laser_scan, odometry_message, seconds_to_time
-from tests.processes import REPO, run_script_while_spinning
+from tests.processes import REPO, run_script_while_spinning, terminate
 
 sys.path.insert(0, str(REPO / "scripts"))
-from topic import rate_statistics  # noqa: E402
+from topic import parse_args, rate_statistics  # noqa: E402
 
 
 @pytest.fixture
@@ -84,3 +84,42 @@ def test_topic_tool_reports_a_missing_topic(ros):
                               "--timeout", "0.5"], capture_output=True, text=True,
                              cwd=REPO, timeout=30)
     assert process.returncode == 1 and "/nobody not found" in process.stderr
+
+
+@pytest.mark.parametrize("argv", [
+    ["echo", "/scan", "--count", "-1"], ["echo", "/scan", "--count", "0"],
+    ["echo", "/scan", "--count", "2.5"], ["echo", "/scan", "--once", "--count", "3"],
+    ["echo", "/scan", "--timeout", "-1"], ["echo", "/scan", "--timeout", "nan"],
+    ["info", "/scan", "--timeout", "inf"], ["list", "--timeout", "-0.5"],
+    ["hz", "/scan", "--period", "0"], ["hz", "/scan", "--period", "-1"],
+    ["hz", "/scan", "--window", "0"], ["echo", "/a b"], ["hz", "/scan/"],
+    ["echo", "/scan", "--type", "sensor_msgs/msg/Nope"], ["echo", "/scan", "--type", "x"],
+    ["info", "/scan", "--type", "sensor_msgs/msg/LaserScan"]])
+def test_command_line_mistakes_are_one_line_errors(argv, capsys):
+    with pytest.raises(SystemExit) as stopped:
+        parse_args(argv)
+    assert stopped.value.code == 2
+    error = capsys.readouterr().err.splitlines()[-1]
+    assert "error: " in error, error
+
+
+def test_topic_names_are_made_absolute_and_types_complete():
+    args = parse_args(["echo", "scan", "--type", "sensor_msgs/LaserScan", "--count", "2"])
+    assert (args.topic, args.type, args.count) == ("/scan", "sensor_msgs/msg/LaserScan", 2)
+
+
+@pytest.mark.slow
+def test_echo_with_a_type_the_topic_does_not_carry_fails_at_once(ros, talker):
+    """It waited forever (a subscription of another type never hears the publisher)."""
+    process = subprocess.Popen([sys.executable, "scripts/topic.py", "echo", "/probe_scan",
+                                "--type", "std_msgs/msg/String"], stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True, cwd=REPO)
+    try:
+        ros.spin_until(lambda: process.poll() is not None, timeout=30.0,
+                       message="topic.py echo to give up")
+    finally:
+        terminate(process, 2.0)
+    _, err = process.communicate()
+    assert process.returncode == 2
+    assert err.strip() == ("topic.py: topic /probe_scan carries sensor_msgs/msg/LaserScan, not "
+                           "--type std_msgs/msg/String")
