@@ -56,6 +56,7 @@ from amr_common.coverage_grid import GridTooLargeError, check_grid_size
 from amr_common.map_raster import FREE, OCCUPIED, UNKNOWN, Raster
 from amr_common.occupancy_grid import OccupancyGrid
 from amr_common.world_file import (
+    NAV2_MAP_KEYS,
     PROJECT_KEYS,
     WorldError,
     number_value,
@@ -65,7 +66,7 @@ from amr_common.world_file import (
 )
 
 MODES = ("trinary", "scale", "raw")
-NAV2_KEYS = ("image", "mode", "resolution", "origin", "negate", "occupied_thresh", "free_thresh")
+NAV2_KEYS = NAV2_MAP_KEYS  # what map_server reads (amr_common.world_file dispatches on them)
 # map_saver's trinary pixels and the thresholds it writes with them.
 OCCUPIED_PIXEL, FREE_PIXEL, UNKNOWN_PIXEL = 0, 254, 205
 SAVED_OCCUPIED_THRESH, SAVED_FREE_THRESH = 0.65, 0.196
@@ -109,6 +110,15 @@ def read_map(path: str | Path) -> MapFile:
 
 def map_from_yaml(data: dict[str, Any], path: Path) -> MapFile:
     """The MapFile of a parsed map YAML `data` read from `path` (loads the image)."""
+    try:
+        return _map_from_yaml(data, path)
+    except MapFileError:
+        raise
+    except WorldError as exc:  # the shared value checks of world_file
+        raise MapFileError(str(exc)) from None
+
+
+def _map_from_yaml(data: dict[str, Any], path: Path) -> MapFile:
     missing = [k for k in NAV2_KEYS if k != "mode" and k not in data]
     if missing:
         raise MapFileError(f"{path}: missing key(s) {', '.join(missing)} (a Nav2 map YAML "

@@ -1,7 +1,7 @@
 """World files: the project's YAML worlds and the course's map JSON, read into a WorldFile.
 
 Three file formats load with `World.load(name_or_path)` (through `read_world_file`); the third,
-a Nav2 map_server map YAML (it has an `image` key), is read by amr_common.map_file:
+a Nav2 map_server map YAML (it has `image`, `resolution`, ...), is read by amr_common.map_file:
 
 1. The project's own YAML world file (bundled ones live in amr_common/worlds/<name>.yaml and
    load by name, e.g. `World.load("lab02")`; any other file loads by path)::
@@ -32,7 +32,7 @@ a Nav2 map_server map YAML (it has an `image` key), is read by amr_common.map_fi
    It has no starts; pass a start pose (x, y, theta) explicitly. Its coverage grid (0.4 m)
    starts at the boundary's lower-left corner.
 
-3. A Nav2 map_server map YAML (`image`, `resolution`, `origin`, ...; what SLAM and map_saver
+3. A Nav2 map_server map YAML (`image`, `resolution`, `origin`, ...: what SLAM and map_saver
    write), by path: its free cells are the free space, every other cell is wall. It may carry
    the keys name, description, cell_size, grid_origin, starts, goals and goal as above (Nav2
    ignores them); scripts/world_to_map.py writes any world as one.
@@ -75,6 +75,9 @@ _WorldYamlLoader.add_implicit_resolver(
     list("-+0123456789."))
 
 
+# The keys of a Nav2 map YAML (amr_common.map_file); a world YAML has none of them.
+NAV2_MAP_KEYS = ("image", "mode", "resolution", "origin", "negate", "occupied_thresh",
+                 "free_thresh")
 # Keys a world YAML shares with a map YAML (a map's extras: amr_common.map_file).
 PROJECT_KEYS = frozenset({"name", "description", "cell_size", "grid_origin", "starts", "goals",
                           "goal"})
@@ -112,7 +115,8 @@ class WorldFile:
 def read_world_file(name_or_path: str | Path) -> WorldFile | MapFile:
     """Read a bundled world by name ("lab02") or a .yaml/.yml/.json file by path.
 
-    A YAML with an `image` key is a Nav2 map: its MapFile (amr_common.map_file).
+    A YAML with Nav2 map keys (`image`, `resolution`, ...) is a map: its MapFile
+    (amr_common.map_file).
     """
     text = str(name_or_path)
     path = Path(text).expanduser()
@@ -141,7 +145,7 @@ def _from_yaml(raw: str, path: Path) -> WorldFile | MapFile:
         data = yaml.load(raw, Loader=_WorldYamlLoader)
     except yaml.YAMLError as exc:
         raise WorldError(f"{path}: invalid YAML: {exc}") from exc
-    if isinstance(data, dict) and "image" in data:  # a Nav2 map_server map YAML
+    if isinstance(data, dict) and set(data) & set(NAV2_MAP_KEYS):  # a Nav2 map_server map
         from amr_common.map_file import map_from_yaml  # it imports WorldError from here
         return map_from_yaml(data, path)
     if not isinstance(data, dict):
