@@ -6,9 +6,10 @@ kernel (amr_common.raycast) costs rays x segments. Marching each ray cell by cel
 (Amanatides & Woo's traversal) costs rays x cells crossed instead, whatever the noise, and
 returns the same ranges: the first cell edge where the ray passes between a free and a non-free
 cell (cells beyond the map are non-free), at t > 0, as the segment kernel finds on those edges
-(a ray through a cell corner hits when the four cells there are not all alike, as it would hit
-a segment's end). Which one is faster depends on the map: scripts/bench_map_world.py measures
-both, and `MarchGrid.worth_it` holds the rule drawn from it.
+(a ray through a cell corner, or within CORNER_EPS of it, hits when the four cells there are not
+all alike, as it would hit a segment's end; a ray running exactly along a grid line is left to
+rounding, in both kernels). Which one is faster depends on the map: scripts/bench_map_world.py
+measures both, and World.march_grid holds the rule drawn from it.
 
 The kernels take a MarchGrid's `cells`: the map's cells padded with one ring of BORDER cells,
 flattened (so the loop needs no bounds checks), FREE_CELL = 1 for a free cell, 0 for the rest.
@@ -23,6 +24,10 @@ import numpy as np
 from amr_common.jit import jit
 
 FREE_CELL, BORDER = 1, 2
+# A ray passing this close to a cell corner (in cells) goes through it: it hits the corner if
+# an edge ends there, as the segment kernel's inclusive end test does (rounding decides
+# otherwise which neighbour a grazing ray visits).
+CORNER_EPS = 1e-9
 
 
 @dataclass(frozen=True)
@@ -89,12 +94,12 @@ def march_python(cells, width, gx, gy, dx, dy, limit):
     index = row * width + col
     inside = cells[index] == FREE_CELL
     while True:
-        if next_c < next_r:
+        if next_c < next_r - CORNER_EPS:
             t = next_c
             index += step_c
             next_c += delta_c
             changed = (cells[index] == FREE_CELL) != inside
-        elif next_r < next_c:
+        elif next_r < next_c - CORNER_EPS:
             t = next_r
             index += step_r
             next_r += delta_r
