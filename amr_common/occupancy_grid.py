@@ -20,7 +20,8 @@ centres: a 0.4 m corridor has a row of cells on its centre line, 0.2 m from both
 - `free`: the centre is in the free space and no wall passes through the cell.
 
 A map world's grid is its map's cells (free: value 0; unknown: -1; any other value: a wall)
-with the same exact clearances, from the edges of its free cells (World.segments).
+with the same exact clearances to its walls (the edges of its free cells, World.segments), by a
+distance transform (amr_common.distance_transform).
 
 No planner specifics (inflation, costs) and no rclpy: the planner and the /map raster
 (amr_common.map_raster) share it.
@@ -34,6 +35,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from amr_common.coverage_grid import check_grid_size, inside_polygon_grid
+from amr_common.distance_transform import free_cell_clearances
 
 if TYPE_CHECKING:  # world.py imports map_raster, which imports this module
     from amr_common.world import World
@@ -93,11 +95,8 @@ class OccupancyGrid:
     def _from_map_world(cls, world: World) -> "OccupancyGrid":
         raster = world.raster
         free = raster.free
-        rows, cols = np.nonzero(free)
-        clearance = np.zeros(free.shape)
-        clearance[rows, cols] = world.clearances(np.column_stack(
-            [raster.origin[0] + (cols + 0.5) * raster.resolution,
-             raster.origin[1] + (rows + 0.5) * raster.resolution]))
+        # The exact distances to the wall segments (the free cells' edges), in linear time.
+        clearance = free_cell_clearances(free, raster.resolution)
         in_boundary = raster.values != UNKNOWN
         return cls(float(raster.resolution), (float(raster.origin[0]), float(raster.origin[1])),
                    free, clearance, in_boundary, in_boundary & ~free)

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from amr_common.distance_transform import squared_edt, squared_edt_python
 from amr_common.map_file import read_map, world_as_map, write_map
 from amr_common.map_messages import grid_values, world_map_messages
 from amr_common.map_raster import Raster, boundary_segments
@@ -107,6 +108,14 @@ def test_free_space_and_clearances_of_a_map_world_are_its_cells():
     free = points[expected]
     np.testing.assert_allclose(world.clearances(free), box_distance(free, raster), atol=1e-12)
     assert world.clearance(*free[0]) == pytest.approx(box_distance(free[:1], raster)[0])
+    # The grid of the planner and the filter: the same clearances at the cell centres (by a
+    # distance transform, not the segments).
+    grid = OccupancyGrid.from_world(world)
+    xs, ys = raster.centres()
+    centres = np.column_stack([xs[raster.free], ys[raster.free]])
+    np.testing.assert_allclose(grid.clearance[raster.free], world.clearances(centres),
+                               rtol=0, atol=1e-12)
+    assert (grid.clearance[~raster.free] == 0).all()
     # The coverage metrics count only free cells.
     assert world.contains_points(world.free_cells()).all() and len(world.free_cells()) > 0
 
@@ -119,6 +128,18 @@ def scan_both_ways(world: World, grid: MarchGrid, pose, angles, noise, limits):
     scan_grid_kernel(grid.cells, grid.width, grid.x0, grid.y0, grid.resolution, *pose, *base,
                      *limits, noise, out[1])
     return out
+
+
+def test_the_distance_transform_is_exact_and_its_twin_agrees():
+    rng = np.random.default_rng(7)
+    sites = rng.random((23, 31)) < 0.05
+    sites[0, 3] = sites[-1, 0] = sites[5, 0] = sites[9, -1] = True
+    sites[0], sites[-1], sites[:, 0], sites[:, -1] = True, True, True, True
+    rows, cols = np.nonzero(sites)
+    r, c = np.mgrid[:23, :31]
+    brute = ((r[..., None] - rows) ** 2 + (c[..., None] - cols) ** 2).min(axis=2)
+    np.testing.assert_array_equal(squared_edt(sites), brute)
+    np.testing.assert_array_equal(squared_edt_python(sites), brute)
 
 
 def test_ray_marching_returns_the_segment_kernels_ranges():
