@@ -244,9 +244,10 @@ def write_map(raster: Raster, prefix: str | Path, image_format: str = "pgm",
               extras: dict[str, Any] | None = None) -> tuple[Path, Path]:
     """Write PREFIX.yaml + PREFIX.pgm (or .png) as map_saver does; returns both paths.
 
-    `prefix` may end in .yaml. `extras`: this project's keys (name, description, cell_size,
-    grid_origin, starts, goals, goal) appended after the Nav2 keys. Each file is written to a
-    temporary name and renamed, so an interrupted save leaves the previous map whole.
+    `prefix` may end in .yaml; missing folders are created. `extras`: this project's keys
+    (name, description, cell_size, grid_origin, starts, goals, goal) appended after the Nav2
+    keys. Each file is written to a temporary name and renamed, so an interrupted save leaves
+    the previous map whole.
     MapFileError for an empty raster, a bad resolution/origin or a file that cannot be written.
     """
     prefix = Path(prefix)
@@ -277,6 +278,7 @@ def write_map(raster: Raster, prefix: str | Path, image_format: str = "pgm",
         text += ("# This project's keys (amr_common.map_file); Nav2's map_server ignores them.\n"
                  + yaml.safe_dump(_plain(extras), sort_keys=False, default_flow_style=None))
     try:
+        yaml_path.parent.mkdir(parents=True, exist_ok=True)
         _replace_atomically(image_path, lambda f: _write_image(f, pixels, image_format,
                                                                resolution))
         _replace_atomically(yaml_path, lambda f: f.write(text.encode("utf-8")))

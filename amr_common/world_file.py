@@ -144,7 +144,7 @@ def _from_yaml(raw: str, path: Path) -> WorldFile | MapFile:
     try:
         data = yaml.load(raw, Loader=_WorldYamlLoader)
     except yaml.YAMLError as exc:
-        raise WorldError(f"{path}: invalid YAML: {exc}") from exc
+        raise WorldError(f"{path}: invalid YAML: {' '.join(str(exc).split())}") from exc
     if isinstance(data, dict) and set(data) & set(NAV2_MAP_KEYS):  # a Nav2 map_server map
         from amr_common.map_file import map_from_yaml  # it imports WorldError from here
         return map_from_yaml(data, path)

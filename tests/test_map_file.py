@@ -150,7 +150,7 @@ def test_written_maps_read_back_cell_for_cell(tmp_path, image_format):
     rng = np.random.default_rng(4)
     values = rng.choice(np.array([-1, 0, 100], dtype=np.int8), size=(37, 53))
     raster = Raster(values, 0.025, (-3.2125, 1.05))
-    yaml_path, image_path = write_map(raster, tmp_path / "saved", image_format,
+    yaml_path, image_path = write_map(raster, tmp_path / "new" / "saved", image_format,
                                       extras={"starts": {"a": (1.0, 2.0, 0.5)}})
     assert (yaml_path.name, image_path.name) == ("saved.yaml", f"saved.{image_format}")
     spec = read_map(yaml_path)
@@ -245,6 +245,12 @@ def test_missing_unreadable_huge_and_all_wall_images_are_refused(tmp_path):
     _refused(map_yaml(tmp_path, image="huge.pgm"), "5e+03 x 4e+03 = 2e+07 cells")
     pgm(tmp_path / "walls.pgm", np.zeros((5, 5), dtype=np.uint8))
     _refused(map_yaml(tmp_path, image="walls.pgm"), "the map has no free cell")
+
+
+def test_broken_yaml_is_a_one_line_error(tmp_path):
+    path = tmp_path / "map.yaml"
+    path.write_text("image: map.pgm\nresolution: [0.05\norigin: [0, 0, 0]\n")
+    _refused(path, "invalid YAML: while parsing a flow sequence", WorldError)
 
 
 def test_a_named_start_off_the_free_cells_is_refused(tmp_path):
