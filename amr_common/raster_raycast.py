@@ -51,6 +51,20 @@ class MarchGrid:
                    float(raster.origin[0]) - res, float(raster.origin[1]) - res, res)
 
 
+def clip_python(g, d, n, t_in, t_out):
+    """(t_in, t_out) narrowed to where g + d t lies in [1, n + 1); t_in > t_out if nowhere."""
+    if d != 0.0:
+        a = (1.0 - g) / d
+        b = (n + 1.0 - g) / d
+        return max(t_in, min(a, b)), min(t_out, max(a, b))
+    if 1.0 <= g < n + 1.0:
+        return t_in, t_out
+    return 1.0, 0.0
+
+
+_clip = jit(clip_python)
+
+
 def march_python(cells, width, gx, gy, dx, dy, limit):
     """Cells travelled from grid point (gx, gy) along the unit ray (dx, dy) to the first edge.
 
@@ -60,22 +74,8 @@ def march_python(cells, width, gx, gy, dx, dy, limit):
     cols = width - 2
     rows = cells.shape[0] // width - 2
     # Clip the ray to the map (grid coordinates 1 .. n + 1): beyond it nothing is free.
-    t_in = 0.0
-    t_out = limit
-    if dx != 0.0:
-        a = (1.0 - gx) / dx
-        b = (cols + 1.0 - gx) / dx
-        t_in = max(t_in, min(a, b))
-        t_out = min(t_out, max(a, b))
-    elif not 1.0 <= gx < cols + 1.0:
-        return np.inf
-    if dy != 0.0:
-        a = (1.0 - gy) / dy
-        b = (rows + 1.0 - gy) / dy
-        t_in = max(t_in, min(a, b))
-        t_out = min(t_out, max(a, b))
-    elif not 1.0 <= gy < rows + 1.0:
-        return np.inf
+    t_in, t_out = _clip(gx, dx, cols, 0.0, limit)
+    t_in, t_out = _clip(gy, dy, rows, t_in, t_out)
     if t_in > t_out:
         return np.inf
     col = min(max(int(math.floor(gx + dx * t_in)), 0), cols + 1)
