@@ -104,7 +104,8 @@ def read_map(path: str | Path) -> MapFile:
     """Read a map YAML and its image (MapFileError if it is not one or is malformed)."""
     spec = read_world_file(Path(path))
     if not isinstance(spec, MapFile):
-        raise MapFileError(f"{spec.path}: not a Nav2 map YAML (no 'image' key)")
+        raise MapFileError(f"{spec.path}: not a Nav2 map YAML (none of the keys "
+                           f"{', '.join(NAV2_KEYS)})")
     return spec
 
 
@@ -155,8 +156,7 @@ def _map_from_yaml(data: dict[str, Any], path: Path) -> MapFile:
     if not (values == FREE).any():
         raise MapFileError(f"{path}: the map has no free cell (value 0) in {image_path.name}: "
                            f"nothing to drive or localize in")
-    if mode == "trinary" and free >= 1.0 - UNKNOWN_PIXEL / 255.0 and \
-            (gray == UNKNOWN_PIXEL).any():
+    if mode == "trinary" and not negate and ((gray == UNKNOWN_PIXEL) & (values == FREE)).any():
         _LOG.warning("%s: free_thresh %g reads map_saver's unknown pixels (205) as free, as "
                      "map_server does; 0.196 keeps them unknown", path, free)
     raster = Raster(np.ascontiguousarray(values[::-1]), resolution, (x0, y0))

@@ -11,7 +11,7 @@ from PIL import Image
 
 from amr_common.map_file import MapFileError, read_map, trinary_pixels, write_map
 from amr_common.map_raster import Raster
-from amr_common.world import World, WorldError
+from amr_common.world import WORLDS_DIR, World, WorldError
 
 NAV2_YAML = ("image: {image}\nmode: {mode}\nresolution: {resolution}\norigin: {origin}\n"
              "negate: {negate}\noccupied_thresh: {occupied}\nfree_thresh: {free}\n")
@@ -113,11 +113,20 @@ def test_scale_and_raw_modes(tmp_path):
     np.testing.assert_array_equal(values, [[0, 50, 100, -1, -1]])
 
 
-def test_map_savers_old_free_thresh_reads_unknown_as_free_as_map_server_does(tmp_path):
+def test_map_savers_old_free_thresh_reads_unknown_as_free_as_map_server_does(tmp_path, caplog):
     """Before navigation2 1.3.7 map_saver wrote free_thresh 0.25 with 205 for unknown."""
     pgm(tmp_path / "map.pgm", [[0, 254, 205]])
     values = read_map(map_yaml(tmp_path, free=0.25)).raster.values
     np.testing.assert_array_equal(values, [[100, 0, 0]])
+    assert "reads map_saver's unknown pixels (205) as free" in caplog.text
+    caplog.clear()
+    read_map(map_yaml(tmp_path))
+    assert "205" not in caplog.text
+
+
+def test_read_map_refuses_a_world_yaml():
+    with pytest.raises(MapFileError, match="not a Nav2 map YAML"):
+        read_map(WORLDS_DIR / "lab02.yaml")
 
 
 def test_project_keys_are_read_and_other_keys_ignored(tmp_path):
