@@ -46,7 +46,7 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import yaml
@@ -64,6 +64,9 @@ from amr_common.world_file import (
     project_values,
     read_world_file,
 )
+
+if TYPE_CHECKING:
+    from amr_common.world import World
 
 MODES = ("trinary", "scale", "raw")
 NAV2_KEYS = NAV2_MAP_KEYS  # what map_server reads (amr_common.world_file dispatches on them)
@@ -287,7 +290,8 @@ def write_map(raster: Raster, prefix: str | Path, image_format: str = "pgm",
     return yaml_path, image_path
 
 
-def world_as_map(world, resolution: float = CONVERT_RESOLUTION) -> tuple[Raster, dict[str, Any]]:
+def world_as_map(world: World, resolution: float = CONVERT_RESOLUTION
+                 ) -> tuple[Raster, dict[str, Any]]:
     """(cells, extras) of any amr_common.world.World as a map at `resolution` m per cell.
 
     The cells are the world's occupancy grid (OccupancyGrid.from_world: cell centres on
