@@ -85,9 +85,12 @@ def wall_markers(segments: np.ndarray, frame_id: str = "map", stamp: Time | None
 
 def world_map_messages(world, resolution: float, frame_id: str = "map",
                        stamp: Time | None = None) -> tuple[OccupancyGrid, MarkerArray]:
-    """/map and /map_markers of an amr_common.world.World."""
+    """/map and /map_markers of an amr_common.world.World.
+
+    A map world's /map is its map's cells exactly (`resolution` does not apply).
+    """
     from amr_common.map_raster import rasterize_world
-    raster = rasterize_world(world, resolution)
+    raster = world.raster if world.raster is not None else rasterize_world(world, resolution)
     return (occupancy_grid(raster.values, raster.resolution, raster.origin, frame_id, stamp),
             wall_markers(world.segments, frame_id, stamp, world.goal))
 

@@ -1,8 +1,9 @@
 """The `amr_map_publisher` lifecycle node: a world file as /map and /map_markers, latched.
 
-For the real robot (the simulator publishes its own): give it the course's map JSON or a world
-YAML by path (or a bundled world by name) and viewers such as Foxglove draw the walls, and a
-localization node gets its map as a nav_msgs/OccupancyGrid:
+For the real robot (the simulator publishes its own): give it the course's map JSON, a world
+YAML or a Nav2 map YAML (map_saver's, published as its cells, like map_server) by path (or a
+bundled world by name) and viewers such as Foxglove draw the walls, and a localization node gets
+its map as a nav_msgs/OccupancyGrid:
 
     .venv/bin/amr_map_publisher --ros-args -p world:=/path/to/map.json -p autostart:=true
 """
@@ -20,7 +21,8 @@ from amr_common.qos import LATCHED
 from amr_common.world import World
 
 _PARAMETERS = {
-    "world": ("lab02", "Bundled world name or path to a world .yaml / the course's map .json"),
+    "world": ("lab02", "Bundled world name or path to a world .yaml / the course's map .json / "
+                       "a Nav2 map .yaml (published cell for cell)"),
     "resolution": (0.05, "Cell size of /map in metres"),
     "frame_id": ("map", "Frame of the map"),
 }

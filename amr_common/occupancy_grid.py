@@ -19,6 +19,10 @@ centres: a 0.4 m corridor has a row of cells on its centre line, 0.2 m from both
   point of every wall lies in such a cell).
 - `free`: the centre is in the free space and no wall passes through the cell.
 
+A map world's grid is its map's cells (free: value 0; unknown: -1; any other value: a wall)
+with the same exact clearances to its walls (the edges of its free cells, World.segments), by a
+distance transform (amr_common.distance_transform).
+
 No planner specifics (inflation, costs) and no rclpy: the planner and the /map raster
 (amr_common.map_raster) share it.
 """
@@ -26,11 +30,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from amr_common.coverage_grid import check_grid_size, inside_polygon_grid
-from amr_common.world import World
+from amr_common.distance_transform import free_cell_clearances
+
+if TYPE_CHECKING:  # world.py imports map_raster, which imports this module
+    from amr_common.world import World
 
 FREE, OCCUPIED, UNKNOWN = 0, 100, -1  # nav_msgs/OccupancyGrid values
 
@@ -49,7 +57,13 @@ class OccupancyGrid:
     @classmethod
     def from_world(cls, world: World, resolution: float = 0.02,
                    padding_m: float | None = None) -> "OccupancyGrid":
-        """Rasterize `world`: cells from `padding_m` (default one cell) beyond its walls."""
+        """Rasterize `world`: cells from `padding_m` (default one cell) beyond its walls.
+
+        A map world (world.raster set): the map's own cells at its own resolution, whatever
+        `resolution` and `padding_m` say (a re-rasterization of its walls would move them).
+        """
+        if world.raster is not None:
+            return cls._from_map_world(world)
         if isinstance(resolution, bool) or not (isinstance(resolution, (int, float))
                                                 and math.isfinite(resolution)
                                                 and resolution > 0):
@@ -76,6 +90,16 @@ class OccupancyGrid:
         walls = wall_cells(world.segments, origin, resolution, (height, width))
         return cls(resolution, origin, inside & ~walls, np.where(inside, distance, 0.0),
                    in_boundary, walls)
+
+    @classmethod
+    def _from_map_world(cls, world: World) -> "OccupancyGrid":
+        raster = world.raster
+        free = raster.free
+        # The exact distances to the wall segments (the free cells' edges), in linear time.
+        clearance = free_cell_clearances(free, raster.resolution)
+        in_boundary = raster.values != UNKNOWN
+        return cls(float(raster.resolution), (float(raster.origin[0]), float(raster.origin[1])),
+                   free, clearance, in_boundary, in_boundary & ~free)
 
     @property
     def width(self) -> int:

@@ -1,11 +1,17 @@
 """Worlds for the simulator: walls as 2D line segments, named start poses and named goals.
 
 `World.load(name_or_path)` reads a bundled world by name ("lab02") or a world YAML / the
-course's map JSON by path (the formats: amr_common/world_file.py), then checks it against its
-walls: no zero-length wall; every start pose and goal inside the boundary, outside every
-obstacle and at least the robot radius from the walls. A World answers the geometric questions
-of the simulator, the planner, the filter and the metrics: clearances, free space, start and
-goal poses, the coverage grid.
+course's map JSON / a Nav2 map YAML by path (the formats: amr_common/world_file.py), then checks
+it against its walls: no zero-length wall; every start pose and goal inside the boundary,
+outside every obstacle and at least the robot radius from the walls.
+
+A map world (a Nav2 map YAML, or `World.from_raster` on a map SLAM built) keeps its cells in
+`raster`: its free space is its free cells, its walls (`segments`) are the edges between free
+and non-free cells (amr_common.map_raster.boundary_segments), and the occupancy grid of the
+planner, the particle filter and /map is the map's own cells.
+
+A World answers the geometric questions of the simulator, the planner, the filter and the
+metrics: clearances, free space, start and goal poses, the coverage grid.
 
 Every problem (missing file, unknown name, bad YAML/JSON, missing keys, non-numeric or non-finite
 coordinates, polylines with too few points, zero-length walls, start poses or goals outside the
@@ -15,12 +21,14 @@ the file.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from .coverage_grid import CoverageGrid, build_coverage_grid, inside_polygon_points
+from .map_raster import Raster, boundary_segments
+from .raster_raycast import MarchGrid
 from .raycast import clearances_into
 from .robot import ROBOT_RADIUS
 from .world_file import (
@@ -32,6 +40,8 @@ from .world_file import (
     pose_value,
     read_world_file,
 )
+
+MARCH_ABOVE_SEGMENTS = 300  # map worlds with more wall segments are ray-marched (march_grid)
 
 
 @dataclass
@@ -50,12 +60,36 @@ class World:
     grid_origin: tuple[float, float] | None = None  # None: the boundary's lower-left corner
     _grids: dict = field(default_factory=dict, init=False, repr=False, compare=False)
     goals: dict[str, tuple[float, float]] = field(default_factory=dict)  # named goals
+    raster: Raster | None = None  # a map world's cells (free: value 0), else None
 
     # ------------------------------------------------------------------ loading
     @classmethod
     def load(cls, name_or_path: str | Path) -> "World":
         """Load a bundled world by name ("lab02") or a .yaml/.yml/.json file by path."""
-        return cls._from_file(read_world_file(name_or_path))
+        spec = read_world_file(name_or_path)
+        if isinstance(spec, WorldFile):
+            return cls._from_file(spec)
+        return cls.from_raster(spec.raster, name=spec.name, source=str(spec.path),
+                               starts=spec.starts, goals=spec.goals, goal=spec.goal,
+                               cell_size=spec.cell_size, description=spec.description,
+                               grid_origin=spec.grid_origin)
+
+    @classmethod
+    def from_raster(cls, raster: Raster, name: str = "map", source: str = "map",
+                    starts: dict | None = None, goals: dict | None = None,
+                    goal: tuple[float, float] | None = None, **extras) -> "World":
+        """The world of a map: free cells (value 0) are free space, every other cell is wall.
+
+        `extras`: cell_size, description, grid_origin. Raises WorldError (naming `source`) for
+        a map without a free cell and for named starts or goals off the free space.
+        """
+        if not (raster.values == 0).any():
+            raise WorldError(f"{source}: the map has no free cell")
+        world = cls(name=name, source=source, segments=boundary_segments(raster),
+                    starts=dict(starts or {}), goal=goal, goals=dict(goals or {}),
+                    raster=raster, **extras)
+        world._check_named_poses()
+        return world
 
     @classmethod
     def _from_file(cls, spec: WorldFile) -> "World":
@@ -74,13 +108,16 @@ class World:
                     goal=spec.goal, cell_size=spec.cell_size, description=spec.description,
                     boundary=spec.boundary, holes=spec.holes, goals=dict(spec.goals),
                     grid_origin=spec.grid_origin)
-        for start_name, pose in spec.starts.items():
-            world._check_pose(pose, f"start '{start_name}'")
-        for goal_name, point in world.goals.items():
-            world._check_pose((*point, 0.0), f"goal '{goal_name}'")
-        if spec.goal is not None:
-            world._check_pose((*spec.goal, 0.0), "goal")
+        world._check_named_poses()
         return world
+
+    def _check_named_poses(self) -> None:
+        for start_name, pose in self.starts.items():
+            self._check_pose(pose, f"start '{start_name}'")
+        for goal_name, point in self.goals.items():
+            self._check_pose((*point, 0.0), f"goal '{goal_name}'")
+        if self.goal is not None:
+            self._check_pose((*self.goal, 0.0), "goal")
 
     # ------------------------------------------------------------------ geometry
     @property
@@ -89,6 +126,20 @@ class World:
         s = self.segments
         return (float(min(s[:, 0].min(), s[:, 2].min())), float(min(s[:, 1].min(), s[:, 3].min())),
                 float(max(s[:, 0].max(), s[:, 2].max())), float(max(s[:, 1].max(), s[:, 3].max())))
+
+    @property
+    def march_grid(self) -> MarchGrid | None:
+        """A map world's cells for grid ray marching when that beats its segments, else None.
+
+        Marching a 360-ray scan through 2 cm cells costs about as much as casting it against
+        ~180 segments in lab02, ~300 in roomier worlds (scripts/bench_map_world.py); a converted
+        world has tens of segments, a SLAM map thousands.
+        """
+        if self.raster is None or len(self.segments) <= MARCH_ABOVE_SEGMENTS:
+            return None
+        if "march" not in self._grids:
+            self._grids["march"] = MarchGrid.from_raster(self.raster)
+        return self._grids["march"]
 
     def clearance(self, x: float, y: float) -> float:
         """Distance (m) from the point (x, y) to the nearest wall segment."""
@@ -108,9 +159,12 @@ class World:
     def contains_points(self, points: np.ndarray) -> np.ndarray:
         """(K,) bool: which points of a (K, 2) array are in the free space (see contains).
 
-        Each hole is tested only against the points within its bounding box.
+        Each hole is tested only against the points within its bounding box. A map world: the
+        points in free cells.
         """
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        if self.raster is not None:
+            return self.raster.free_at(pts)
         inside = inside_polygon_points(self.boundary, pts) if self.boundary is not None else \
             np.ones(len(pts), dtype=bool)
         if not self.holes:
@@ -172,6 +226,9 @@ class World:
 
     def _check_pose(self, pose: tuple[float, float, float], what: str) -> None:
         x, y, _ = pose
+        if self.raster is not None and not self.contains(x, y):
+            raise WorldError(f"{self.source}: {what} ({x:g}, {y:g}) is not in a free cell of "
+                             f"the map (occupied, unknown or off the map)")
         if self.boundary is not None and not _point_in_polygon(self.boundary, x, y):
             raise WorldError(f"{self.source}: {what} ({x:g}, {y:g}) is outside the boundary")
         if not self.contains(x, y):  # inside a hole: name it
@@ -191,9 +248,14 @@ class World:
         """
         key = ("grid", float(margin))
         if key not in self._grids:
-            self._grids[key] = build_coverage_grid(
+            grid = build_coverage_grid(
                 self.segments, self.boundary, self.holes, self.cell_size, self.grid_origin,
                 float(margin), source=self.source)
+            if self.raster is not None:  # no boundary: the free cells say what is inside
+                gx, gy = np.meshgrid(grid.x_centres, grid.y_centres)
+                inside = self.raster.free_at(np.column_stack([gx.ravel(), gy.ravel()]))
+                grid = replace(grid, free=grid.free & inside.reshape(grid.free.shape))
+            self._grids[key] = grid
         return self._grids[key]
 
     def free_cells(self, margin: float = ROBOT_RADIUS) -> np.ndarray:

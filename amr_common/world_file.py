@@ -1,6 +1,7 @@
 """World files: the project's YAML worlds and the course's map JSON, read into a WorldFile.
 
-Two file formats load with `World.load(name_or_path)` (through `read_world_file`):
+Three file formats load with `World.load(name_or_path)` (through `read_world_file`); the third,
+a Nav2 map_server map YAML (it has `image`, `resolution`, ...), is read by amr_common.map_file:
 
 1. The project's own YAML world file (bundled ones live in amr_common/worlds/<name>.yaml and
    load by name, e.g. `World.load("lab02")`; any other file loads by path)::
@@ -31,6 +32,11 @@ Two file formats load with `World.load(name_or_path)` (through `read_world_file`
    It has no starts; pass a start pose (x, y, theta) explicitly. Its coverage grid (0.4 m)
    starts at the boundary's lower-left corner.
 
+3. A Nav2 map_server map YAML (`image`, `resolution`, `origin`, ...: what SLAM and map_saver
+   write), by path: its free cells are the free space, every other cell is wall. It may carry
+   the keys name, description, cell_size, grid_origin, starts, goals and goal as above (Nav2
+   ignores them); scripts/world_to_map.py writes any world as one.
+
 Every problem (missing file, unknown name, bad YAML/JSON, missing keys, non-numeric or non-finite
 coordinates, polylines with too few points, zero-length walls, start poses or goals outside the
 boundary, inside an obstacle or closer to a wall than the robot radius) raises WorldError naming
@@ -44,10 +50,13 @@ import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import yaml
+
+if TYPE_CHECKING:
+    from amr_common.map_file import MapFile
 
 WORLDS_DIR = Path(__file__).resolve().parent / "worlds"
 
@@ -64,6 +73,14 @@ class _WorldYamlLoader(yaml.SafeLoader):
 _WorldYamlLoader.add_implicit_resolver(
     "tag:yaml.org,2002:float", re.compile(r"^[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)[eE][-+]?[0-9]+$"),
     list("-+0123456789."))
+
+
+# The keys of a Nav2 map YAML (amr_common.map_file); a world YAML has none of them.
+NAV2_MAP_KEYS = ("image", "mode", "resolution", "origin", "negate", "occupied_thresh",
+                 "free_thresh")
+# Keys a world YAML shares with a map YAML (a map's extras: amr_common.map_file).
+PROJECT_KEYS = frozenset({"name", "description", "cell_size", "grid_origin", "starts", "goals",
+                          "goal"})
 
 
 class WorldError(ValueError):
@@ -95,8 +112,12 @@ class WorldFile:
     grid_origin: tuple[float, float] | None = None
 
 
-def read_world_file(name_or_path: str | Path) -> WorldFile:
-    """Read a bundled world by name ("lab02") or a .yaml/.yml/.json file by path."""
+def read_world_file(name_or_path: str | Path) -> WorldFile | MapFile:
+    """Read a bundled world by name ("lab02") or a .yaml/.yml/.json file by path.
+
+    A YAML with Nav2 map keys (`image`, `resolution`, ...) is a map: its MapFile
+    (amr_common.map_file).
+    """
     text = str(name_or_path)
     path = Path(text).expanduser()
     looks_like_path = (path.suffix.lower() in (".yaml", ".yml", ".json") or "/" in text
@@ -119,16 +140,18 @@ def read_world_file(name_or_path: str | Path) -> WorldFile:
     return _from_yaml(raw, path)
 
 
-def _from_yaml(raw: str, path: Path) -> WorldFile:
+def _from_yaml(raw: str, path: Path) -> WorldFile | MapFile:
     try:
         data = yaml.load(raw, Loader=_WorldYamlLoader)
     except yaml.YAMLError as exc:
-        raise WorldError(f"{path}: invalid YAML: {exc}") from exc
+        raise WorldError(f"{path}: invalid YAML: {' '.join(str(exc).split())}") from exc
+    if isinstance(data, dict) and set(data) & set(NAV2_MAP_KEYS):  # a Nav2 map_server map
+        from amr_common.map_file import map_from_yaml  # it imports WorldError from here
+        return map_from_yaml(data, path)
     if not isinstance(data, dict):
         raise WorldError(f"{path}: expected a mapping with keys boundary, holes, walls, "
-                         f"starts, ...")
-    known = {"name", "description", "cell_size", "grid_origin", "boundary", "holes", "walls",
-             "starts", "goal", "goals"}
+                         f"starts, ... (or a Nav2 map YAML with 'image')")
+    known = {"boundary", "holes", "walls"} | PROJECT_KEYS
     unknown = set(data) - known
     if unknown:
         raise WorldError(f"{path}: unknown key(s) {sorted(unknown)}; allowed: {sorted(known)}")
@@ -139,7 +162,17 @@ def _from_yaml(raw: str, path: Path) -> WorldFile:
              for i, h in enumerate(_as_list(data.get("holes", []), path, "holes"))]
     walls = [_polyline(w, path, f"walls[{i}]", closed=False)
              for i, w in enumerate(_as_list(data.get("walls", []), path, "walls"))]
-    cell_size = _positive_number(data.get("cell_size", 0.4), path, "cell_size")
+    return WorldFile(path=path, boundary=boundary, holes=holes, walls=walls,
+                     **project_values(data, path))
+
+
+def project_values(data: dict, path: Path) -> dict[str, Any]:
+    """The keys a world YAML and a map YAML share (PROJECT_KEYS), parsed and checked.
+
+    Returns name, description, cell_size, grid_origin, starts, goals and goal (the `goal` key,
+    else the first named goal).
+    """
+    cell_size = positive_number(data.get("cell_size", 0.4), path, "cell_size")
     grid_origin = None
     if data.get("grid_origin") is not None:
         grid_origin = point_value(data["grid_origin"], path, "grid_origin")
@@ -159,10 +192,9 @@ def _from_yaml(raw: str, path: Path) -> WorldFile:
         goal = goals[data["goal"]]
     elif data.get("goal") is not None:
         goal = point_value(data["goal"], path, "goal")
-    return WorldFile(name=str(data.get("name") or path.stem), path=path, boundary=boundary,
-                     holes=holes, walls=walls, starts=starts, goals=goals, goal=goal,
-                     cell_size=cell_size, description=str(data.get("description") or ""),
-                     grid_origin=grid_origin)
+    return dict(name=str(data.get("name") or path.stem), starts=starts, goals=goals, goal=goal,
+                cell_size=cell_size, description=str(data.get("description") or ""),
+                grid_origin=grid_origin)
 
 
 def _from_course_json(raw: str, path: Path) -> WorldFile:
@@ -210,14 +242,16 @@ def _number(value: Any, path, what: str) -> float:
     return out
 
 
-def _coordinate(value: Any, path, what: str) -> float:
+def number_value(value: Any, path, what: str) -> float:
+    """A finite number (no pi expression); WorldError naming `path` and `what` if it is not."""
     if isinstance(value, str):  # pi expressions are for angles only
         raise WorldError(f"{path}: {what} must be a number, got {value!r}")
     return _number(value, path, what)
 
 
-def _positive_number(value: Any, path, what: str) -> float:
-    out = _coordinate(value, path, what)
+def positive_number(value: Any, path, what: str) -> float:
+    """A finite number > 0; WorldError naming `path` and `what` if it is not."""
+    out = number_value(value, path, what)
     if out <= 0:
         raise WorldError(f"{path}: {what} must be > 0, got {value!r}")
     return out
@@ -227,14 +261,14 @@ def point_value(value: Any, path, what: str) -> tuple[float, float]:
     """[x, y] as two finite floats; WorldError naming `path` and `what` if it is not."""
     if not isinstance(value, (list, tuple)) or len(value) != 2:
         raise WorldError(f"{path}: {what} must be [x, y], got {value!r}")
-    return (_coordinate(value[0], path, f"{what} x"), _coordinate(value[1], path, f"{what} y"))
+    return (number_value(value[0], path, f"{what} x"), number_value(value[1], path, f"{what} y"))
 
 
 def pose_value(value: Any, path, what: str) -> tuple[float, float, float]:
     """[x, y, theta] as three finite floats (theta may be "pi/2" etc.); WorldError if not."""
     if not isinstance(value, (list, tuple)) or len(value) != 3:
         raise WorldError(f"{path}: {what} must be [x, y, theta], got {value!r}")
-    return (_coordinate(value[0], path, f"{what} x"), _coordinate(value[1], path, f"{what} y"),
+    return (number_value(value[0], path, f"{what} x"), number_value(value[1], path, f"{what} y"),
             _number(value[2], path, f"{what} theta"))
 
 

@@ -25,11 +25,20 @@ def draw_world(ax, world: World, show_starts: bool = True, show_grid: bool = Fal
                show_goals: bool | None = None) -> None:
     """Walls and optionally named starts, named goals and the corridor grid on an Axes.
 
+    A map world also shows its cells (free white, unknown light grey, occupied dark grey).
+
     Goals are shown with the starts unless show_goals says otherwise.
     """
     segs = world.segments.reshape(-1, 2, 2)
-    ax.add_collection(LineCollection(segs, colors=_WALL_COLOUR, linewidths=2.0, capstyle="round",
-                                     zorder=3))
+    if world.raster is not None:  # a map: its cells as map viewers show them, edges thin
+        r = world.raster
+        rows, cols = r.values.shape
+        shade = np.where(r.values == 0, 1.0, np.where(r.values == -1, 0.8, 0.35))
+        ax.imshow(shade, cmap="gray", vmin=0.0, vmax=1.0, origin="lower", zorder=1,
+                  interpolation="nearest", extent=(r.origin[0], r.origin[0] + cols * r.resolution,
+                                                   r.origin[1], r.origin[1] + rows * r.resolution))
+    ax.add_collection(LineCollection(segs, colors=_WALL_COLOUR, capstyle="round", zorder=3,
+                                     linewidths=2.0 if world.raster is None else 0.8))
     for hole in world.holes:
         ax.fill(hole[:, 0], hole[:, 1], color="#bbbbbb", zorder=2)
     xmin, ymin, xmax, ymax = world.bounds

@@ -52,8 +52,8 @@ from amr_localization.particle_filter_params import PARAMETERS as FILTER_PARAMET
 from amr_localization.particle_filter_params import check_parameters
 
 _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
-    "world": ("lab02", "Bundled world name or path to a world .yaml / course map .json (the "
-                       "simulator's loader)"),
+    "world": ("lab02", "Bundled world name or path to a world .yaml / course map .json / Nav2 "
+                       "map .yaml (the simulator's loader)"),
     "queue_size": (10, "Synchronizer queue size per input"),
     "slop": (0.15, "Synchronizer slop in seconds (lockstep stamps are equal; the real robot's "
                    "/odometry and /scan differ by up to half an odometry period)"),

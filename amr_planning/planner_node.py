@@ -32,8 +32,8 @@ from amr_common.world import World
 from amr_planning.planner import Planner, PlanningError
 
 _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
-    "world": ("lab02", "Bundled world name or path to a world .yaml / course map .json (the "
-                       "simulator's and the particle filter's map)"),
+    "world": ("lab02", "Bundled world name or path to a world .yaml / course map .json / Nav2 "
+                       "map .yaml (the simulator's and the particle filter's map)"),
     "goal": ([], "Goal [x, y] in metres; [] = goal_name, else the world's default goal"),
     "goal_name": ("", "A named goal of the world (used when `goal` is [])"),
     "replan_on_relocalization": (True, "Plan again from the pose when /pose becomes localized "

@@ -1,13 +1,16 @@
 """The simulated 2D LiDAR: a scan of rays from a pose against the world's wall segments.
 
 The ray-casting kernels live in amr_common.raycast (shared with the particle filter and the
-planner); this module adds the sensor: ray angles, range limits and the no-return value.
+planner); this module adds the sensor: ray angles, range limits and the no-return value. A map
+world with many wall segments is scanned through its cells instead (amr_common.raster_raycast:
+the same ranges, at a cost that does not grow with the segments).
 """
 from __future__ import annotations
 
 import numpy as np
 
 from amr_common.jit import HAVE_NUMBA
+from amr_common.raster_raycast import MarchGrid, scan_grid_kernel
 from amr_common.raycast import scan_kernel, scan_numpy
 
 
@@ -20,7 +23,9 @@ class Lidar:
 
     def __init__(self, segments: np.ndarray, rays: int, angle_min: float, angle_increment: float,
                  range_min: float, range_max: float, no_return: float,
-                 use_numba: bool = True) -> None:
+                 use_numba: bool = True, grid: MarchGrid | None = None) -> None:
+        """`grid`: scan through these cells instead of the segments (World.march_grid)."""
+        self.grid = grid
         self.segments = np.ascontiguousarray(segments, dtype=np.float64)
         angles = angle_min + angle_increment * np.arange(rays)
         self.base_cos = np.cos(angles)
@@ -40,6 +45,13 @@ class Lidar:
              noise: np.ndarray | None = None) -> np.ndarray:
         """Ranges from the pose (x, y, theta), plus `noise` (one value per ray) if given."""
         out = np.empty(self.rays)
+        if self.grid is not None:
+            g = self.grid
+            scan_grid_kernel(g.cells, g.width, g.x0, g.y0, g.resolution, float(x), float(y),
+                             float(theta), self.base_cos, self.base_sin, self.range_min,
+                             self.range_max, self.no_return,
+                             self._zeros if noise is None else noise, out)
+            return out
         self._kernel(self.segments, float(x), float(y), float(theta), self.base_cos, self.base_sin,
                      self.range_min, self.range_max, self.no_return,
                      self._zeros if noise is None else noise, out)

@@ -121,7 +121,7 @@ class Simulator:
 
         p = self._profile
         self._lidar = Lidar(self._segments, p.scan_rays, p.angle_min, p.angle_increment,
-                            p.range_min, p.range_max, p.no_return)
+                            p.range_min, p.range_max, p.no_return, grid=self._world.march_grid)
         self._x, self._y, self._theta = x, y, theta  # theta continuous (not wrapped)
         self._steps = 0
         self._distance = 0.0

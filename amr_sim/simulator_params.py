@@ -14,7 +14,8 @@ DEFAULT_START = "outer"  # the course's "outer corridor" start in lab02
 # Numbers accept ints or doubles (`-p dt:=1` must not kill the process): amr_common.parameters
 # declares them with dynamic typing, on_configure checks.
 PARAMETERS: dict[str, tuple[Any, str]] = {
-    "world": ("lab02", "Bundled world name or path to a world .yaml / course map .json"),
+    "world": ("lab02", "Bundled world name or path to a world .yaml / course map .json / Nav2 "
+                       "map .yaml"),
     "start": (DEFAULT_START, "Start pose: a name from the world file or 'x,y,theta' "
                              "(m, m, rad); '' or the default 'outer' in a world without "
                              "it = the world's first start"),

@@ -48,12 +48,13 @@ def parse_args(argv=None) -> argparse.Namespace:
                            "(default params/turtlebot3.yaml)")
     parser.add_argument("--dt", type=float, default=None, help="control period in seconds")
     parser.add_argument("--map", default=None, metavar="MAP", help="also publish this course "
-                        "map JSON / world YAML as /map and /map_markers (amr_map_publisher)")
+                        "map JSON / world YAML / Nav2 map YAML as /map and /map_markers "
+                        "(amr_map_publisher)")
     add_foxglove_options(parser)
     add_localization_options(parser)
     parser.add_argument("--world", default=None, help="with --localize or --goal: the map the "
-                        "robot is in (bundled world name or world YAML / course map JSON; "
-                        "default --map)")
+                        "robot is in (bundled world name or world YAML / course map JSON / Nav2 "
+                        "map YAML; default --map)")
     parser.add_argument("--goal", default=None, help="navigate to X,Y (metres, negative numbers "
                         "typed as is) or a named goal of --world: also the particle filter, the "
                         "planner and the pure pursuit")

@@ -63,7 +63,7 @@ def parse_args(argv=None) -> argparse.Namespace:
                                      formatter_class=argparse.RawDescriptionHelpFormatter,
                                      epilog=__doc__.split("\n\n", 1)[1])
     parser.add_argument("--world", default="lab02", help="bundled world name or a path to a "
-                        "world YAML / course map JSON (default lab02)")
+                        "world YAML / course map JSON / Nav2 map YAML (default lab02)")
     parser.add_argument("--start", default=None, help="named start, X,Y,THETA (m, m, rad; e.g. "
                         "--start -1.0,-1.0,1.57), or 'all' to run every named start in turn "
                         "(default: the world's first start)")

@@ -7,12 +7,14 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 from nav_msgs.msg import OccupancyGrid
 from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.parameter import Parameter
 from visualization_msgs.msg import Marker
 
+from amr_common.map_file import world_as_map, write_map
 from amr_common.map_messages import grid_values
 from amr_common.map_publisher import MapPublisherNode
 from amr_common.map_raster import OCCUPIED, Raster, rasterize_world
@@ -74,6 +76,32 @@ def test_map_publisher_serves_a_course_map_json(ros, tmp_path):
     raster = Raster(grid_values(grid), 0.1,
                     (grid.info.origin.position.x, grid.info.origin.position.y))
     check_raster_matches_world(raster, World.load(path))
+
+
+def test_a_nav2_map_is_published_cell_for_cell_by_both_nodes(ros, tmp_path):
+    """As map_server does: the file's cells, resolution and origin, whatever `resolution` says."""
+    raster, extras = world_as_map(World.load("lab02"), 0.02)
+    values = raster.values.copy()
+    values.flat[np.flatnonzero(values == 0)[:40]] = -1  # some unknown inside too
+    yaml_path, _ = write_map(Raster(values, 0.02, raster.origin), tmp_path / "lab02",
+                             extras=extras)
+    publisher = ros.add(MapPublisherNode(context=ros.context, parameter_overrides=[
+        Parameter("world", value=str(yaml_path)), Parameter("resolution", value=0.1)]))
+    assert publisher.trigger_configure() == TransitionCallbackReturn.SUCCESS
+    assert publisher.trigger_activate() == TransitionCallbackReturn.SUCCESS
+    frames = FrameProbe(ros)
+    ros.spin_until(lambda: frames.maps, message="the latched map")
+    published = [frames.maps[0]]
+    publisher.trigger_deactivate()
+    publisher.trigger_cleanup()
+    frames.maps.clear()
+    start_with_frames(ros, world=str(yaml_path), start="outer", map_resolution=0.05)
+    ros.spin_until(lambda: frames.maps, message="the simulator's map")
+    published.append(frames.maps[0])
+    for grid in published:
+        assert grid.info.resolution == pytest.approx(0.02)
+        assert (grid.info.origin.position.x, grid.info.origin.position.y) == raster.origin
+        assert grid_values(grid).tolist() == values.tolist()
 
 
 @pytest.mark.parametrize("parameters, reason", [
