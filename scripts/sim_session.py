@@ -11,6 +11,7 @@ the goal.
 from __future__ import annotations
 
 import math
+import sys
 import time
 
 import numpy as np
@@ -82,7 +83,10 @@ def _report(args, world, start, sim, trajectory, wall_errors, wall_time: float,
 
 
 def report_before_start(args, world, start) -> dict:
-    """The report of a run stopped before its graph existed: nothing simulated, interrupted."""
+    """The report of a run stopped before its graph ran: nothing simulated, interrupted.
+
+    The keys of a run's report, localization and navigation ones included.
+    """
     from types import SimpleNamespace
 
     from amr_common.robot import ROBOT_RADIUS
@@ -90,8 +94,46 @@ def report_before_start(args, world, start) -> dict:
     sim = SimpleNamespace(steps=0, time=0.0, collisions=0, first_collision_time=None,
                           min_clearance=world.clearance(x, y) - ROBOT_RADIUS, distance=0.0,
                           collision_points=[])
-    return _report(args, world, start, sim, [[0.0, x, y, theta]], [], 0.0, True, graph={
+    trajectory = [[0.0, x, y, theta]]
+    report = _report(args, world, start, sim, trajectory, [], 0.0, True, graph={
         "controller": args.controller_spec, "nodes": [], "controller_mode": None})
+    goal = getattr(args, "goal", None)
+    if getattr(args, "localize", False) or goal is not None:
+        report |= _localization_fields(args, trajectory, [], [])
+    if goal is not None:
+        report |= _navigation_fields(goal, {
+            "goal_reached_time_s": None, "stopped_time_s": None,
+            "final_position_error_m": math.hypot(x - goal[0], y - goal[1])}, None, [], None)
+    return report
+
+
+def _localization_fields(args, trajectory: list, estimate: list, particles: list) -> dict:
+    """The report's localization figures, the kidnapping, every /pose and the particles."""
+    from amr_evaluation.localization_episode import metrics_from_rows
+    kidnap = list(args.kidnap) if getattr(args, "kidnap", None) else None
+    return {"localization": metrics_from_rows(trajectory, estimate, kidnap), "kidnap": kidnap,
+            "estimate": estimate, "particles_snapshot": particles}
+
+
+def _navigation_fields(goal, summary: dict, plan, estimate: list,
+                       planning_error: str | None) -> dict:
+    """The report's navigation figures.
+
+    Goal, time localized, goal reached and stopped times, planned path, final error, and why the
+    planner found no path (None if it found one or has not planned).
+    """
+    localized = next((row[0] for row in estimate if row[4] > 0.5), None)
+    return {
+        "goal": [float(goal[0]), float(goal[1])], "localized_time_s": localized,
+        "goal_reached_time_s": summary["goal_reached_time_s"],
+        "stopped_time_s": summary["stopped_time_s"],
+        "final_position_error_m": summary["final_position_error_m"],
+        "path_length_m": plan.length_m if plan is not None else None,
+        "path": plan.points.tolist() if plan is not None else [],
+        "planning_error": planning_error,
+    }
+
+
 def _localization_line(report: dict) -> str:
     m = report.get("localization")
     if m is None:
@@ -111,7 +153,6 @@ def _localization_line(report: dict) -> str:
     if m["loss_reported_after_s"] is not None:
         text += f", loss reported {m['loss_reported_after_s']:.2f} s after the kidnapping"
     return text
-
 
 
 def _navigation_line(report: dict) -> str:
@@ -147,7 +188,9 @@ class SimSession:
         self._sim_time_ns = 0  # the recorder's clock in real time: the newest simulated time
         self.rehearsal = args.realtime and args.profile == "turtlebot3"
         self.context = rclpy.Context()
-        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
+        # No arguments for rcl: by default it reads the script's own command line (a value
+        # such as '__node:=x' would rename every node, 'name:=value' warns as a remap rule).
+        rclpy.init(args=[], context=self.context, signal_handler_options=SignalHandlerOptions.NO)
         self.executor = make_executor(self.context)
 
         self.navigating = getattr(args, "goal", None) is not None
@@ -271,8 +314,9 @@ class SimSession:
         wall_start = time.monotonic()
         last_steps, last_progress = sim.steps, wall_start
         try:
+            # A goal the planner cannot reach ends the run at once: the robot would only wait.
             while (sim.time < args.duration - 1e-9 and not self.simulator_node.finished
-                   and not self._stop_requested()):
+                   and not self._stop_requested() and self.planning_error() is None):
                 self.executor.spin_once(timeout_sec=0.1)
                 if sim.steps != last_steps:
                     last_steps, last_progress = sim.steps, time.monotonic()
@@ -284,6 +328,8 @@ class SimSession:
         self.interrupted = self.interrupted or (self.stop is not None and self.stop.requested)
         if self.interrupted:
             print(f"run_sim: interrupted at t={sim.time:.2f} s")
+        elif self.planning_error() is not None:
+            print(f"run_sim: no path to the goal: {self.planning_error()}", file=sys.stderr)
         wall_time = time.monotonic() - wall_start
         if self.recorder is not None:
             # Stop stepping, then let the recorder take the last step's messages.
@@ -341,27 +387,19 @@ class SimSession:
     def _localization_report(self) -> dict:
         if self.particle_filter is None:
             return {}
-        from amr_evaluation.localization_episode import metrics_from_rows
-        kidnap = list(self.args.kidnap) if getattr(self.args, "kidnap", None) else None
-        return {"localization": metrics_from_rows(self.trajectory, self.estimate, kidnap),
-                "kidnap": kidnap, "estimate": self.estimate,
-                "particles_snapshot": self.particles_snapshot}
+        return _localization_fields(self.args, self.trajectory, self.estimate,
+                                    self.particles_snapshot)
 
     def _navigation_report(self) -> dict:
-        """Goal, time localized, goal reached and stopped times, planned path, final error."""
         if not self.navigating:
             return {}
-        summary = self.simulator_node.summary()
-        plan = self.planner_node.last_plan if self.planner_node is not None else None
-        localized = next((row[0] for row in self.estimate if row[4] > 0.5), None)
-        return {
-            "goal": summary["goal"], "localized_time_s": localized,
-            "goal_reached_time_s": summary["goal_reached_time_s"],
-            "stopped_time_s": summary["stopped_time_s"],
-            "final_position_error_m": summary["final_position_error_m"],
-            "path_length_m": plan.length_m if plan is not None else None,
-            "path": plan.points.tolist() if plan is not None else [],
-        }
+        return _navigation_fields(self.args.goal, self.simulator_node.summary(),
+                                  self.planner_node.last_plan, self.estimate,
+                                  self.planning_error())
+
+    def planning_error(self) -> str | None:
+        """Why the planner found no path to the goal (it logged it), or None."""
+        return None if self.planner_node is None else self.planner_node.last_error
 
     def summary_line(self, report: dict) -> str:
         """One line for the terminal: where, how long, how fast, how safe."""
