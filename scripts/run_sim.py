@@ -203,7 +203,7 @@ def _simulate(args, world, starts, outputs, stop) -> int:
     from sim_session import SimSession, report_before_start
 
     from amr_common.world import start_label
-    print(f"run_sim: {describe_graph_settings()}")
+    print(f"run_sim: {describe_graph_settings()}", flush=True)  # the graph starts now
     reports = []
     for start in starts:
         if stop.requested:
