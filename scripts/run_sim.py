@@ -200,7 +200,8 @@ def _prepare(args):
 
 def _simulate(args, world, starts, outputs, stop) -> int:
     """Run each start in turn until done or stopped; write the outputs; the exit code."""
-    from sim_session import SimSession, report_before_start
+    from sim_report import report_before_start
+    from sim_session import SimSession
 
     from amr_common.world import start_label
     print(f"run_sim: {describe_graph_settings()}", flush=True)  # the graph starts now
