@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import importlib
 import math
+import re
 from typing import Any
 
 DEFAULT_CONTROLLER = "amr_control.wall_follower:WallFollower"
@@ -45,9 +46,22 @@ def _one_line(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
+# A ROS parameter name: words of letters, digits and '_' joined by '.', not starting with '__'
+# (rcl's own arguments: __node, __ns, __log_level ...). No remapping syntax (':', '/', '~').
+_PARAMETER_NAME = re.compile(r"^(?!__)[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*$")
+
+
 def parse_value(text: str) -> Any:
-    """Type a command-line value like ROS does: bool, int, float, else string."""
-    lowered = text.strip().lower()
+    """Type a command-line value like ROS does: bool, int, float, [list of those], else string.
+
+    `[1.0, 2, 3]` is a list (as `-p name:=[1.0, 2, 3]` in ROS); ValueError for a non-finite
+    number.
+    """
+    stripped = text.strip()
+    if stripped.startswith("[") and stripped.endswith("]"):
+        inner = stripped[1:-1].strip()
+        return [parse_value(item.strip()) for item in inner.split(",")] if inner else []
+    lowered = stripped.lower()
     if lowered in ("true", "false"):
         return lowered == "true"
     for cast in (int, float):
@@ -66,9 +80,17 @@ def parse_overrides(items: list[str] | None) -> dict[str, Any]:
     overrides: dict[str, Any] = {}
     for item in items or []:
         name, sep, value = item.partition(":=")
-        if not sep or not name.strip():
+        name = name.strip()
+        if not sep or not name:
             raise ControllerSpecError(f"override '{item}' must look like name:=value")
-        overrides[name.strip()] = parse_value(value)
+        if not _PARAMETER_NAME.match(name):
+            raise ControllerSpecError(
+                f"override '{item}': '{name}' is not a parameter name (letters, digits and '_', "
+                f"parts joined by '.'; names starting with '__' are rcl's own arguments)")
+        try:
+            overrides[name] = parse_value(value)
+        except ValueError as exc:
+            raise ControllerSpecError(f"override '{item}': {exc}") from None
     return overrides
 
 

@@ -7,7 +7,6 @@ transition BEFORE the context goes away, so nodes that command a robot can send 
 """
 from __future__ import annotations
 
-import signal
 import sys
 from typing import Callable, Sequence
 
@@ -16,6 +15,8 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import Executor, SingleThreadedExecutor
 from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from rclpy.signals import SignalHandlerOptions
+
+from amr_common.stop_flag import StopFlag  # the scripts' and executables' Ctrl-C flag
 
 
 def make_executor(context=None) -> Executor:
@@ -55,29 +56,6 @@ def shutdown_node(node: LifecycleNode) -> None:
             node.trigger_shutdown()
     except Exception as exc:  # never let cleanup mask the original exit reason
         node.get_logger().warning(f"shutdown transition failed: {exc}")
-
-
-class StopFlag:
-    """Set by SIGINT/SIGTERM; spin loops poll it (a blocking spin() would never see a signal)."""
-
-    def __init__(self) -> None:
-        self.requested = False
-        self._previous: dict[int, object] = {}
-
-    def install(self) -> "StopFlag":
-        """Make SIGINT and SIGTERM set this flag; uninstall() restores their handlers."""
-        for signum in (signal.SIGINT, signal.SIGTERM):
-            self._previous[signum] = signal.signal(signum, self._handle)
-        return self
-
-    def uninstall(self) -> None:
-        """Give SIGINT and SIGTERM back to the handlers they had before install()."""
-        for signum, handler in self._previous.items():
-            signal.signal(signum, handler)
-        self._previous.clear()
-
-    def _handle(self, signum, frame) -> None:
-        self.requested = True
 
 
 def spin_until_stopped(executor: Executor, stop: StopFlag, context=None) -> None:

@@ -59,15 +59,24 @@ def read_parameters(node: Node, table: ParameterTable,
     Returns (values, problems): a problem names a parameter whose value has the wrong type (it
     keeps its raw value in `values`).
     """
-    values: dict[str, Any] = {}
+    return typed_values(table, {name: node.get_parameter(name).value for name in table}, types)
+
+
+def typed_values(table: ParameterTable, values: Mapping[str, Any],
+                 types: Mapping[str, int] | None = None) -> tuple[dict[str, Any], list[str]]:
+    """`values` (names of `table`) in their declared types, as a node would read them.
+
+    What read_parameters does for a node's values, for values not yet given to a node (the run
+    scripts check -p overrides with it before any node exists). Returns (values, problems).
+    """
+    typed: dict[str, Any] = {}
     problems: list[str] = []
-    for name, (default, _) in table.items():
-        value = node.get_parameter(name).value
-        type_ = (types or {}).get(name, parameter_type(default))
-        values[name], problem = _as_declared(name, value, type_)
+    for name, value in values.items():
+        type_ = (types or {}).get(name, parameter_type(table[name][0]))
+        typed[name], problem = _as_declared(name, value, type_)
         if problem:
             problems.append(problem)
-    return values, problems
+    return typed, problems
 
 
 def _is_integer(value: Any) -> bool:
@@ -91,7 +100,14 @@ def _as_declared(name: str, value: Any, type_: int) -> tuple[Any, str | None]:
         if items is not None and all(_is_integer(v) or isinstance(v, float) for v in items):
             return [float(v) for v in items], None
         return value, f"{name} must be a list of numbers (got {value!r})"
-    return value, None  # statically typed: rclpy already refused other types
+    # Statically typed: a node's value already has its type (rclpy refuses others); values not
+    # yet given to a node may not (rclpy would raise in the node's constructor).
+    if type_ == ParameterType.PARAMETER_BOOL and not isinstance(value, bool):
+        return value, f"{name} must be true or false (got {value!r})"
+    if type_ == ParameterType.PARAMETER_STRING and not isinstance(value, str):
+        return value, f"{name} must be a string (got {value!r})"
+    return value, None
 
 
-__all__ = ["ParameterTable", "parameter_type", "declare_parameters", "read_parameters", "finite"]
+__all__ = ["ParameterTable", "parameter_type", "declare_parameters", "read_parameters",
+           "typed_values", "finite"]

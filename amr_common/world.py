@@ -2,8 +2,10 @@
 
 `World.load(name_or_path)` reads a bundled world by name ("lab02") or a world YAML / the
 course's map JSON / a Nav2 map YAML by path (the formats: amr_common/world_file.py), then checks
-it against its walls: no zero-length wall; every start pose and goal inside the boundary,
-outside every obstacle and at least the robot radius from the walls.
+it against its walls: no zero-length wall; a boundary and holes that do not cross themselves,
+holes inside the boundary (they may touch it); every start pose inside the boundary, outside
+every obstacle and at least the robot radius from the walls; every goal at least GOAL_CLEARANCE
+from them.
 
 A map world (a Nav2 map YAML, or `World.from_raster` on a map SLAM built) keeps its cells in
 `raster`: its free space is its free cells, its walls (`segments`) are the edges between free
@@ -13,10 +15,14 @@ planner, the particle filter and /map is the map's own cells.
 A World answers the geometric questions of the simulator, the planner, the filter and the
 metrics: clearances, free space, start and goal poses, the coverage grid.
 
+The one clearance rule for goals (the run scripts, evaluate's worlds and the planner use it):
+a goal keeps the robot radius plus SAFETY_MARGIN from every wall, the planner's inflated walls,
+so a path to it never leaves the planner's free space. A start only needs the robot to fit.
+
 Every problem (missing file, unknown name, bad YAML/JSON, missing keys, non-numeric or non-finite
-coordinates, polylines with too few points, zero-length walls, start poses or goals outside the
-boundary, inside an obstacle or closer to a wall than the robot radius) raises WorldError naming
-the file.
+coordinates, polylines with too few points, zero-length walls, self-crossing polygons, holes
+outside or across the boundary, start poses or goals outside the boundary, inside an obstacle
+or too close to a wall) raises WorldError naming the file.
 """
 from __future__ import annotations
 
@@ -42,6 +48,10 @@ from .world_file import (
 )
 
 MARCH_ABOVE_SEGMENTS = 300  # map worlds with more wall segments are ray-marched (march_grid)
+# Paths and goals keep the robot radius plus this margin from every wall: the planner's
+# inflated walls (its safety_margin_m default) and the goals the run scripts accept.
+SAFETY_MARGIN = 0.03  # m
+GOAL_CLEARANCE = ROBOT_RADIUS + SAFETY_MARGIN  # 0.135 m
 
 
 @dataclass
@@ -104,6 +114,7 @@ class World:
             x1, y1 = segments[bad[0], :2]
             raise WorldError(f"{path}: zero-length wall at ({x1:g}, {y1:g}) (repeated point in "
                              f"a polyline)")
+        _check_polygons(spec)
         world = cls(name=spec.name, source=str(path), segments=segments, starts=spec.starts,
                     goal=spec.goal, cell_size=spec.cell_size, description=spec.description,
                     boundary=spec.boundary, holes=spec.holes, goals=dict(spec.goals),
@@ -115,9 +126,9 @@ class World:
         for start_name, pose in self.starts.items():
             self._check_pose(pose, f"start '{start_name}'")
         for goal_name, point in self.goals.items():
-            self._check_pose((*point, 0.0), f"goal '{goal_name}'")
+            self._check_goal(point, f"goal '{goal_name}'")
         if self.goal is not None:
-            self._check_pose((*self.goal, 0.0), "goal")
+            self._check_goal(self.goal, "goal")
 
     # ------------------------------------------------------------------ geometry
     @property
@@ -181,9 +192,12 @@ class World:
             inside[rows] &= ~inside_polygon_points(self.holes[hole_index], pts[rows])
         return inside
 
-    def resolve_start(self, start: str | tuple | list | np.ndarray | None
-                      ) -> tuple[float, float, float]:
-        """A start pose from a name, an (x, y, theta) triple or None (= the first named start)."""
+    def resolve_start(self, start: str | tuple | list | np.ndarray | None,
+                      what: str = "start") -> tuple[float, float, float]:
+        """A start pose from a name, an (x, y, theta) triple or None (= the first named start).
+
+        `what` names the pose in errors (e.g. "kidnap pose"): the robot must fit there.
+        """
         if start is None:
             if not self.starts:
                 raise WorldError(f"{self.source}: the world names no start pose; pass "
@@ -195,15 +209,15 @@ class World:
                                  f"{', '.join(self.starts) or 'none'})")
             return self.starts[start]
         pose = pose_value(list(start) if not isinstance(start, list) else start, self.source,
-                          "start")
-        self._check_pose(pose, "start")
+                          what)
+        self._check_pose(pose, what)
         return pose
 
     def resolve_goal(self, goal: str | tuple | list | np.ndarray | None) -> tuple[float, float]:
         """A goal position from a name of `goals`, "x,y" text, an (x, y) pair or None.
 
         None is the world's default goal. Raises WorldError if the goal is unknown, malformed,
-        outside the free space or closer to a wall than the robot radius.
+        outside the free space or closer to a wall than GOAL_CLEARANCE.
         """
         if goal is None:
             if self.goal is None:
@@ -221,25 +235,54 @@ class World:
                 raise WorldError(f"{self.source}: goal is neither a named goal ("
                                  f"{', '.join(self.goals) or 'none'}) nor 'x,y'")
         point = point_value(list(goal), self.source, "goal")
-        self._check_pose((*point, 0.0), "goal")
+        self._check_goal(point, "goal")
         return point
 
+    def goal_problem(self, x: float, y: float, what: str = "goal",
+                     min_clearance: float = GOAL_CLEARANCE) -> str | None:
+        """Why (x, y) cannot be a goal, or None.
+
+        Outside the free space or within `min_clearance` of a wall (the planner passes its own
+        inflation radius).
+        """
+        problem = self._pose_problem(x, y, what)
+        if problem is None and (c := self.clearance(x, y)) < min_clearance:
+            problem = (f"{what} ({x:g}, {y:g}) is too close to a wall: clearance {c:.3f} m < "
+                       f"{min_clearance:.3f} m (robot radius + safety margin: a path there "
+                       f"would leave the planner's free space)")
+        return problem
+
+    def _check_goal(self, point: tuple[float, float], what: str) -> None:
+        problem = self.goal_problem(*point, what=what)
+        if problem is not None:
+            raise WorldError(f"{self.source}: {problem}")
+
     def _check_pose(self, pose: tuple[float, float, float], what: str) -> None:
-        x, y, _ = pose
+        problem = self._pose_problem(pose[0], pose[1], what)
+        if problem is not None:
+            raise WorldError(f"{self.source}: {problem}")
+
+    def _pose_problem(self, x: float, y: float, what: str) -> str | None:
+        """Why the robot cannot stand at (x, y), or None."""
+        xmin, ymin, xmax, ymax = self.bounds
+        # Beyond every wall first: the polygon tests would overflow on huge coordinates.
+        beyond = not (xmin <= x <= xmax and ymin <= y <= ymax)
+        if self.boundary is not None and (beyond or not _point_in_polygon(self.boundary, x, y)):
+            return f"{what} ({x:g}, {y:g}) is outside the boundary"
+        if beyond:
+            return f"{what} ({x:g}, {y:g}) is outside the map"
         if self.raster is not None and not self.contains(x, y):
-            raise WorldError(f"{self.source}: {what} ({x:g}, {y:g}) is not in a free cell of "
-                             f"the map (occupied, unknown or off the map)")
-        if self.boundary is not None and not _point_in_polygon(self.boundary, x, y):
-            raise WorldError(f"{self.source}: {what} ({x:g}, {y:g}) is outside the boundary")
+            return (f"{what} ({x:g}, {y:g}) is not in a free cell of the map (occupied, unknown "
+                    f"or off the map)")
         if not self.contains(x, y):  # inside a hole: name it
             for i, hole in enumerate(self.holes):
                 if _point_in_polygon(hole, x, y):
-                    raise WorldError(f"{self.source}: {what} ({x:g}, {y:g}) is inside obstacle "
-                                     f"holes[{i}]")
+                    return f"{what} ({x:g}, {y:g}) is inside obstacle holes[{i}]"
         c = self.clearance(x, y)
         if c < ROBOT_RADIUS:
-            raise WorldError(f"{self.source}: {what} ({x:g}, {y:g}) touches a wall: clearance "
-                             f"{c:.3f} m < robot radius {ROBOT_RADIUS} m")
+            return (f"{what} ({x:g}, {y:g}) touches a wall: clearance {c:.3f} m < robot radius "
+                    f"{ROBOT_RADIUS} m")
+        return None
 
     def coverage_grid(self, margin: float = ROBOT_RADIUS) -> CoverageGrid:
         """The cell_size grid behind the coverage metrics (amr_common.coverage_grid).
@@ -324,5 +367,67 @@ def _closed_segments(poly: np.ndarray) -> np.ndarray:
     return np.hstack([poly, np.roll(poly, -1, axis=0)])
 
 
+def _check_polygons(spec: WorldFile) -> None:
+    """WorldError for a self-crossing boundary or hole, or a hole outside or across the boundary.
+
+    Touching is fine (a hole flush with the outer wall); free-standing walls may cross anything.
+    """
+    polygons = [("boundary", spec.boundary)] + [(f"holes[{i}]", h) for i, h in
+                                                 enumerate(spec.holes)]
+    for what, poly in polygons:
+        edges = _closed_segments(poly)
+        n = len(edges)
+        # Edges i < j that are not neighbours (neighbours share a point).
+        point = _first_crossing(edges, edges,
+                                lambda i, j: (j > i + 1) & ~((i == 0) & (j == n - 1)))
+        if point is not None:
+            raise WorldError(f"{spec.path}: '{what}' crosses itself at ({point[0]:g}, "
+                             f"{point[1]:g}): a polygon's edges may not cross")
+    boundary_edges = _closed_segments(spec.boundary)
+    for what, hole in polygons[1:]:
+        point = _first_crossing(_closed_segments(hole), boundary_edges)
+        if point is not None:
+            raise WorldError(f"{spec.path}: '{what}' crosses the boundary at ({point[0]:g}, "
+                             f"{point[1]:g}): holes are obstacles inside it")
+        outside = ~inside_polygon_points(spec.boundary, hole)
+        if outside.any():
+            gaps = np.sqrt(_squared_distances(boundary_edges, hole[outside, 0:1],
+                                              hole[outside, 1:2]).min(axis=1))
+            if (gaps > 1e-9).any():  # on the boundary is touching, not outside
+                raise WorldError(f"{spec.path}: '{what}' lies outside the boundary: holes are "
+                                 f"obstacles inside it")
+
+
+def _first_crossing(a: np.ndarray, b: np.ndarray, pairs=None, chunk: int = 256):
+    """Where a segment of `a` properly crosses one of `b` (not touching), or None.
+
+    `pairs(i, j)` (index arrays) selects the pairs to test; rows of `a` go in chunks to bound
+    the memory of long polylines.
+    """
+    def orient(p, q, r):  # sign of the turn p -> q -> r, 0 within rounding
+        value = (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - \
+                (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0])
+        return np.where(np.abs(value) < 1e-12, 0.0, np.sign(value))
+
+    q1, q2 = b[None, :, 0:2], b[None, :, 2:4]
+    for start in range(0, len(a), chunk):
+        rows = a[start:start + chunk]
+        p1, p2 = rows[:, None, 0:2], rows[:, None, 2:4]
+        crossing = ((orient(p1, p2, q1) * orient(p1, p2, q2) < 0)
+                    & (orient(q1, q2, p1) * orient(q1, q2, p2) < 0))
+        if pairs is not None:
+            i, j = np.meshgrid(np.arange(start, start + len(rows)), np.arange(len(b)),
+                               indexing="ij")
+            crossing &= pairs(i, j)
+        if crossing.any():
+            i, j = np.argwhere(crossing)[0]
+            (x1, y1, x2, y2), (x3, y3, x4, y4) = rows[i], b[j]
+            t = ((x3 - x1) * (y4 - y3) - (y3 - y1) * (x4 - x3)) / \
+                ((x2 - x1) * (y4 - y3) - (y2 - y1) * (x4 - x3))
+            return x1 + t * (x2 - x1), y1 + t * (y2 - y1)
+    return None
+
+
 # WorldError, bundled_worlds and WORLDS_DIR live in world_file.py; they are imported from here.
-__all__ = ["WORLDS_DIR", "World", "WorldError", "bundled_worlds", "parse_start", "start_label"]
+__all__ = ["GOAL_CLEARANCE", "SAFETY_MARGIN", "WORLDS_DIR", "World", "WorldError",
+           "bundled_worlds", "parse_start", "start_label"]

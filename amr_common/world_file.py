@@ -18,7 +18,8 @@ a Nav2 map_server map YAML (it has `image`, `resolution`, ...), is read by amr_c
          - [[x, y], ...]
        starts:                   # optional named start poses [x, y, theta]
          outer: [1.0, -1.0, pi/2]  # theta in rad: a number or "pi", "pi/2", "3*pi/2", "-pi/4"
-       goals:                    # optional named goals [x, y] (navigation targets)
+       goals:                    # optional named goals [x, y] (navigation targets, >= 0.135 m
+                                 # from every wall: amr_common.world.GOAL_CLEARANCE)
          far_corner: [-1.0, 1.0]
        goal: far_corner          # optional default goal: [x, y] or a name of `goals`;
                                  # without it the first named goal is the default
@@ -38,10 +39,11 @@ a Nav2 map_server map YAML (it has `image`, `resolution`, ...), is read by amr_c
    ignores them); scripts/world_to_map.py writes any world as one.
 
 Every problem (missing file, unknown name, bad YAML/JSON, missing keys, non-numeric or non-finite
-coordinates, polylines with too few points, zero-length walls, start poses or goals outside the
-boundary, inside an obstacle or closer to a wall than the robot radius) raises WorldError naming
-the file; the checks against the walls (starts and goals in the free space, no zero-length
-wall) are World's (amr_common.world).
+coordinates, polylines with too few points, zero-length walls, a boundary or hole that crosses
+itself, a hole outside or across the boundary, start poses or goals outside the boundary, inside
+an obstacle or too close to a wall) raises WorldError naming the file; the checks against the
+walls (polygons, starts within the robot radius, goals within the planner's inflation
+GOAL_CLEARANCE = 0.135 m, no zero-length wall) are World's (amr_common.world).
 """
 from __future__ import annotations
 

@@ -101,9 +101,28 @@ def tuning_table(controller_class: type) -> dict[str, tuple[Any, str]]:
             if name not in _NODE_PARAMETERS and name != "use_sim_time"}
 
 
+def parameter_table(controller_class: type) -> dict[str, tuple[Any, str]]:
+    """The node's own parameters and the controller's tuning ones: name -> (default, description).
+
+    use_sim_time (rclpy declares it) included; the run scripts check -p against it.
+    """
+    return {**_NODE_PARAMETERS, **tuning_table(controller_class),
+            "use_sim_time": (False, "Follow /clock (rclpy's parameter)")}
+
+
 def parameter_names(controller_class: type) -> list[str]:
     """Every parameter the node declares with this controller class (run scripts check -p)."""
-    return sorted({*_NODE_PARAMETERS, *tuning_table(controller_class), "use_sim_time"})
+    return sorted(parameter_table(controller_class))
+
+
+def node_parameter_problems(p: dict[str, Any]) -> list[str]:
+    """What is wrong with the node's own parameter values (typed as declared)."""
+    problems = command_parameter_problems(p)
+    if p["queue_size"] < 1:
+        problems.append(f"queue_size must be >= 1 (got {p['queue_size']})")
+    if not math.isfinite(p["slop"]):
+        problems.append(f"slop must be finite (got {p['slop']})")
+    return problems
 
 
 class WallFollowerNode(CommandingNode):
@@ -162,11 +181,7 @@ class WallFollowerNode(CommandingNode):
         if problems:
             self.get_logger().error("configure failed: " + "; ".join(problems))
             return TransitionCallbackReturn.FAILURE
-        problems = command_parameter_problems(p)
-        if p["queue_size"] < 1:
-            problems.append(f"queue_size must be >= 1 (got {p['queue_size']})")
-        if not math.isfinite(p["slop"]):
-            problems.append(f"slop must be finite (got {p['slop']})")
+        problems = node_parameter_problems(p)
         if problems:
             self.get_logger().error("configure failed: " + "; ".join(problems))
             return TransitionCallbackReturn.FAILURE

@@ -83,6 +83,25 @@ _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
 _ARRAYS = {"initial_pose", "initial_pose_sigma"}
 
 
+def node_parameters() -> dict[str, tuple[Any, str]]:
+    """The node's own parameters (not the filter's): name -> (default, description)."""
+    return dict(_NODE_PARAMETERS)
+
+
+def node_parameter_problems(node: dict[str, Any]) -> list[str]:
+    """What is wrong with the node's own parameter values (typed as declared)."""
+    problems = []
+    for name in ("slop", "max_odometry_gap_s", "max_scan_age_s", "particles_period_s"):
+        if not finite(node[name]) or node[name] < 0:
+            problems.append(f"{name} must be a number >= 0 (got {node[name]!r})")
+    if not 0.0 <= float(node["min_valid_share"]) <= 1.0:
+        problems.append(f"min_valid_share must be in [0, 1] (got {node['min_valid_share']})")
+    for name in ("queue_size", "particles_published"):
+        if node[name] < 1:
+            problems.append(f"{name} must be >= 1 (got {node[name]})")
+    return problems
+
+
 class ParticleFilterNode(GuardedLifecycleNode):
     """Monte Carlo localization on the world map; see the module docstring for the I/O.
 
@@ -130,14 +149,8 @@ class ParticleFilterNode(GuardedLifecycleNode):
         node, problems = read_parameters(self, _NODE_PARAMETERS)
         filter_values, filter_problems = read_parameters(self, FILTER_PARAMETERS)
         problems += filter_problems
-        for name in ("slop", "max_odometry_gap_s", "max_scan_age_s", "particles_period_s"):
-            if not finite(node[name]) or node[name] < 0:
-                problems.append(f"{name} must be a number >= 0 (got {node[name]!r})")
-        if not 0.0 <= float(node["min_valid_share"]) <= 1.0:
-            problems.append(f"min_valid_share must be in [0, 1] (got {node['min_valid_share']})")
-        for name in ("queue_size", "particles_published"):
-            if node[name] < 1:
-                problems.append(f"{name} must be >= 1 (got {node[name]})")
+        if not problems:
+            problems += node_parameter_problems(node)
         filter_params: dict[str, Any] = {}
         if not filter_problems:
             try:

@@ -74,6 +74,9 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     "reinit_updates": (10, "... at this many consecutive updates restarts the global search."),
 }
 
+# More particles than this cost seconds per scan update and configure (a million: ~0.3 s per
+# update, ~2 s to build, ~150 MB on the 2-core reference machine); 8000 localize the mazes.
+MAX_PARTICLE_COUNT = 1_000_000
 _INTEGERS = {"seed", "max_particles", "min_particles", "tracking_particles", "beams",
              "table_angles", "localize_updates", "lost_updates", "reinit_updates"}
 _FRACTIONS = {"z_random", "seed_uniform_share", "resample_ess_fraction", "search_ess_fraction",
@@ -112,6 +115,10 @@ def check_parameters(overrides: dict[str, Any] | None = None) -> dict[str, Any]:
             problems.append(f"{name} must be > 0 (got {values[name]!r})")
     if isinstance(values["z_random"], float) and not 0.0 < values["z_random"] < 1.0:
         problems.append(f"z_random must be in (0, 1) (got {values['z_random']!r})")
+    for name in ("max_particles", "min_particles", "tracking_particles"):
+        if isinstance(values[name], int) and values[name] > MAX_PARTICLE_COUNT:
+            problems.append(f"{name} must be at most {MAX_PARTICLE_COUNT} (got {values[name]}): "
+                            f"a million particles already take ~0.3 s per scan update")
     if isinstance(values["min_particles"], int) and isinstance(values["max_particles"], int) \
             and values["min_particles"] > values["max_particles"]:
         problems.append(f"min_particles ({values['min_particles']}) must not exceed "

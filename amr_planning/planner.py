@@ -15,9 +15,11 @@ Grid and costs (amr_common.occupancy_grid gives each cell's exact distance c to 
   inflation layer, but from exact distances).
 - A* (8-connected, no corner cutting, octile heuristic: optimal for heuristic_weight 1, within
   that factor of the optimal cost above 1) or the seeds' wavefront (`algorithm`).
-- A start or goal inside the inflation (but not touching a wall) is connected by a straight
-  piece to the nearest traversable cell; the start may even touch a wall (the robot is there),
-  the goal may not.
+- Paths never leave the inflated free space, except where the robot already is: a start inside
+  the inflation (it may even touch a wall) is connected by a straight piece to the nearest
+  traversable cell that does not bring it closer to the walls. A goal must keep the inflation
+  radius from every wall (amr_common.world's goal rule, the one the run scripts check): one
+  closer is a PlanningError, never a straight piece through the inflation.
 The grid path is then simplified and its corners rounded (amr_planning.smoothing).
 """
 from __future__ import annotations
@@ -34,7 +36,7 @@ from amr_common.occupancy_grid import OccupancyGrid
 from amr_common.parameter_table import finite, table_values
 from amr_common.raycast import nearest_wall_kernel
 from amr_common.robot import ROBOT_RADIUS
-from amr_common.world import World
+from amr_common.world import SAFETY_MARGIN, World
 from amr_planning import search, smoothing
 
 ALGORITHMS = ("astar", "wavefront")
@@ -45,8 +47,9 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
                            "'wavefront' (the seeds' breadth-first wave from the goal)."),
     "resolution_m": (0.02, "Grid cell size [m]."),
     "robot_radius_m": (ROBOT_RADIUS, "Robot footprint radius [m]."),
-    "safety_margin_m": (0.03, "Added to the radius: cells closer to a wall than radius + margin "
-                              "are not traversable [m]."),
+    "safety_margin_m": (SAFETY_MARGIN, "Added to the radius: cells closer to a wall than radius "
+                                       "+ margin are not traversable, and goals closer are "
+                                       "refused [m]."),
     "preferred_clearance_m": (0.25, "Clearance from which a cell costs no extra; also the "
                                     "clearance smoothing keeps where the grid path had it [m]."),
     "clearance_weight": (4.0, "Extra cost of a cell at the inflation edge relative to a free "
@@ -253,17 +256,18 @@ class Planner:
         clearance = nearest_wall_kernel(self.segments, x, y)[0]
         if clearance < 1e-9:
             raise PlanningError(f"{what} ({x:.3f}, {y:.3f}) is on a wall")
-        if not may_touch and clearance < self.params["robot_radius_m"]:
-            raise PlanningError(
-                f"{what} ({x:.3f}, {y:.3f}) is too close to a wall: clearance {clearance:.3f} m "
-                f"< robot radius {self.params['robot_radius_m']:.3f} m")
+        if not may_touch:  # a goal: the world's rule with this planner's inflation radius
+            problem = self.world.goal_problem(x, y, what, min_clearance=self.inflation_radius)
+            if problem is not None:
+                raise PlanningError(problem)
         return x, y
 
     def _entry_cell(self, point: tuple[float, float], what: str) -> int:
         """The point's own cell if traversable, else the nearest traversable cell in reach.
 
-        In reach: a straight piece from the point gets there without touching a wall, within
-        the inflation radius.
+        In reach: within the inflation radius, by a straight piece that keeps the point's own
+        clearance up to the inflation radius (a start in the inflation gets out without coming
+        closer to a wall; a goal, outside it, stays out).
         """
         x, y = point
         cell = self.cell_index(x, y)
@@ -278,13 +282,11 @@ class Planner:
         finite = np.isfinite(self.cost[rows * grid.width + cols])
         centres = grid.cell_centres(rows[finite], cols[finite])
         distance = np.hypot(centres[:, 0] - x, centres[:, 1] - y)
-        radius = self.params["robot_radius_m"]
+        need = min(self.inflation_radius, nearest_wall_kernel(self.segments, x, y)[0])
         for k in np.argsort(distance, kind="stable"):
             if distance[k] > reach:
                 break
             cx, cy = centres[k]
-            # The straight piece must not touch a wall (the start may already: then not worse).
-            need = min(radius, nearest_wall_kernel(self.segments, x, y)[0])
             if smoothing._segment_clearance(self.segments, x, y, cx, cy,
                                             0.5 * grid.resolution) >= need - 1e-9:
                 return int(rows[finite][k] * grid.width + cols[finite][k])

@@ -65,6 +65,7 @@ class PlannerNode(GuardedLifecycleNode):
         self.planner: Planner | None = None
         self.goal: tuple[float, float] | None = None
         self.last_plan = None
+        self.last_error: str | None = None  # why the newest planning gave no path (run scripts)
         self._path_publisher = None
         self._subscriptions: list = []
         self._localized = False
@@ -165,29 +166,30 @@ class PlannerNode(GuardedLifecycleNode):
         """Plan from the newest localized pose to the goal; publish the path (empty if none)."""
         start = self._pose
         if self.goal is None:
-            self.get_logger().error("no goal: set the `goal` or `goal_name` parameter, give the "
-                                    "world a goal, or send /goal_pose; publishing an empty path")
-            self._publish([])
+            self._fail("no goal: set the `goal` or `goal_name` parameter, give the world a "
+                       "goal, or send /goal_pose")
             return
         try:
             plan = self.planner.plan(start, self.goal)
         except PlanningError as exc:
-            self.get_logger().error(f"no path: {exc}; publishing an empty path")
-            self.last_plan = None
-            self._publish([])
+            self._fail(str(exc), "no path: ")
             return
         except Exception as exc:  # a bug must not take the node (and the loop) down
-            self.get_logger().error(f"planning failed: {exc!r}; publishing an empty path")
-            self.last_plan = None
-            self._publish([])
+            self._fail(f"planning failed: {exc!r}")
             return
-        self.last_plan = plan
+        self.last_plan, self.last_error = plan, None
         self.get_logger().info(
             f"path from ({start[0]:.3f}, {start[1]:.3f}) to ({self.goal[0]:.3f}, "
             f"{self.goal[1]:.3f}): {len(plan.points)} poses, {plan.length_m:.2f} m, min "
             f"clearance {plan.min_clearance_m:.3f} m, planned in {plan.total_time_s * 1e3:.1f} "
             f"ms ({plan.algorithm}: {plan.search_time_s * 1e3:.2f} ms, {plan.expanded} cells)")
         self._publish(plan.points)
+
+    def _fail(self, reason: str, prefix: str = "") -> None:
+        """Log why there is no path, keep it in last_error and publish an empty path."""
+        self.get_logger().error(f"{prefix}{reason}; publishing an empty path")
+        self.last_plan, self.last_error = None, reason
+        self._publish([])
 
     def _publish(self, points) -> None:
         stamp = self._pose_stamp if self._pose_stamp is not None else \

@@ -1,7 +1,7 @@
-"""Command-line checks the scripts share: negative pose values, domain ids, output paths.
+"""Command-line checks the scripts share: one-line errors, pose values, domain ids, outputs.
 
-Output paths are checked before a run instead of failing after it; numbers (number_argument)
-and ROS names (ros_name_argument) as argparse types.
+Errors are one line (no usage dump); output paths are checked before a run instead of failing
+after it; numbers (number_argument) and ROS names (ros_name_argument) as argparse types.
 """
 from __future__ import annotations
 
@@ -11,13 +11,25 @@ import os
 import re
 import sys
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Callable, NoReturn, Sequence
 
 REPO = Path(__file__).resolve().parent.parent
 if str(REPO) not in sys.path:  # run from a checkout without installing
     sys.path.insert(0, str(REPO))
 
 from amr_common.ros_env import check_domain_id  # noqa: E402
+
+
+class OneLineArgumentParser(argparse.ArgumentParser):
+    """An ArgumentParser whose errors are one line, `prog: error: message`, exit code 2.
+
+    argparse prints the whole usage before the message (11 lines for run_sim.py), which buries
+    it; --help still shows the usage.
+    """
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (--help lists the options)\n")
+
 
 # '-1.0,2,0' or '-.5': a value, not an option (argparse only takes plain negative numbers).
 _NEGATIVE_VALUE = re.compile(r"^-\.?\d")
@@ -157,6 +169,21 @@ def plot_file(path: str | os.PathLike) -> Path:
     if target.suffix[1:].lower() not in formats:
         raise ValueError(f"--plot '{path}': matplotlib cannot write '{target.suffix}' files "
                          f"(use one of {', '.join('.' + f for f in sorted(formats))})")
+    return target
+
+
+def recording_file(path: str | os.PathLike) -> Path:
+    """The MCAP file a recording is written to: .mcap when the name has no suffix.
+
+    ValueError for another suffix (a recording is always MCAP).
+    """
+    target = Path(path)
+    if target.is_dir():
+        return target  # check_output_file says what is wrong with it
+    if not target.suffix:
+        return target.with_name(target.name + ".mcap")
+    if target.suffix.lower() != ".mcap":
+        raise ValueError(f"--record '{path}': recordings are MCAP files: name it .mcap")
     return target
 
 

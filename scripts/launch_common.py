@@ -81,20 +81,20 @@ def add_localization_options(parser) -> None:
                         "--pf-param beams:=90")
 
 
-def check_common_options(parser, args) -> None:
-    """Check dt, the -p overrides, the params file and the controller before anything runs.
+def check_common_options(parser, args, script: str, wall_follower_set: dict[str, str],
+                         filter_set: dict[str, str]) -> None:
+    """Check dt, the Foxglove port, -p, --pf-param, the params file and the controller now.
 
-    Sets args.overrides (typed -p values) and args.controller_spec (the MODULE:CLASS the wall
-    follower will run); argparse errors (exit 2, one line) on failure,
-    including a -p name the wall follower does not have (the node would ignore it).
+    Everything the nodes would refuse once started is refused here, before any node exists
+    (argparse error: one line, exit code 2). `wall_follower_set` and `filter_set` name the
+    parameters `script` sets itself from its options ({"dt": "from --dt"}): a -p or --pf-param
+    for them would contradict the option, so it is refused naming the option.
+    Sets args.overrides and args.pf_overrides (typed as the nodes declare them) and
+    args.controller_spec (the MODULE:CLASS the wall follower will run).
     """
     import math
 
-    from amr_common.controller_loader import (
-        DEFAULT_CONTROLLER,
-        load_controller_class,
-        parse_overrides,
-    )
+    from amr_common.controller_loader import ControllerSpecError, parse_overrides
     if args.dt is not None and not (math.isfinite(args.dt) and args.dt > 0):
         parser.error("--dt must be > 0")
     if getattr(args, "foxglove_port", 0) is not None and \
@@ -103,34 +103,119 @@ def check_common_options(parser, args) -> None:
     if (getattr(args, "foxglove_teleop", False) or getattr(args, "foxglove_origin", [])) \
             and not args.foxglove:
         parser.error("--foxglove-teleop and --foxglove-origin need --foxglove")
+    if getattr(args, "foxglove", False):
+        problem = _listen_problem(args.foxglove_host, args.foxglove_port)
+        if problem:
+            parser.error(problem)
+    pf_param = getattr(args, "pf_param", [])
+    for option, attribute, items in (("-p", "overrides", args.param),
+                                     ("--pf-param", "pf_overrides", pf_param)):
+        try:
+            setattr(args, attribute, parse_overrides(items))
+        except ControllerSpecError as exc:
+            parser.error(f"{option}: {exc}")
     try:
-        args.overrides = parse_overrides(args.param)
-        args.pf_overrides = parse_overrides(getattr(args, "pf_param", []))
-        in_file = read_params_file(args.params_file) if args.params_file else {}
-        spec = (args.controller or args.overrides.get("controller")
-                or in_file.get("controller") or DEFAULT_CONTROLLER)
-        args.controller_spec = str(spec)
-        controller_class = load_controller_class(args.controller_spec)
-    except ValueError as exc:  # ControllerSpecError, EvaluationError: one-line messages
+        _check_wall_follower(args, script, wall_follower_set)
+        _check_particle_filter(args, script, filter_set)
+    except ValueError as exc:  # one-line messages
         parser.error(str(exc))
-    from amr_control.wall_follower_node import parameter_names, tuning_table
-    known = parameter_names(controller_class)
-    unknown = [name for name in args.overrides if name not in known]
+
+
+def _refused(option: str, overrides: dict, script: str, set_by_script: dict[str, str]) -> None:
+    """ValueError for an override of a parameter the script sets itself (naming the option)."""
+    for name in overrides:
+        if name in set_by_script:
+            raise ValueError(f"{option} {name}: {script} sets it {set_by_script[name]}")
+
+
+def _check_wall_follower(args, script: str, set_by_script: dict[str, str]) -> None:
+    """-p names and values, the params file and the controller; ValueError (one line)."""
+    from amr_common.controller_loader import DEFAULT_CONTROLLER, load_controller_class
+    from amr_common.parameters import typed_values
+    from amr_control.wall_follower_node import (
+        node_parameter_problems,
+        parameter_table,
+        tuning_table,
+    )
+    _refused("-p", args.overrides, script, set_by_script)
+    in_file = read_params_file(args.params_file) if args.params_file else {}
+    spec = args.controller or in_file.get("controller") or DEFAULT_CONTROLLER
+    args.controller_spec = str(spec)
+    controller_class = load_controller_class(args.controller_spec)
+    table = parameter_table(controller_class)
+    unknown = [name for name in args.overrides if name not in table]
     if unknown:
-        parser.error(f"-p {', '.join(unknown)}: no such wall follower parameter with controller "
-                     f"{spec}; known: {', '.join(known)}")
+        raise ValueError(f"-p {', '.join(unknown)}: no such wall follower parameter with "
+                         f"controller {spec}; known: {', '.join(sorted(table))}")
+    args.overrides, problems = typed_values(table, args.overrides)
+    # What the node will read: defaults, the params file, -p, the script's dt.
+    values, file_problems = typed_values(
+        table, {name: value for name, value in in_file.items() if name in table})
+    problems += file_problems
+    values = {**{name: default for name, (default, _) in table.items()}, **values,
+              **args.overrides}
+    if args.dt is not None:
+        values["dt"] = float(args.dt)
+    if not problems:
+        problems = node_parameter_problems(values)
+    if problems:
+        raise ValueError(f"wall follower parameters (-p, --params-file): {'; '.join(problems)}")
     # Build the controller once with what the node will give it: a bad value fails now, before
     # any node exists (and its compiled kernels load here, not while the graph starts).
-    values = {**in_file, **args.overrides}
-    tuning = {name: values[name] for name in tuning_table(controller_class) if name in values}
+    tuning = {name: values[name] for name in tuning_table(controller_class)}
     try:
-        dt = float(args.dt if args.dt is not None else values.get("dt", 0.05))
-    except (TypeError, ValueError):
-        return  # the node reports a bad dt when it configures
-    try:
-        controller_class(dt, **tuning)
+        controller_class(values["dt"], **tuning)
     except Exception as exc:  # a user's controller may raise anything
-        parser.error(f"controller {spec} rejects its parameters: {exc}")
+        raise ValueError(f"controller {spec} rejects its parameters: {exc}") from None
+
+
+def _check_particle_filter(args, script: str, set_by_script: dict[str, str]) -> None:
+    """--pf-param names and values, by the filter's and its node's own checks; ValueError."""
+    if not args.pf_overrides:
+        return
+    if not (getattr(args, "localize", False) or getattr(args, "goal", None) is not None):
+        raise ValueError("--pf-param needs --localize or --goal (no particle filter runs "
+                         "without them)")
+    from amr_common.parameters import typed_values
+    from amr_localization.particle_filter_node import node_parameter_problems, node_parameters
+    from amr_localization.particle_filter_params import PARAMETERS, check_parameters
+    _refused("--pf-param", args.pf_overrides, script, set_by_script)
+    node_table = node_parameters()
+    table = {**node_table, **PARAMETERS}
+    unknown = [name for name in args.pf_overrides if name not in table]
+    if unknown:
+        raise ValueError(f"--pf-param {', '.join(unknown)}: no such particle filter parameter; "
+                         f"known: {', '.join(sorted(table))}")
+    args.pf_overrides, problems = typed_values(table, args.pf_overrides)
+    if not problems:
+        node_values = {name: default for name, (default, _) in node_table.items()}
+        node_values.update({k: v for k, v in args.pf_overrides.items() if k in node_table})
+        problems = node_parameter_problems(node_values)
+        try:
+            check_parameters({k: v for k, v in args.pf_overrides.items() if k in PARAMETERS})
+        except ValueError as exc:
+            problems.append(str(exc))
+    if problems:
+        raise ValueError(f"--pf-param: {'; '.join(problems)}")
+
+
+def _listen_problem(host: str, port: int) -> str | None:
+    """Why a server (the Foxglove bridge) could not listen on host:port now, or None."""
+    import socket
+    try:
+        family, kind, proto, _, address = socket.getaddrinfo(
+            host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)[0]
+    except (socket.gaierror, UnicodeError) as exc:
+        return f"--foxglove-host {host}: not an address of this machine ({exc})"
+    with socket.socket(family, kind, proto) as probe:
+        # As the bridge binds (SO_REUSEADDR: a port left in TIME_WAIT is free, one in use not).
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind(address)
+        except OSError as exc:
+            return f"--foxglove-port {port}: cannot listen on {host}:{port}: " \
+                   f"{exc.strerror or exc}"
+    return None
 
 
 def read_params_file(path: Path | str) -> dict[str, Any]:

@@ -23,7 +23,12 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from amr_common.ros_env import describe_graph_settings, environment_domain_id  # noqa: E402
-from cli_checks import add_domain_id_option, join_negative_values, use_domain_id  # noqa: E402
+from cli_checks import (  # noqa: E402
+    OneLineArgumentParser,
+    add_domain_id_option,
+    join_negative_values,
+    use_domain_id,
+)
 from launch_common import (  # noqa: E402
     ROBOT_PARAMS,
     add_controller_options,
@@ -34,11 +39,17 @@ from launch_common import (  # noqa: E402
     make_viewer_nodes,
 )
 
+# Node parameters run_robot sets itself: a -p / --pf-param would contradict them.
+WALL_FOLLOWER_SET = {"simulation": "(robot mode)", "dt": "from --dt",
+                     "cmd_vel_stamped": "from --cmd-vel", "controller": "from --controller"}
+FILTER_SET = {"world": "from --world",
+              "lidar_offset_x_m": "(the Burger's LiDAR position; the robot's /tf_static gives it)"}
+
 
 def parse_args(argv=None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog=__doc__.split("\n\n", 1)[1])
+    parser = OneLineArgumentParser(description=__doc__.split("\n\n")[0],
+                                   formatter_class=argparse.RawDescriptionHelpFormatter,
+                                   epilog=__doc__.split("\n\n", 1)[1])
     add_domain_id_option(parser, "ROS_DOMAIN_ID shared with the robot, 0-232 (default: "
                          "$ROS_DOMAIN_ID)")
     parser.add_argument("--cmd-vel", choices=["stamped", "twist"], default=None,
@@ -64,7 +75,7 @@ def parse_args(argv=None) -> argparse.Namespace:
             environment_domain_id()
         except ValueError as exc:
             parser.error(str(exc))
-    check_common_options(parser, args)
+    check_common_options(parser, args, "run_robot", WALL_FOLLOWER_SET, FILTER_SET)
     args.localize = args.localize or args.goal is not None  # navigation needs the filter
     if args.localize and args.world is None:
         args.world = args.map
@@ -92,7 +103,9 @@ def main(argv=None) -> int:
     from amr_common.node_runner import StopFlag
 
     # Own signal handling: the final zero command must go out before the context shuts down.
-    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+    # No arguments for rcl: it would read the script's own command line (a '__ns:=...' value
+    # as a remapping of every node).
+    rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
     stop = StopFlag().install()
     stamped = None if args.cmd_vel is None else args.cmd_vel == "stamped"
     nodes = make_robot_graph(None, params_file=args.params_file, dt=args.dt,

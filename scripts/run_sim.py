@@ -38,13 +38,20 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from amr_common.stop_flag import StopFlag  # noqa: E402
+
+# Run as a script, Ctrl-C (or SIGTERM) only sets a flag from the first moment on: see main().
+_STOP = StopFlag().install() if __name__ == "__main__" else None
+
 from amr_common.ros_env import describe_graph_settings, isolate_local_graph  # noqa: E402
 from cli_checks import (  # noqa: E402
+    OneLineArgumentParser,
     add_domain_id_option,
     check_output_file,
     join_negative_values,
     per_start_path,
     plot_file,
+    recording_file,
 )
 from launch_common import (  # noqa: E402
     ROBOT_PARAMS,
@@ -56,12 +63,18 @@ from launch_common import (  # noqa: E402
 )
 
 INTERRUPTED = 130  # exit code after Ctrl-C / SIGTERM, as a shell reports it
+# Node parameters run_sim sets from its own options: a -p / --pf-param would contradict them.
+WALL_FOLLOWER_SET = {"dt": "from --dt", "simulation": "from --realtime and --profile",
+                     "enable_localization": "from --enable-localization, --localize and --goal",
+                     "controller": "from --controller"}
+FILTER_SET = {"world": "from --world",
+              "lidar_offset_x_m": "from --profile (where the simulated LiDAR sits)"}
 
 
 def parse_args(argv=None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog=__doc__.split("\n\n", 1)[1])
+    parser = OneLineArgumentParser(description=__doc__.split("\n\n")[0],
+                                   formatter_class=argparse.RawDescriptionHelpFormatter,
+                                   epilog=__doc__.split("\n\n", 1)[1])
     parser.add_argument("--world", default="lab02", help="bundled world name or a path to a "
                         "world YAML / course map JSON / Nav2 map YAML (default lab02)")
     parser.add_argument("--start", default=None, help="named start, X,Y,THETA (m, m, rad; e.g. "
@@ -93,7 +106,8 @@ def parse_args(argv=None) -> argparse.Namespace:
                         "(PNG unless the name says .svg, .pdf, ...; one per start with --start "
                         "all)")
     parser.add_argument("--record", default=None, help="record topics to this .mcap file (one "
-                        "file per start with --start all: NAME-START.mcap)")
+                        "file per start with --start all: NAME-START.mcap; .mcap is added to a "
+                        "name without a suffix)")
     parser.add_argument("--gui", action="store_true", help="live view window (pygame)")
     add_foxglove_options(parser)
     add_domain_id_option(parser, "ROS_DOMAIN_ID, 0-232 (default: $ROS_DOMAIN_ID if set and not "
@@ -104,13 +118,16 @@ def parse_args(argv=None) -> argparse.Namespace:
     if args.params_file is None:
         rehearsal = args.realtime and args.profile == "turtlebot3"
         args.params_file = str(ROBOT_PARAMS if rehearsal else SIM_PARAMS)
-    check_common_options(parser, args)
+    _check_simulator_options(parser, args)
+    check_common_options(parser, args, "run_sim", WALL_FOLLOWER_SET, FILTER_SET)
     from amr_common.world import parse_start
     try:
         if args.start != "all":
             args.start = parse_start(args.start or "")
         if args.plot:
             args.plot = str(plot_file(args.plot))
+        if args.record:
+            args.record = str(recording_file(args.record))
     except ValueError as exc:
         parser.error(str(exc))
     if args.kidnap is not None:
@@ -121,23 +138,34 @@ def parse_args(argv=None) -> argparse.Namespace:
         if len(args.kidnap) != 4 or not all(math.isfinite(v) for v in args.kidnap) or \
                 args.kidnap[0] < 0:
             parser.error("--kidnap must be T,X,Y,THETA (s, m, m, rad) with T >= 0")
+        if args.kidnap[0] >= args.duration:
+            parser.error(f"--kidnap at {args.kidnap[0]:g} s comes after the run ends "
+                         f"(--duration {args.duration:g} s)")
     return args
 
 
+def _check_simulator_options(parser, args) -> None:
+    """--dt and --seed by the simulator's own checks (its node would refuse them later)."""
+    from amr_sim.simulator_params import PARAMETERS, check_parameters
+    defaults = {name: default for name, (default, _) in PARAMETERS.items()}
+    for option, name, value in (("--dt", "dt", args.dt), ("--seed", "seed", args.seed)):
+        try:
+            check_parameters({**defaults, name: value})
+        except ValueError as exc:
+            parser.error(f"{option} {value:g}: {exc}")
+
+
 def main(argv=None) -> int:
+    # Ctrl-C (or SIGTERM) only sets the flag, whenever it comes: the options are still checked,
+    # then the run ends at its next check and writes what it has (if it came before the graph
+    # ran, a report of the start pose, marked interrupted), instead of a KeyboardInterrupt
+    # tearing through imports or ROS callbacks.
+    stop = _STOP if _STOP is not None else StopFlag().install()
     try:
         args = parse_args(argv)
         prepared = _prepare(args)
         if isinstance(prepared, int):
             return prepared
-        from amr_common.node_runner import StopFlag
-        # From here on Ctrl-C (or SIGTERM) only sets the flag: the run ends at the next check
-        # and writes what it has, instead of a KeyboardInterrupt tearing through ROS callbacks.
-        stop = StopFlag().install()
-    except KeyboardInterrupt:  # still checking options and loading: no node exists yet
-        print("run_sim: interrupted before the simulation started (no report)", file=sys.stderr)
-        return INTERRUPTED
-    try:
         return _simulate(args, *prepared, stop)
     finally:
         stop.uninstall()
@@ -159,7 +187,7 @@ def _prepare(args):
         for start in starts:
             world.resolve_start(start)  # fail early with the world's own message
         if args.kidnap is not None:
-            world.resolve_start(args.kidnap[1:])
+            world.resolve_start(args.kidnap[1:], what="kidnap pose")
         if args.goal is not None:  # a name or X,Y, checked against the walls
             args.goal = world.resolve_goal(args.goal)
         starts = [next(iter(world.starts)) if s is None else s for s in starts]
@@ -172,10 +200,11 @@ def _prepare(args):
 
 def _simulate(args, world, starts, outputs, stop) -> int:
     """Run each start in turn until done or stopped; write the outputs; the exit code."""
-    from sim_session import SimSession, report_before_start
+    from sim_report import report_before_start
+    from sim_session import SimSession
 
     from amr_common.world import start_label
-    print(f"run_sim: {describe_graph_settings()}")
+    print(f"run_sim: {describe_graph_settings()}", flush=True)  # the graph starts now
     reports = []
     for start in starts:
         if stop.requested:
@@ -194,7 +223,9 @@ def _simulate(args, world, starts, outputs, stop) -> int:
     if stop.requested:
         print("run_sim: interrupted", file=sys.stderr)
         return INTERRUPTED
-    return 1 if any(report["collisions"] > 0 for report in reports) else 0
+    # 1: a run collided, or its goal had no path (the planner said why; the run ended then).
+    return 1 if any(report["collisions"] > 0 or report.get("planning_error")
+                    for report in reports) else 0
 
 
 def _check_outputs(args, labels: list[str]) -> dict:

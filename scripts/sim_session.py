@@ -11,16 +11,23 @@ the goal.
 from __future__ import annotations
 
 import math
+import sys
 import time
 
-import numpy as np
 import rclpy
 from rclpy.signals import SignalHandlerOptions
+from sim_report import (
+    localization_fields,
+    localization_line,
+    navigation_fields,
+    navigation_line,
+    report_before_start,
+    run_report,
+)
 
 from amr_common.lifecycle_manager import LifecycleManager, LifecycleStartupError
 from amr_common.node_runner import make_executor, shutdown_node
 from amr_common.world import start_label
-from amr_evaluation.episode import trajectory_metrics
 from amr_sim.simulator_node import SimulatorNode
 from launch_common import (
     ROBOT_PARAMS,
@@ -58,78 +65,6 @@ def _robot_parameters(tuning: dict, params_file, profile_name: str) -> dict:
     return {k: v for k, v in defaults.items() if k not in in_file and k not in tuning}
 
 
-def _report(args, world, start, sim, trajectory, wall_errors, wall_time: float,
-            interrupted: bool, graph: dict) -> dict:
-    """The JSON report of one start; `sim` is the Simulator (or its figures before any step)."""
-    positions = np.array([row[1:3] for row in trajectory])
-    rms = (math.sqrt(sum(e * e for e in wall_errors) / len(wall_errors))
-           if wall_errors else None)
-    return {
-        "world": world.name, "start": start_label(start), "interrupted": interrupted,
-        "profile": args.profile, "mode": "realtime" if args.realtime else "lockstep",
-        "seed": args.seed, "dt": args.dt, **graph,
-        "steps": sim.steps, "sim_time_s": round(sim.time, 6),
-        "wall_time_s": round(wall_time, 3),
-        "real_time_factor": round(sim.time / wall_time, 2) if wall_time > 0 else None,
-        "collisions": sim.collisions,
-        "first_collision_time_s": sim.first_collision_time,
-        "min_clearance_m": sim.min_clearance, "distance_m": sim.distance,
-        **trajectory_metrics(world, positions),  # None + metric_errors if not computable
-        "rms_wall_error_m": rms,
-        "trajectory": trajectory,
-        "collision_points": [list(p) for p in sim.collision_points],
-    }
-
-
-def report_before_start(args, world, start) -> dict:
-    """The report of a run stopped before its graph existed: nothing simulated, interrupted."""
-    from types import SimpleNamespace
-
-    from amr_common.robot import ROBOT_RADIUS
-    x, y, theta = world.resolve_start(start)
-    sim = SimpleNamespace(steps=0, time=0.0, collisions=0, first_collision_time=None,
-                          min_clearance=world.clearance(x, y) - ROBOT_RADIUS, distance=0.0,
-                          collision_points=[])
-    return _report(args, world, start, sim, [[0.0, x, y, theta]], [], 0.0, True, graph={
-        "controller": args.controller_spec, "nodes": [], "controller_mode": None})
-def _localization_line(report: dict) -> str:
-    m = report.get("localization")
-    if m is None:
-        return ""
-    if m["time_to_localized_s"] is None:
-        return f"; not localized, false localizations {m['false_localizations']}"
-    text = (f"; localized after {m['time_to_localized_s']:.1f} s "
-            f"({m['distance_to_localized_m']:.2f} m), false localizations "
-            f"{m['false_localizations']}")
-    if m["tracking_error_mean_m"] is not None:
-        text += (f", error mean {100 * m['tracking_error_mean_m']:.1f} cm, p95 "
-                 f"{100 * m['tracking_error_p95_m']:.1f} cm, max "
-                 f"{100 * m['tracking_error_max_m']:.1f} cm, heading p95 "
-                 f"{m['heading_error_p95_deg']:.1f} deg")
-    if m["relocalization_times_s"]:
-        text += ", relocalized at " + ", ".join(f"{t:.1f}" for t in m["relocalization_times_s"])
-    if m["loss_reported_after_s"] is not None:
-        text += f", loss reported {m['loss_reported_after_s']:.2f} s after the kidnapping"
-    return text
-
-
-
-def _navigation_line(report: dict) -> str:
-    def when(key: str) -> str:
-        return "never" if report[key] is None else f"{report[key]:.1f} s"
-    path = "no path" if report["path_length_m"] is None else \
-        f"path {report['path_length_m']:.2f} m"
-    factor = report["real_time_factor"]
-    return (f"run_sim: {report['world']} / {report['start']} -> goal "
-            f"({report['goal'][0]:g}, {report['goal'][1]:g}) / {report['profile']} "
-            f"({report['mode']}): localized {when('localized_time_s')}, goal reached "
-            f"{when('goal_reached_time_s')}, stopped {when('stopped_time_s')}, {path}, "
-            f"final error {report['final_position_error_m'] * 100:.1f} cm, collisions "
-            f"{report['collisions']}, min clearance {report['min_clearance_m'] * 100:.1f} "
-            f"cm; {report['sim_time_s']:.1f} s simulated in {report['wall_time_s']:.1f} s "
-            f"({f'{factor}x' if factor else 'n/a'} real time)")
-
-
 class SimSession:
     """One start of a run_sim.py run: the graph in one process, its report and outputs.
 
@@ -147,7 +82,9 @@ class SimSession:
         self._sim_time_ns = 0  # the recorder's clock in real time: the newest simulated time
         self.rehearsal = args.realtime and args.profile == "turtlebot3"
         self.context = rclpy.Context()
-        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
+        # No arguments for rcl: by default it reads the script's own command line (a value
+        # such as '__node:=x' would rename every node, 'name:=value' warns as a remap rule).
+        rclpy.init(args=[], context=self.context, signal_handler_options=SignalHandlerOptions.NO)
         self.executor = make_executor(self.context)
 
         self.navigating = getattr(args, "goal", None) is not None
@@ -271,8 +208,9 @@ class SimSession:
         wall_start = time.monotonic()
         last_steps, last_progress = sim.steps, wall_start
         try:
+            # A goal the planner cannot reach ends the run at once: the robot would only wait.
             while (sim.time < args.duration - 1e-9 and not self.simulator_node.finished
-                   and not self._stop_requested()):
+                   and not self._stop_requested() and self.planning_error() is None):
                 self.executor.spin_once(timeout_sec=0.1)
                 if sim.steps != last_steps:
                     last_steps, last_progress = sim.steps, time.monotonic()
@@ -284,6 +222,8 @@ class SimSession:
         self.interrupted = self.interrupted or (self.stop is not None and self.stop.requested)
         if self.interrupted:
             print(f"run_sim: interrupted at t={sim.time:.2f} s")
+        elif self.planning_error() is not None:
+            print(f"run_sim: no path to the goal: {self.planning_error()}", file=sys.stderr)
         wall_time = time.monotonic() - wall_start
         if self.recorder is not None:
             # Stop stepping, then let the recorder take the last step's messages.
@@ -330,43 +270,35 @@ class SimSession:
                              log_time="receive" if self.args.realtime else "header")
 
     def _report(self, sim, wall_time: float) -> dict:
-        return _report(self.args, self.world, self.start, sim, self.trajectory, self.wall_errors,
-                       wall_time, self.interrupted, graph={
-                           "controller": self.wall_follower.get_parameter("controller").value,
-                           "nodes": self.manager.node_startup_order,
-                           "controller_mode": "simulation" if self.wall_follower.get_parameter(
-                               "simulation").value else "robot (timer)"}) \
+        return run_report(self.args, self.world, self.start, sim, self.trajectory,
+                          self.wall_errors, wall_time, self.interrupted, graph={
+                              "controller": self.wall_follower.get_parameter("controller").value,
+                              "nodes": self.manager.node_startup_order,
+                              "controller_mode": "simulation" if self.wall_follower.get_parameter(
+                                  "simulation").value else "robot (timer)"}) \
             | self._localization_report() | self._navigation_report()
 
     def _localization_report(self) -> dict:
         if self.particle_filter is None:
             return {}
-        from amr_evaluation.localization_episode import metrics_from_rows
-        kidnap = list(self.args.kidnap) if getattr(self.args, "kidnap", None) else None
-        return {"localization": metrics_from_rows(self.trajectory, self.estimate, kidnap),
-                "kidnap": kidnap, "estimate": self.estimate,
-                "particles_snapshot": self.particles_snapshot}
+        return localization_fields(self.args, self.trajectory, self.estimate,
+                                    self.particles_snapshot)
 
     def _navigation_report(self) -> dict:
-        """Goal, time localized, goal reached and stopped times, planned path, final error."""
         if not self.navigating:
             return {}
-        summary = self.simulator_node.summary()
-        plan = self.planner_node.last_plan if self.planner_node is not None else None
-        localized = next((row[0] for row in self.estimate if row[4] > 0.5), None)
-        return {
-            "goal": summary["goal"], "localized_time_s": localized,
-            "goal_reached_time_s": summary["goal_reached_time_s"],
-            "stopped_time_s": summary["stopped_time_s"],
-            "final_position_error_m": summary["final_position_error_m"],
-            "path_length_m": plan.length_m if plan is not None else None,
-            "path": plan.points.tolist() if plan is not None else [],
-        }
+        return navigation_fields(self.args.goal, self.simulator_node.summary(),
+                                  self.planner_node.last_plan, self.estimate,
+                                  self.planning_error())
+
+    def planning_error(self) -> str | None:
+        """Why the planner found no path to the goal (it logged it), or None."""
+        return None if self.planner_node is None else self.planner_node.last_error
 
     def summary_line(self, report: dict) -> str:
         """One line for the terminal: where, how long, how fast, how safe."""
         if self.navigating:
-            return _navigation_line(report)
+            return navigation_line(report)
         laps = report["laps"]
         factor = report["real_time_factor"]
         return (f"run_sim: {report['world']} / {report['start']} / {report['profile']} "
@@ -377,7 +309,7 @@ class SimSession:
                 f"{report['min_clearance_m'] * 100:.1f} cm, distance {report['distance_m']:.1f} m,"
                 + (" explored n/a" if report["explored_fraction"] is None else
                    f" explored {report['explored_fraction'] * 100:.0f}%")
-                + (f", laps {laps}" if laps else "") + _localization_line(report))
+                + (f", laps {laps}" if laps else "") + localization_line(report))
 
     def close(self) -> None:
         """Shut the graph down (controllers first: their zero command goes out), close files."""

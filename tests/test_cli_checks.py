@@ -6,6 +6,7 @@ ros_graph.py's), params files and controllers: every mistake is a one-line error
 """
 from __future__ import annotations
 
+import socket
 import sys
 from pathlib import Path
 
@@ -23,15 +24,25 @@ import topic  # noqa: E402
 def _fails_with(capsys, argv, message):
     """run_sim.main(argv) exits 2 with `message` on one line, before simulating anything."""
     try:
-        code = run_sim.main([*argv, "--duration", "2"])
+        code = run_sim.main([*argv, *([] if "--duration" in argv else ["--duration", "2"])])
     except SystemExit as exc:  # argparse errors
         code = exc.code
     out, err = capsys.readouterr()
     assert code == 2, err
-    assert message in err.strip().splitlines()[-1], err
+    assert len(err.strip().splitlines()) == 1, f"one line, no usage, no warning:\n{err}"
+    assert message in err, err
     assert "Traceback" not in err
-    assert "simulated in" not in out  # checked up front: no run
+    assert "simulated in" not in out and "ROS_DOMAIN_ID=" not in out  # checked up front: no run
     return err
+
+
+def _robot_fails_with(capsys, argv, message):
+    """run_robot.parse_args(argv) exits 2 with `message` on one line."""
+    with pytest.raises(SystemExit) as exit_info:
+        run_robot.parse_args(["--domain-id", "5", *argv])
+    err = capsys.readouterr().err
+    assert exit_info.value.code == 2, err
+    assert len(err.strip().splitlines()) == 1 and message in err, err
 
 
 # --- start poses -----------------------------------------------------------------------
@@ -112,3 +123,102 @@ def test_bad_params_files_and_controllers_are_one_line_errors(capsys, tmp_path, 
     with pytest.raises(SystemExit):
         run_robot.parse_args(["--controller", "broken_ctrl:C"])
     assert "SyntaxError" in capsys.readouterr().err
+
+
+# --- the run's own options: one line each, before anything runs ----------------------------
+
+@pytest.mark.parametrize("argv, message", [
+    (["--no-such-option"], "unrecognized arguments: --no-such-option"),
+    (["--duration", "0"], "--duration must be > 0"),
+    (["--duration", "nan"], "--duration must be > 0"),
+    (["--kidnap", "5,1,1"], "--kidnap must be T,X,Y,THETA"),
+    (["--kidnap", "30,1,-1,0", "--duration", "10"],
+     "--kidnap at 30 s comes after the run ends (--duration 10 s)"),
+    (["--kidnap", "1,0,0,0"], "kidnap pose (0, 0) touches a wall"),
+    (["--goal", "1e308,1e308"], "goal (1e+308, 1e+308) is outside the boundary"),
+    (["--goal", "1.094,-0.2", "--profile", "turtlebot3"],
+     "goal (1.094, -0.2) is too close to a wall: clearance 0.106 m < 0.135 m"),
+    (["--dt", "10"], "--dt 10: dt must be a number in [0.0001, 1.0]"),
+    (["--seed", "-1"], "--seed -1: seed must be a non-negative integer"),
+    (["--pf-param", "beams:=90"], "--pf-param needs --localize or --goal"),
+])
+def test_bad_run_options_are_one_line_errors(capsys, argv, message):
+    _fails_with(capsys, argv, message)
+
+
+def test_a_recording_must_be_an_mcap_file(capsys, tmp_path):
+    _fails_with(capsys, ["--record", str(tmp_path / "x.txt")],
+                "--record '" + str(tmp_path / "x.txt") + "': recordings are MCAP files")
+    args = run_sim.parse_args(["--record", str(tmp_path / "run")])
+    assert args.record == str(tmp_path / "run.mcap")
+
+
+def test_a_foxglove_port_in_use_is_found_before_the_run(capsys):
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        _fails_with(capsys, ["--foxglove", "--foxglove-port", str(port)],
+                    f"--foxglove-port {port}: cannot listen on 127.0.0.1:{port}")
+
+
+# --- --pf-param and -p: names, values, what the script sets itself -------------------------
+
+@pytest.mark.parametrize("override, message", [
+    ("beamz:=3", "--pf-param beamz: no such particle filter parameter; known: "),
+    ("max_particles:=0", "max_particles must be a positive integer"),
+    ("beams:=0", "beams must be a positive integer"),
+    ("sigma_hit_m:=-0.03", "sigma_hit_m must be >= 0"),
+    ("z_random:=2", "z_random must be in [0, 1]"),
+    ("max_particles:=100000000", "max_particles must be at most 1000000"),
+    ("initial_pose:=[0.0,0.0]", "initial_pose must be 0 numbers or 3 numbers"),
+    ("sigma_hit_m:=nan", "--pf-param: override 'sigma_hit_m:=nan': value 'nan' is not finite"),
+    ("slop:=-1", "slop must be a number >= 0"),
+    ("pose_topic:=5", "pose_topic must be a string"),
+    ("world:=twin_maze", "--pf-param world: run_sim sets it from --world"),
+    ("lidar_offset_x_m:=0.1", "--pf-param lidar_offset_x_m: run_sim sets it from --profile"),
+    ("__node:=evil", "'__node' is not a parameter name"),
+    ("__ns:=/evil", "'__ns' is not a parameter name"),
+    ("a/b:=1", "'a/b' is not a parameter name"),
+])
+def test_particle_filter_overrides_are_checked_before_the_run(capsys, override, message):
+    _fails_with(capsys, ["--localize", "--pf-param", override], message)
+
+
+def test_particle_filter_overrides_take_lists_and_typed_values():
+    args = run_sim.parse_args(["--goal", "inner_far", "--pf-param", "initial_pose:=[1.0,-1,1.57]",
+                               "--pf-param", "max_particles:=2000", "--pf-param", "slop:=1"])
+    assert args.pf_overrides == {"initial_pose": [1.0, -1.0, 1.57], "max_particles": 2000,
+                                 "slop": 1.0}
+    assert all(type(v) is float for v in args.pf_overrides["initial_pose"])
+
+
+@pytest.mark.parametrize("override, message", [
+    ("dt:=0.1", "-p dt: run_sim sets it from --dt"),
+    ("simulation:=false", "-p simulation: run_sim sets it from --realtime and --profile"),
+    ("enable_localization:=true", "-p enable_localization: run_sim sets it from "
+                                  "--enable-localization, --localize and --goal"),
+    ("controller:=tests.controllers:ConstantController", "-p controller: run_sim sets it "
+                                                         "from --controller"),
+    ("queue_size:=0", "queue_size must be >= 1"),
+    ("angular_sign:=2", "angular_sign must be 1 or -1"),
+    ("scan_topic:=5", "scan_topic must be a string"),
+    ("stop_when_localized:=1", "stop_when_localized must be true or false"),
+    ("__ns:=/evil", "'__ns' is not a parameter name"),
+])
+def test_wall_follower_overrides_are_checked_like_the_filters(capsys, override, message):
+    _fails_with(capsys, ["-p", override], message)
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--no-such-option"], "unrecognized arguments"),
+    (["--localize", "--world", "lab02", "--pf-param", "__ns:=/evil"],
+     "'__ns' is not a parameter name"),
+    (["--localize", "--world", "lab02", "--pf-param", "world:=twin_maze"],
+     "--pf-param world: run_robot sets it from --world"),
+    (["--pf-param", "beams:=90"], "--pf-param needs --localize or --goal"),
+    (["-p", "simulation:=true"], "-p simulation: run_robot sets it (robot mode)"),
+    (["--dt", "0"], "--dt must be > 0"),
+])
+def test_run_robot_checks_the_same_way(capsys, argv, message):
+    _robot_fails_with(capsys, argv, message)

@@ -72,9 +72,22 @@ def test_override_names_values_and_order():
     assert parse_overrides([" kp :=1", "kp:=2"]) == {"kp": 2}  # trimmed name, the last wins
     assert parse_overrides(["world:=a:=b"]) == {"world": "a:=b"}  # only the first := splits
     assert parse_overrides(["offset:=-0.032"]) == {"offset": -0.032}
+    assert parse_overrides(["_private:=1", "ns.kp:=2"]) == {"_private": 1, "ns.kp": 2}
+
+
+def test_lists_are_typed_like_ros_parameters():
+    assert parse_value("[0.0,0.0,0.0]") == [0.0, 0.0, 0.0]
+    assert parse_value(" [1, -2.5, true, a] ") == [1, -2.5, True, "a"] and parse_value("[]") == []
+    assert parse_overrides(["initial_pose:=[1.0, -1.0, 1.57]"]) == {
+        "initial_pose": [1.0, -1.0, 1.57]}
 
 
 @pytest.mark.parametrize("item, message", [
+    ("__node:=evil", "'__node' is not a parameter name"),  # rcl would rename every node
+    ("__ns:=/evil", "'__ns' is not a parameter name"),
+    ("a/b:=1", "'a/b' is not a parameter name"),
+    ("~kp:=1", "'~kp' is not a parameter name"),
+    ("kp:=[1, nan]", "override 'kp:=\\[1, nan\\]': value 'nan' is not finite"),
     ("kp=4", "override 'kp=4' must look like name:=value"),
     (":=4", "must look like name:=value"),
     ("  :=4", "must look like name:=value"),

@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from amr_common.world import World, bundled_worlds
+from amr_common.world import GOAL_CLEARANCE, World, bundled_worlds
 from amr_planning import search
 from amr_planning.planner import Planner, PlanningError
 
@@ -118,7 +118,7 @@ def test_a_start_inside_the_inflation_is_connected_to_the_nearest_free_cell(plan
     ("room_obstacles", (1.1, 1.0), r"goal \(1.100, 1.000\) is inside a wall or outside the map"),
     ("lab02", (5.0, 5.0), "goal .* inside a wall or outside the map"),
     ("lab02", (0.0, -0.8), r"goal \(0.000, -0.800\) is on a wall"),  # a free-standing wall
-    ("lab02", (1.0, -1.1), "goal .* too close to a wall: clearance 0.100 m < robot radius"),
+    ("lab02", (1.0, -1.1), "goal .* touches a wall: clearance 0.100 m < robot radius"),
     ("lab02", (float("nan"), 0.0), "goal .* not finite"),
     ("lab02", (1.0,), r"goal must be \(x, y\)"),
 ])
@@ -126,6 +126,37 @@ def test_impossible_goals_give_clear_errors(planners, world, goal, problem):
     start = planners[world].world.resolve_start(None)[:2]
     with pytest.raises(PlanningError, match=problem):
         planners[world].plan(start, goal)
+
+
+def test_a_goal_inside_the_inflation_is_an_error_not_a_straight_line_through_it(planners):
+    # The robot fits there (10.6 cm > 10.5 cm) but the walls are inflated by 13.5 cm: the path
+    # once ended with a straight piece through the inflation, and the run collided.
+    planner = planners["lab02"]
+    with pytest.raises(PlanningError, match=r"goal \(1.094, -0.2\) is too close to a wall: "
+                                            r"clearance 0.106 m < 0.135 m"):
+        planner.plan((1.0, -1.0), (1.094, -0.2))
+    margin = Planner(planner.world, safety_margin_m=0.05)  # the planner's own inflation counts
+    with pytest.raises(PlanningError, match="clearance 0.140 m < 0.155 m"):
+        margin.plan((1.0, -1.0), (1.06, -0.2))
+
+
+@pytest.mark.parametrize("world", ["lab02", "room_obstacles"])
+def test_paths_to_goals_on_the_inflation_edge_never_leave_the_free_space(planners, world):
+    planner = planners[world]
+    rng = np.random.default_rng(3)
+    xmin, ymin, xmax, ymax = planner.world.bounds
+    points = rng.uniform((xmin, ymin), (xmax, ymax), size=(20000, 2))
+    clearance = planner.world.clearances(points)
+    edge = points[(clearance >= GOAL_CLEARANCE) & (clearance < GOAL_CLEARANCE + 0.01)
+                  & planner.world.contains_points(points)][:25]
+    start = planner.world.resolve_start(None)[:2]
+    for goal in edge:
+        try:
+            plan = planner.plan(start, goal)
+        except PlanningError as exc:  # unreachable pockets are fine; leaving the space is not
+            assert "unreachable" in str(exc)
+            continue
+        assert planner.world.clearances(densify(plan.points)).min() >= GOAL_CLEARANCE - 1e-3
 
 
 def test_a_goal_behind_a_gap_narrower_than_the_robot_is_unreachable(tmp_path):

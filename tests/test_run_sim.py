@@ -16,7 +16,7 @@ import pytest
 from geometry_msgs.msg import TwistStamped
 
 from amr_common.qos import RELIABLE_10
-from tests.processes import terminate
+from tests.processes import terminate, wait_for
 
 REPO = Path(__file__).resolve().parent.parent
 SCRIPTS = REPO / "scripts"
@@ -256,17 +256,34 @@ def _interrupt(process, log, ros, ready, what: str, delay: float = 0.0) -> str:
         ros.spin_for(delay)
         sent = time.monotonic()
         process.send_signal(signal.SIGINT)
-        ros.spin_until(lambda: process.poll() is not None, 30.0, "run_sim to exit")
-        ended = time.monotonic() - sent
+        checked = _options_checked_at(process, Path(log.name).read_text, sent, ros.spin_for)
+        ended = time.monotonic() - checked
         ros.spin_for(0.3)  # the last commands still in flight
     finally:
         terminate(process, 5.0)
     output = _read(log)
-    print(f"run_sim ended {ended:.2f} s after SIGINT")
+    print(f"run_sim ended {ended:.2f} s after SIGINT (or its option checks)")
     assert process.returncode == 130, output
     assert "Traceback" not in output and "Exception" not in output, output
     assert ended < END_WITHIN_S, output
     return output
+
+
+def _options_checked_at(process, read, sent: float, wait) -> float:
+    """Wait for the exit; when its options were checked (the graph settings line), or `sent`.
+
+    A run interrupted before its options were checked finishes checking them (about 1 s on a
+    quiet machine, several on a loaded one): the report needs them. The prompt end is measured
+    from there.
+    """
+    checked = sent if "ROS_DOMAIN_ID=" in read() else None
+    deadline = sent + 30.0
+    while process.poll() is None and time.monotonic() < deadline:
+        wait(0.02)
+        if checked is None and "ROS_DOMAIN_ID=" in read():
+            checked = time.monotonic()
+    assert process.poll() is not None, "run_sim did not exit within 30 s of SIGINT"
+    return checked if checked is not None else sent
 
 
 @pytest.mark.parametrize("delay", [0.0, 0.5, 1.5])
@@ -296,12 +313,87 @@ def test_ctrl_c_during_startup_ends_at_once_and_cleanly(ros, tmp_path, moment):
     else:  # the options are checked; the nodes are being created and configured
         output = _interrupt(process, log, ros, lambda: "ROS_DOMAIN_ID=" in _read(log),
                             "the graph settings line")
+    # Whatever the moment, the first start is reported, marked interrupted.
+    reports = json.loads((tmp_path / "run.json").read_text())
+    assert len(reports) == 1 and reports[0]["interrupted"] is True, output
+
+
+# Ctrl-C at any moment of start-up, in each graph: exit code 130 and the report, marked
+# interrupted (during the node start-up of a --goal run it once ended in a KeyError, exit 1 and
+# no report). The moments: fixed delays (imports, option checks), the graph settings line (the
+# nodes are being built), the last control node configured (the graph starts).
+STARTUP_GRAPHS = {"wall following": ([], "[wall_follower]: configured"),
+                  "localize": (["--localize"], "[particle_filter]: configured"),
+                  "goal": (["--goal", "inner_far"], "[planner]: configured")}
+
+
+@pytest.mark.parametrize("graph", list(STARTUP_GRAPHS))
+def test_ctrl_c_at_every_moment_of_start_up_writes_the_interrupted_report(tmp_path, graph):
+    options, configured = STARTUP_GRAPHS[graph]
+    moments = {"0.5 s": lambda text, elapsed: elapsed > 0.5,
+               "1.5 s": lambda text, elapsed: elapsed > 1.5,
+               "graph settings": lambda text, elapsed: "ROS_DOMAIN_ID=" in text,
+               "configured": lambda text, elapsed: configured in text}
+    for moment, ready in moments.items():
+        report_path, log_path = tmp_path / f"{moment}.json", tmp_path / f"{moment}.log"
+        with open(log_path, "w") as log:
+            process = subprocess.Popen(
+                [sys.executable, str(SCRIPTS / "run_sim.py"), "--world", "lab02", *options,
+                 "--duration", "3000", "--report", str(report_path)],
+                cwd=REPO, env=dict(os.environ), stdout=log, stderr=subprocess.STDOUT)
+            started = time.monotonic()
+            try:
+                wait_for(lambda: ready(log_path.read_text(), time.monotonic() - started)
+                         or process.poll() is not None, 60.0, moment)
+                assert process.poll() is None, log_path.read_text()
+                sent = time.monotonic()
+                process.send_signal(signal.SIGINT)
+                checked = _options_checked_at(process, log_path.read_text, sent, time.sleep)
+                ended = time.monotonic() - checked
+            finally:
+                terminate(process, 5.0)
+        output = log_path.read_text()
+        print(f"{graph}, SIGINT at {moment}: ended {ended:.2f} s after it or the option checks")
+        assert process.returncode == 130, f"{moment}: {output}"
+        assert "Traceback" not in output and "Error" not in output, f"{moment}: {output}"
+        assert ended < END_WITHIN_S, f"{moment}: {output}"
+        report = json.loads(report_path.read_text())
+        assert report["interrupted"] is True and report["collisions"] == 0, moment
+        if graph != "wall following":
+            assert report["localization"]["time_to_localized_s"] is None, moment
+        if graph == "goal":
+            assert report["goal"] == [0.6, -0.2] and report["goal_reached_time_s"] is None
+            assert "path_length_m" in report and report["planning_error"] is None, moment
+
+
+def test_an_unreachable_goal_ends_the_run_at_once_with_exit_1_and_the_report(tmp_path, capsys):
+    # lab02 with inner_far walled in: the filter localizes in the ring, the planner finds no
+    # path. The run once idled until --duration and exited 0.
+    world = tmp_path / "lab02_walled_in.yaml"
+    world.write_text((REPO / "amr_common" / "worlds" / "lab02.yaml").read_text().replace(
+        "walls:\n", "walls:\n  - [[0.4, -0.4], [0.8, -0.4]]\n", 1))
+    report_path = tmp_path / "nav.json"
+    exit_code = run_sim.main(["--world", str(world), "--goal", "inner_far", "--duration", "600",
+                              "--report", str(report_path)])
+    err = capsys.readouterr().err
+    report = json.loads(report_path.read_text())
+    assert exit_code == 1
+    assert "run_sim: no path to the goal: goal (0.600, -0.200) is unreachable" in err
+    assert "unreachable" in report["planning_error"] and report["interrupted"] is False
+    assert report["localized_time_s"] is not None
+    assert report["sim_time_s"] < report["localized_time_s"] + 1.0, "ends once planned"
+
+
+def test_the_scripts_own_command_line_never_reaches_rcl(tmp_path, monkeypatch, capfd):
+    # rclpy.init() reads sys.argv by default: a '-p follow_side:=left' value warned as a remap
+    # rule, '__node:=evil' renamed every node (StopIteration), '__ns:=/evil' moved them.
+    monkeypatch.setattr(sys, "argv", ["run_sim.py", "follow_side:=left", "__node:=evil",
+                                      "__ns:=/evil"])
     report_path = tmp_path / "run.json"
-    if report_path.exists():  # whatever started is reported, marked interrupted
-        reports = json.loads(report_path.read_text())
-        assert len(reports) == 1 and reports[0]["interrupted"] is True, output
-    else:
-        assert "interrupted before the simulation started (no report)" in output
+    assert run_sim.main(["--duration", "1", "--report", str(report_path)]) == 0
+    assert json.loads(report_path.read_text())["nodes"] == ["wall_follower", "amr_simulator"]
+    err = capfd.readouterr().err
+    assert "deprecated" not in err and "/evil" not in err, err
 
 
 def test_goal_values_with_signs_and_names_parse():

@@ -3,12 +3,13 @@ from __future__ import annotations
 
 import json
 import math
+import warnings
 
 import numpy as np
 import pytest
 
 from amr_common.robot import ROBOT_RADIUS
-from amr_common.world import World, WorldError, bundled_worlds
+from amr_common.world import GOAL_CLEARANCE, SAFETY_MARGIN, World, WorldError, bundled_worlds
 
 REQUIRED_WORLDS = {"lab02", "corridor_loop", "maze_deadends", "room_obstacles", "wide_maze"}
 
@@ -111,6 +112,15 @@ def test_numbers_with_an_exponent_and_no_dot_are_numbers(tmp_path):
     (GOOD + "cell_size: -1\n", "must be > 0"),
     (GOOD + "goal: [9, 9]\n", "goal .* outside"),
     (GOOD + "colour: red\n", "unknown key"),
+    # polygons that cannot be a map: a bowtie boundary, a self-crossing hole, holes outside
+    # or across the boundary
+    ("boundary: [[0, 0], [2, 2], [2, 0], [0, 2]]\n", "'boundary' crosses itself at"),
+    ("boundary: [[0, 0], [2, 0], [2, 2], [0, 2]]\nholes: [[[0.5, 0.5], [1, 1], [1, 0.5], "
+     "[0.5, 1]]]\n", r"'holes\[0\]' crosses itself"),
+    ("boundary: [[0, 0], [2, 0], [2, 2], [0, 2]]\nholes: [[[3, 3], [4, 3], [4, 4]]]\n",
+     r"'holes\[0\]' lies outside the boundary"),
+    ("boundary: [[0, 0], [2, 0], [2, 2], [0, 2]]\nholes: [[[1.5, 0.5], [2.5, 0.5], "
+     "[2.5, 1], [1.5, 1]]]\n", r"'holes\[0\]' crosses the boundary at"),
 ])
 def test_malformed_yaml_gives_clear_error(tmp_path, text, problem):
     path = tmp_path / "bad_world.yaml"
@@ -171,7 +181,7 @@ def test_every_bundled_world_names_goals_the_robot_fits_at(name):
     assert len(world.goals) >= 2
     assert world.goal in world.goals.values()
     for goal_name, (x, y) in world.goals.items():
-        assert world.contains(x, y) and world.clearance(x, y) >= ROBOT_RADIUS, goal_name
+        assert world.contains(x, y) and world.clearance(x, y) >= GOAL_CLEARANCE, goal_name
         assert world.resolve_goal(goal_name) == (x, y)
 
 
@@ -219,3 +229,51 @@ def test_contains_points_agrees_with_contains():
     points = rng.uniform((-0.2, -0.2), (4.2, 3.2), size=(400, 2))
     expected = [world.contains(x, y) for x, y in points]
     assert world.contains_points(points).tolist() == expected
+
+
+# --- one clearance rule for goals (the planner's inflated walls) ---------------------------
+
+def test_a_goal_inside_the_planners_inflation_is_refused_with_the_rule():
+    # 10.6 cm from lab02's east wall: the robot fits (10.5 cm) but no path reaches it without
+    # leaving the planner's free space (13.5 cm); the CLI once accepted it and the run collided.
+    world = World.load("lab02")
+    with pytest.raises(WorldError, match=r"goal \(1.094, -0.2\) is too close to a wall: "
+                                         r"clearance 0.106 m < 0.135 m"):
+        world.resolve_goal("1.094,-0.2")
+    assert GOAL_CLEARANCE == pytest.approx(ROBOT_RADIUS + SAFETY_MARGIN) == 0.135
+    assert world.resolve_goal("1.065,-0.2") == (1.065, -0.2)  # 13.5 cm: on the edge, fine
+    # A start may be anywhere the robot fits: the robot is there.
+    assert world.resolve_start((1.094, -0.2, 0.0)) == (1.094, -0.2, 0.0)
+
+
+def test_a_named_goal_inside_the_inflation_is_refused_when_the_world_loads(tmp_path):
+    with pytest.raises(WorldError, match=r"goal 'a' \(0.12, 1\) is too close to a wall"):
+        load_with_goals(tmp_path, "goals: {a: [0.12, 1]}\n")
+
+
+@pytest.mark.parametrize("what", ["goal", "start"])
+def test_huge_coordinates_are_outside_without_a_numpy_warning(what):
+    world = World.load("lab02")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # an overflow warning would fail here
+        with pytest.raises(WorldError, match="outside the boundary"):
+            if what == "goal":
+                world.resolve_goal("1e308,1e308")
+            else:
+                world.resolve_start((1e308, -1e308, 0.0))
+
+
+def test_a_pose_checked_for_another_purpose_is_named_so():
+    with pytest.raises(WorldError, match=r"kidnap pose \(0, 0\) touches a wall"):
+        World.load("lab02").resolve_start((0.0, 0.0, 0.0), what="kidnap pose")
+
+
+# --- polygons: touching is fine -----------------------------------------------------------
+
+def test_holes_may_touch_the_boundary_and_walls_may_cross_anything(tmp_path):
+    path = tmp_path / "touching.yaml"
+    path.write_text("boundary: [[0, 0], [2, 0], [2, 2], [0, 2]]\n"
+                    "holes: [[[0, 0.5], [0.5, 0.5], [0.5, 1], [0, 1]]]\n"  # flush, west wall
+                    "walls: [[[1, 1], [1.5, 1.5]], [[1, 1.5], [1.5, 1]]]\n")  # an X of walls
+    world = World.load(str(path))
+    assert not world.contains(0.25, 0.75) and world.contains(1.5, 0.5)

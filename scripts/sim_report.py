@@ -1,0 +1,126 @@
+"""The report of one run_sim.py start and its summary line (sim_session.py builds them).
+
+Keys: what ran (world, start, profile, mode, nodes), the simulator's figures, the trajectory
+metrics; with the particle filter its localization figures, with a goal the navigation ones.
+A run stopped before its graph ran gets the same keys (report_before_start).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from amr_common.world import start_label
+from amr_evaluation.episode import trajectory_metrics
+
+
+def run_report(args, world, start, sim, trajectory, wall_errors, wall_time: float,
+            interrupted: bool, graph: dict) -> dict:
+    """The JSON report of one start; `sim` is the Simulator (or its figures before any step)."""
+    positions = np.array([row[1:3] for row in trajectory])
+    rms = (math.sqrt(sum(e * e for e in wall_errors) / len(wall_errors))
+           if wall_errors else None)
+    return {
+        "world": world.name, "start": start_label(start), "interrupted": interrupted,
+        "profile": args.profile, "mode": "realtime" if args.realtime else "lockstep",
+        "seed": args.seed, "dt": args.dt, **graph,
+        "steps": sim.steps, "sim_time_s": round(sim.time, 6),
+        "wall_time_s": round(wall_time, 3),
+        "real_time_factor": round(sim.time / wall_time, 2) if wall_time > 0 else None,
+        "collisions": sim.collisions,
+        "first_collision_time_s": sim.first_collision_time,
+        "min_clearance_m": sim.min_clearance, "distance_m": sim.distance,
+        **trajectory_metrics(world, positions),  # None + metric_errors if not computable
+        "rms_wall_error_m": rms,
+        "trajectory": trajectory,
+        "collision_points": [list(p) for p in sim.collision_points],
+    }
+
+
+def report_before_start(args, world, start) -> dict:
+    """The report of a run stopped before its graph ran: nothing simulated, interrupted.
+
+    The keys of a run's report, localization and navigation ones included.
+    """
+    from types import SimpleNamespace
+
+    from amr_common.robot import ROBOT_RADIUS
+    x, y, theta = world.resolve_start(start)
+    sim = SimpleNamespace(steps=0, time=0.0, collisions=0, first_collision_time=None,
+                          min_clearance=world.clearance(x, y) - ROBOT_RADIUS, distance=0.0,
+                          collision_points=[])
+    trajectory = [[0.0, x, y, theta]]
+    report = run_report(args, world, start, sim, trajectory, [], 0.0, True, graph={
+        "controller": args.controller_spec, "nodes": [], "controller_mode": None})
+    goal = getattr(args, "goal", None)
+    if getattr(args, "localize", False) or goal is not None:
+        report |= localization_fields(args, trajectory, [], [])
+    if goal is not None:
+        report |= navigation_fields(goal, {
+            "goal_reached_time_s": None, "stopped_time_s": None,
+            "final_position_error_m": math.hypot(x - goal[0], y - goal[1])}, None, [], None)
+    return report
+
+
+def localization_fields(args, trajectory: list, estimate: list, particles: list) -> dict:
+    """The report's localization figures, the kidnapping, every /pose and the particles."""
+    from amr_evaluation.localization_episode import metrics_from_rows
+    kidnap = list(args.kidnap) if getattr(args, "kidnap", None) else None
+    return {"localization": metrics_from_rows(trajectory, estimate, kidnap), "kidnap": kidnap,
+            "estimate": estimate, "particles_snapshot": particles}
+
+
+def navigation_fields(goal, summary: dict, plan, estimate: list,
+                       planning_error: str | None) -> dict:
+    """The report's navigation figures.
+
+    Goal, time localized, goal reached and stopped times, planned path, final error, and why the
+    planner found no path (None if it found one or has not planned).
+    """
+    localized = next((row[0] for row in estimate if row[4] > 0.5), None)
+    return {
+        "goal": [float(goal[0]), float(goal[1])], "localized_time_s": localized,
+        "goal_reached_time_s": summary["goal_reached_time_s"],
+        "stopped_time_s": summary["stopped_time_s"],
+        "final_position_error_m": summary["final_position_error_m"],
+        "path_length_m": plan.length_m if plan is not None else None,
+        "path": plan.points.tolist() if plan is not None else [],
+        "planning_error": planning_error,
+    }
+
+
+def localization_line(report: dict) -> str:
+    m = report.get("localization")
+    if m is None:
+        return ""
+    if m["time_to_localized_s"] is None:
+        return f"; not localized, false localizations {m['false_localizations']}"
+    text = (f"; localized after {m['time_to_localized_s']:.1f} s "
+            f"({m['distance_to_localized_m']:.2f} m), false localizations "
+            f"{m['false_localizations']}")
+    if m["tracking_error_mean_m"] is not None:
+        text += (f", error mean {100 * m['tracking_error_mean_m']:.1f} cm, p95 "
+                 f"{100 * m['tracking_error_p95_m']:.1f} cm, max "
+                 f"{100 * m['tracking_error_max_m']:.1f} cm, heading p95 "
+                 f"{m['heading_error_p95_deg']:.1f} deg")
+    if m["relocalization_times_s"]:
+        text += ", relocalized at " + ", ".join(f"{t:.1f}" for t in m["relocalization_times_s"])
+    if m["loss_reported_after_s"] is not None:
+        text += f", loss reported {m['loss_reported_after_s']:.2f} s after the kidnapping"
+    return text
+
+
+def navigation_line(report: dict) -> str:
+    def when(key: str) -> str:
+        return "never" if report[key] is None else f"{report[key]:.1f} s"
+    path = "no path" if report["path_length_m"] is None else \
+        f"path {report['path_length_m']:.2f} m"
+    factor = report["real_time_factor"]
+    return (f"run_sim: {report['world']} / {report['start']} -> goal "
+            f"({report['goal'][0]:g}, {report['goal'][1]:g}) / {report['profile']} "
+            f"({report['mode']}): localized {when('localized_time_s')}, goal reached "
+            f"{when('goal_reached_time_s')}, stopped {when('stopped_time_s')}, {path}, "
+            f"final error {report['final_position_error_m'] * 100:.1f} cm, collisions "
+            f"{report['collisions']}, min clearance {report['min_clearance_m'] * 100:.1f} "
+            f"cm; {report['sim_time_s']:.1f} s simulated in {report['wall_time_s']:.1f} s "
+            f"({f'{factor}x' if factor else 'n/a'} real time)")
