@@ -87,23 +87,33 @@ class KeyReader:
 
 
 class StatusLine:
-    """The current command on one line (redrawn on a terminal, one line per change if not)."""
+    """The current command on one line (redrawn on a terminal, one line per change if not).
+
+    Only a display: if the output goes away (a closed pipe, a closed terminal), it stays silent
+    and the caller carries on.
+    """
 
     def __init__(self, stream=None) -> None:
         self.stream = sys.stdout if stream is None else stream
-        self.redraw = self.stream.isatty()
+        self.redraw = self.stream is not None and self.stream.isatty()
         self._shown: str | None = None
 
     def show(self, text: str) -> None:
         """Print `text` unless it is already shown."""
-        if text == self._shown:
-            return
-        self._shown = text
-        self.stream.write(f"\r\x1b[K{text}" if self.redraw else f"{text}\n")
-        self.stream.flush()
+        if text != self._shown:
+            self._shown = text
+            self._write(f"\r\x1b[K{text}" if self.redraw else f"{text}\n")
 
     def close(self) -> None:
         """End the redrawn line."""
         if self.redraw and self._shown is not None:
-            self.stream.write("\n")
+            self._write("\n")
+
+    def _write(self, text: str) -> None:
+        if self.stream is None:
+            return
+        try:
+            self.stream.write(text)
             self.stream.flush()
+        except (OSError, ValueError):  # closed: nobody reads the status any more
+            self.stream = None

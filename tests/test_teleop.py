@@ -368,3 +368,25 @@ def test_option_error_exits_2_before_anything_runs():
     assert result.stderr.splitlines()[-1] == \
         "teleop.py: error: argument --hold-timeout: must be > 0 (got '0')"
     assert "RMW=" not in result.stderr and result.stdout == ""
+
+
+class _ClosedOutput:
+    """stdout piped into a program that has exited (`teleop.py | head -1`)."""
+
+    def isatty(self) -> bool:
+        return False
+
+    def write(self, text: str) -> int:
+        raise BrokenPipeError(errno.EPIPE, "Broken pipe")
+
+    def flush(self) -> None:
+        raise BrokenPipeError(errno.EPIPE, "Broken pipe")
+
+
+def test_a_closed_output_does_not_stop_the_driving_nor_the_final_zeros():
+    sent = []
+    code = drive(_Keys("wwq", AssertionError("read after q")),
+                 lambda v, w: sent.append((v, w)), _options(), _Stop(),
+                 StatusLine(_ClosedOutput()))
+    assert code == 0
+    assert (0.02, 0.0) in sent and sent[-3:] == [(0.0, 0.0)] * 3
