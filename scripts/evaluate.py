@@ -152,7 +152,42 @@ def resolve_settings(args: argparse.Namespace) -> dict:
                           **parse_overrides(args.param)}
     if settings["jobs"] is not None and settings["jobs"] < 1:
         raise EvaluationError(f"--jobs must be >= 1, got {settings['jobs']}")
+    check_option_pairs(args, settings)
     return settings
+
+
+def check_option_pairs(args: argparse.Namespace, settings: dict) -> None:
+    """Options that mean something only with another one: an error rather than ignored."""
+    if not args.localize:
+        for option, given in (("--kidnap-at", args.kidnap_at is not None),
+                              ("--pf-param", bool(args.pf_param))):
+            if given:
+                raise EvaluationError(f"{option} needs --localize")
+    if args.pose_source is not None and settings["goals"] is None:
+        raise EvaluationError("--pose-source needs --goals (navigation episodes)")
+
+
+def check_localization_options(args: argparse.Namespace, settings: dict, specs) -> None:
+    """--localize: --kidnap-at within the episodes, in worlds with a start to carry it to.
+
+    And --pf-param: names and values the particle filter takes.
+    """
+    if args.kidnap_at is not None:
+        duration = settings["duration"]
+        if not 0.0 < args.kidnap_at < duration:  # also NaN
+            raise EvaluationError(f"--kidnap-at must be a time within the episode (0 < T < "
+                                  f"{duration:g} s), got {args.kidnap_at:g}")
+        from amr_evaluation.localization_evaluation import kidnap_pose
+        for world in dict.fromkeys(spec.world for spec in specs):
+            if kidnap_pose(world, None, args.kidnap_at) is None:
+                raise EvaluationError(f"--kidnap-at: world '{Path(world).stem}' has fewer "
+                                      "than two named starts (the robot is carried to the "
+                                      "next one)")
+    from amr_localization.particle_filter_params import check_parameters
+    try:
+        check_parameters(parse_overrides(args.pf_param))
+    except ValueError as exc:
+        raise EvaluationError(f"--pf-param: {exc}") from None
 
 
 def episode_specs(settings: dict) -> list:
@@ -224,6 +259,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.localize and settings["goals"]:
             raise EvaluationError("--goals (navigation) and --localize exclude each other")
         specs = episode_specs(settings)
+        if args.localize:
+            check_localization_options(args, settings, specs)
         started = dt_module.datetime.now(dt_module.timezone.utc)
         out = check_output_folder(args.out or Path("out") / f"evaluate-{started:%Y%m%d-%H%M%S}",
                                   "--out")

@@ -81,3 +81,32 @@ def test_the_local_pool_imports_no_ray(tmp_path):
                           text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     assert "on 2 local process(es)" in proc.stdout
+
+
+def test_options_that_would_be_ignored_or_mean_nothing_are_one_line_errors(capsys, tmp_path,
+                                                                          course_map):
+    """Issue 18 #11: each was accepted (and ignored, or read as 'all'/'none') or crashed."""
+    cases = [(["--localize", "--kidnap-at", "-5"], "--kidnap-at must be a time within the "
+                                                   "episode (0 < T < 1 s), got -5"),
+             (["--localize", "--kidnap-at", "0"], "(0 < T < 1 s), got 0"),
+             (["--localize", "--kidnap-at", "1"], "(0 < T < 1 s), got 1"),
+             (["--localize", "--kidnap-at", "nan"], "(0 < T < 1 s), got nan"),
+             (["--localize", "--kidnap-at", "0.5", "--worlds", str(course_map), "--starts",
+               "1,1,0"], "--kidnap-at: world 'course_map' has fewer than two named starts"),
+             (["--kidnap-at", "0.5"], "--kidnap-at needs --localize"),
+             (["--pf-param", "beams:=30"], "--pf-param needs --localize"),
+             (["--localize", "--pf-param", "beams:=0"],
+              "--pf-param: beams must be a positive integer (got 0)"),
+             (["--localize", "--pf-param", "bemas:=30"], "unknown parameter(s) ['bemas']"),
+             (["--localize", "--pf-param", "beams"], "'beams' must look like name:=value"),
+             (["--goals", ""], "no goals given (an empty list)"),
+             (["--goals", " , "], "no goals given (an empty list)"),
+             (["--starts", ""], "no starts given (an empty list)"),
+             (["--profiles", ""], "no profiles given (an empty list)"),
+             (["--pose-source", "truth"], "--pose-source needs --goals")]
+    for argv, message in cases:
+        argv = ["--worlds", "lab02", *argv, "--out", str(tmp_path / "out")]
+        code, out, err = _evaluate(capsys, *argv)
+        assert code == 2, (argv, out, err)
+        assert len(err.strip().splitlines()) == 1 and message in err, (argv, err)
+        assert "episodes" not in out and not (tmp_path / "out").exists()  # nothing ran
