@@ -38,7 +38,7 @@ from amr_common.controller_loader import (
 )
 from amr_evaluation.evaluation import EpisodeSpec, EvaluationError, run_one
 
-__all__ = ["SEARCHES", "Dimension", "parse_space", "grid_size", "safe_exploration",
+__all__ = ["SEARCHES", "Dimension", "parse_space", "grid_size", "search_size", "safe_exploration",
            "load_objective", "run_trial", "TrialResult", "run_search", "write_params_file"]
 
 SEARCHES = ("grid", "random", "optuna")
@@ -103,8 +103,9 @@ def _dimension(name: str, spec: str, default: Any) -> Dimension:
         if len(parts) == 2:
             return Dimension(name, low=low, high=high, integer=integer)
         points = numbers[2]
-        if not isinstance(points, int) or points < 2:
-            raise EvaluationError(f"--space {name}={spec}: N must be an integer >= 2")
+        if not isinstance(points, int) or not 2 <= points <= MAX_GRID:
+            raise EvaluationError(f"--space {name}={spec}: N must be an integer from 2 to "
+                                  f"{MAX_GRID}, got {points}")
         raw = [low + (high - low) * k / (points - 1) for k in range(points)]
         values = [round(v, 12) for v in raw]
     else:
@@ -141,6 +142,19 @@ def grid_size(dims: Sequence[Dimension]) -> int:
         raise EvaluationError(f"--search grid needs values or LOW:HIGH:N points, not a "
                               f"continuous range ({', '.join(ranges)})")
     return math.prod(len(d.values) for d in dims)
+
+
+def search_size(dims: Sequence[Dimension], search: str, samples: int) -> int:
+    """Parameter sets the search tries; EvaluationError beyond 1 to MAX_GRID."""
+    if search == "grid":
+        total = grid_size(dims)
+        if total > MAX_GRID:
+            raise EvaluationError(f"--search grid: {total} parameter sets; at most {MAX_GRID} "
+                                  "(fewer values, or --search random/optuna with --samples)")
+        return total
+    if not 1 <= samples <= MAX_GRID:
+        raise EvaluationError(f"--samples must be from 1 to {MAX_GRID}, got {samples}")
+    return samples
 
 
 def _tune_space(dims: Sequence[Dimension], search: str) -> dict[str, Any]:
@@ -244,9 +258,7 @@ def run_search(specs: Sequence[EpisodeSpec], dims: Sequence[Dimension], search: 
     release_idle_warm_workers(ray)
     # Tune's own tables and hints off (verbose=0 with its classic reporter): progress() reports.
     os.environ.setdefault("RAY_AIR_NEW_OUTPUT", "0")
-    total = grid_size(dims) if search == "grid" else int(samples)
-    if total < 1 or total > MAX_GRID:
-        raise EvaluationError(f"{total} parameter sets requested; 1 to {MAX_GRID} allowed")
+    total = search_size(dims, search, int(samples))
     if search == "optuna":
         from ray.tune.search.optuna import OptunaSearch
         searcher = OptunaSearch(seed=seed)

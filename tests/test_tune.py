@@ -115,7 +115,7 @@ def test_search_spaces_are_typed_and_checked():
     for bad, message in [("kq=1,2", "has no such parameter; known:"),
                          ("kp", "must look like NAME=a,b,c"),
                          ("kp=5:1", "LOW must be below HIGH"),
-                         ("kp=1:5:1", "N must be an integer >= 2"),
+                         ("kp=1:5:1", "N must be an integer from 2 to 10000, got 1"),
                          ("kp=fast,slow", "'fast' is not a float"),
                          ("escape_islands=1", "1 is not a bool")]:
         with pytest.raises(EvaluationError, match=message):
@@ -142,8 +142,27 @@ def test_bad_tune_options_are_one_line_errors(capsys, tmp_path):
                           (["--space", "kp=-1,5"], "rejected its parameters"),
                           (["--space", "kp=1,2", "--objective", "nowhere:f"],
                            "No module named 'nowhere'"),
-                          ([], "give at least one --space")]:
+                          ([], "give at least one --space"),
+                          # Issue 18 #11: a huge grid hung, then died with a traceback; the
+                          # searcher-only options were ignored by a grid search.
+                          (["--space", "kp=1:10:100000000"], "N must be an integer from 2 to "
+                                                             "10000, got 100000000"),
+                          (["--space", "kp=1:10:200", "--space", "kd=0:10:200"],
+                           "40000 parameter sets; at most 10000"),
+                          (["--search", "random", "--space", "kp=1:10", "--samples", "20000"],
+                           "--samples must be from 1 to 10000, got 20000"),
+                          (["--space", "kp=1,2", "--samples", "5"],
+                           "--samples is for --search random or optuna"),
+                          (["--space", "kp=1,2", "--search-seed", "3"],
+                           "--search-seed is for --search random or optuna"),
+                          (["--space", "kp=1,2", "--localize"],
+                           "--localize is not a tune.py option"),
+                          (["--space", "kp=1,2", "--ray-keep-workers", "5"],
+                           "--ray-keep-workers is not a tune.py option"),
+                          (["--space", "kp=1,2", "--kidnap-at", "5"],
+                           "--kidnap-at needs --localize")]:
         code = tune.main(["--worlds", "lab02", "--duration", "1", *argv,
                           "--out", str(tmp_path / "out")])
         err = capsys.readouterr().err
         assert code == 2 and len(err.strip().splitlines()) == 1 and message in err, (argv, err)
+        assert not (tmp_path / "out").exists()  # nothing ran
