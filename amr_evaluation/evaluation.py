@@ -37,6 +37,7 @@ from amr_evaluation.evaluation_config import (
 from amr_evaluation.executors import (
     Executor,
     TaskLost,
+    episode_time_limit,
     local_executor,
     run_tasks,
 )
@@ -268,20 +269,23 @@ def lost_episode(spec: EpisodeSpec, lost: TaskLost) -> EpisodeOutcome:
 
 def run_episodes(specs: Sequence[EpisodeSpec], jobs: int | None = None,
                  progress: Callable[[int, int, EpisodeOutcome], None] | None = None,
-                 executor: Executor | None = None, trajectory: bool = True
-                 ) -> list[EpisodeOutcome]:
+                 executor: Executor | None = None, trajectory: bool = True,
+                 episode_timeout_s: float | None = None) -> list[EpisodeOutcome]:
     """Run all episodes, outcomes in spec order.
 
-    On `executor` (amr_evaluation.executors; e.g. a RayExecutor), else on `jobs` local
-    processes (None: all cores; 1: this process). trajectory=False: summaries only (see
-    run_one).
+    On `executor` (amr_evaluation.executors; e.g. a RayExecutor, with its own time limit),
+    else on `jobs` local worker processes (None: all cores), each episode limited to
+    `episode_timeout_s` of wall-clock time (None: episode_time_limit of the longest
+    duration; 0: no limit). trajectory=False: summaries only (see run_one).
     """
     specs = list(specs)
     if not specs:
         return []
     if executor is None:
+        if episode_timeout_s is None:
+            episode_timeout_s = episode_time_limit(max(spec.duration for spec in specs))
         try:
-            executor = local_executor(jobs, len(specs))
+            executor = local_executor(jobs, len(specs), episode_timeout_s)
         except ValueError as exc:
             raise EvaluationError(str(exc)) from None
     return run_tasks(run_one if trajectory else run_summary, specs, executor, lost_episode,

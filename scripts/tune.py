@@ -132,7 +132,8 @@ def search_and_write(args, settings: dict, specs, dims, executor, out: Path) -> 
 
     try:
         trials = run_search(specs, dims, args.search, args.samples, args.search_seed,
-                            args.objective, storage=out / "ray_results", progress=progress)
+                            args.objective, storage=out / "ray_results", progress=progress,
+                            episode_timeout_s=settings["episode_timeout"])
     except KeyboardInterrupt:
         print("tune: interrupted", file=sys.stderr)
         return 130

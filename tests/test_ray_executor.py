@@ -193,6 +193,34 @@ def test_a_worker_killed_mid_episode_is_retried_and_a_second_death_reported(ray_
     assert "worker process died (killed by signal 9)" in local.error
 
 
+def test_an_episode_past_its_time_limit_ends_its_ray_worker_and_the_others_still_run(
+        ray_cluster):
+    """Issue 18 #8: a controller sleeping forever hung the sweep on Ray too."""
+    hows = ["none", "sleep", "none", "none", "sleep", "none"]
+    specs = [EpisodeSpec("lab02", "outer", seed=k, duration=1.0,
+                         controller="tests.controllers:Misbehaves", params={"how": how})
+             for k, how in enumerate(hows)]
+    executor = evaluate.ray_executor(ray_cluster.address, None, None, 0.0, 3.0)
+    try:
+        assert executor.episode_timeout_s == 3.0
+        seen = []
+        outcomes = run_episodes(specs, executor=executor,
+                                progress=lambda done, total, o: seen.append(done))
+        # The workers that slept were killed and replaced: the executor runs on.
+        (after,) = run_episodes(specs[:1], executor=executor)
+    finally:
+        executor.close()
+    assert seen == [1, 2, 3, 4, 5, 6]
+    for how, outcome in zip(hows, outcomes):
+        if how == "sleep":
+            assert outcome.result is None
+            assert "ran past its wall-clock limit of 3 s" in outcome.error, outcome.error
+            assert 3.0 <= outcome.wall_time_s < 60.0
+        else:
+            assert outcome.error is None and outcome.result.steps == 20, outcome.error
+    assert after.error is None
+
+
 def test_a_worker_node_lost_mid_sweep_is_survived(ray_cluster, tmp_path):
     ray = ray_cluster.ray
     release_idle_warm_workers(ray)

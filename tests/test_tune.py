@@ -89,6 +89,24 @@ def test_default_objective_picks_the_fastest_speed_that_does_not_hit_the_wall(
     assert float(by_speed[0.14]["explored_mean"]) > float(by_speed[0.1]["explored_mean"])
 
 
+def test_a_controller_that_hangs_or_ends_its_process_is_a_bad_episode_of_its_trial(
+        ray_cluster, tmp_path, capsys):
+    """Issue 18 #8: a sleeping controller hung tune.py.
+
+    One that ended its process lost the trial (twice: Tune retried it). Now each is its
+    episode's error, and the trial is scored.
+    """
+    out, _ = _tune(capsys, tmp_path, "--worlds", "lab02", "--starts", "outer", "--duration",
+                   "1", "--controller", "tests.controllers:Misbehaves", "--params-file",
+                   "none", "--space", "how=none,sleep,exit", "--episode-timeout", "5")
+    best = json.loads((out / "best.json").read_text())
+    assert best["params"] == {"how": "none"}
+    with open(out / "trials.csv", newline="") as stream:
+        by_how = {t["how"]: t for t in csv.DictReader(stream)}
+    assert {how: (t["bad_episodes"], t["errors"], t["error"]) for how, t in by_how.items()} \
+        == {"none": ("0", "0", ""), "sleep": ("1", "1", ""), "exit": ("1", "1", "")}
+
+
 def test_optuna_and_random_search_approach_a_continuous_optimum(ray_cluster, tmp_path,
                                                                  capsys):
     for search in ("optuna", "random"):
