@@ -9,7 +9,7 @@ results.json, results.csv and sheet.png (every episode's trajectory) to --out, p
 a one-line verdict.
 Exit code: 0 no collision (and every goal reached), 1 some episode collided, commanded
 NaN/inf/non-numbers or missed its goal, 2 bad options, 3 some episode failed to run (an
-exception, sys.exit, or its worker process died).
+exception, sys.exit, its worker process died, or it ran past --episode-timeout).
 
 Examples:
   .venv/bin/python scripts/evaluate.py --worlds lab02 --seeds 0,1,2 --duration 120
