@@ -1,9 +1,10 @@
 # Two commands set everything up and run: `make run` (simulator + wall follower on the default
 # maze) and `make test` (the ruff linter, then pytest). Each creates .venv if missing, installs
-# the pinned dependencies when requirements.lock or pyproject.toml changed, and rebuilds
-# amr_msgs (and tf2_msgs) when their sources changed. `make test` also installs the cluster
-# extra (Ray, requirements-cluster.lock: ~560 MB, ~30 s) so the Ray tests run; `make run` does
-# not need it.
+# the pinned dependencies when requirements.lock or pyproject.toml changed, rebuilds
+# amr_msgs (and tf2_msgs) when their sources changed, and compiles the numba kernels into
+# their cache when their sources changed (so the first run is as fast as the next). `make
+# test` also installs the cluster extra (Ray, requirements-cluster.lock: ~560 MB, ~30 s) so
+# the Ray tests run; `make run` does not need it.
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
@@ -18,6 +19,11 @@ TF2_STAMP := $(VENV)/.stamp-tf2_msgs
 TF2_SOURCES := $(wildcard third_party/tf2_msgs/msg/*.msg) third_party/tf2_msgs/CMakeLists.txt \
 	third_party/tf2_msgs/package.xml tools/cmake/ros_pypi_wheels.cmake tools/build_amr_msgs.py
 
+# numba's cached kernels (tools/precompile.py): rebuilt when a file they are compiled from
+# changed (the list comes from the tool, read with the system Python: no venv needed yet).
+NUMBA_STAMP := $(VENV)/.stamp-numba
+KERNEL_SOURCES := $(shell $(PYTHON) tools/precompile.py --sources)
+
 ARGS ?=
 PYTEST_ARGS ?=
 # Local runs, tests and benchmarks stay on loopback (the scripts and tests/conftest.py also
@@ -26,17 +32,17 @@ LOCAL_ROS := ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 
 .PHONY: run test bench setup lock clean
 
-run: $(MSGS_STAMP)
+run: $(MSGS_STAMP) $(NUMBA_STAMP)
 	$(LOCAL_ROS) $(PY) scripts/run_sim.py $(ARGS)
 
-test: $(MSGS_STAMP) $(CLUSTER_STAMP)
+test: $(MSGS_STAMP) $(CLUSTER_STAMP) $(NUMBA_STAMP)
 	$(PY) -m ruff check .
 	$(LOCAL_ROS) $(PY) -m pytest $(PYTEST_ARGS)
 
-bench: $(MSGS_STAMP)
+bench: $(MSGS_STAMP) $(NUMBA_STAMP)
 	$(LOCAL_ROS) $(PY) scripts/bench.py $(ARGS)
 
-setup: $(MSGS_STAMP)
+setup: $(MSGS_STAMP) $(NUMBA_STAMP)
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -57,6 +63,12 @@ $(TF2_STAMP): $(DEPS_STAMP) $(TF2_SOURCES)
 
 $(MSGS_STAMP): $(DEPS_STAMP) $(TF2_STAMP) $(MSGS_SOURCES)
 	$(PY) tools/build_amr_msgs.py
+	touch $@
+
+# After the messages (the last step of the set-up), not because of them: headless episodes
+# compile every kernel (~1 min from nothing) and the old cache files are removed first.
+$(NUMBA_STAMP): $(DEPS_STAMP) $(KERNEL_SOURCES) | $(MSGS_STAMP)
+	$(PY) tools/precompile.py
 	touch $@
 
 # Re-pin after editing requirements.in (needs network access to PyPI).

@@ -37,6 +37,7 @@ from amr_evaluation.evaluation_config import (
 from amr_evaluation.executors import (
     Executor,
     TaskLost,
+    episode_time_limit,
     local_executor,
     run_tasks,
 )
@@ -110,8 +111,8 @@ def expand_grid(worlds: str | Sequence[str], starts: str | Sequence[str] = "all"
     A start name applies to the worlds that have it; a name no chosen world has is an error. A pose
     (x, y, theta; see parse_start_list) applies to every world. A world without named starts
     (the course's map JSON) needs poses. `goals` (navigation episodes): "all" = every named goal
-    of each world, or names, applied like the start names; None or empty: wall-following
-    episodes.
+    of each world, or names, applied like the start names; None: wall-following episodes.
+    An empty list given for starts, profiles or goals is an error (not 'all' or 'none').
     """
     from amr_common.world import World, WorldError, bundled_worlds
     from amr_sim.profiles import get_profile
@@ -121,14 +122,16 @@ def expand_grid(worlds: str | Sequence[str], starts: str | Sequence[str] = "all"
         world_names = bundled_worlds()
     if not world_names:
         raise EvaluationError("no worlds given")
-    profile_names = parse_name_list(profiles) or ["ideal"]
+    profile_names = _given(parse_name_list(profiles), profiles, "profiles", ["ideal"],
+                           "give profile names (ideal, turtlebot3)")
     for name in profile_names:
         try:
             get_profile(name)
         except (KeyError, ValueError) as exc:
             raise EvaluationError(f"profile '{name}': {exc}") from None
     seed_list = parse_seeds(seeds)
-    start_list = parse_start_list(starts) or ["all"]
+    start_list = _given(parse_start_list(starts), starts, "starts", ["all"],
+                        "give 'all', start names or X,Y,THETA poses")
     poses = [s for s in start_list if not isinstance(s, str)]
     start_names = [s for s in start_list if isinstance(s, str)]
     loaded: dict[str, list[str | tuple[float, float, float]]] = {}
@@ -157,7 +160,8 @@ def expand_grid(worlds: str | Sequence[str], starts: str | Sequence[str] = "all"
     if unused:
         raise EvaluationError(f"start(s) {', '.join(unused)} exist in none of the worlds "
                               f"{', '.join(world_names)}")
-    goal_names = parse_name_list(goals)
+    goal_names = _given(parse_name_list(goals), goals, "goals", [],
+                        "give 'all' or goal names, or leave them out for wall following")
     world_goals = {w: _world_goals(w, goals_of[w], goal_names) for w in world_names}
     missing = [g for g in goal_names if g != "all" and not any(g in v for v in
                                                                 world_goals.values())]
@@ -175,6 +179,15 @@ def expand_grid(worlds: str | Sequence[str], starts: str | Sequence[str] = "all"
     if len(specs) > MAX_EPISODES:
         raise EvaluationError(f"{len(specs)} episodes requested; the limit is {MAX_EPISODES}")
     return specs
+
+
+def _given(parsed: list, value: Any, what: str, default: list, hint: str) -> list:
+    """`parsed`, or `default` if the option was not given (None); an empty list is an error."""
+    if value is None:
+        return default
+    if not parsed:
+        raise EvaluationError(f"no {what} given (an empty list): {hint}")
+    return parsed
 
 
 def _world_goals(world_name: str, available: list[str],
@@ -256,20 +269,23 @@ def lost_episode(spec: EpisodeSpec, lost: TaskLost) -> EpisodeOutcome:
 
 def run_episodes(specs: Sequence[EpisodeSpec], jobs: int | None = None,
                  progress: Callable[[int, int, EpisodeOutcome], None] | None = None,
-                 executor: Executor | None = None, trajectory: bool = True
-                 ) -> list[EpisodeOutcome]:
+                 executor: Executor | None = None, trajectory: bool = True,
+                 episode_timeout_s: float | None = None) -> list[EpisodeOutcome]:
     """Run all episodes, outcomes in spec order.
 
-    On `executor` (amr_evaluation.executors; e.g. a RayExecutor), else on `jobs` local
-    processes (None: all cores; 1: this process). trajectory=False: summaries only (see
-    run_one).
+    On `executor` (amr_evaluation.executors; e.g. a RayExecutor, with its own time limit),
+    else on `jobs` local worker processes (None: all cores), each episode limited to
+    `episode_timeout_s` of wall-clock time (None: episode_time_limit of the longest
+    duration; 0: no limit). trajectory=False: summaries only (see run_one).
     """
     specs = list(specs)
     if not specs:
         return []
     if executor is None:
+        if episode_timeout_s is None:
+            episode_timeout_s = episode_time_limit(max(spec.duration for spec in specs))
         try:
-            executor = local_executor(jobs, len(specs))
+            executor = local_executor(jobs, len(specs), episode_timeout_s)
         except ValueError as exc:
             raise EvaluationError(str(exc)) from None
     return run_tasks(run_one if trajectory else run_summary, specs, executor, lost_episode,

@@ -8,9 +8,16 @@ outcomes back in spec order, calls the progress hook once per finished episode a
 TaskLost into the episode kind's own error outcome, so the tables and files do not care where
 an episode ran.
 
-- InProcessExecutor: one after the other in this process (jobs=1; a debugger works).
-- LocalPoolExecutor: worker processes on this machine (the default; no Ray needed).
+- InProcessExecutor: one after the other in this process (a debugger works; nothing protects
+  this process from the controller: only for code that asks for it).
+- LocalPoolExecutor: worker processes on this machine (the default, also for one episode or
+  one job; no Ray needed).
 - amr_evaluation.ray_executor.RayExecutor: tasks on a Ray cluster (`evaluate.py --ray`).
+
+The pool and Ray end an episode that runs longer than `episode_timeout_s` of wall-clock time
+(a controller that sleeps or loops forever) with its worker process, and report it as that
+episode's TaskLost; a new worker takes the episodes left (episode_time_limit() is the default
+evaluate.py and tune.py give).
 """
 from __future__ import annotations
 
@@ -24,9 +31,39 @@ from multiprocessing.connection import Connection, wait
 from typing import Any, Callable, Iterator, Protocol, Sequence
 
 __all__ = ["TaskLost", "Executor", "InProcessExecutor", "LocalPoolExecutor", "local_executor",
-           "run_tasks"]
+           "run_tasks", "episode_time_limit", "timed_out"]
 
 Task = Callable[[Any], Any]
+_STARTED = "amr_evaluation.executors.STARTED"  # a worker's note: the episode it got began
+
+
+def episode_time_limit(duration_s: float) -> float:
+    """The default wall-clock limit of an episode of `duration_s` simulated seconds.
+
+    The larger of 60 s and twice the simulated time: episodes run tens to thousands of times
+    faster than real time, so only a controller that hangs (or a machine far too loaded)
+    reaches it.
+    """
+    return max(60.0, 2.0 * float(duration_s))
+
+
+def timed_out(limit_s: float, wall_time_s: float) -> "TaskLost":
+    """The TaskLost of an episode ended at its wall-clock limit."""
+    return TaskLost(f"the episode ran past its wall-clock limit of {limit_s:g} s "
+                    "(--episode-timeout) and its worker process was ended: a controller that "
+                    "hangs or sleeps, or an episode far slower than its simulated time",
+                    wall_time_s)
+
+
+def _check_limit(episode_timeout_s: float | None) -> float | None:
+    """None or 0: no limit; else a positive number of seconds (ValueError otherwise)."""
+    if episode_timeout_s is None or episode_timeout_s == 0:
+        return None
+    limit = float(episode_timeout_s)
+    if not limit > 0 or limit == float("inf"):
+        raise ValueError(f"the episode timeout must be a number of seconds > 0 (0: no limit), "
+                         f"got {episode_timeout_s!r}")
+    return limit
 
 
 @dataclass(frozen=True)
@@ -100,13 +137,16 @@ class LocalPoolExecutor:
 
     Unlike multiprocessing.Pool (which waits forever for the task of a worker that died), a
     worker that ends during an episode (os._exit, a crash, the OOM killer) makes that
-    episode's TaskLost; a new worker takes the remaining episodes.
+    episode's TaskLost, and so does an episode past `episode_timeout_s` of wall-clock time
+    (its worker is killed); a new worker takes the remaining episodes.
     """
 
-    def __init__(self, jobs: int | None = None) -> None:
+    def __init__(self, jobs: int | None = None,
+                 episode_timeout_s: float | None = None) -> None:
         self.jobs = (os.cpu_count() or 1) if jobs is None else int(jobs)
         if self.jobs < 1:
             raise ValueError(f"jobs must be >= 1, got {self.jobs}")
+        self.episode_timeout_s = _check_limit(episode_timeout_s)
 
     def describe(self) -> str:
         """'N local process(es)'."""
@@ -121,18 +161,19 @@ class LocalPoolExecutor:
         """Yield (index, outcome or TaskLost) as the workers finish episodes."""
         if not specs:
             return
-        yield from _WorkerPool(task, specs, self.workers(len(specs)), tuple(preload)).run()
+        yield from _WorkerPool(task, specs, self.workers(len(specs)), tuple(preload),
+                               self.episode_timeout_s).run()
 
 
-def local_executor(jobs: int | None,
-                   episodes: int | None = None) -> InProcessExecutor | LocalPoolExecutor:
-    """This process for jobs=1 or at most one episode, else a pool of `jobs` processes.
+def local_executor(jobs: int | None, episodes: int | None = None,
+                   episode_timeout_s: float | None = None) -> LocalPoolExecutor:
+    """A pool of `jobs` worker processes (None: all cores), at most one per episode.
 
-    jobs None: all cores; ValueError for jobs < 1 (checked in every case).
+    Also for one job or one episode: a controller that hangs or ends its process must not
+    take this process (the driver, holding the other episodes' results) with it.
+    ValueError for jobs < 1 or a bad timeout.
     """
-    pool = LocalPoolExecutor(jobs)
-    return InProcessExecutor() if pool.jobs == 1 or (episodes is not None and episodes <= 1) \
-        else pool
+    return LocalPoolExecutor(jobs, episode_timeout_s)
 
 
 # --- the local pool ------------------------------------------------------------------------
@@ -169,6 +210,7 @@ def _worker_main(connection: Connection, task: Task, preload: Sequence[str]) -> 
             return
         index, spec = item
         started = time.perf_counter()
+        connection.send((index, _STARTED))  # the episode's clock starts now (not at import)
         outcome = task(spec)
         try:
             connection.send((index, outcome))
@@ -179,12 +221,14 @@ def _worker_main(connection: Connection, task: Task, preload: Sequence[str]) -> 
 
 class _WorkerPool:
     def __init__(self, task: Task, specs: Sequence[Any], workers: int,
-                 preload: tuple[str, ...]) -> None:
+                 preload: tuple[str, ...], limit_s: float | None = None) -> None:
         self._task, self._preload = task, preload
         self._context = _context(preload)
         self._pending = list(enumerate(specs))[::-1]  # popped from the end: spec order
         self._workers = workers
-        # connection -> [process, index of the episode it runs or None, start time]
+        self._limit_s = limit_s
+        # connection -> [process, index of the episode it runs or None, time it was sent,
+        # time the worker began it or None]
         self._running: dict[Connection, list] = {}
 
     def run(self) -> Iterator[tuple[int, Any]]:
@@ -193,12 +237,13 @@ class _WorkerPool:
                 self._start_worker()
             while self._running:
                 by_sentinel = {entry[0].sentinel: conn for conn, entry in self._running.items()}
-                for ready in wait([*self._running, *by_sentinel]):
+                for ready in wait([*self._running, *by_sentinel], timeout=self._next_deadline()):
                     conn = by_sentinel.get(ready, ready)
                     if conn in self._running:
                         yield from self._collect(conn)
+                yield from self._end_overdue()
         finally:
-            for conn, (process, _, _) in list(self._running.items()):
+            for conn, (process, *_) in list(self._running.items()):
                 process.terminate()
                 process.join(timeout=5.0)
                 conn.close()
@@ -210,8 +255,31 @@ class _WorkerPool:
                                         args=(theirs, self._task, self._preload), daemon=True)
         process.start()
         theirs.close()
-        self._running[ours] = [process, None, 0.0]
+        self._running[ours] = [process, None, 0.0, None]
         self._assign(ours)
+
+    def _next_deadline(self) -> float | None:
+        """Seconds until the first running episode reaches the limit (None: no limit)."""
+        begun = [entry[3] for entry in self._running.values() if entry[3] is not None]
+        if self._limit_s is None or not begun:
+            return None
+        return max(0.0, min(begun) + self._limit_s - time.perf_counter())
+
+    def _end_overdue(self) -> Iterator[tuple[int, Any]]:
+        """Kill the workers whose episode ran past the limit: the episodes' TaskLost."""
+        if self._limit_s is None:
+            return
+        now = time.perf_counter()
+        for conn, (process, index, _, begun) in list(self._running.items()):
+            if begun is None or now - begun < self._limit_s or conn.poll():
+                continue  # in time, or its result is here already
+            process.kill()  # SIGKILL: a hung controller may ignore anything else
+            process.join(timeout=5.0)
+            del self._running[conn]
+            conn.close()
+            yield index, timed_out(self._limit_s, now - begun)
+            if self._pending:
+                self._start_worker()
 
     def _assign(self, conn: Connection) -> None:
         entry = self._running[conn]
@@ -223,14 +291,17 @@ class _WorkerPool:
                 pass
             return
         index, spec = self._pending.pop()
-        entry[1], entry[2] = index, time.perf_counter()
+        entry[1:] = [index, time.perf_counter(), None]
         conn.send((index, spec))
 
     def _collect(self, conn: Connection) -> Iterator[tuple[int, Any]]:
-        process, index, started = self._running[conn]
+        process, index, started, _ = self._running[conn]
         try:
             if conn.poll():
                 result_index, outcome = conn.recv()
+                if isinstance(outcome, str) and outcome == _STARTED:
+                    self._running[conn][3] = time.perf_counter()
+                    return
                 yield result_index, outcome
                 self._assign(conn)
                 return

@@ -98,16 +98,23 @@ def lost_localization(spec: LocalizationSpec, lost) -> LocalizationOutcome:
 
 def run_localization_specs(specs: Sequence[LocalizationSpec], jobs: int | None = None,
                            progress: Callable[[int, int, LocalizationOutcome], None] | None
-                           = None, executor=None) -> list[LocalizationOutcome]:
+                           = None, executor=None,
+                           episode_timeout_s: float | None = None) -> list[LocalizationOutcome]:
     """Run every spec, results in spec order.
 
     On `executor` (amr_evaluation.executors, e.g. a RayExecutor), else on `jobs` local
-    processes (None: all cores).
+    processes (None: all cores), each episode limited to `episode_timeout_s` of wall-clock
+    time (None: episode_time_limit of the longest duration; 0: no limit).
     """
-    from amr_evaluation.executors import local_executor, run_tasks
+    from amr_evaluation.executors import episode_time_limit, local_executor, run_tasks
     specs = list(specs)
+    if not specs:
+        return []
     if executor is None:
-        executor = local_executor(max(int(jobs), 1) if jobs is not None else None, len(specs))
+        if episode_timeout_s is None:
+            episode_timeout_s = episode_time_limit(max(spec.duration for spec in specs))
+        executor = local_executor(max(int(jobs), 1) if jobs is not None else None, len(specs),
+                                  episode_timeout_s)
     return run_tasks(run_one, specs, executor, lost_localization, progress,
                      preload=("amr_evaluation.localization_episode",))
 

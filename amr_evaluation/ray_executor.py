@@ -18,7 +18,9 @@ second loss, or an error Ray raises for the task (its arguments could not be unp
 worker, ...), becomes that episode's TaskLost with the reason. While no node with a CPU is
 alive for `no_worker_timeout_s`, the episodes left are reported lost instead of waiting
 forever. Exceptions inside an episode are its own error outcome already (run_one), never
-retried: episodes are deterministic.
+retried: episodes are deterministic. An episode running longer than `episode_timeout_s` of
+wall-clock time (a controller that hangs) is not retried either: its worker is killed and
+replaced, and the episode's TaskLost says why.
 """
 from __future__ import annotations
 
@@ -33,7 +35,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterator, Mapping, Sequence
 
-from amr_evaluation.executors import TaskLost
+from amr_evaluation.executors import TaskLost, _check_limit, timed_out
 from amr_evaluation.ray_workers import (
     NAMESPACE,
     STALE,
@@ -90,15 +92,18 @@ class RayExecutor:
     open. `runtime_env`: Ray's runtime environment for the workers (e.g. a wheel of the
     project in py_modules). `keep_workers_s`: on a cluster joined (an address), how long the
     workers stay idle after a run for the next one (0: they end with the run).
+    `episode_timeout_s`: the wall-clock limit of one episode (None or 0: none).
     """
 
     def __init__(self, address: str | None = None, num_cpus: int | None = None,
                  runtime_env: Mapping[str, Any] | None = None,
-                 no_worker_timeout_s: float = 60.0, keep_workers_s: float = 60.0) -> None:
+                 no_worker_timeout_s: float = 60.0, keep_workers_s: float = 60.0,
+                 episode_timeout_s: float | None = None) -> None:
         self.address = address or None
         self.num_cpus = num_cpus
         self.runtime_env = dict(runtime_env) if runtime_env else None
         self.no_worker_timeout_s = float(no_worker_timeout_s)
+        self.episode_timeout_s = _check_limit(episode_timeout_s)
         if not math.isfinite(keep_workers_s) or keep_workers_s < 0:
             raise ValueError(f"keep_workers_s must be a finite number >= 0, got "
                              f"{keep_workers_s}")
@@ -211,9 +216,11 @@ class RayExecutor:
         tries = [0] * len(specs)
         running: dict[Any, tuple[Any, int, float]] = {}  # ref -> (worker, index, submitted)
         queues: dict[Any, deque] = {}  # worker's actor id -> its refs, in submission order
+        begun: dict[Any, float] = {}  # ref -> when the driver saw it start (first in queue)
         no_cpu_since: float | None = None
         try:
             while waiting or running:
+                yield from self._end_overdue(running, queues, begun, waiting, specs)
                 pool.top_up(len(waiting) + len(running))
                 # Sent ahead only while there is plenty left: the last ones go to whichever
                 # worker is free first, and a worker still starting gets its share.
@@ -283,6 +290,31 @@ class RayExecutor:
                     self._ray.cancel(ref)
                 except Exception:  # noqa: BLE001 - best effort while leaving
                     pass
+
+    def _end_overdue(self, running: dict, queues: dict, begun: dict, waiting: deque,
+                     specs: Sequence[Any]) -> Iterator[tuple[int, Any]]:
+        """Kill and replace the workers whose episode ran past the limit: its TaskLost.
+
+        A worker runs its queue in order: the first of its refs is running, since the driver
+        saw the one before end (the clock starts then, within a loop turn of ~1 s at most).
+        The episodes queued behind it never started: they are run again elsewhere.
+        """
+        if self.episode_timeout_s is None:
+            return
+        now = time.perf_counter()
+        for actor, queue in list(queues.items()):
+            if not queue or queue[0] not in running:
+                continue
+            head = queue[0]
+            since = begun.setdefault(head, now)
+            if now - since < self.episode_timeout_s:
+                continue
+            worker, index, _ = running.pop(head)
+            self._workers.discard(worker)  # ray.kill: the process ends, sleeping or not
+            again = [running.pop(ref)[1] for ref in list(queue)[1:] if ref in running]
+            del queues[actor]
+            waiting.extendleft(reversed([(k, specs[k]) for k in again]))
+            yield index, timed_out(self.episode_timeout_s, now - since)
 
     def _fetch(self, ref: Any, wall_time_s: float) -> Any:
         """The episode's outcome; _WorkerLost if its worker died or is stale; else TaskLost."""

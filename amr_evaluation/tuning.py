@@ -1,7 +1,8 @@
 """Parameter search over an episode set with Ray Tune; the best values as a ROS params file.
 
 scripts/tune.py is the command line. A trial is one parameter set: it runs every episode of the
-set (amr_evaluation.evaluation.run_one, summaries only) one after the other on one CPU, and
+set (amr_evaluation.evaluation.run_one, summaries only) one after the other on one CPU (in a
+worker process of the trial: a hanging or crashing controller is its episode's error), and
 scores them with the objective; trials run in parallel on the Ray cluster's CPUs.
 
 Search space, one `NAME=SPEC` per parameter:
@@ -36,9 +37,9 @@ from amr_common.controller_loader import (
     load_controller_class,
     parse_value,
 )
-from amr_evaluation.evaluation import EpisodeSpec, EvaluationError, run_one
+from amr_evaluation.evaluation import EpisodeSpec, EvaluationError, run_episodes
 
-__all__ = ["SEARCHES", "Dimension", "parse_space", "grid_size", "safe_exploration",
+__all__ = ["SEARCHES", "Dimension", "parse_space", "grid_size", "search_size", "safe_exploration",
            "load_objective", "run_trial", "TrialResult", "run_search", "write_params_file"]
 
 SEARCHES = ("grid", "random", "optuna")
@@ -103,8 +104,9 @@ def _dimension(name: str, spec: str, default: Any) -> Dimension:
         if len(parts) == 2:
             return Dimension(name, low=low, high=high, integer=integer)
         points = numbers[2]
-        if not isinstance(points, int) or points < 2:
-            raise EvaluationError(f"--space {name}={spec}: N must be an integer >= 2")
+        if not isinstance(points, int) or not 2 <= points <= MAX_GRID:
+            raise EvaluationError(f"--space {name}={spec}: N must be an integer from 2 to "
+                                  f"{MAX_GRID}, got {points}")
         raw = [low + (high - low) * k / (points - 1) for k in range(points)]
         values = [round(v, 12) for v in raw]
     else:
@@ -141,6 +143,19 @@ def grid_size(dims: Sequence[Dimension]) -> int:
         raise EvaluationError(f"--search grid needs values or LOW:HIGH:N points, not a "
                               f"continuous range ({', '.join(ranges)})")
     return math.prod(len(d.values) for d in dims)
+
+
+def search_size(dims: Sequence[Dimension], search: str, samples: int) -> int:
+    """Parameter sets the search tries; EvaluationError beyond 1 to MAX_GRID."""
+    if search == "grid":
+        total = grid_size(dims)
+        if total > MAX_GRID:
+            raise EvaluationError(f"--search grid: {total} parameter sets; at most {MAX_GRID} "
+                                  "(fewer values, or --search random/optuna with --samples)")
+        return total
+    if not 1 <= samples <= MAX_GRID:
+        raise EvaluationError(f"--samples must be from 1 to {MAX_GRID}, got {samples}")
+    return samples
 
 
 def _tune_space(dims: Sequence[Dimension], search: str) -> dict[str, Any]:
@@ -191,14 +206,21 @@ def load_objective(spec: str) -> Callable[..., Any]:
     return function
 
 
-def run_trial(config: dict[str, Any], specs: Sequence[EpisodeSpec], objective: str) -> dict:
-    """One parameter set over every episode (a Ray Tune function trainable)."""
+def run_trial(config: dict[str, Any], specs: Sequence[EpisodeSpec], objective: str,
+              episode_timeout_s: float | None = None) -> dict:
+    """One parameter set over every episode (a Ray Tune function trainable).
+
+    The episodes run one after the other in a worker process of the trial's (a local pool
+    of one): a controller that hangs past `episode_timeout_s` (None: episode_time_limit; 0:
+    no limit) or ends its process is that episode's error, and the trial is still scored.
+    """
     from amr_evaluation.evaluation_report import outcome_row
     started = time.perf_counter()
     config = _plain(config)
-    rows = [outcome_row(run_one(dataclasses.replace(spec, params={**dict(spec.params),
-                                                                  **config}),
-                                trajectory=False)) for spec in specs]
+    outcomes = run_episodes([dataclasses.replace(spec, params={**dict(spec.params), **config})
+                             for spec in specs], jobs=1, trajectory=False,
+                            episode_timeout_s=episode_timeout_s)
+    rows = [outcome_row(outcome) for outcome in outcomes]
     metrics = load_objective(objective)(rows, dict(config))
     metrics = dict(metrics) if isinstance(metrics, Mapping) else {"score": float(metrics)}
     metrics["episodes"] = len(rows)
@@ -228,9 +250,12 @@ class TrialResult:
 def run_search(specs: Sequence[EpisodeSpec], dims: Sequence[Dimension], search: str = "grid",
                samples: int = 20, seed: int = 0, objective: str = DEFAULT_OBJECTIVE,
                storage: Path | None = None,
-               progress: Callable[[int, int, TrialResult], None] | None = None
-               ) -> list[TrialResult]:
-    """Run the search on the Ray instance this process is connected to; trials best first."""
+               progress: Callable[[int, int, TrialResult], None] | None = None,
+               episode_timeout_s: float | None = None) -> list[TrialResult]:
+    """Run the search on the Ray instance this process is connected to; trials best first.
+
+    `episode_timeout_s`: each episode's wall-clock limit (see run_trial).
+    """
     import ray
     from ray import tune
     from ray.tune.search.basic_variant import BasicVariantGenerator
@@ -244,16 +269,15 @@ def run_search(specs: Sequence[EpisodeSpec], dims: Sequence[Dimension], search: 
     release_idle_warm_workers(ray)
     # Tune's own tables and hints off (verbose=0 with its classic reporter): progress() reports.
     os.environ.setdefault("RAY_AIR_NEW_OUTPUT", "0")
-    total = grid_size(dims) if search == "grid" else int(samples)
-    if total < 1 or total > MAX_GRID:
-        raise EvaluationError(f"{total} parameter sets requested; 1 to {MAX_GRID} allowed")
+    total = search_size(dims, search, int(samples))
     if search == "optuna":
         from ray.tune.search.optuna import OptunaSearch
         searcher = OptunaSearch(seed=seed)
     else:
         searcher = BasicVariantGenerator(random_state=seed)
-    trainable = tune.with_resources(tune.with_parameters(run_trial, specs=list(specs),
-                                                         objective=objective), {"cpu": 1})
+    trainable = tune.with_resources(tune.with_parameters(
+        run_trial, specs=list(specs), objective=objective,
+        episode_timeout_s=episode_timeout_s), {"cpu": 1})
     reporter = _reporter(total, progress)
     tuner = tune.Tuner(
         trainable, param_space=_tune_space(dims, search),

@@ -9,7 +9,7 @@ results.json, results.csv and sheet.png (every episode's trajectory) to --out, p
 a one-line verdict.
 Exit code: 0 no collision (and every goal reached), 1 some episode collided, commanded
 NaN/inf/non-numbers or missed its goal, 2 bad options, 3 some episode failed to run (an
-exception, sys.exit, or its worker process died).
+exception, sys.exit, its worker process died, or it ran past --episode-timeout).
 
 Examples:
   .venv/bin/python scripts/evaluate.py --worlds lab02 --seeds 0,1,2 --duration 120
@@ -56,6 +56,7 @@ from amr_evaluation.evaluation_report import (  # noqa: E402
     write_csv,
     write_json,
 )
+from amr_evaluation.executors import episode_time_limit  # noqa: E402
 from cli_checks import check_output_folder, join_negative_values  # noqa: E402
 
 # run_sim.py gives the wall follower node this file: the same gains here keep both paths equal.
@@ -94,6 +95,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("-p", "--param", action="append", default=[], metavar="NAME:=VALUE",
                         help="controller constructor parameter override (repeatable; typed "
                         "bool/int/float/str like ROS)")
+    parser.add_argument("--episode-timeout", type=float, default=None, metavar="S",
+                        help="wall-clock limit of one episode in s: an episode still running "
+                        "then (a controller that hangs) is ended as that episode's error "
+                        "(default: the larger of 60 s and twice --duration; 0: no limit)")
     parser.add_argument("--jobs", "-j", type=int, default=None,
                         help="worker processes (default: all cores); with --ray and no address, "
                         "the local Ray instance's CPUs")
@@ -152,7 +157,50 @@ def resolve_settings(args: argparse.Namespace) -> dict:
                           **parse_overrides(args.param)}
     if settings["jobs"] is not None and settings["jobs"] < 1:
         raise EvaluationError(f"--jobs must be >= 1, got {settings['jobs']}")
+    timeout = args.episode_timeout
+    if timeout is not None and not 0 <= timeout < math.inf:  # also NaN
+        raise EvaluationError(f"--episode-timeout must be a number of seconds > 0 (0: no "
+                              f"limit), got {timeout:g}")
+    if timeout is None:  # a bad duration is refused with the episodes
+        duration = settings["duration"]
+        timeout = episode_time_limit(duration) if math.isfinite(duration) else 0.0
+    settings["episode_timeout"] = timeout
+    check_option_pairs(args, settings)
     return settings
+
+
+def check_option_pairs(args: argparse.Namespace, settings: dict) -> None:
+    """Options that mean something only with another one: an error rather than ignored."""
+    if not args.localize:
+        for option, given in (("--kidnap-at", args.kidnap_at is not None),
+                              ("--pf-param", bool(args.pf_param))):
+            if given:
+                raise EvaluationError(f"{option} needs --localize")
+    if args.pose_source is not None and settings["goals"] is None:
+        raise EvaluationError("--pose-source needs --goals (navigation episodes)")
+
+
+def check_localization_options(args: argparse.Namespace, settings: dict, specs) -> None:
+    """--localize: --kidnap-at within the episodes, in worlds with a start to carry it to.
+
+    And --pf-param: names and values the particle filter takes.
+    """
+    if args.kidnap_at is not None:
+        duration = settings["duration"]
+        if not 0.0 < args.kidnap_at < duration:  # also NaN
+            raise EvaluationError(f"--kidnap-at must be a time within the episode (0 < T < "
+                                  f"{duration:g} s), got {args.kidnap_at:g}")
+        from amr_evaluation.localization_evaluation import kidnap_pose
+        for world in dict.fromkeys(spec.world for spec in specs):
+            if kidnap_pose(world, None, args.kidnap_at) is None:
+                raise EvaluationError(f"--kidnap-at: world '{Path(world).stem}' has fewer "
+                                      "than two named starts (the robot is carried to the "
+                                      "next one)")
+    from amr_localization.particle_filter_params import check_parameters
+    try:
+        check_parameters(parse_overrides(args.pf_param))
+    except ValueError as exc:
+        raise EvaluationError(f"--pf-param: {exc}") from None
 
 
 def episode_specs(settings: dict) -> list:
@@ -165,7 +213,8 @@ def episode_specs(settings: dict) -> list:
     return specs
 
 
-def make_executor(args: argparse.Namespace, jobs: int | None, episodes: int):
+def make_executor(args: argparse.Namespace, jobs: int | None, episodes: int,
+                  timeout: float | None = None):
     """The local pool (default), or Ray with --ray; ValueError with a reason for bad options."""
     from amr_evaluation.executors import local_executor
     if args.ray is None:
@@ -173,17 +222,18 @@ def make_executor(args: argparse.Namespace, jobs: int | None, episodes: int):
                               ("--ray-keep-workers", args.ray_keep_workers)):
             if value is not None:
                 raise EvaluationError(f"{option} needs --ray")
-        return local_executor(jobs, episodes)
+        return local_executor(jobs, episodes, timeout)
     keep = 60.0 if args.ray_keep_workers is None else args.ray_keep_workers
-    return ray_executor(args.ray, jobs, args.ray_runtime_env, keep)
+    return ray_executor(args.ray, jobs, args.ray_runtime_env, keep, timeout)
 
 
 def ray_executor(address: str | None, jobs: int | None, runtime_env: str | None,
-                 keep_workers_s: float = 0.0):
+                 keep_workers_s: float = 0.0, episode_timeout_s: float | None = None):
     """A connected RayExecutor: address ''/None starts a local instance of `jobs` CPUs.
 
     `runtime_env`: --ray-runtime-env's JSON text or file; `keep_workers_s`:
-    --ray-keep-workers. EvaluationError with the reason.
+    --ray-keep-workers; `episode_timeout_s`: the limit of one episode (None or 0: none).
+    EvaluationError with the reason.
     """
     from amr_evaluation.ray_executor import RayExecutor, RaySetupError
     if not math.isfinite(keep_workers_s) or keep_workers_s < 0:
@@ -191,7 +241,7 @@ def ray_executor(address: str | None, jobs: int | None, runtime_env: str | None,
                               f"{keep_workers_s:g}")
     executor = RayExecutor(address or None, num_cpus=jobs,
                            runtime_env=read_runtime_env(runtime_env) if runtime_env else None,
-                           keep_workers_s=keep_workers_s)
+                           keep_workers_s=keep_workers_s, episode_timeout_s=episode_timeout_s)
     try:
         executor.connect()
     except RaySetupError as exc:
@@ -224,10 +274,13 @@ def main(argv: list[str] | None = None) -> int:
         if args.localize and settings["goals"]:
             raise EvaluationError("--goals (navigation) and --localize exclude each other")
         specs = episode_specs(settings)
+        if args.localize:
+            check_localization_options(args, settings, specs)
         started = dt_module.datetime.now(dt_module.timezone.utc)
         out = check_output_folder(args.out or Path("out") / f"evaluate-{started:%Y%m%d-%H%M%S}",
                                   "--out")
-        executor = make_executor(args, settings["jobs"], len(specs))
+        executor = make_executor(args, settings["jobs"], len(specs),
+                                 settings["episode_timeout"])
     except ValueError as exc:  # EvaluationError, ControllerSpecError, a bad --out
         print(f"evaluate: {exc}", file=sys.stderr)
         return 2
@@ -265,6 +318,7 @@ def run_and_report(args, settings: dict, specs, executor, out: Path, started) ->
             "controller": settings["controller"],
             "params": settings["params"], "params_file": settings["params_file"],
             "duration_s": settings["duration"], "dt_s": settings["dt"],
+            "episode_timeout_s": settings["episode_timeout"],
             "goals": settings["goals"], "pose_source": settings["pose_source"],
             "config": args.config, "command": " ".join(sys.argv),
             "python": platform.python_version(), "host": platform.node()}

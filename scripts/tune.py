@@ -4,7 +4,8 @@ r"""Search a controller's parameters over episodes with Ray Tune; write the best
 Each trial (one parameter set) runs every episode of the set headless and is scored by the
 objective; trials run in parallel on a Ray cluster, by default a local Ray instance on this
 machine (127.0.0.1). The episode set takes evaluate.py's options (--worlds, --starts, --profiles,
---seeds, --duration, --dt, --controller, --params-file, -p, --config, --jobs). Writes to --out:
+--seeds, --duration, --dt, --controller, --params-file, -p, --config, --jobs, --episode-timeout:
+an episode that hangs or ends its process is a bad episode of its trial). Writes to --out:
 best_params.yaml (a ROS 2 params file for the wall_follower node: run_sim.py --params-file and
 --ros-args --params-file take it), trials.csv, best.json and Tune's own logs (ray_results/).
 
@@ -41,10 +42,10 @@ from amr_evaluation.evaluation import EvaluationError, check_controller  # noqa:
 from amr_evaluation.tuning import (  # noqa: E402
     DEFAULT_OBJECTIVE,
     SEARCHES,
-    grid_size,
     load_objective,
     parse_space,
     run_search,
+    search_size,
     write_params_file,
 )
 from cli_checks import check_output_folder  # noqa: E402
@@ -60,9 +61,10 @@ def parse_args(argv: list[str] | None = None) -> tuple[argparse.Namespace, argpa
                         "LOW:HIGH")
     parser.add_argument("--search", choices=SEARCHES, default="grid",
                         help="grid (every combination; default), random, or optuna (TPE)")
-    parser.add_argument("--samples", type=int, default=20,
-                        help="parameter sets tried by random and optuna (default 20)")
-    parser.add_argument("--search-seed", type=int, default=0,
+    parser.add_argument("--samples", type=int, default=None,
+                        help="parameter sets tried by random and optuna (default 20; a grid "
+                        "tries every combination)")
+    parser.add_argument("--search-seed", type=int, default=None,
                         help="seed of the random and optuna searchers (default 0)")
     parser.add_argument("--objective", default=DEFAULT_OBJECTIVE,
                         help=f"{DEFAULT_OBJECTIVE} (default) or MODULE:FUNCTION")
@@ -73,17 +75,27 @@ def parse_args(argv: list[str] | None = None) -> tuple[argparse.Namespace, argpa
                         help="Ray runtime_env for the workers (see evaluate.py)")
     parser.add_argument("--out", default=None, help="output folder (default out/tune-<UTC>)")
     own, rest = parser.parse_known_args(argv)
-    episodes = evaluate.parse_args([*rest, "--no-sheet"])
-    if episodes.localize or episodes.ray is not None:
-        parser.error("--localize and evaluate.py's --ray are not tune.py options (tune.py "
-                     "has its own --ray)")
-    return own, episodes
+    return own, evaluate.parse_args([*rest, "--no-sheet"])
+
+
+def check_options(args: argparse.Namespace, episode_args: argparse.Namespace) -> None:
+    """tune.py's own option mistakes, and evaluate.py options that mean nothing here."""
+    for option, given in (("--localize", episode_args.localize),
+                          ("--ray-keep-workers", episode_args.ray_keep_workers is not None)):
+        if given:
+            raise EvaluationError(f"{option} is not a tune.py option")
+    if args.search == "grid":
+        for option, value in (("--samples", args.samples), ("--search-seed", args.search_seed)):
+            if value is not None:
+                raise EvaluationError(f"{option} is for --search random or optuna (a grid "
+                                      "search tries every combination once)")
 
 
 def main(argv: list[str] | None = None) -> int:
     args, episode_args = parse_args(argv)
     started = dt_module.datetime.now(dt_module.timezone.utc)
     try:
+        check_options(args, episode_args)
         settings = evaluate.resolve_settings(episode_args)
         specs = evaluate.episode_specs(settings)
         dims = parse_space(args.space, settings["controller"])
@@ -92,10 +104,9 @@ def main(argv: list[str] | None = None) -> int:
                 check_controller(settings["controller"], {**settings["params"],
                                                           dim.name: value}, settings["dt"])
         load_objective(args.objective)
-        if args.search == "grid":
-            grid_size(dims)
-        if args.samples < 1:
-            raise EvaluationError(f"--samples must be >= 1, got {args.samples}")
+        args.samples = search_size(dims, args.search, 20 if args.samples is None
+                                   else args.samples)
+        args.search_seed = args.search_seed or 0
         out = check_output_folder(args.out or Path("out") / f"tune-{started:%Y%m%d-%H%M%S}",
                                   "--out")
         executor = evaluate.ray_executor(args.ray, settings["jobs"], args.ray_runtime_env)
@@ -122,7 +133,8 @@ def search_and_write(args, settings: dict, specs, dims, executor, out: Path) -> 
 
     try:
         trials = run_search(specs, dims, args.search, args.samples, args.search_seed,
-                            args.objective, storage=out / "ray_results", progress=progress)
+                            args.objective, storage=out / "ray_results", progress=progress,
+                            episode_timeout_s=settings["episode_timeout"])
     except KeyboardInterrupt:
         print("tune: interrupted", file=sys.stderr)
         return 130

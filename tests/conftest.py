@@ -1,4 +1,4 @@
-"""Test harness: every test process gets its own ROS domain on loopback and its own log folder.
+"""Test harness: every test process gets its own ROS domain on loopback, log folder and Ray token.
 
 Fixtures:
 - `course_map`: a map JSON file as the course gives them (a room with a box, no named starts).
@@ -28,7 +28,13 @@ isolate_local_graph(log_dir=_log_dir)
 
 import pytest  # noqa: E402
 
+from tests.ray_cluster import use_session_ray_token  # noqa: E402
 from tests.ros_harness import RosHarness  # noqa: E402
+
+# Before any Ray import: the session's Ray instances use a token of their own, not ~/.ray's.
+_ray_dir = tempfile.mkdtemp(prefix="amr-test-ray-")
+atexit.register(shutil.rmtree, _ray_dir, ignore_errors=True)
+use_session_ray_token(_ray_dir)
 
 
 @pytest.fixture

@@ -2,6 +2,7 @@
 import math
 import os
 import signal
+import time
 
 
 class ConstantController:
@@ -68,3 +69,31 @@ class NotesItsProcess:
             with open(os.path.join(self.folder, f"{os.getpid()}-{id(self)}"), "w"):
                 pass
         return 0.0, 0.0
+
+
+class Misbehaves:
+    """Commands zero; on its 5th step `how`: "none", "sleep" (for good) or "exit" (os._exit(7)).
+
+    With a `marker` path, only the episode that creates that file first misbehaves (the others,
+    in parallel workers or after it, run through).
+    """
+
+    def __init__(self, dt, how="none", marker=""):
+        self.how, self.marker, self.calls = how, marker, 0
+
+    def compute_commands(self, z_scan, z_v, z_w):
+        self.calls += 1
+        if self.calls == 5 and self.how != "none" and self._first():
+            if self.how == "sleep":
+                time.sleep(1e6)
+            os._exit(7)
+        return 0.0, 0.0
+
+    def _first(self) -> bool:
+        if not self.marker:
+            return True
+        try:
+            os.close(os.open(self.marker, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+        except FileExistsError:
+            return False
+        return True

@@ -6,10 +6,17 @@ driver. Its node processes are children of this process, started from this venv'
 workers import the project from the same venv path, the set-up README "Sweep on a cluster"
 describes. Nodes are declared dead after ~2 s of missed health checks (Ray's default ~15 s), so
 node-loss tests stay short. Ray start-up takes a few seconds: one cluster per test session.
+
+Every Ray instance of the test session (this cluster, `evaluate.py --ray` in a subprocess)
+authenticates with the session's own token (use_session_ray_token, called by conftest.py
+before any Ray import), never with the user's `~/.ray/auth_token`: the suite passes with an
+empty HOME and leaves HOME as it found it.
 """
 from __future__ import annotations
 
 import os
+import secrets
+from pathlib import Path
 
 import pytest
 
@@ -17,6 +24,30 @@ from amr_evaluation.ray_executor import LOCAL_RAY_ENV
 
 FAST_NODE_DEATH = {"health_check_initial_delay_ms": 0, "health_check_period_ms": 500,
                    "health_check_failure_threshold": 3, "health_check_timeout_ms": 500}
+
+
+# Ray's documented variables for token authentication; RAY_ADDRESS would join the user's cluster.
+RAY_AUTH_VARIABLES = ("RAY_AUTH_MODE", "RAY_AUTH_TOKEN", "RAY_AUTH_TOKEN_PATH", "RAY_ADDRESS")
+
+
+def use_session_ray_token(folder: str | Path) -> Path:
+    """Token authentication for this process and its children with a new token in `folder`.
+
+    Ray 2.60 enables token authentication for a new local instance: `ray.init()` writes
+    `~/.ray/auth_token` when it finds no token, and a cluster started node by node (this
+    module's, `ray start`) needs one already, or its GCS aborts ("Ray couldn't find an
+    authentication token"): the first run on a fresh machine failed. The token file is named
+    by RAY_AUTH_TOKEN_PATH (read before `~/.ray/auth_token`; RAY_AUTH_TOKEN, which would win,
+    and RAY_ADDRESS are dropped). Returns the token file.
+    """
+    for name in RAY_AUTH_VARIABLES:
+        os.environ.pop(name, None)
+    path = Path(folder) / "ray_auth_token"
+    path.touch(mode=0o600)
+    path.write_text(secrets.token_hex(32), encoding="utf-8")
+    os.environ["RAY_AUTH_MODE"] = "token"
+    os.environ["RAY_AUTH_TOKEN_PATH"] = str(path)
+    return path
 
 
 def import_ray():

@@ -81,3 +81,65 @@ def test_the_local_pool_imports_no_ray(tmp_path):
                           text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     assert "on 2 local process(es)" in proc.stdout
+
+
+def test_options_that_would_be_ignored_or_mean_nothing_are_one_line_errors(capsys, tmp_path,
+                                                                          course_map):
+    """Issue 18 #11: each was accepted (and ignored, or read as 'all'/'none') or crashed."""
+    cases = [(["--localize", "--kidnap-at", "-5"], "--kidnap-at must be a time within the "
+                                                   "episode (0 < T < 1 s), got -5"),
+             (["--localize", "--kidnap-at", "0"], "(0 < T < 1 s), got 0"),
+             (["--localize", "--kidnap-at", "1"], "(0 < T < 1 s), got 1"),
+             (["--localize", "--kidnap-at", "nan"], "(0 < T < 1 s), got nan"),
+             (["--localize", "--kidnap-at", "0.5", "--worlds", str(course_map), "--starts",
+               "1,1,0"], "--kidnap-at: world 'course_map' has fewer than two named starts"),
+             (["--kidnap-at", "0.5"], "--kidnap-at needs --localize"),
+             (["--pf-param", "beams:=30"], "--pf-param needs --localize"),
+             (["--localize", "--pf-param", "beams:=0"],
+              "--pf-param: beams must be a positive integer (got 0)"),
+             (["--localize", "--pf-param", "bemas:=30"], "unknown parameter(s) ['bemas']"),
+             (["--localize", "--pf-param", "beams"], "'beams' must look like name:=value"),
+             (["--goals", ""], "no goals given (an empty list)"),
+             (["--goals", " , "], "no goals given (an empty list)"),
+             (["--starts", ""], "no starts given (an empty list)"),
+             (["--profiles", ""], "no profiles given (an empty list)"),
+             (["--pose-source", "truth"], "--pose-source needs --goals"),
+             (["--episode-timeout", "-1"], "--episode-timeout must be a number of seconds > 0"),
+             (["--episode-timeout", "nan"], "(0: no limit), got nan")]
+    for argv, message in cases:
+        argv = ["--worlds", "lab02", *argv, "--out", str(tmp_path / "out")]
+        code, out, err = _evaluate(capsys, *argv)
+        assert code == 2, (argv, out, err)
+        assert len(err.strip().splitlines()) == 1 and message in err, (argv, err)
+        assert "episodes" not in out and not (tmp_path / "out").exists()  # nothing ran
+
+
+def test_a_hanging_or_crashing_controller_is_its_episodes_error_with_the_results_written(
+        capsys, tmp_path):
+    """Issue 18 #8: a sleeping controller hung evaluate.py (--out stayed empty).
+
+    And a single episode ran in evaluate.py's own process, which the controller's os._exit
+    ended: no results at all.
+    """
+    misbehaves = ["--worlds", "lab02", "--controller", "tests.controllers:Misbehaves",
+                  "--params-file", "none", "--no-sheet"]
+    code = evaluate.main([*misbehaves, "--starts", "outer", "-p", "how:=exit",
+                          "--duration", "1", "--out", str(tmp_path / "exit")])
+    out = capsys.readouterr().out
+    assert code == 3 and "1 episode(s) FAILED" in out
+    (episode,) = json.loads((tmp_path / "exit" / "results.json").read_text())["episodes"]
+    assert "worker process died (exit code 7)" in episode["error"]
+
+    # Two episodes in parallel, the first to start sleeps for good: it ends at the limit.
+    code = evaluate.main([*misbehaves, "--starts", "outer,inner", "-p", "how:=sleep",
+                          "-p", f"marker:={tmp_path / 'first'}", "--duration", "1",
+                          "--jobs", "2", "--episode-timeout", "3", "--out",
+                          str(tmp_path / "sleep")])
+    out = capsys.readouterr().out
+    assert code == 3 and "1 episode(s) FAILED" in out
+    data = json.loads((tmp_path / "sleep" / "results.json").read_text())
+    errors = [e["error"] for e in data["episodes"]]
+    assert sum(e is None for e in errors) == 1, errors
+    assert any(e and "ran past its wall-clock limit of 3 s" in e for e in errors), errors
+    assert data["meta"]["episode_timeout_s"] == 3.0
+    assert (tmp_path / "sleep" / "results.csv").read_text().count("\n") == 3

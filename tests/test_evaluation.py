@@ -34,6 +34,7 @@ from amr_evaluation.evaluation_report import (
     write_csv,
     write_json,
 )
+from amr_evaluation.executors import LocalPoolExecutor, episode_time_limit
 
 REPO = Path(__file__).resolve().parent.parent
 EVALUATE = REPO / "scripts" / "evaluate.py"
@@ -461,6 +462,47 @@ def test_sys_exit_in_a_controller_does_not_end_a_single_process_evaluation():
     assert "sys.exit(4)" in outcome.error
 
 
+def _misbehaving(how: str) -> EpisodeSpec:
+    return EpisodeSpec("lab02", "outer", duration=1.0, controller="tests.controllers:Misbehaves",
+                       params={"how": how})
+
+
+def test_an_episode_past_its_time_limit_is_its_error_and_the_others_still_run():
+    """Issue 18 #8: a controller that sleeps forever hung the whole evaluation."""
+    specs = [_misbehaving("none"), _misbehaving("sleep"), _misbehaving("exit"),
+             _misbehaving("none"), _misbehaving("sleep"), _misbehaving("none")]
+    seen = []
+    outcomes = run_episodes(specs, jobs=2, episode_timeout_s=3.0,
+                            progress=lambda done, total, o: seen.append(done))
+    assert seen == [1, 2, 3, 4, 5, 6]
+    errors = [o.error for o in outcomes]
+    for k in (1, 4):
+        assert "ran past its wall-clock limit of 3 s" in errors[k], errors[k]
+        assert 3.0 <= outcomes[k].wall_time_s < 60.0
+    assert "worker process died (exit code 7)" in errors[2]
+    assert all(outcomes[k].error is None and outcomes[k].result.steps == 20 for k in (0, 3, 5))
+
+
+@pytest.mark.parametrize("how, error", [("sleep", "ran past its wall-clock limit of 2 s"),
+                                        ("exit", "worker process died (exit code 7)")])
+def test_a_single_episode_is_protected_too(how, error):
+    """Issue 18 #8: one episode (or --jobs 1) ran in this process: os._exit ended it."""
+    (outcome,) = run_episodes([_misbehaving(how)], jobs=1, episode_timeout_s=2.0)
+    assert outcome.result is None and error in outcome.error
+    assert os.getpid() == _PID  # still here
+
+
+_PID = os.getpid()  # this test process
+
+
+def test_the_default_time_limit_is_the_larger_of_60_s_and_twice_the_simulated_time():
+    assert episode_time_limit(1.0) == 60.0 and episode_time_limit(600.0) == 1200.0
+    for bad in (-1.0, math.nan, math.inf):
+        with pytest.raises(ValueError, match="episode timeout must be a number of seconds > 0"):
+            LocalPoolExecutor(2, bad)
+    assert LocalPoolExecutor(2, 0).episode_timeout_s is None  # 0: no limit
+
+
 @pytest.mark.parametrize("kind", ["nan", "inf", "text"])
 def test_invalid_commands_are_counted_and_fail_the_verdict(kind):
     outcomes = run_episodes([_pool_spec("Standing"), _pool_spec("Garbage", kind=kind)], jobs=1)
@@ -518,11 +560,11 @@ def test_navigation_episodes_report_goals_and_exit_1_when_one_is_missed(tmp_path
     assert "final err. cm" in proc.stdout
 
 
-def test_one_episode_or_one_job_runs_in_this_process_and_bad_jobs_are_refused():
-    from amr_evaluation.executors import InProcessExecutor, LocalPoolExecutor, local_executor
-    assert isinstance(local_executor(4, 1), InProcessExecutor)
-    assert isinstance(local_executor(1, 5), InProcessExecutor)
-    assert isinstance(local_executor(2, 5), LocalPoolExecutor)
-    assert isinstance(local_executor(2), LocalPoolExecutor)
+def test_one_episode_or_one_job_runs_in_a_worker_process_and_bad_jobs_are_refused():
+    from amr_evaluation.executors import local_executor
+    for jobs, episodes, workers in ((4, 1, 1), (1, 5, 1), (2, 5, 2), (2, None, 2)):
+        executor = local_executor(jobs, episodes, 30.0)
+        assert isinstance(executor, LocalPoolExecutor) and executor.episode_timeout_s == 30.0
+        assert executor.workers(episodes or 10) == workers
     with pytest.raises(ValueError, match="jobs must be >= 1"):
         local_executor(0, 1)

@@ -13,8 +13,11 @@ import dataclasses
 import json
 import os
 import re
+import shutil
+import socket
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -26,6 +29,7 @@ from amr_evaluation.evaluation_report import outcome_row
 from amr_evaluation.executors import LocalPoolExecutor
 from amr_evaluation.ray_executor import RayExecutor
 from amr_evaluation.ray_workers import release_idle_warm_workers, warm_workers
+from tests.ray_cluster import RAY_AUTH_VARIABLES
 
 pytestmark = pytest.mark.slow
 
@@ -189,6 +193,34 @@ def test_a_worker_killed_mid_episode_is_retried_and_a_second_death_reported(ray_
     assert "worker process died (killed by signal 9)" in local.error
 
 
+def test_an_episode_past_its_time_limit_ends_its_ray_worker_and_the_others_still_run(
+        ray_cluster):
+    """Issue 18 #8: a controller sleeping forever hung the sweep on Ray too."""
+    hows = ["none", "sleep", "none", "none", "sleep", "none"]
+    specs = [EpisodeSpec("lab02", "outer", seed=k, duration=1.0,
+                         controller="tests.controllers:Misbehaves", params={"how": how})
+             for k, how in enumerate(hows)]
+    executor = evaluate.ray_executor(ray_cluster.address, None, None, 0.0, 3.0)
+    try:
+        assert executor.episode_timeout_s == 3.0
+        seen = []
+        outcomes = run_episodes(specs, executor=executor,
+                                progress=lambda done, total, o: seen.append(done))
+        # The workers that slept were killed and replaced: the executor runs on.
+        (after,) = run_episodes(specs[:1], executor=executor)
+    finally:
+        executor.close()
+    assert seen == [1, 2, 3, 4, 5, 6]
+    for how, outcome in zip(hows, outcomes):
+        if how == "sleep":
+            assert outcome.result is None
+            assert "ran past its wall-clock limit of 3 s" in outcome.error, outcome.error
+            assert 3.0 <= outcome.wall_time_s < 60.0
+        else:
+            assert outcome.error is None and outcome.result.steps == 20, outcome.error
+    assert after.error is None
+
+
 def test_a_worker_node_lost_mid_sweep_is_survived(ray_cluster, tmp_path):
     ray = ray_cluster.ray
     release_idle_warm_workers(ray)
@@ -241,3 +273,62 @@ def test_a_cluster_without_cpus_ends_the_sweep_with_errors_not_a_hang(ray_cluste
     assert all(o.result is None and "no Ray node with a CPU was alive for 3 s" in o.error
                for o in outcomes), [o.error for o in outcomes]
     assert elapsed < 30
+
+
+def _free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+def test_the_readmes_ray_start_recipe_works_from_an_empty_home(tmp_path):
+    """README "Sweep on a cluster", on this machine: a token, `ray start --head`, `--ray auto`.
+
+    As a newcomer: HOME empty, no Ray variables. A Ray temporary folder of its own, so `auto`
+    finds this head, not another Ray on the machine (short: Ray's socket paths are limited).
+    """
+    home = tmp_path / "home"
+    home.mkdir()
+    ray_tmp = Path(tempfile.mkdtemp(prefix="amr-ray-"))
+    env = {k: v for k, v in os.environ.items() if k not in RAY_AUTH_VARIABLES}
+    env.update(HOME=str(home), RAY_TMPDIR=str(ray_tmp), RAY_USAGE_STATS_ENABLED="0")
+    ray_cli = str(Path(sys.executable).parent / "ray")
+    made = subprocess.run([ray_cli, "get-auth-token", "--generate"], env=env,
+                          capture_output=True, text=True, timeout=60)
+    assert made.returncode == 0, made.stderr
+    port = _free_port()
+    head_log = tmp_path / "head.log"
+    with open(head_log, "w") as log:
+        head = subprocess.Popen(
+            [ray_cli, "start", "--head", "--port", str(port), "--num-cpus", "1",
+             "--include-dashboard", "false", "--block"],
+            env={**env, "RAY_AUTH_MODE": "token", "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "0"},
+            stdout=log, stderr=subprocess.STDOUT)
+    try:
+        deadline = time.monotonic() + 120
+        while "Ray runtime started" not in head_log.read_text():
+            assert head.poll() is None and time.monotonic() < deadline, head_log.read_text()
+            time.sleep(0.2)
+        evaluate_py = [sys.executable, str(REPO / "scripts" / "evaluate.py"), "--ray", "auto",
+                       "--ray-keep-workers", "0", "--worlds", "lab02", "--starts", "outer",
+                       "--duration", "1", "--no-sheet"]
+        proc = subprocess.run([*evaluate_py, "--out", str(tmp_path / "out")], cwd=tmp_path,
+                              env=env, capture_output=True, text=True, timeout=180)
+        # The head requires the token: a driver without one (another empty HOME) is refused
+        # (after Ray's connection retries, 2 here instead of 20).
+        stranger = tmp_path / "stranger"
+        stranger.mkdir()
+        refused = subprocess.run(
+            [*evaluate_py, "--out", str(tmp_path / "refused")], cwd=tmp_path,
+            env={**env, "HOME": str(stranger), "RAY_gcs_server_port_wait_time_s": "2"},
+            capture_output=True, text=True, timeout=180)
+    finally:
+        head.terminate()  # as Ctrl-C: `ray start --block` stops the node's processes
+        head.wait(timeout=60)
+        shutil.rmtree(ray_tmp, ignore_errors=True)
+    assert proc.returncode == 0, proc.stderr
+    assert f"on the Ray cluster at 127.0.0.1:{port}: 1 CPUs on 1 node(s)" in proc.stdout
+    assert refused.returncode == 2, refused.stdout + refused.stderr
+    assert "a cluster with token authentication needs" in refused.stderr.splitlines()[-1]
+    assert sorted(p.name for p in home.iterdir()) == [".ray"]  # the token, as the README says
+    assert len((home / ".ray" / "auth_token").read_text()) == 64

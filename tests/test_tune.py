@@ -89,6 +89,24 @@ def test_default_objective_picks_the_fastest_speed_that_does_not_hit_the_wall(
     assert float(by_speed[0.14]["explored_mean"]) > float(by_speed[0.1]["explored_mean"])
 
 
+def test_a_controller_that_hangs_or_ends_its_process_is_a_bad_episode_of_its_trial(
+        ray_cluster, tmp_path, capsys):
+    """Issue 18 #8: a sleeping controller hung tune.py.
+
+    One that ended its process lost the trial (twice: Tune retried it). Now each is its
+    episode's error, and the trial is scored.
+    """
+    out, _ = _tune(capsys, tmp_path, "--worlds", "lab02", "--starts", "outer", "--duration",
+                   "1", "--controller", "tests.controllers:Misbehaves", "--params-file",
+                   "none", "--space", "how=none,sleep,exit", "--episode-timeout", "5")
+    best = json.loads((out / "best.json").read_text())
+    assert best["params"] == {"how": "none"}
+    with open(out / "trials.csv", newline="") as stream:
+        by_how = {t["how"]: t for t in csv.DictReader(stream)}
+    assert {how: (t["bad_episodes"], t["errors"], t["error"]) for how, t in by_how.items()} \
+        == {"none": ("0", "0", ""), "sleep": ("1", "1", ""), "exit": ("1", "1", "")}
+
+
 def test_optuna_and_random_search_approach_a_continuous_optimum(ray_cluster, tmp_path,
                                                                  capsys):
     for search in ("optuna", "random"):
@@ -115,7 +133,7 @@ def test_search_spaces_are_typed_and_checked():
     for bad, message in [("kq=1,2", "has no such parameter; known:"),
                          ("kp", "must look like NAME=a,b,c"),
                          ("kp=5:1", "LOW must be below HIGH"),
-                         ("kp=1:5:1", "N must be an integer >= 2"),
+                         ("kp=1:5:1", "N must be an integer from 2 to 10000, got 1"),
                          ("kp=fast,slow", "'fast' is not a float"),
                          ("escape_islands=1", "1 is not a bool")]:
         with pytest.raises(EvaluationError, match=message):
@@ -142,8 +160,27 @@ def test_bad_tune_options_are_one_line_errors(capsys, tmp_path):
                           (["--space", "kp=-1,5"], "rejected its parameters"),
                           (["--space", "kp=1,2", "--objective", "nowhere:f"],
                            "No module named 'nowhere'"),
-                          ([], "give at least one --space")]:
+                          ([], "give at least one --space"),
+                          # Issue 18 #11: a huge grid hung, then died with a traceback; the
+                          # searcher-only options were ignored by a grid search.
+                          (["--space", "kp=1:10:100000000"], "N must be an integer from 2 to "
+                                                             "10000, got 100000000"),
+                          (["--space", "kp=1:10:200", "--space", "kd=0:10:200"],
+                           "40000 parameter sets; at most 10000"),
+                          (["--search", "random", "--space", "kp=1:10", "--samples", "20000"],
+                           "--samples must be from 1 to 10000, got 20000"),
+                          (["--space", "kp=1,2", "--samples", "5"],
+                           "--samples is for --search random or optuna"),
+                          (["--space", "kp=1,2", "--search-seed", "3"],
+                           "--search-seed is for --search random or optuna"),
+                          (["--space", "kp=1,2", "--localize"],
+                           "--localize is not a tune.py option"),
+                          (["--space", "kp=1,2", "--ray-keep-workers", "5"],
+                           "--ray-keep-workers is not a tune.py option"),
+                          (["--space", "kp=1,2", "--kidnap-at", "5"],
+                           "--kidnap-at needs --localize")]:
         code = tune.main(["--worlds", "lab02", "--duration", "1", *argv,
                           "--out", str(tmp_path / "out")])
         err = capsys.readouterr().err
         assert code == 2 and len(err.strip().splitlines()) == 1 and message in err, (argv, err)
+        assert not (tmp_path / "out").exists()  # nothing ran
