@@ -47,6 +47,7 @@ from amr_mapping.scan_points import ScanError, scan_points
 _LOG = ThrottledLogger(logging.getLogger(__name__))
 _JUMP_SLACK = (0.05, 0.1)  # m, rad beyond the plausible motion before odometry counts as a jump
 _WEAK_LINK = (0.05, 0.05)  # m, rad: sigmas of a keyframe link that no match confirmed
+_STALE_FIELD_VERSIONS = 3
 
 
 @dataclass(frozen=True)
@@ -69,7 +70,10 @@ class Mapper:
         self._occupied_units = p["occupied_log_odds"] * UNITS
         self._global = self._new_grid(hit_moments=False)
         self._local = self._new_grid(hit_moments=True)
-        self._tracker = CorrelativeMatcher(p["resolution_m"], p["smear_sigma_m"])
+        # The local map changes by one keyframe in local_map_keyframes (two grid versions: one
+        # drawn, one taken out); its field is rebuilt after two keyframes, not after each.
+        self._tracker = CorrelativeMatcher(p["resolution_m"], p["smear_sigma_m"],
+                                           stale_versions=_STALE_FIELD_VERSIONS)
         self._closer = LoopCloser(p)
         self._graph = PoseGraph((p["sequential_sigma_m"], p["sequential_sigma_rad"]),
                                 (p["loop_sigma_m"], p["loop_sigma_rad"]))
@@ -184,7 +188,7 @@ class Mapper:
         return result.pose, result.score
 
     def _is_keyframe(self, pose) -> bool:
-        last = tuple(self._graph.poses[-1])
+        last = self._graph.pose(-1)
         return (math.hypot(pose[0] - last[0], pose[1] - last[1]) >= self.p["keyframe_distance_m"]
                 or abs(wrap_angle(pose[2] - last[2])) >= self.p["keyframe_angle_rad"])
 
@@ -206,13 +210,13 @@ class Mapper:
         if pose is None:
             index = graph.add_keyframe(odom)
         else:
-            link = compose(inverse(tuple(graph.poses[-1])), pose)
+            link = compose(inverse(graph.pose(-1)), pose)
             index = graph.add_keyframe(pose, link, None if matched else _WEAK_LINK)
         self._points.append(points)
         self._odom.append(odom)
         self._travelled.append(self._distance)
         self._drawn_global.append(None)
-        pose = tuple(graph.poses[index])
+        pose = graph.pose(index)
         self._draw(self._local, index, pose)
         self._local_members[index] = pose
         while len(self._local_members) > self.p["local_map_keyframes"]:

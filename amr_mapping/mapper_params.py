@@ -40,9 +40,9 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     "keyframe_angle_rad": (0.1, "... or turned this much [rad] since the last keyframe."),
     "local_map_keyframes": (40, "Scans are matched against a map of this many latest "
                                 "keyframes (older ones are joined through loop closures)."),
-    "search_linear_m": (0.12, "Half-width of the correlative search in x and y around the "
+    "search_linear_m": (0.1, "Half-width of the correlative search in x and y around the "
                               "odometry prediction [m]."),
-    "search_angular_rad": (0.12, "Half-width of the correlative search in heading [rad]."),
+    "search_angular_rad": (0.08, "Half-width of the correlative search in heading [rad]."),
     "smear_sigma_m": (0.03, "Standard deviation of the Gaussian that smooths the map for "
                             "scoring [m]."),
     "prior_sigma_m": (0.1, "The search's score is weighted by exp(-d^2 / 2 sigma^2) for a "
@@ -63,7 +63,7 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     "loop_search_radius_m": (1.0, "Earlier keyframes within this distance of the current "
                                   "estimate are loop-closure candidates [m] ..."),
     "loop_min_travel_m": (5.0, "... if the robot travelled at least this far since [m]."),
-    "loop_chain_keyframes": (12, "The candidate's map: this many keyframes on each side of it."),
+    "loop_chain_keyframes": (8, "The candidate's map: this many keyframes on each side of it."),
     "loop_window_m": (0.3, "Half-width of the loop-closure search in x and y [m]."),
     "loop_window_rad": (0.25, "Half-width of the loop-closure search in heading [rad]."),
     "loop_min_score": (0.55, "A loop-closure match must score at least this ..."),
@@ -71,7 +71,7 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
                                    "loop_ambiguity_distance_m away must score below this share "
                                    "of it (no closure along a featureless corridor)."),
     "loop_ambiguity_distance_m": (0.1, "See loop_ambiguity_ratio [m]."),
-    "loop_interval_keyframes": (3, "Loop closure is tried every this many keyframes."),
+    "loop_interval_keyframes": (5, "Loop closure is tried every this many keyframes."),
     "sequential_sigma_m": (0.01, "Standard deviation of a chain link between consecutive "
                                  "keyframes, translation [m] ..."),
     "sequential_sigma_rad": (0.005, "... and rotation [rad]."),

@@ -167,7 +167,31 @@ def bnb_search_python(levels, cells, wx, wy, angle_penalty, inv_two_sigma2, excl
     result[4] = scored
 
 
+def thin_points_python(points, theta, spacing, keep):
+    """Indices of the points (robot frame, scan order) to score, written into keep; the count.
+
+    A point is kept when its square of side `spacing` (axes of the map at heading theta)
+    differs from the last kept point's: near walls give several points per map cell, and one
+    or two score the same shape for less work (the refinement uses them all).
+    """
+    c = math.cos(theta)
+    s = math.sin(theta)
+    count = 0
+    last_col = -(1 << 40)
+    last_row = -(1 << 40)
+    for i in range(points.shape[0]):
+        col = math.floor((c * points[i, 0] - s * points[i, 1]) / spacing)
+        row = math.floor((s * points[i, 0] + c * points[i, 1]) / spacing)
+        if col != last_col or row != last_row:
+            keep[count] = i
+            count += 1
+            last_col = col
+            last_row = row
+    return count
+
+
 bnb_search = jit(bnb_search_python)
+thin_points = jit(thin_points_python)
 
 
 def exhaustive_search_numpy(levels, cells, wx, wy, angle_penalty, inv_two_sigma2, exclude,
@@ -202,4 +226,5 @@ def exhaustive_search_numpy(levels, cells, wx, wy, angle_penalty, inv_two_sigma2
     result[4] = cells.shape[0] * len(offsets_x) * len(offsets_y)
 
 
-__all__ = ["bnb_search", "bnb_search_python", "exhaustive_search_numpy"]
+__all__ = ["bnb_search", "bnb_search_python", "exhaustive_search_numpy", "thin_points",
+           "thin_points_python"]

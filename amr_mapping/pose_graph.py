@@ -46,7 +46,12 @@ class PoseGraph:
     @property
     def poses(self) -> np.ndarray:
         """(K, 3) current estimate of every keyframe pose [x, y, theta] (a copy)."""
-        return self._poses.copy()
+        return self._poses[:self._count].copy()
+
+    def pose(self, index: int) -> tuple[float, float, float]:
+        """The current estimate of one keyframe (index -1: the latest)."""
+        x, y, th = self._poses[index if index >= 0 else self._count + index]
+        return float(x), float(y), float(th)
 
     def add_keyframe(self, pose: tuple[float, float, float],
                      link: tuple[float, float, float] | None = None,
@@ -72,7 +77,11 @@ class PoseGraph:
         self._isam.update(graph, values)
         self._count += 1
         latest = self._isam.calculateEstimatePose2(index)
-        self._poses = np.vstack([self._poses, [latest.x(), latest.y(), latest.theta()]])
+        if index >= len(self._poses):  # room for more, doubling: appending stays O(1)
+            grown = np.zeros((max(2 * len(self._poses), 64), 3))
+            grown[:index] = self._poses[:index]
+            self._poses = grown
+        self._poses[index] = (latest.x(), latest.y(), latest.theta())
         return index
 
     def add_loop(self, earlier: int, later: int, relative: tuple[float, float, float]) -> None:
@@ -87,11 +96,9 @@ class PoseGraph:
 
     def _read_all(self) -> None:
         estimate = self._isam.calculateEstimate()
-        poses = np.empty((self._count, 3))
         for k in range(self._count):
             pose = estimate.atPose2(k)
-            poses[k] = (pose.x(), pose.y(), pose.theta())
-        self._poses = poses
+            self._poses[k] = (pose.x(), pose.y(), pose.theta())
 
 
 __all__ = ["PoseGraph"]

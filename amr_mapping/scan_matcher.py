@@ -27,7 +27,7 @@ import numpy as np
 from amr_mapping.grid_kernels import max_pool, shifted_gaussian_kernels, smear_window
 from amr_mapping.line_kernels import fit_lines, refine_lines
 from amr_mapping.log_odds_grid import LogOddsGrid
-from amr_mapping.match_kernels import bnb_search, exhaustive_search_numpy
+from amr_mapping.match_kernels import bnb_search, exhaustive_search_numpy, thin_points
 
 _FIELD_MARGIN_M = 0.5  # a cached field covers this much more than one match needs
 _REFINE_ITERATIONS = 10
@@ -35,6 +35,7 @@ _LINE_MIN_HITS = 4  # hits in a 3 x 3 neighbourhood to fit a wall line ...
 _LINE_MAX_RATIO = 0.2  # ... whose spread across is at most this share of the spread along
 _LINE_MAX_DISTANCE = 0.04  # m: points farther from their cell's line are outliers
 _MIN_REFINE_POINTS = 10  # fewer points on lines: keep the lattice optimum
+_SEARCH_SPACING_CELLS = 2  # the search scores points at least this many cells apart
 NO_EXCLUSION = np.array([0, 0, 0, -1, 0], dtype=np.int64)
 
 
@@ -62,22 +63,29 @@ class _Field:
 class CorrelativeMatcher:
     """Scan-to-map matching against a LogOddsGrid (see the module docstring)."""
 
-    def __init__(self, resolution: float, smear_sigma: float,
-                 use_reference: bool = False) -> None:
+    def __init__(self, resolution: float, smear_sigma: float, use_reference: bool = False,
+                 stale_versions: int = 0) -> None:
+        """A matcher for maps of `resolution` m, smoothed by a Gaussian of smear_sigma m.
+
+        use_reference: search with the numpy reference (the benchmark's); stale_versions: a
+        cached field is reused while the grid changed at most this many times since.
+        """
         self.resolution = float(resolution)
         self.kernels = shifted_gaussian_kernels(smear_sigma / self.resolution)
         self._search = exhaustive_search_numpy if use_reference else bnb_search
+        self._stale_versions = int(stale_versions)
         self._cache: _Field | None = None
 
     def field(self, grid: LogOddsGrid, occupied_units: float, row_lo: int, col_lo: int,
               row_hi: int, col_hi: int, depth: int) -> _Field:
         """The smoothed field and its pyramid over global cells [row_lo, row_hi) x [col_lo, ...).
 
-        Reused while the grid is unchanged and the cached field covers the box at that depth.
+        Reused while the grid changed at most stale_versions times and the cached field covers
+        the box at that depth.
         """
         cached = self._cache
         if cached is not None and cached.grid_id == grid.serial \
-                and cached.version == grid.version \
+                and 0 <= grid.version - cached.version <= self._stale_versions \
                 and cached.levels.shape[0] >= depth and cached.row0 <= row_lo \
                 and cached.col0 <= col_lo and cached.row0 + cached.levels.shape[1] >= row_hi \
                 and cached.col0 + cached.levels.shape[2] >= col_hi:
@@ -120,7 +128,8 @@ class CorrelativeMatcher:
         window = max(int(math.ceil(linear_window / res - 1e-9)), 0)
         depth = 1 + max(int(math.floor(math.log2(window))), 0) if window > 1 else 1
         px, py, pth = prior
-        search = _one_per_cell(points, prior, res)
+        keep = np.empty(len(points), dtype=np.int64)
+        search = points[keep[:thin_points(points, pth, _SEARCH_SPACING_CELLS * res, keep)]]
         cos_a, sin_a = np.cos(pth + offsets), np.sin(pth + offsets)
         wx = search[None, :, 0] * cos_a[:, None] - search[None, :, 1] * sin_a[:, None] + px
         wy = search[None, :, 0] * sin_a[:, None] + search[None, :, 1] * cos_a[:, None] + py
@@ -179,19 +188,6 @@ class CorrelativeMatcher:
                 abs(th - lattice[2]) > 2.0 * step:
             return lattice
         return x, y, math.remainder(th, math.tau)
-
-
-def _one_per_cell(points: np.ndarray, pose, resolution: float) -> np.ndarray:
-    """The points (robot frame) with at most one per map cell at `pose`, in scan order.
-
-    Near walls give many points per cell; one each scores the same shape for less work (the
-    refinement uses them all).
-    """
-    c, s = math.cos(pose[2]), math.sin(pose[2])
-    col = np.floor((c * points[:, 0] - s * points[:, 1]) / resolution).astype(np.int64)
-    row = np.floor((s * points[:, 0] + c * points[:, 1]) / resolution).astype(np.int64)
-    _, first = np.unique(row * 1_000_003 + col, return_index=True)
-    return points[np.sort(first)]
 
 
 __all__ = ["CorrelativeMatcher", "MatchResult"]
