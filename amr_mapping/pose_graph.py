@@ -14,7 +14,7 @@ import gtsam
 import numpy as np
 
 _ANCHOR_SIGMAS = np.array([1e-4, 1e-4, 1e-5])
-_HUBER_K = 1.345  # the usual Huber threshold, in standard deviations
+_HUBER_K = 10.0
 _RELINEARIZE_STEPS = 2  # extra iSAM2 passes after a loop closure (relinearization settles)
 
 

@@ -32,7 +32,7 @@ from amr_mapping.match_kernels import bnb_search, exhaustive_search_numpy, thin_
 _FIELD_MARGIN_M = 0.5  # a cached field covers this much more than one match needs
 _REFINE_ITERATIONS = 10
 _LINE_MIN_HITS = 4  # hits in a 3 x 3 neighbourhood to fit a wall line ...
-_LINE_MAX_RATIO = 0.2  # ... whose spread across is at most this share of the spread along
+_LINE_MAX_RATIO = 0.35  # ... whose spread across is at most this share of the spread along
 _LINE_MAX_DISTANCE = 0.04  # m: points farther from their cell's line are outliers
 _MIN_REFINE_POINTS = 10  # fewer points on lines: keep the lattice optimum
 _SEARCH_SPACING_CELLS = 2  # the search scores points at least this many cells apart
