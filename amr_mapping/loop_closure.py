@@ -54,7 +54,9 @@ class LoopCloser:
 
     def __init__(self, params: dict) -> None:
         self.p = params
-        self.matcher = CorrelativeMatcher(params["resolution_m"], params["smear_sigma_m"])
+        self.matcher = CorrelativeMatcher(
+            params["resolution_m"], params["smear_sigma_m"],
+            use_reference=params["correlative_search"] == "exhaustive")
 
     def candidate(self, poses: np.ndarray, travelled: np.ndarray, current: int) -> int | None:
         """Index of the nearest keyframe eligible to close a loop with `current`, or None."""

@@ -56,6 +56,10 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     "odometry_sigma_per_rad": (0.05, "... this share of the angle turned [rad/rad]."),
     "point_sigma_m": (0.015, "Standard deviation of a scan point about the wall line of its "
                              "map cell, in the sub-cell refinement [m]."),
+    "correlative_search": ("branch_and_bound", "How the correlative search finds its optimum: "
+                                               "'branch_and_bound' (compiled), or "
+                                               "'exhaustive' (every pose scored with numpy: the "
+                                               "same optimum, for benchmarks)."),
     "min_match_score": (0.35, "Matches scoring below this (mean smoothed-map value under the "
                               "points, 0..1) are rejected: the pose follows the odometry."),
     # --- back end: pose graph and loop closure
@@ -86,6 +90,7 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
 _INTEGERS = {"min_points", "max_map_cells", "local_map_keyframes", "loop_chain_keyframes",
              "loop_interval_keyframes"}
 _BOOLEANS = {"loop_closure"}
+_CHOICES = {"correlative_search": ("branch_and_bound", "exhaustive")}
 _MAY_BE_NEGATIVE = {"lidar_offset_x_m", "free_log_odds"}
 _MAY_BE_ZERO = {"miss_stop_m", "occupied_min_hit_share", "keyframe_distance_m",
                 "keyframe_angle_rad", "min_match_score",
@@ -104,6 +109,10 @@ def check_parameters(overrides: dict[str, Any] | None = None) -> dict[str, Any]:
         if name in _BOOLEANS:
             if not isinstance(value, bool):
                 problems.append(f"{name} must be true or false (got {value!r})")
+            continue
+        if name in _CHOICES:
+            if value not in _CHOICES[name]:
+                problems.append(f"{name} must be one of {list(_CHOICES[name])} (got {value!r})")
             continue
         if not finite(value):
             problems.append(f"{name} must be a finite number (got {value!r})")
