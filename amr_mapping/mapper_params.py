@@ -75,7 +75,7 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
                                    "loop_ambiguity_distance_m away must score below this share "
                                    "of it (no closure along a featureless corridor)."),
     "loop_ambiguity_distance_m": (0.1, "See loop_ambiguity_ratio [m]."),
-    "loop_interval_keyframes": (5, "Loop closure is tried every this many keyframes."),
+    "loop_interval_keyframes": (10, "Loop closure is tried every this many keyframes."),
     "sequential_sigma_m": (0.01, "Standard deviation of a chain link between consecutive "
                                  "keyframes, translation [m] ..."),
     "sequential_sigma_rad": (0.005, "... and rotation [rad]."),
