@@ -117,7 +117,7 @@ _solve3 = jit(_solve3_python)
 
 
 def refine_lines_python(lines, col0, row0, resolution, points, pose, prior, prior_weights,
-                        point_weight, max_distance, iterations, out):
+                        point_weight, max_distance, iterations, degenerate_ratio, out):
     """Gauss-Newton of point-to-line residuals from pose; writes [x, y, theta, points used].
 
     lines: (4, rows, cols) from fit_lines over the window whose corner is global cell
@@ -125,6 +125,10 @@ def refine_lines_python(lines, col0, row0, resolution, points, pose, prior, prio
     [1/sigma_x, 1/sigma_y, 1/sigma_theta] (0: no prior); point_weight 1/sigma_point (1/m);
     max_distance (m): points farther from their line are left out. Steps are limited to one
     cell and 0.02 rad; stops after `iterations` or when a step is below 1e-7.
+    Degeneracy (with a prior): if the walls fix one direction of translation less than
+    degenerate_ratio times the other (the eigenvalues of the points' information), the
+    result keeps the prior's position along it (solution remapping, Zhang et al. 2016): slight
+    tilts of the fitted lines along a featureless corridor are not information.
     """
     rows = lines.shape[1]
     cols = lines.shape[2]
@@ -136,6 +140,7 @@ def refine_lines_python(lines, col0, row0, resolution, points, pose, prior, prio
     grad = np.zeros(3)
     step = np.zeros(3)
     used = 0
+    info_xx = info_xy = info_yy = 0.0  # the points' information on x, y (last iteration)
     for _ in range(iterations):
         c = math.cos(th)
         s = math.sin(th)
@@ -170,6 +175,9 @@ def refine_lines_python(lines, col0, row0, resolution, points, pose, prior, prio
             grad[0] += j0 * r
             grad[1] += j1 * r
             grad[2] += j2 * r
+        info_xx = hess[0, 0]
+        info_xy = hess[0, 1]
+        info_yy = hess[1, 1]
         dth = th - prior[2]
         dth -= 2.0 * math.pi * math.floor((dth + math.pi) / (2.0 * math.pi))
         wx2 = prior_weights[0] * prior_weights[0]
@@ -201,6 +209,24 @@ def refine_lines_python(lines, col0, row0, resolution, points, pose, prior, prio
         th += step[2]
         if abs(step[0]) + abs(step[1]) < 1e-7 and abs(step[2]) < 1e-7:
             break
+    if prior_weights[0] > 0.0 and used > 0:
+        half = 0.5 * (info_xx + info_yy)
+        disc = math.sqrt(max(0.25 * (info_xx - info_yy) ** 2 + info_xy * info_xy, 0.0))
+        small = half - disc
+        if small < degenerate_ratio * (half + disc):
+            ax = info_xy
+            ay = small - info_xx
+            bx = small - info_yy
+            by = info_xy
+            if ax * ax + ay * ay >= bx * bx + by * by:
+                dx, dy = ax, ay
+            else:
+                dx, dy = bx, by
+            norm = math.sqrt(dx * dx + dy * dy)
+            if norm > 0.0:
+                along = (dx * (prior[0] - x) + dy * (prior[1] - y)) / (norm * norm)
+                x += along * dx
+                y += along * dy
     out[0] = x
     out[1] = y
     out[2] = th

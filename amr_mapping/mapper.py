@@ -48,6 +48,7 @@ _LOG = ThrottledLogger(logging.getLogger(__name__))
 _JUMP_SLACK = (0.05, 0.1)  # m, rad beyond the plausible motion before odometry counts as a jump
 _WEAK_LINK = (0.05, 0.05)  # m, rad: sigmas of a keyframe link that no match confirmed
 _STALE_FIELD_VERSIONS = 3
+_RECENTRE_MARGIN_M = 1.0
 
 
 @dataclass(frozen=True)
@@ -225,12 +226,29 @@ class Mapper:
         while len(self._local_members) > self.p["local_map_keyframes"]:
             oldest = min(self._local_members)
             self._draw(self._local, oldest, self._local_members.pop(oldest), -1)
+        self._recentre_local()
         closed = False
         self._since_loop_try += 1
         if self.p["loop_closure"] and self._since_loop_try >= self.p["loop_interval_keyframes"]:
             self._since_loop_try = 0
             closed = self._try_loop_closure(index)
         return closed
+
+    def _recentre_local(self) -> None:
+        """Redraw the local map in a fresh grid once it spans far more than its keyframes.
+
+        Taking old keyframes out leaves their cells at zero but the array as large: without
+        this the local map would grow with everything explored, as the global map does.
+        """
+        poses = np.array(list(self._local_members.values()))
+        reach = self.p["max_range_m"] + 2 * _RECENTRE_MARGIN_M
+        width = np.ptp(poses[:, 0]) + 2 * reach
+        height = np.ptp(poses[:, 1]) + 2 * reach
+        if self._local.counts.size * self.p["resolution_m"] ** 2 <= 4.0 * width * height:
+            return
+        self._local = self._new_grid(hit_moments=True)
+        for member, drawn in self._local_members.items():
+            self._draw(self._local, member, drawn)
 
     def _try_loop_closure(self, index: int) -> bool:
         started = _clocks()
@@ -309,6 +327,8 @@ class Mapper:
         """
         stats = dict(self._stats, rejected=dict(self._stats["rejected"]))
         stats["keyframes"] = len(self._graph)
+        stats["map_cells"] = int(self._global.counts.size)  # as drawn so far
+        stats["local_map_cells"] = int(self._local.counts.size)
         stats["distance_m"] = self._distance
         for name, times in self._times.items():
             stats[f"{name}_ms"] = _summary([wall for wall, _ in times])

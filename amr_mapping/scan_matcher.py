@@ -35,6 +35,7 @@ _LINE_MIN_HITS = 4  # hits in a 3 x 3 neighbourhood to fit a wall line ...
 _LINE_MAX_RATIO = 0.35  # ... whose spread across is at most this share of the spread along
 _LINE_MAX_DISTANCE = 0.04  # m: points farther from their cell's line are outliers
 _MIN_REFINE_POINTS = 10  # fewer points on lines: keep the lattice optimum
+_DEGENERATE_RATIO = 0.02  # a direction the walls fix 50x less than the other: the prior's
 _SEARCH_SPACING_CELLS = 2  # the search scores points at least this many cells apart
 NO_EXCLUSION = np.array([0, 0, 0, -1, 0], dtype=np.int64)
 
@@ -177,7 +178,8 @@ class CorrelativeMatcher:
             point_weight = 1.0 / sigmas[2]
         refine_lines(field.lines, field.col0, field.row0, self.resolution, points,
                      np.asarray(lattice, dtype=np.float64), np.asarray(prior, dtype=np.float64),
-                     prior_weights, point_weight, _LINE_MAX_DISTANCE, _REFINE_ITERATIONS, out)
+                     prior_weights, point_weight, _LINE_MAX_DISTANCE, _REFINE_ITERATIONS,
+                     _DEGENERATE_RATIO, out)
         x, y, th = float(out[0]), float(out[1]), float(out[2])
         res = self.resolution
         # The lattice optimum is within a cell and a step of the best pose: a refinement that

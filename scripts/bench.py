@@ -13,6 +13,8 @@
                      real-time factors (bench_planning.py)
   localization       particle filter: measurement update rate vs numpy, one full update at
                      2,000 particles, headless localization episode (bench_localization.py)
+  mapping            SLAM: one update, a loop closure, a headless mapping episode, each vs
+                     the numpy exhaustive search of the same matcher (bench_mapping.py)
 Usage: .venv/bin/python scripts/bench.py [--quick] [--only NAME ...] [--json FILE]
 """
 from __future__ import annotations
@@ -77,12 +79,12 @@ def main(argv=None) -> int:
     parser.add_argument("--quick", action="store_true", help="fewer repetitions")
     parser.add_argument("--only", nargs="*", default=None,
                         choices=["sim", "ros", "sync", "controller", "evaluate",
-                                 "localization", "planning"])
+                                 "localization", "planning", "mapping"])
     parser.add_argument("--json", default=None, help="also write the figures to this file")
     args = parser.parse_args(argv)
     isolate_local_graph()
     chosen = args.only or ["sim", "ros", "sync", "controller", "evaluate", "localization",
-                           "planning"]
+                           "planning", "mapping"]
     figures: dict[str, dict] = {}
     if "sim" in chosen:
         import bench_sim
@@ -112,6 +114,9 @@ def main(argv=None) -> int:
         import bench_planning
         figures["planning"] = bench_planning.measure(args.quick)
         print(bench_planning.report(figures["planning"]))
+    if "mapping" in chosen:
+        import bench_mapping
+        figures["mapping"] = bench_mapping.main(["--quick"] if args.quick else [])
     if args.json:
         Path(args.json).write_text(json.dumps(figures, indent=1, default=float))
     return 0

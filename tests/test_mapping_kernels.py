@@ -131,7 +131,7 @@ def test_line_kernels_twins_equal_and_refinement_recovers_an_offset():
     for kernel in (lk.refine_lines, lk.refine_lines_python):
         out = np.zeros(4)
         kernel(lines[0], 0, 0, resolution, points, np.array([0.73, 0.59, 0.02]),
-               np.zeros(3), np.zeros(3), 100.0, 0.04, 20, out)
+               np.zeros(3), np.zeros(3), 100.0, 0.04, 20, 0.02, out)
         results.append(out)
     assert np.array_equal(*results)
     x, y, th, used = results[0]
