@@ -22,6 +22,28 @@ import numpy as np
 from amr_common.jit import jit
 
 
+def _small_eigen_python(a, b, c):
+    """(smaller eigenvalue, larger, unit eigenvector x, y of the smaller) of [[a, b], [b, c]]."""
+    half = 0.5 * (a + c)
+    disc = math.sqrt(max(0.25 * (a - c) * (a - c) + b * b, 0.0))
+    small = half - disc
+    ax = b
+    ay = small - a
+    bx = small - c
+    by = b
+    if ax * ax + ay * ay >= bx * bx + by * by:
+        vx, vy = ax, ay
+    else:
+        vx, vy = bx, by
+    norm = math.sqrt(vx * vx + vy * vy)
+    if not norm > 0.0:  # isotropic
+        return small, half + disc, 1.0, 0.0
+    return small, half + disc, vx / norm, vy / norm
+
+
+_small_eigen = jit(_small_eigen_python)
+
+
 def fit_lines_python(hits, sums, row_off, col_off, min_hits, max_ratio, lines):
     """lines[:, r, c] = (nx, ny, d, valid): the line n . p = d of each cell of a window.
 
@@ -69,26 +91,10 @@ def fit_lines_python(hits, sums, row_off, col_off, min_hits, max_ratio, lines):
             cxx = sxx / n - mx * mx
             cxy = sxy / n - mx * my
             cyy = syy / n - my * my
-            half = 0.5 * (cxx + cyy)
-            disc = math.sqrt(max(0.25 * (cxx - cyy) * (cxx - cyy) + cxy * cxy, 0.0))
-            large = half + disc
-            small = half - disc
+            # the normal of the line: the direction of least spread
+            small, large, nx, ny = _small_eigen(cxx, cxy, cyy)
             if not large > 0.0 or small > max_ratio * large:
                 continue
-            # eigenvector of the small eigenvalue: the normal of the line
-            ax = cxy
-            ay = small - cxx
-            bx = small - cyy
-            by = cxy
-            if ax * ax + ay * ay >= bx * bx + by * by:
-                nx, ny = ax, ay
-            else:
-                nx, ny = bx, by
-            norm = math.sqrt(nx * nx + ny * ny)
-            if not norm > 0.0:
-                nx, ny, norm = (1.0, 0.0, 1.0) if cxx <= cyy else (0.0, 1.0, 1.0)
-            nx /= norm
-            ny /= norm
             lines[0, i, j] = nx
             lines[1, i, j] = ny
             lines[2, i, j] = nx * (mx + j) + ny * (my + i)
@@ -210,23 +216,11 @@ def refine_lines_python(lines, col0, row0, resolution, points, pose, prior, prio
         if abs(step[0]) + abs(step[1]) < 1e-7 and abs(step[2]) < 1e-7:
             break
     if prior_weights[0] > 0.0 and used > 0:
-        half = 0.5 * (info_xx + info_yy)
-        disc = math.sqrt(max(0.25 * (info_xx - info_yy) ** 2 + info_xy * info_xy, 0.0))
-        small = half - disc
-        if small < degenerate_ratio * (half + disc):
-            ax = info_xy
-            ay = small - info_xx
-            bx = small - info_yy
-            by = info_xy
-            if ax * ax + ay * ay >= bx * bx + by * by:
-                dx, dy = ax, ay
-            else:
-                dx, dy = bx, by
-            norm = math.sqrt(dx * dx + dy * dy)
-            if norm > 0.0:
-                along = (dx * (prior[0] - x) + dy * (prior[1] - y)) / (norm * norm)
-                x += along * dx
-                y += along * dy
+        small, large, dx, dy = _small_eigen(info_xx, info_xy, info_yy)
+        if small < degenerate_ratio * large:
+            along = dx * (prior[0] - x) + dy * (prior[1] - y)
+            x += along * dx
+            y += along * dy
     out[0] = x
     out[1] = y
     out[2] = th
