@@ -31,15 +31,17 @@ class MappingSpec:
     drift: OdometryDrift | None = TYPICAL_DRIFT
     profile: str = "turtlebot3"
     start: Any = None  # a world's named start or [x, y, theta]; None: its first
+    mapper_params: dict[str, Any] | None = None  # Mapper parameter overrides
 
 
 def mapping_specs(worlds: Iterable[str], seeds: Iterable[int], duration: float = 300.0,
                   loop_closure: Iterable[bool] = (True,), starts: dict[str, Any] | None = None,
-                  drift: OdometryDrift | None = TYPICAL_DRIFT) -> list[MappingSpec]:
+                  drift: OdometryDrift | None = TYPICAL_DRIFT,
+                  mapper_params: dict[str, Any] | None = None) -> list[MappingSpec]:
     """Every world x loop-closure setting x seed; starts: world -> start for worlds without."""
     starts = starts or {}
     return [MappingSpec(world, int(seed), float(duration), bool(closure), drift,
-                        start=starts.get(world))
+                        start=starts.get(world), mapper_params=mapper_params)
             for world in worlds for closure in loop_closure for seed in seeds]
 
 
@@ -48,7 +50,8 @@ def run_mapping_spec(spec: MappingSpec) -> dict[str, Any]:
     try:
         result = run_mapping_episode(spec.world, start=spec.start, profile=spec.profile,
                                      seed=spec.seed, duration=spec.duration,
-                                     loop_closure=spec.loop_closure, drift=spec.drift)
+                                     loop_closure=spec.loop_closure, drift=spec.drift,
+                                     mapper_params=spec.mapper_params)
     except Exception as exc:  # noqa: BLE001 - reported per episode, the batch goes on
         return {**asdict(spec), "error": f"{type(exc).__name__}: {exc}",
                 "traceback": traceback.format_exc()}
