@@ -29,6 +29,16 @@ from amr_common.jit import jit
 SHIFT_BINS = 16  # sub-cell positions of the smoothed field's peaks, per axis
 
 
+def _crossings_python(start, cell, d):
+    """Along start + t d (t in [0, 1]): the t between cell borders and of the first border."""
+    if d == 0.0:
+        return math.inf, math.inf
+    return 1.0 / abs(d), ((cell + (1 if d > 0.0 else 0)) - start) / d
+
+
+_crossings = jit(_crossings_python)
+
+
 def trace_rays_python(counts, sx, sy, ends, hit, miss, miss_stop, sign, hits, sums):
     """Add `miss` along each ray from (sx, sy) to ends[k] and `hit` at its end cell.
 
@@ -57,18 +67,8 @@ def trace_rays_python(counts, sx, sy, ends, hit, miss, miss_stop, sign, hits, su
             row = row0
             step_col = 1 if dx > 0.0 else -1
             step_row = 1 if dy > 0.0 else -1
-            if dx != 0.0:
-                delta_x = 1.0 / abs(dx)
-                t_x = ((col + (1 if dx > 0.0 else 0)) - sx) / dx
-            else:
-                delta_x = math.inf
-                t_x = math.inf
-            if dy != 0.0:
-                delta_y = 1.0 / abs(dy)
-                t_y = ((row + (1 if dy > 0.0 else 0)) - sy) / dy
-            else:
-                delta_y = math.inf
-                t_y = math.inf
+            delta_x, t_x = _crossings(sx, col, dx)
+            delta_y, t_y = _crossings(sy, row, dy)
             # Each step moves one cell closer in one axis: this many reach the end cell.
             steps = abs(end_col - col0) + abs(end_row - row0)
             for _ in range(steps):
