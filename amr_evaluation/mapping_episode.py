@@ -167,53 +167,11 @@ def run_mapping_episode(world: World | str, start=None, profile: str | SensorPro
     odometry = DriftingOdometry(drift, seed)
     hits = RayHits(world_obj, prof.angle_min, prof.angle_increment, prof.scan_rays,
                    prof.range_min, min(prof.range_max, mapper.p["max_range_m"]))
-
-    def scan_message(ranges: np.ndarray) -> Scan:
-        return Scan(ranges, prof.angle_min, prof.angle_increment, prof.range_min, prof.range_max)
-
-    truth, estimate, odom_rows = [], [], []
-    n_steps = int(round(float(duration) / sim.dt))
-    odom_period = prof.odom_period
-    next_odom = 0.0
-    z_scan, z_v, z_w = sim.measure()
-    held_v, held_w = z_v, z_w
-    held_odom = odometry.step(sim.odometry_pose, sim.dt)
-    scan_time = sim.scan_time
-    slam_time = 0.0
-
-    def feed(ranges: np.ndarray, stamp: float) -> None:
-        nonlocal slam_time
-        started = time.perf_counter()
-        result = mapper.update(scan_message(ranges), held_odom, stamp)
-        slam_time += time.perf_counter() - started
-        if result.status.startswith("rejected"):
-            return
-        truth.append(sim.pose)
-        estimate.append((stamp, *result.pose))
-        odom_rows.append(held_odom)
-        hits.add(*sim.lidar_position, sim.pose[2])
-
-    wall_start, cpu_start = time.perf_counter(), time.process_time()
-    feed(z_scan, 0.0)
-    for _ in range(n_steps):
-        v, w = controller.compute_commands(z_scan, held_v, held_w)
-        z_scan, z_v, z_w = sim.step(v, w)
-        odom_now = odometry.step(sim.odometry_pose, sim.dt)
-        if odom_period is None or sim.time >= next_odom - 1e-9:
-            held_v, held_w, held_odom = z_v, z_w, odom_now
-            if odom_period is not None:
-                while next_odom <= sim.time + 1e-9:
-                    next_odom += odom_period
-        if sim.scan_time != scan_time:
-            scan_time = sim.scan_time
-            feed(z_scan, scan_time)
-    wall_time = time.perf_counter() - wall_start
-    cpu_time = time.process_time() - cpu_start
-
+    run = _explore(sim, controller, mapper, odometry, hits, duration)
     raster = mapper.occupancy_raster()
-    rows = np.asarray(estimate, dtype=np.float64).reshape(-1, 4)
-    errors = trajectory_errors(sim.start, np.asarray(truth), rows[:, 1:])
-    odom_errors = trajectory_errors(sim.start, np.asarray(truth), np.asarray(odom_rows))
+    rows = np.asarray(run.estimate, dtype=np.float64).reshape(-1, 4)
+    errors = trajectory_errors(sim.start, np.asarray(run.truth), rows[:, 1:])
+    odom_errors = trajectory_errors(sim.start, np.asarray(run.truth), np.asarray(run.odometry))
     recall, seen = map_recall(raster, world_obj, sim.start, hits)
     stats = mapper.statistics()
     start_label = start if isinstance(start, str) else (
@@ -223,8 +181,8 @@ def run_mapping_episode(world: World | str, start=None, profile: str | SensorPro
         world=world_obj.name, start=start_label, profile=prof.name, seed=int(seed),
         loop_closure=bool(mapper.p["loop_closure"]),
         drift=None if drift is None else asdict(drift),
-        sim_time_s=sim.time, wall_time_s=wall_time, cpu_time_s=cpu_time,
-        slam_wall_time_s=slam_time,
+        sim_time_s=sim.time, wall_time_s=run.wall_time, cpu_time_s=run.cpu_time,
+        slam_wall_time_s=run.slam_time,
         collisions=sim.collisions, distance_m=sim.distance, scans=len(rows),
         keyframes=stats["keyframes"], loop_closures=stats["loop_closures"],
         odometry_max_error_m=odom_errors["trajectory_max_m"], **errors,
@@ -233,9 +191,63 @@ def run_mapping_episode(world: World | str, start=None, profile: str | SensorPro
         update_ms_p90=stats["update_cpu_ms"]["p90"], update_ms_max=stats["update_cpu_ms"]["max"],
         loop_closure_ms_median=stats["loop_closed_cpu_ms"]["median"],
         loop_closure_ms_max=stats["loop_closed_cpu_ms"]["max"], statistics=stats,
-        real_time_factor=sim.time / wall_time if wall_time > 0 else math.inf,
-        cpu_real_time_factor=sim.time / cpu_time if cpu_time > 0 else math.inf,
+        real_time_factor=sim.time / run.wall_time if run.wall_time > 0 else math.inf,
+        cpu_real_time_factor=sim.time / run.cpu_time if run.cpu_time > 0 else math.inf,
         estimate=rows.tolist() if record else [])
+
+
+@dataclass
+class _Recording:
+    """Per accepted scan: the true pose, [stamp, x, y, theta] of the estimate, the odometry."""
+
+    truth: list = field(default_factory=list)
+    estimate: list = field(default_factory=list)
+    odometry: list = field(default_factory=list)
+    slam_time: float = 0.0  # wall seconds inside Mapper.update
+    wall_time: float = 0.0
+    cpu_time: float = 0.0
+
+
+def _explore(sim: Simulator, controller, mapper, odometry: DriftingOdometry, hits: RayHits,
+             duration: float) -> _Recording:
+    """The episode's loop: control every dt, the newest odometry, every new scan mapped."""
+    prof = sim.profile
+    run = _Recording()
+    n_steps = int(round(float(duration) / sim.dt))
+    next_odom = 0.0
+    z_scan, z_v, z_w = sim.measure()
+    held_v, held_w = z_v, z_w
+    held_odom = odometry.step(sim.odometry_pose, sim.dt)
+    scan_time = sim.scan_time
+
+    def feed(ranges: np.ndarray, stamp: float) -> None:
+        started = time.perf_counter()
+        result = mapper.update(Scan(ranges, prof.angle_min, prof.angle_increment,
+                                    prof.range_min, prof.range_max), held_odom, stamp)
+        run.slam_time += time.perf_counter() - started
+        if not result.status.startswith("rejected"):
+            run.truth.append(sim.pose)
+            run.estimate.append((stamp, *result.pose))
+            run.odometry.append(held_odom)
+            hits.add(*sim.lidar_position, sim.pose[2])
+
+    wall_start, cpu_start = time.perf_counter(), time.process_time()
+    feed(z_scan, 0.0)
+    for _ in range(n_steps):
+        v, w = controller.compute_commands(z_scan, held_v, held_w)
+        z_scan, z_v, z_w = sim.step(v, w)
+        odom_now = odometry.step(sim.odometry_pose, sim.dt)
+        if prof.odom_period is None or sim.time >= next_odom - 1e-9:
+            held_v, held_w, held_odom = z_v, z_w, odom_now
+            if prof.odom_period is not None:
+                while next_odom <= sim.time + 1e-9:
+                    next_odom += prof.odom_period
+        if sim.scan_time != scan_time:
+            scan_time = sim.scan_time
+            feed(z_scan, scan_time)
+    run.wall_time = time.perf_counter() - wall_start
+    run.cpu_time = time.process_time() - cpu_start
+    return run
 
 
 __all__ = ["DriftingOdometry", "MappingResult", "OdometryDrift", "TYPICAL_DRIFT",
