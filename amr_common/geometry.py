@@ -1,4 +1,4 @@
-"""Planar geometry shared by every package: angle wrapping and yaw <-> quaternion.
+"""Planar geometry shared by every package: angles, planar poses, yaw <-> quaternion.
 
 Pure math on floats (no message classes, no rclpy); amr_common.ros_conversions applies it to
 geometry_msgs. REP 103: x forward/east, y left/north, yaw counter-clockwise about +z.
@@ -39,6 +39,27 @@ def without_repeats(points: np.ndarray, tolerance: float = 1e-9) -> np.ndarray:
     return points[np.concatenate([[True], steps > tolerance])]
 
 
+def compose(a: tuple[float, float, float], b: tuple[float, float, float]) -> tuple[float, ...]:
+    """Planar pose b (x, y, yaw) expressed in a's parent: a * b."""
+    ax, ay, ath = a
+    bx, by, bth = b
+    c, s = math.cos(ath), math.sin(ath)
+    return ax + c * bx - s * by, ay + s * bx + c * by, wrap_angle(ath + bth)
+
+
+def inverse(a: tuple[float, float, float]) -> tuple[float, float, float]:
+    """The inverse planar transform of (x, y, yaw)."""
+    x, y, th = a
+    c, s = math.cos(th), math.sin(th)
+    return -c * x - s * y, s * x - c * y, wrap_angle(-th)
+
+
+def map_to_odom(map_to_base: tuple[float, float, float],
+                odom_to_base: tuple[float, float, float]) -> tuple[float, float, float]:
+    """Map -> odom that makes map -> odom -> base equal map_to_base (what a localizer sends)."""
+    return compose(map_to_base, inverse(odom_to_base))
+
+
 def yaw_to_quaternion(yaw: float) -> tuple[float, float, float, float]:
     """(x, y, z, w) of a rotation by `yaw` rad about +z: (0, 0, sin(yaw/2), cos(yaw/2))."""
     half = 0.5 * float(yaw)
@@ -63,4 +84,4 @@ def quaternion_to_yaw(x: float, y: float, z: float, w: float) -> float:
 
 
 __all__ = ["wrap_angle", "angle_difference", "wrap_angles", "polyline_length", "without_repeats",
-           "yaw_to_quaternion", "quaternion_to_yaw"]
+           "compose", "inverse", "map_to_odom", "yaw_to_quaternion", "quaternion_to_yaw"]

@@ -24,6 +24,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from tf2_msgs.msg import TFMessage
 
 from amr_common import geometry
+from amr_common.geometry import compose, inverse, map_to_odom
 from amr_common.qos import LATCHED
 
 TF_TOPIC = "/tf"
@@ -51,27 +52,6 @@ def planar_transform(stamp, parent: str, child: str, x: float, y: float, yaw: fl
     rotation = message.transform.rotation
     rotation.x, rotation.y, rotation.z, rotation.w = geometry.yaw_to_quaternion(yaw)
     return message
-
-
-def compose(a: tuple[float, float, float], b: tuple[float, float, float]) -> tuple[float, ...]:
-    """Planar pose b (x, y, yaw) expressed in a's parent: a * b."""
-    ax, ay, ath = a
-    bx, by, bth = b
-    c, s = math.cos(ath), math.sin(ath)
-    return ax + c * bx - s * by, ay + s * bx + c * by, geometry.wrap_angle(ath + bth)
-
-
-def inverse(a: tuple[float, float, float]) -> tuple[float, float, float]:
-    """The inverse planar transform of (x, y, yaw)."""
-    x, y, th = a
-    c, s = math.cos(th), math.sin(th)
-    return -c * x - s * y, s * x - c * y, geometry.wrap_angle(-th)
-
-
-def map_to_odom(map_to_base: tuple[float, float, float],
-                odom_to_base: tuple[float, float, float]) -> tuple[float, float, float]:
-    """Map -> odom that makes map -> odom -> base equal map_to_base (what a localizer sends)."""
-    return compose(map_to_base, inverse(odom_to_base))
 
 
 @dataclass(frozen=True)

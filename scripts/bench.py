@@ -15,6 +15,8 @@
                      2,000 particles, headless localization episode (bench_localization.py)
   maps               simulator step on Nav2 map worlds (converted, SLAM-like) vs the polygon
                      world, segment scan vs grid ray marching (bench_map_world.py)
+  mapping            SLAM: one update, a loop closure, a headless mapping episode, each vs
+                     the numpy exhaustive search of the same matcher (bench_mapping.py)
 Usage: .venv/bin/python scripts/bench.py [--quick] [--only NAME ...] [--json FILE]
 """
 from __future__ import annotations
@@ -79,12 +81,12 @@ def main(argv=None) -> int:
     parser.add_argument("--quick", action="store_true", help="fewer repetitions")
     parser.add_argument("--only", nargs="*", default=None,
                         choices=["sim", "ros", "sync", "controller", "evaluate",
-                                 "localization", "planning", "maps"])
+                                 "localization", "planning", "maps", "mapping"])
     parser.add_argument("--json", default=None, help="also write the figures to this file")
     args = parser.parse_args(argv)
     isolate_local_graph()
     chosen = args.only or ["sim", "ros", "sync", "controller", "evaluate", "localization",
-                           "planning", "maps"]
+                           "planning", "maps", "mapping"]
     figures: dict[str, dict] = {}
     if "sim" in chosen:
         import bench_sim
@@ -118,6 +120,9 @@ def main(argv=None) -> int:
         import bench_map_world
         figures["maps"] = bench_map_world.main(["--steps", "1000", "--repeats", "2"]
                                                if args.quick else [])
+    if "mapping" in chosen:
+        import bench_mapping
+        figures["mapping"] = bench_mapping.main(["--quick"] if args.quick else [])
     if args.json:
         Path(args.json).write_text(json.dumps(figures, indent=1, default=float))
     return 0

@@ -15,7 +15,7 @@ import pytest
 REPO = Path(__file__).resolve().parent.parent
 SHARED = "amr_common"
 ALGORITHM_PACKAGES = ["amr_sim", "amr_control", "amr_turtlebot3", "amr_localization",
-                      "amr_planning"]
+                      "amr_planning", "amr_mapping"]
 HARNESS = "amr_evaluation"
 
 

@@ -1,0 +1,254 @@
+"""Headless mapping episodes: the simulator, the wall follower exploring, and the SLAM Mapper.
+
+    result = run_mapping_episode("lab02", profile="turtlebot3", seed=0, duration=300.0)
+    print(result.summary())          # trajectory RMSE / max, precision, recall, loop closures
+
+Timing as amr_evaluation.episode: the wall follower runs every dt on the newest scan and the
+newest odometry twist; the Mapper gets every NEW scan (5 Hz with `turtlebot3`, every step with
+`ideal`) with the odometry pose at that moment (the profile's /odom) and the scan's stamp.
+
+The simulator's odometry is exact so far (it sees only what the wheels did), which would make
+SLAM look better than on a robot: `drift` adds the errors of a real Burger's /odom (wheel
+radius and gyro scale errors, gyro bias, random walk) to it, seeded by the episode's seed.
+`TYPICAL_DRIFT` is the default; `drift=None` feeds the simulator's odometry as it is.
+
+Figures (amr_evaluation.mapping_metrics): trajectory RMSE / max against the truth aligned at
+the start, map precision and recall at 3 cm, loop closures, SLAM update times, and the speed
+(simulated seconds per wall-clock second of the whole loop, simulator and controller included).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from amr_common.geometry import compose, inverse
+from amr_common.world import World
+from amr_evaluation.episode import default_controller
+from amr_evaluation.mapping_metrics import (
+    RayHits,
+    map_precision,
+    map_recall,
+    trajectory_errors,
+)
+from amr_mapping.mapper import Mapper
+from amr_mapping.scan_points import Scan
+from amr_sim.profiles import SensorProfile, get_profile
+from amr_sim.simulator import Simulator
+
+
+@dataclass(frozen=True)
+class OdometryDrift:
+    """Errors added to the simulator's exact odometry, per step of its motion.
+
+    distance_scale: relative error of every distance (a wheel radius off by this share);
+    turn_scale: relative error of every turn (gyro scale / track width); gyro_bias_rad_s:
+    heading drift per second; noise_m / noise_rad: random walk per sqrt(m) driven.
+    """
+
+    distance_scale: float = 0.0
+    turn_scale: float = 0.0
+    gyro_bias_rad_s: float = 0.0
+    noise_m: float = 0.0
+    noise_rad: float = 0.0
+
+
+# A Burger whose wheels are 1 % off, gyro 0.5 % off and drifting 1.7 deg per minute, plus a
+# random walk of 5 mm and 0.3 deg per sqrt(m).
+TYPICAL_DRIFT = OdometryDrift(distance_scale=0.01, turn_scale=0.005, gyro_bias_rad_s=0.0005,
+                              noise_m=0.005, noise_rad=0.005)
+
+
+class DriftingOdometry:
+    """The simulator's odometry pose with OdometryDrift's errors integrated on top."""
+
+    def __init__(self, drift: OdometryDrift | None, seed: int) -> None:
+        self._drift = drift
+        self._rng = np.random.default_rng([int(seed), 19])
+        self._exact: tuple[float, float, float] | None = None
+        self.pose = (0.0, 0.0, 0.0)
+
+    def step(self, exact: tuple[float, float, float], dt: float) -> tuple[float, float, float]:
+        """Advance with the simulator's new odometry pose; returns the drifting pose."""
+        if self._exact is None or self._drift is None:
+            self._exact = exact
+            self.pose = exact if self._drift is None else self.pose
+            return self.pose
+        d = self._drift
+        dx, dy, dth = compose(inverse(self._exact), exact)
+        self._exact = exact
+        distance = math.hypot(dx, dy)
+        root = math.sqrt(distance)
+        scale = 1.0 + d.distance_scale + d.noise_m * root * self._rng.standard_normal() / \
+            max(distance, 1e-12)
+        turn = dth * (1.0 + d.turn_scale) + d.gyro_bias_rad_s * dt + \
+            d.noise_rad * root * self._rng.standard_normal()
+        self.pose = compose(self.pose, (dx * scale, dy * scale, turn))
+        return self.pose
+
+
+@dataclass
+class MappingResult:
+    """What one mapping episode produced (JSON-serialisable with to_dict())."""
+
+    world: str
+    start: str | list[float]
+    profile: str
+    seed: int
+    loop_closure: bool
+    drift: dict[str, float] | None
+    sim_time_s: float
+    wall_time_s: float  # the whole loop: simulator, controller, SLAM, truth bookkeeping
+    cpu_time_s: float  # the same loop's CPU time (this process): steadier on a busy machine
+    slam_wall_time_s: float
+    collisions: int
+    distance_m: float
+    scans: int
+    keyframes: int
+    loop_closures: int
+    trajectory_rmse_m: float
+    trajectory_max_m: float
+    heading_rmse_rad: float
+    odometry_max_error_m: float  # the drifting odometry's worst error: what SLAM corrected
+    precision: float
+    recall: float
+    seen_wall_m: float
+    # SLAM timings in CPU ms of the mapping thread (Mapper.statistics() has the wall clock too)
+    update_ms_median: float
+    update_ms_p90: float
+    update_ms_max: float
+    loop_closure_ms_median: float  # the attempts that closed a loop: search + optimization
+    loop_closure_ms_max: float
+    real_time_factor: float = 0.0  # simulated seconds per wall-clock second of the loop
+    cpu_real_time_factor: float = 0.0  # ... per CPU second
+    statistics: dict[str, Any] = field(default_factory=dict)
+    estimate: list[list[float]] = field(default_factory=list)  # [t, x, y, theta] per scan
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON-serialisable dict."""
+        return asdict(self)
+
+    def summary(self) -> str:
+        """One line with the setup and the figures."""
+        closure = "on" if self.loop_closure else "off"
+        return (f"{self.world} seed {self.seed} loop closure {closure}: RMSE "
+                f"{100 * self.trajectory_rmse_m:.2f} cm, max "
+                f"{100 * self.trajectory_max_m:.2f} cm (odometry max "
+                f"{100 * self.odometry_max_error_m:.1f} cm), precision "
+                f"{100 * self.precision:.1f} %, recall {100 * self.recall:.1f} %, "
+                f"{self.loop_closures} loop closures, {self.keyframes} keyframes, update median "
+                f"{self.update_ms_median:.2f} ms, {self.real_time_factor:.0f}x real time "
+                f"({self.cpu_real_time_factor:.0f}x per CPU second)")
+
+
+def run_mapping_episode(world: World | str, start=None, profile: str | SensorProfile =
+                        "turtlebot3", seed: int = 0, duration: float = 300.0, dt: float = 0.05,
+                        loop_closure: bool = True, drift: OdometryDrift | None = TYPICAL_DRIFT,
+                        mapper_params: dict[str, Any] | None = None,
+                        record: bool = False, mapper=None) -> MappingResult:
+    """Explore `world` with the wall follower for `duration` s while the Mapper maps it.
+
+    mapper: a ready Mapper (or an object with its update / occupancy_raster / statistics /
+    p); by default one with the profile's LiDAR offset, `loop_closure` and `mapper_params`.
+    """
+    world_obj = world if isinstance(world, World) else World.load(world)
+    prof = get_profile(profile)
+    sim = Simulator(world_obj, start=start, dt=dt, profile=prof, seed=seed)
+    controller = default_controller(sim.dt, prof)
+    if callable(getattr(controller, "set_scan_geometry", None)):
+        controller.set_scan_geometry(prof.angle_min, prof.angle_increment, prof.range_min,
+                                     prof.range_max)
+    if mapper is None:
+        mapper = Mapper({"lidar_offset_x_m": prof.lidar_offset_x,
+                         "loop_closure": bool(loop_closure), **(mapper_params or {})})
+    odometry = DriftingOdometry(drift, seed)
+    hits = RayHits(world_obj, prof.angle_min, prof.angle_increment, prof.scan_rays,
+                   prof.range_min, min(prof.range_max, mapper.p["max_range_m"]))
+    run = _explore(sim, controller, mapper, odometry, hits, duration)
+    raster = mapper.occupancy_raster()
+    rows = np.asarray(run.estimate, dtype=np.float64).reshape(-1, 4)
+    errors = trajectory_errors(sim.start, np.asarray(run.truth), rows[:, 1:])
+    odom_errors = trajectory_errors(sim.start, np.asarray(run.truth), np.asarray(run.odometry))
+    recall, seen = map_recall(raster, world_obj, sim.start, hits)
+    stats = mapper.statistics()
+    start_label = start if isinstance(start, str) else (
+        next(iter(world_obj.starts)) if start is None and world_obj.starts
+        else [float(c) for c in sim.start])
+    return MappingResult(
+        world=world_obj.name, start=start_label, profile=prof.name, seed=int(seed),
+        loop_closure=bool(mapper.p["loop_closure"]),
+        drift=None if drift is None else asdict(drift),
+        sim_time_s=sim.time, wall_time_s=run.wall_time, cpu_time_s=run.cpu_time,
+        slam_wall_time_s=run.slam_time,
+        collisions=sim.collisions, distance_m=sim.distance, scans=len(rows),
+        keyframes=stats["keyframes"], loop_closures=stats["loop_closures"],
+        odometry_max_error_m=odom_errors["trajectory_max_m"], **errors,
+        precision=map_precision(raster, world_obj, sim.start), recall=recall, seen_wall_m=seen,
+        update_ms_median=stats["update_cpu_ms"]["median"],
+        update_ms_p90=stats["update_cpu_ms"]["p90"], update_ms_max=stats["update_cpu_ms"]["max"],
+        loop_closure_ms_median=stats["loop_closed_cpu_ms"]["median"],
+        loop_closure_ms_max=stats["loop_closed_cpu_ms"]["max"], statistics=stats,
+        real_time_factor=sim.time / run.wall_time if run.wall_time > 0 else math.inf,
+        cpu_real_time_factor=sim.time / run.cpu_time if run.cpu_time > 0 else math.inf,
+        estimate=rows.tolist() if record else [])
+
+
+@dataclass
+class _Recording:
+    """Per accepted scan: the true pose, [stamp, x, y, theta] of the estimate, the odometry."""
+
+    truth: list = field(default_factory=list)
+    estimate: list = field(default_factory=list)
+    odometry: list = field(default_factory=list)
+    slam_time: float = 0.0  # wall seconds inside Mapper.update
+    wall_time: float = 0.0
+    cpu_time: float = 0.0
+
+
+def _explore(sim: Simulator, controller, mapper, odometry: DriftingOdometry, hits: RayHits,
+             duration: float) -> _Recording:
+    """The episode's loop: control every dt, the newest odometry, every new scan mapped."""
+    prof = sim.profile
+    run = _Recording()
+    n_steps = int(round(float(duration) / sim.dt))
+    next_odom = 0.0
+    z_scan, z_v, z_w = sim.measure()
+    held_v, held_w = z_v, z_w
+    held_odom = odometry.step(sim.odometry_pose, sim.dt)
+    scan_time = sim.scan_time
+
+    def feed(ranges: np.ndarray, stamp: float) -> None:
+        started = time.perf_counter()
+        result = mapper.update(Scan(ranges, prof.angle_min, prof.angle_increment,
+                                    prof.range_min, prof.range_max), held_odom, stamp)
+        run.slam_time += time.perf_counter() - started
+        if not result.status.startswith("rejected"):
+            run.truth.append(sim.pose)
+            run.estimate.append((stamp, *result.pose))
+            run.odometry.append(held_odom)
+            hits.add(*sim.lidar_position, sim.pose[2])
+
+    wall_start, cpu_start = time.perf_counter(), time.process_time()
+    feed(z_scan, 0.0)
+    for _ in range(n_steps):
+        v, w = controller.compute_commands(z_scan, held_v, held_w)
+        z_scan, z_v, z_w = sim.step(v, w)
+        odom_now = odometry.step(sim.odometry_pose, sim.dt)
+        if prof.odom_period is None or sim.time >= next_odom - 1e-9:
+            held_v, held_w, held_odom = z_v, z_w, odom_now
+            if prof.odom_period is not None:
+                while next_odom <= sim.time + 1e-9:
+                    next_odom += prof.odom_period
+        if sim.scan_time != scan_time:
+            scan_time = sim.scan_time
+            feed(z_scan, scan_time)
+    run.wall_time = time.perf_counter() - wall_start
+    run.cpu_time = time.process_time() - cpu_start
+    return run
+
+
+__all__ = ["DriftingOdometry", "MappingResult", "OdometryDrift", "TYPICAL_DRIFT",
+           "run_mapping_episode"]

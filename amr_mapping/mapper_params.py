@@ -1,0 +1,154 @@
+"""The Mapper's parameters: name -> (default, description with units), and their checking.
+
+No rclpy import; the slam node declares each as a ROS parameter. The defaults map the bundled
+worlds with the `turtlebot3` profile (LDS-01: 360 rays, 3.5 m, 1 cm noise, 5 Hz).
+"""
+from __future__ import annotations
+
+from typing import Any
+
+from amr_common.parameter_table import finite, table_values
+
+# name: (default, description)
+PARAMETERS: dict[str, tuple[Any, str]] = {
+    # --- sensor
+    "lidar_offset_x_m": (0.0, "Forward position of the LiDAR relative to the robot centre [m] "
+                              "(-0.032 on a real Burger; the run scripts set the profile's)."),
+    "max_range_m": (3.5, "Returns farther than this are not used [m] (the scan's own "
+                         "range_max applies as well)."),
+    "min_points": (30, "Scans with fewer valid returns are not matched: the pose follows the "
+                       "odometry."),
+    # --- occupancy grid
+    "resolution_m": (0.02, "Cell size of the map [m]."),
+    "max_map_cells": (25_000_000, "Most cells a grid may grow to (4 bytes each; 25 M = a "
+                                  "100 m x 100 m map at 2 cm). Rays beyond are dropped, with a "
+                                  "warning."),
+    "log_odds_hit": (0.9, "Log-odds added to the cell a ray ends in."),
+    "log_odds_miss": (0.4, "Log-odds taken from each cell a ray crosses."),
+    "occupied_log_odds": (0.6, "A cell is occupied above this log-odds (0.6 = p 0.65, "
+                               "map_saver's occupied_thresh)."),
+    "occupied_min_hit_share": (0.2, "... and has at least this share of the hits of the "
+                                    "most-hit cell around it (3 x 3): range noise spreads a few "
+                                    "hits beside each wall, also behind it where no ray clears "
+                                    "them."),
+    "free_log_odds": (-0.4, "A cell is free below this log-odds; between the two: unknown."),
+    "miss_stop_m": (0.02, "Rays clear cells only up to this far short of their end [m]: "
+                          "grazing rays then do not erode the wall they end on."),
+    # --- front end: keyframes and scan-to-map matching
+    "keyframe_distance_m": (0.1, "A scan becomes a keyframe (inserted into the map and the "
+                                 "pose graph) after the robot moved this far [m] ..."),
+    "keyframe_angle_rad": (0.1, "... or turned this much [rad] since the last keyframe."),
+    "local_map_keyframes": (40, "Scans are matched against a map of this many latest "
+                                "keyframes (older ones are joined through loop closures)."),
+    "search_linear_m": (0.1, "Half-width of the correlative search in x and y around the "
+                              "odometry prediction [m]."),
+    "search_angular_rad": (0.08, "Half-width of the correlative search in heading [rad]."),
+    "smear_sigma_m": (0.03, "Standard deviation of the Gaussian that smooths the map for "
+                            "scoring [m]."),
+    "prior_sigma_m": (0.1, "The search's score is weighted by exp(-d^2 / 2 sigma^2) for a "
+                           "distance d from the odometry prediction [m] ..."),
+    "prior_sigma_rad": (0.1, "... and likewise for the heading difference [rad]."),
+    "odometry_sigma_m": (0.005, "Standard deviation of the odometry's motion between two "
+                                "scans, translation [m], plus ..."),
+    "odometry_sigma_per_m": (0.05, "... this share of the distance moved [m/m]; weighs the "
+                                   "odometry against the scan in the sub-cell refinement."),
+    "odometry_sigma_rad": (0.005, "The same for rotation [rad], plus ..."),
+    "odometry_sigma_per_rad": (0.05, "... this share of the angle turned [rad/rad]."),
+    "point_sigma_m": (0.015, "Standard deviation of a scan point about the wall line of its "
+                             "map cell, in the sub-cell refinement [m]."),
+    "correlative_search": ("branch_and_bound", "How the correlative search finds its optimum: "
+                                               "'branch_and_bound' (compiled), or "
+                                               "'exhaustive' (every pose scored with numpy: the "
+                                               "same optimum, for benchmarks)."),
+    "min_match_score": (0.35, "Matches scoring below this (mean smoothed-map value under the "
+                              "points, 0..1) are rejected: the pose follows the odometry."),
+    # --- back end: pose graph and loop closure
+    "loop_closure": (True, "Search for loop closures (off: the pose graph is a chain)."),
+    "loop_search_radius_m": (1.0, "Earlier keyframes within this distance of the current "
+                                  "estimate are loop-closure candidates [m] ..."),
+    "loop_min_travel_m": (5.0, "... if the robot travelled at least this far since [m]."),
+    "loop_chain_keyframes": (8, "The candidate's map: this many keyframes on each side of it."),
+    "loop_window_m": (0.3, "Half-width of the loop-closure search in x and y [m]."),
+    "loop_window_rad": (0.25, "Half-width of the loop-closure search in heading [rad]."),
+    "loop_min_score": (0.55, "A loop-closure match must score at least this ..."),
+    "loop_ambiguity_ratio": (0.92, "... and the best match farther than "
+                                   "loop_ambiguity_distance_m away must score below this share "
+                                   "of it (no closure along a featureless corridor)."),
+    "loop_ambiguity_distance_m": (0.1, "See loop_ambiguity_ratio [m]."),
+    "loop_interval_keyframes": (10, "Loop closure is tried every this many keyframes."),
+    "sequential_sigma_m": (0.01, "Standard deviation of a chain link between consecutive "
+                                 "keyframes, translation [m] ..."),
+    "sequential_sigma_rad": (0.005, "... and rotation [rad]."),
+    "loop_sigma_m": (0.02, "Standard deviation of a loop-closure link, translation [m] ..."),
+    "loop_sigma_rad": (0.01, "... and rotation [rad] (Huber-robust)."),
+    "rerender_tolerance_m": (0.002, "After an optimization, keyframes that moved more than "
+                                    "this [m] ..."),
+    "rerender_tolerance_rad": (0.002, "... or turned more than this [rad] are redrawn in the "
+                                      "map."),
+}
+
+_INTEGERS = {"min_points", "max_map_cells", "local_map_keyframes", "loop_chain_keyframes",
+             "loop_interval_keyframes"}
+_BOOLEANS = {"loop_closure"}
+_CHOICES = {"correlative_search": ("branch_and_bound", "exhaustive")}
+_MAY_BE_NEGATIVE = {"lidar_offset_x_m", "free_log_odds"}
+_MAY_BE_ZERO = {"miss_stop_m", "occupied_min_hit_share", "keyframe_distance_m",
+                "keyframe_angle_rad", "min_match_score",
+                "odometry_sigma_per_m", "odometry_sigma_per_rad", "loop_min_travel_m",
+                "rerender_tolerance_m", "rerender_tolerance_rad", "occupied_log_odds"}
+
+
+def check_parameters(overrides: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Every parameter's value (defaults updated with `overrides`), checked and normalised.
+
+    Floats, ints and bools; ValueError naming every bad one.
+    """
+    values = table_values(PARAMETERS, overrides, "Mapper")
+    problems = []
+    for name, value in values.items():
+        if name in _BOOLEANS:
+            if not isinstance(value, bool):
+                problems.append(f"{name} must be true or false (got {value!r})")
+            continue
+        if name in _CHOICES:
+            if value not in _CHOICES[name]:
+                problems.append(f"{name} must be one of {list(_CHOICES[name])} (got {value!r})")
+            continue
+        if not finite(value):
+            problems.append(f"{name} must be a finite number (got {value!r})")
+        elif name in _INTEGERS:
+            if int(value) != value or value < 1:
+                problems.append(f"{name} must be a positive integer (got {value!r})")
+            else:
+                values[name] = int(value)
+        elif name not in _MAY_BE_NEGATIVE and (value < 0.0 or (value == 0.0
+                                                                and name not in _MAY_BE_ZERO)):
+            problems.append(f"{name} must be {'>= 0' if name in _MAY_BE_ZERO else '> 0'} "
+                            f"(got {value!r})")
+        else:
+            values[name] = float(value)
+    for name in ("min_match_score", "loop_min_score", "loop_ambiguity_ratio",
+                 "occupied_min_hit_share"):
+        if isinstance(values[name], float) and values[name] > 1.0:
+            problems.append(f"{name} must be in [0, 1] (got {values[name]!r})")
+    if isinstance(values["free_log_odds"], float) and \
+            isinstance(values["occupied_log_odds"], float) and \
+            not values["free_log_odds"] < values["occupied_log_odds"]:
+        problems.append(f"free_log_odds ({values['free_log_odds']}) must be below "
+                        f"occupied_log_odds ({values['occupied_log_odds']})")
+    if isinstance(values["resolution_m"], float) and \
+            isinstance(values["smear_sigma_m"], float) and \
+            values["smear_sigma_m"] > 10.0 * values["resolution_m"]:
+        problems.append(f"smear_sigma_m ({values['smear_sigma_m']}) must be at most 10 cells "
+                        f"({10.0 * values['resolution_m']:g} m)")
+    if problems:
+        raise ValueError("Mapper: " + "; ".join(problems))
+    return values
+
+
+def parameter_descriptions() -> dict[str, tuple[Any, str]]:
+    """Name -> (default, description) of every parameter."""
+    return dict(PARAMETERS)
+
+
+__all__ = ["PARAMETERS", "check_parameters", "parameter_descriptions"]

@@ -1,0 +1,66 @@
+"""A LaserScan-like input as points in the robot frame, with the unusable returns left out.
+
+The scan is any object with `ranges`, `angle_min`, `angle_increment`, `range_min` and
+`range_max` (sensor_msgs/LaserScan, or `Scan` below). The geometry comes from each scan itself,
+never from a fixed ray count: the LDS-02 changes its count and angles from scan to scan.
+A return is used when it is finite, > 0, within [range_min, range_max] and within max_range
+(0.0 is the LDS-01's "no return", NaN the LDS-02's).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+import numpy as np
+
+MAX_RAYS = 100_000  # more rays than any 2D LiDAR gives: refused as malformed
+
+
+@dataclass(frozen=True)
+class Scan:
+    """The fields of a sensor_msgs/LaserScan the mapper reads."""
+
+    ranges: Sequence[float] | np.ndarray
+    angle_min: float
+    angle_increment: float
+    range_min: float
+    range_max: float
+
+
+class ScanError(ValueError):
+    """A scan whose geometry or ranges cannot be used at all."""
+
+
+def scan_points(scan: Any, lidar_offset_x: float, max_range: float) -> np.ndarray:
+    """(N, 2) float64 points of the usable returns in the robot frame (LiDAR at lidar_offset_x).
+
+    Raises ScanError for a scan that is not a scan: non-numeric or non-finite geometry,
+    angle_increment 0, ranges that are not a flat list of numbers, more than MAX_RAYS rays.
+    """
+    try:
+        angle_min = float(scan.angle_min)
+        increment = float(scan.angle_increment)
+        range_min = float(scan.range_min)
+        range_max = float(scan.range_max)
+        ranges = np.asarray(scan.ranges, dtype=np.float64)
+    except (AttributeError, TypeError, ValueError) as exc:
+        raise ScanError(f"not a usable scan ({exc})") from None
+    if not all(math.isfinite(v) for v in (angle_min, increment, range_min)) or \
+            math.isnan(range_max) or increment == 0.0:
+        raise ScanError(f"unusable scan geometry: angle_min {angle_min}, angle_increment "
+                        f"{increment}, range_min {range_min}, range_max {range_max}")
+    if ranges.ndim != 1 or ranges.size > MAX_RAYS:
+        raise ScanError(f"ranges must be a flat list of at most {MAX_RAYS} numbers "
+                        f"(got shape {ranges.shape})")
+    upper = min(range_max, max_range)
+    with np.errstate(invalid="ignore"):
+        usable = np.isfinite(ranges) & (ranges > 0.0) & (ranges >= range_min) & \
+            (ranges <= upper)
+    index = np.flatnonzero(usable)
+    angles = angle_min + increment * index
+    r = ranges[index]
+    return np.column_stack([lidar_offset_x + r * np.cos(angles), r * np.sin(angles)])
+
+
+__all__ = ["MAX_RAYS", "Scan", "ScanError", "scan_points"]

@@ -1,0 +1,116 @@
+#!/usr/bin/env python3
+"""Benchmarks of the SLAM Mapper, each against the plain numpy reference of the same matcher.
+
+The reference is the Mapper with `correlative_search: exhaustive`: every candidate pose of the
+correlative search scored with numpy (the same optimum as the compiled branch and bound, which
+tests/test_mapping_kernels.py checks); everything else is the same code, fed the same scans.
+1. One SLAM update (scan-to-map match + grid update when the scan is a keyframe), 360 rays,
+   2 cm cells: median CPU ms over a 60 s lab02 session (target <= 5 ms).
+2. A loop closure (candidate search, correlative match over the loop window, ambiguity check,
+   iSAM2 optimization, local map redraw) in a session on twin_maze, the 2.4 m x 2.4 m maze:
+   median and worst CPU ms of the closures (target <= 100 ms).
+3. A headless mapping episode (simulator + wall follower + Mapper), lab02, 300 s: simulated
+   seconds per CPU second (target >= 50x real time); the reference over 60 s.
+All with the `turtlebot3` profile (LDS-01 at 5 Hz) and the episode's typical odometry drift.
+CPU times are this thread's / process's (time.thread_time / process_time): on a shared machine
+the wall clock also counts waiting for a CPU; wall-clock figures are printed alongside.
+
+Usage: .venv/bin/python scripts/bench_mapping.py [--quick]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from amr_evaluation.mapping_episode import run_mapping_episode  # noqa: E402
+
+TARGET_UPDATE_MS = 5.0
+TARGET_LOOP_MS = 100.0
+TARGET_REAL_TIME = 50.0
+SEARCHES = ("branch_and_bound", "exhaustive")
+
+
+def _session(world: str, duration: float, search: str):
+    """A mapping episode with one search; (result, Mapper statistics, wall seconds)."""
+    started = time.perf_counter()
+    result = run_mapping_episode(world, profile="turtlebot3", seed=0, duration=duration,
+                                 mapper_params={"correlative_search": search})
+    return result, result.statistics, time.perf_counter() - started
+
+
+def bench_update(duration: float) -> dict:
+    figures = {}
+    for search in SEARCHES:
+        _, stats, _ = _session("lab02", duration, search)
+        figures[search] = {"cpu_median": stats["update_cpu_ms"]["median"],
+                           "cpu_p90": stats["update_cpu_ms"]["p90"],
+                           "wall_median": stats["update_ms"]["median"],
+                           "updates": stats["updates"], "keyframes": stats["keyframes"]}
+    figures["ratio"] = figures["exhaustive"]["cpu_median"] / \
+        figures["branch_and_bound"]["cpu_median"]
+    return figures
+
+
+def bench_loop_closure(duration: float) -> dict:
+    figures = {}
+    for search in SEARCHES:
+        _, stats, _ = _session("twin_maze", duration, search)
+        closed, cpu = stats["loop_closed_ms"], stats["loop_closed_cpu_ms"]
+        figures[search] = {"closures": closed["count"], "attempts": stats["loop_attempts"],
+                           "cpu_median": cpu["median"], "cpu_max": cpu["max"],
+                           "wall_median": closed["median"], "wall_max": closed["max"],
+                           "attempt_cpu_median": stats["loop_cpu_ms"]["median"]}
+    figures["ratio"] = figures["exhaustive"]["cpu_median"] / \
+        max(figures["branch_and_bound"]["cpu_median"], 1e-9)
+    return figures
+
+
+def bench_episode(duration: float, reference_duration: float) -> dict:
+    figures = {}
+    for search, seconds in (("branch_and_bound", duration), ("exhaustive", reference_duration)):
+        result, _, _ = _session("lab02", seconds, search)
+        figures[search] = {"duration_s": seconds, "cpu_real_time": result.cpu_real_time_factor,
+                           "wall_real_time": result.real_time_factor,
+                           "slam_share_of_wall": result.slam_wall_time_s / result.wall_time_s}
+    figures["ratio"] = figures["branch_and_bound"]["cpu_real_time"] / \
+        figures["exhaustive"]["cpu_real_time"]
+    return figures
+
+
+def main(argv=None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="shorter sessions")
+    args = parser.parse_args(argv)
+    run_mapping_episode("lab02", duration=2.0)  # compile / load the kernels from the cache
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    u = bench_update(20.0 if args.quick else 60.0)
+    b, r = u["branch_and_bound"], u["exhaustive"]
+    print(f"SLAM update (match + grid), 360 rays, 2 cm, lab02: median {b['cpu_median']:.2f} ms "
+          f"CPU (p90 {b['cpu_p90']:.2f}, wall median {b['wall_median']:.2f}; {b['updates']} "
+          f"updates, {b['keyframes']} keyframes) vs numpy exhaustive search "
+          f"{r['cpu_median']:.1f} ms: {u['ratio']:.0f}x (target <= {TARGET_UPDATE_MS:g} ms)")
+    c = bench_loop_closure(60.0 if args.quick else 120.0)
+    b, r = c["branch_and_bound"], c["exhaustive"]
+    print(f"loop closure (search + optimization), twin_maze 2.4 m: median {b['cpu_median']:.1f} "
+          f"ms CPU, worst {b['cpu_max']:.1f} (wall {b['wall_median']:.1f} / {b['wall_max']:.1f}"
+          f"; {b['closures']} closures in {b['attempts']} attempts, an attempt "
+          f"{b['attempt_cpu_median']:.1f} ms) vs numpy exhaustive search {r['cpu_median']:.0f} "
+          f"ms: {c['ratio']:.0f}x (target <= {TARGET_LOOP_MS:g} ms)")
+    e = bench_episode(*((60.0, 20.0) if args.quick else (300.0, 60.0)))
+    b, r = e["branch_and_bound"], e["exhaustive"]
+    print(f"mapping episode lab02 {b['duration_s']:.0f} s: {b['cpu_real_time']:.0f}x real time "
+          f"per CPU second (wall {b['wall_real_time']:.0f}x; SLAM "
+          f"{100 * b['slam_share_of_wall']:.0f} % of the loop) vs numpy exhaustive search "
+          f"{r['cpu_real_time']:.1f}x over {r['duration_s']:.0f} s: {e['ratio']:.0f}x "
+          f"(target >= {TARGET_REAL_TIME:g}x)")
+    print(f"load average {load:.1f} on {os.cpu_count()} cores")
+    return {"update": u, "loop_closure": c, "episode": e, "load": load}
+
+
+if __name__ == "__main__":
+    main()

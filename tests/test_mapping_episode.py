@@ -1,0 +1,102 @@
+"""Headless mapping episodes and their figures (trajectory error, map precision and recall)."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from amr_common.map_raster import Raster, rasterize_world
+from amr_common.world import World
+from amr_evaluation.mapping_episode import (
+    TYPICAL_DRIFT,
+    DriftingOdometry,
+    OdometryDrift,
+    run_mapping_episode,
+)
+from amr_evaluation.mapping_metrics import (
+    RayHits,
+    map_precision,
+    map_recall,
+    trajectory_errors,
+)
+
+LIDAR = (0.0, 2 * math.pi / 360, 360, 0.12, 3.5)
+
+
+@pytest.fixture(scope="module")
+def lab02_seen():
+    world = World.load("lab02")
+    hits = RayHits(world, *LIDAR)
+    for x, y in [(1.0, -1.0), (1.0, 1.0), (-1.0, 1.0), (-1.0, -1.0), (0.6, -0.6), (0.2, 0.6)]:
+        for theta in (0.0, 1.0):
+            hits.add(x, y, theta)
+    return world, hits
+
+
+def test_a_true_map_scores_full_precision_and_recall_and_a_shifted_one_does_not(lab02_seen):
+    world, hits = lab02_seen
+    truth = rasterize_world(world, 0.02)
+    start = (0.0, 0.0, 0.0)  # map frame = world frame
+    assert map_precision(truth, world, start) == 1.0
+    recall, seen = map_recall(truth, world, start, hits)
+    assert recall == 1.0 and seen > 10.0
+    shifted = Raster(truth.values, truth.resolution,
+                     (truth.origin[0] + 0.05, truth.origin[1] + 0.05))
+    assert map_precision(shifted, world, start) < 0.5
+    assert map_recall(shifted, world, start, hits)[0] < 0.5
+    # The same map in a start frame: (1.0, -1.0, pi/2) with the raster expressed in it.
+    empty = Raster(np.full((3, 3), -1, dtype=np.int8), 0.02, (0.0, 0.0))
+    assert math.isnan(map_precision(empty, world, start))
+    assert map_recall(empty, world, start, hits)[0] == 0.0
+
+
+def test_only_walls_that_rays_hit_count_for_recall():
+    world = World.load("lab02")
+    hits = RayHits(world, *LIDAR)
+    hits.add(1.0, -1.0, math.pi / 2)  # one scan from the outer corridor's south-east corner
+    truth = rasterize_world(world, 0.02)
+    recall, seen = map_recall(truth, world, (0.0, 0.0, 0.0), hits)
+    total = float(np.hypot(*(world.segments[:, 2:] - world.segments[:, :2]).T).sum())
+    assert recall == 1.0 and 1.0 < seen < 0.5 * total
+
+
+def test_trajectory_errors_align_the_start():
+    start = (1.0, -1.0, math.pi / 2)
+    truth = np.array([start, (1.0, -0.5, math.pi / 2), (0.5, -0.5, math.pi)])
+    in_start_frame = np.array([(0.0, 0.0, 0.0), (0.5, 0.0, 0.0), (0.5, 0.5, math.pi / 2)])
+    errors = trajectory_errors(start, truth, in_start_frame)
+    assert errors["trajectory_rmse_m"] == pytest.approx(0.0, abs=1e-12)
+    off = in_start_frame + np.array([0.0, 0.03, 0.0])
+    errors = trajectory_errors(start, truth, off)
+    assert errors["trajectory_rmse_m"] == pytest.approx(0.03)
+    assert errors["trajectory_max_m"] == pytest.approx(0.03)
+
+
+def test_drifting_odometry_is_exact_without_drift_and_seeded_with_it():
+    motion = [(0.01 * k, 0.0005 * k * k, 0.02 * k) for k in range(50)]
+    exact = DriftingOdometry(None, 0)
+    assert [exact.step(m, 0.05) for m in motion] == motion
+    runs = []
+    for _ in range(2):
+        odometry = DriftingOdometry(TYPICAL_DRIFT, 7)
+        runs.append([odometry.step(m, 0.05) for m in motion])
+    assert runs[0] == runs[1]
+    final = runs[0][-1]
+    assert 0.0 < math.hypot(final[0] - motion[-1][0], final[1] - motion[-1][1]) < 0.05
+    biased = DriftingOdometry(OdometryDrift(gyro_bias_rad_s=0.01), 0)
+    for _ in range(20):
+        pose = biased.step((0.0, 0.0, 0.0), 0.05)
+    assert pose[2] == pytest.approx(19 * 0.05 * 0.01)  # standing still, the heading drifts
+
+
+@pytest.mark.slow
+def test_a_short_mapping_episode_meets_the_figures():
+    result = run_mapping_episode("lab02", profile="turtlebot3", seed=0, duration=60.0)
+    assert result.odometry_max_error_m > 0.05  # the drift is there to be corrected
+    assert result.trajectory_rmse_m <= 0.015 and result.trajectory_max_m <= 0.05
+    assert result.precision >= 0.95 and result.recall >= 0.95
+    assert result.loop_closures >= 1 and result.collisions == 0
+    assert result.scans == 301  # 5 Hz for 60 s, and the first scan
+    json.dumps(result.to_dict())  # a report can be written
