@@ -6,7 +6,9 @@ numba compiles a kernel on its first call and caches the machine code beside its
 newcomer's first `make run` spent ~15 s compiling. The kernels are compiled by what calls them,
 with the argument types they get there: short headless episodes of every kind (wall following
 on both sensor profiles, the particle filter's global localization, navigation with both
-planner algorithms and the pure pursuit) run the same kernels as the ROS nodes.
+planner algorithms and the pure pursuit, mapping, and wall following in a Nav2 map world with a
+SLAM map's speckles, which is ray-marched through its cells) run the same kernels as the ROS
+nodes.
 
 The project's old cache files are removed first: numba checks only the source file of the
 kernel it loads, not the files of the kernels that one calls, so after an edit an outdated one
@@ -31,7 +33,8 @@ REPO = Path(__file__).resolve().parent.parent
 if str(REPO) not in sys.path:  # run from a checkout without installing
     sys.path.insert(0, str(REPO))
 
-PACKAGES = ("amr_common", "amr_sim", "amr_control", "amr_localization", "amr_planning")
+PACKAGES = ("amr_common", "amr_sim", "amr_control", "amr_localization", "amr_planning",
+            "amr_mapping")
 CACHE_SUFFIXES = (".nbi", ".nbc")
 
 
@@ -77,10 +80,32 @@ def kernels(repo: Path = REPO) -> dict[str, object]:
     return found
 
 
+def speckled_map_world():
+    """lab02 as a 2 cm Nav2 map with a SLAM map's speckles: a map world that is ray-marched."""
+    import numpy as np
+
+    from amr_common.map_file import world_as_map
+    from amr_common.map_raster import FREE, OCCUPIED, Raster
+    from amr_common.world import MARCH_ABOVE_SEGMENTS, World
+    lab02 = World.load("lab02")
+    raster, extras = world_as_map(lab02)
+    values = raster.values.copy()
+    xs, ys = raster.centres()
+    start_x, start_y, _ = lab02.starts["outer"]
+    far = np.hypot(xs - start_x, ys - start_y) > 0.3
+    speckles = (values == FREE) & far & (np.arange(values.size).reshape(values.shape) % 97 == 0)
+    values[speckles] = OCCUPIED
+    world = World.from_raster(Raster(values, raster.resolution, raster.origin), name="lab02",
+                              starts={"outer": lab02.starts["outer"]})
+    assert len(world.segments) > MARCH_ABOVE_SEGMENTS and world.march_grid is not None
+    return world
+
+
 def warm_up() -> None:
     """Run what calls every kernel: short headless episodes of each kind."""
     from amr_evaluation.episode import run_episode
     from amr_evaluation.localization_episode import run_localization_episode
+    from amr_evaluation.mapping_episode import run_mapping_episode
     from amr_evaluation.navigation_episode import run_navigation_episode
     for profile, algorithm in (("ideal", "astar"), ("turtlebot3", "wavefront")):
         run_episode("lab02", "outer", profile=profile, duration=3.0, record_trajectory=False)
@@ -89,6 +114,10 @@ def warm_up() -> None:
                                planner_params={"algorithm": algorithm})
         run_localization_episode("twin_maze_small", None, profile=profile, duration=3.0,
                                  record=False)
+    run_mapping_episode("lab02", "outer", profile="turtlebot3", duration=3.0)
+    map_world = speckled_map_world()
+    run_episode(map_world, "outer", profile="ideal", duration=1.0, record_trajectory=False)
+    run_localization_episode(map_world, "outer", profile="ideal", duration=1.0, record=False)
 
 
 def main(argv: list[str] | None = None) -> int:
