@@ -123,21 +123,46 @@ class ParticleFilter:
         self._set_particles(np.concatenate([poses, uniform]))
         self._seed_pending = False
 
-    def initialize_pose(self, pose, sigma=None) -> None:
+    def initialize_pose(self, pose, sigma=None) -> tuple[float, float, float]:
         """Re-initialize around a pose: Gaussian particles, not localized.
 
         Gaussian around pose (x, y, theta) with sigma [sx, sy, stheta] (default
-        initial_pose_sigma): not localized until the scans confirm it.
+        initial_pose_sigma), each clamped to the map (bounded_sigma): not localized until the
+        scans confirm it. Returns the sigma used. ValueError, with the state unchanged, for
+        values that are not finite or a pose where the robot cannot be (robot_can_be_at).
         """
         x, y, theta = (float(v) for v in pose)
-        sx, sy, st = (float(v) for v in (sigma if sigma is not None
-                                          else self.params["initial_pose_sigma"]))
-        if not all(math.isfinite(v) for v in (x, y, theta, sx, sy, st)):
-            raise ValueError(f"initial pose {pose} / sigma {sigma} is not finite")
-        self._set_particles(gaussian_poses([(x, y, theta)], (sx, sy, st),
+        sigma = self.params["initial_pose_sigma"] if sigma is None else sigma
+        wanted = tuple(float(v) for v in sigma)
+        if not all(math.isfinite(v) for v in (x, y, theta)):
+            raise ValueError(f"initial pose ({x}, {y}, {theta}) is not finite")
+        if len(wanted) != 3 or not all(math.isfinite(v) and v >= 0.0 for v in wanted):
+            raise ValueError(f"initial pose sigma {list(wanted)} must be 3 finite numbers >= 0")
+        if not self.robot_can_be_at(x, y):
+            where = "on or too close to a wall" if self.world.contains(x, y) else \
+                "outside the map's free space"
+            raise ValueError(f"initial pose ({x:.3f}, {y:.3f}) is {where}: the robot's centre "
+                             f"must be inside the map, at least "
+                             f"{ROBOT_RADIUS - _WALL_SLACK_M:.3f} m from every wall")
+        used = self.bounded_sigma(wanted)
+        if used != wanted:
+            log.warning("initial pose sigma %s clamped to the map: %s", _rounded(wanted),
+                        _rounded(used))
+        self._set_particles(gaussian_poses([(x, y, theta)], used,
                                            self.params["tracking_particles"], self.rng))
         self.estimate = (x, y, math.atan2(math.sin(theta), math.cos(theta)))
         self.events.append(("pose", self.total_updates))
+        return used
+
+    def bounded_sigma(self, sigma) -> tuple[float, float, float]:
+        """The sigma (sx m, sy m, stheta rad) clamped to the map: its width, its height, pi.
+
+        Wider Gaussians put nearly every particle off the map (a global search does better),
+        and their spread only costs memory and time.
+        """
+        xmin, ymin, xmax, ymax = self.world.bounds
+        limits = (xmax - xmin, ymax - ymin, math.pi)
+        return tuple(min(float(s), limit) for s, limit in zip(sigma, limits))
 
     def _set_particles(self, particles: np.ndarray) -> None:
         self._seed_pending = False
@@ -375,6 +400,10 @@ class ParticleFilter:
     def particle_count(self) -> int:
         """Particles now (the adaptive count)."""
         return len(self.particles)
+
+
+def _rounded(values) -> list:
+    return [float(f"{v:.3g}") for v in values]
 
 
 __all__ = ["ParticleFilter"]

@@ -364,7 +364,13 @@ class ParticleFilterNode(GuardedLifecycleNode):
         publisher.publish(message)
 
     def _on_initial_pose(self, message: PoseWithCovarianceStamped) -> None:
-        """Re-initialize around a 2D pose estimate (sigmas from its covariance when usable)."""
+        """Re-initialize around a 2D pose estimate (sigmas from its covariance when usable).
+
+        Sigmas wider than the map are clamped to it (ParticleFilter.bounded_sigma); a pose or
+        covariance that is not finite, in another frame, or where the robot cannot be (on a
+        wall, outside the map) is ignored with a logged reason: the filter keeps its state.
+        Zero or negative variances mean "not given": initial_pose_sigma is used.
+        """
         if self.filter is None:
             return
         frame = message.header.frame_id
@@ -377,17 +383,30 @@ class ParticleFilterNode(GuardedLifecycleNode):
         except ValueError as exc:
             self._warn(f"/initialpose ignored: {exc}")
             return
-        if not (math.isfinite(x) and math.isfinite(y)) or \
-                not self.filter.world.contains(x, y):
-            self._warn(f"/initialpose ({x:.2f}, {y:.2f}) is outside the free space: ignored")
-            return
         cov = np.asarray(message.pose.covariance, dtype=float)
-        sigma = None
-        if cov.size == 36 and np.all(np.isfinite(cov[[0, 7, 35]])) and np.all(cov[[0, 7, 35]] > 0):
-            sigma = np.sqrt(cov[[0, 7, 35]])
-        self.filter.initialize_pose((x, y, theta), sigma)
-        self.get_logger().info(f"re-initialized around ({x:.2f}, {y:.2f}, {theta:.2f}) from "
-                               "/initialpose: not localized until the scans confirm it")
+        variances = cov[[0, 7, 35]] if cov.size == 36 else np.zeros(3)
+        if not all(math.isfinite(v) for v in (x, y, theta, *variances)):
+            self._warn(f"/initialpose ignored: pose ({x}, {y}, {theta}) or variances "
+                       f"{variances.tolist()} not finite")
+            return
+        sigma = np.sqrt(variances) if np.all(variances > 0.0) else None
+        try:
+            used = self.filter.initialize_pose((x, y, theta), sigma)
+        except ValueError as exc:
+            self._warn(f"/initialpose ignored: {exc}")
+            return
+        clamped = sigma is not None and not np.allclose(used, sigma, rtol=0.0, atol=0.0)
+        note = f" (clamped to the map from {_rounded(sigma)})" if clamped else ""
+        text = (f"re-initialized around ({x:.2f}, {y:.2f}, {theta:.2f}) from /initialpose, "
+                f"sigma {_rounded(used)}{note}: not localized until the scans confirm it")
+        if clamped:
+            self.get_logger().warning(text)
+        else:
+            self.get_logger().info(text)
+
+
+def _rounded(values) -> list[float]:
+    return [float(f"{float(v):.3g}") for v in values]
 
 
 def _fill_pose(pose: Pose, xyt) -> None:

@@ -135,7 +135,7 @@ def _vector(value: Any, lengths: tuple[int, ...], name: str, problems: list[str]
     except (TypeError, ValueError):
         ok, items = False, ()
     if not ok:
-        sizes = " or ".join(f"{n} numbers" for n in lengths)
+        sizes = " or ".join("[]" if n == 0 else f"{n} finite numbers" for n in lengths)
         problems.append(f"{name} must be {sizes} (got {value!r})")
         return None
     return items

@@ -312,3 +312,56 @@ def test_adaptive_count_shrinks_when_tracking():
     assert math.hypot(pf.estimate[0] - pose[0], pf.estimate[1] - pose[1]) < 0.03
     assert pf.localized, "a standing robot is confirmed by repeated updates"
     assert ParticleFilter(world).particle_count == 8000
+
+
+# --- hostile initial poses (issue 18, item 1) ------------------------------------------------
+
+def test_dominant_cluster_of_particles_spread_over_kilometres():
+    """A histogram over the particles' extent must not grow with it (was a MemoryError)."""
+    from amr_localization import cluster
+    rng = np.random.default_rng(8)
+    spread = np.column_stack([rng.normal(0.0, 1e4, 2000), rng.normal(0.0, 1e4, 2000),
+                              rng.uniform(-math.pi, math.pi, 2000)])
+    spread[:300] = rng.normal([5.0, 5.0, 0.5], [0.01, 0.01, 0.02], (300, 3))  # one tight group
+    found = dominant_cluster(spread, np.full(2000, 1 / 2000), 0.1, 0.35)
+    assert found.pose[:2] == pytest.approx((5.0, 5.0), abs=0.01)
+    assert found.share == pytest.approx(0.15, abs=0.01)
+    assert np.all(np.isfinite(found.covariance))
+    for kernel in (cluster.cluster_kernel, cluster.cluster_python):  # the twins agree
+        members, stats = np.zeros(2000, dtype=np.bool_), np.zeros(13)
+        kernel(spread, np.full(2000, 1 / 2000), 0.1, 0.35, members, stats)
+        assert np.array_equal(members, found.members) and stats[3] == found.share
+
+
+def test_initial_pose_sigma_is_clamped_to_the_map_and_logged(caplog):
+    world = World.load("lab02")
+    x, y, theta = world.starts["inner"]
+    with caplog.at_level("WARNING", logger="amr_localization.particle_filter"):
+        pf = ParticleFilter(world, initial_pose=[x, y, theta],
+                            initial_pose_sigma=[1e6, 1e6, 1.0])
+    assert "clamped" in caplog.text
+    xmin, ymin, xmax, ymax = world.bounds
+    assert np.std(pf.particles[:, 0]) <= 1.2 * (xmax - xmin)
+    used = pf.initialize_pose((x, y, theta), (1e4, 1e300, 1e9))
+    assert used == pytest.approx((xmax - xmin, ymax - ymin, math.pi))
+    assert np.std(pf.particles[:, 1]) <= 1.2 * (ymax - ymin)
+    assert pf.initialize_pose((x, y, theta), (0.02, 0.03, 0.1)) == (0.02, 0.03, 0.1)
+
+
+@pytest.mark.parametrize("pose, reason", [((0.0, -0.8, 0.0), "wall"),  # on a wall of lab02
+                                          ((0.6, -0.73, 0.0), "wall"),  # 7 cm from one
+                                          ((5.0, 5.0, 0.0), "outside"),
+                                          ((math.nan, 0.0, 0.0), "finite"),
+                                          ((0.6, -0.6, math.inf), "finite")])
+def test_an_initial_pose_where_the_robot_cannot_be_is_refused_and_the_state_kept(pose, reason):
+    world = World.load("lab02")
+    pf = ParticleFilter(world, max_particles=500)
+    particles, events = pf.particles.copy(), list(pf.events)
+    with pytest.raises(ValueError, match=reason):
+        pf.initialize_pose(pose)
+    assert np.array_equal(pf.particles, particles) and pf.events == events
+    with pytest.raises(ValueError, match="sigma"):
+        pf.initialize_pose((0.6, -0.6, 0.0), (0.1, math.nan, 0.1))
+    if math.isfinite(pose[0]):
+        with pytest.raises(ValueError, match=reason):  # the parameter: configure fails
+            ParticleFilter(world, initial_pose=list(pose))
