@@ -17,10 +17,11 @@ Thin: messages become ParticleFilter.predict / correct calls and results become 
   /particles (geometry_msgs/PoseArray) at most every `particles_period_s` of stamp time.
 - /initialpose (RViz's and Foxglove's "2D Pose Estimate") re-initializes around that pose.
 Bad input (NaN or 0.0 everywhere, inconsistent scan geometry, non-finite odometry, stamps going
-backwards) is skipped with a throttled message, never a crash; without a usable scan for
-`max_scan_age_s` the node reports localized false. All stamps come from the messages, so the node
-works the same in lockstep (simulated stamps) and in real time; use_sim_time only changes its
-log clock.
+backwards) is skipped with a throttled message, never a crash (a jump back by more than
+max_odometry_gap_s restarts the integration from there: one stamp far in the future cannot stop
+it for good); without a usable scan for `max_scan_age_s` the node reports localized false. All
+stamps come from the messages, so the node works the same in lockstep (simulated stamps) and in
+real time; use_sim_time only changes its log clock.
 """
 from __future__ import annotations
 
@@ -226,9 +227,15 @@ class ParticleFilterNode(GuardedLifecycleNode):
             return
         dt = (stamp - last) * 1e-9
         if dt <= 0.0:
-            self.get_logger().warning(f"odometry stamp went back or repeated ({dt:+.3f} s): "
-                                      "not integrated", throttle_duration_sec=2.0)
-            self._last_odometry_ns = max(last, stamp)
+            # A late message is skipped; a jump back beyond max_odometry_gap_s (time reset, or
+            # the previous stamp was bogus, e.g. far in the future) restarts from this stamp,
+            # so one bad stamp never stops the integration for good.
+            jumped = -dt > self.node_params["max_odometry_gap_s"]
+            self.get_logger().warning(
+                f"odometry stamp went back or repeated ({dt:+.3f} s): not integrated"
+                + ("; integrating from this stamp on" if jumped else ""),
+                throttle_duration_sec=2.0)
+            self._last_odometry_ns = stamp if jumped else last
             return
         if dt > self.node_params["max_odometry_gap_s"]:
             self.get_logger().warning(f"{dt:.2f} s without odometry: the motion in the gap is "
@@ -311,7 +318,8 @@ class ParticleFilterNode(GuardedLifecycleNode):
         """The filter's flag, unless the newest usable scan is older than max_scan_age_s."""
         if self.filter is None or not self.filter.localized or self._last_scan_ns is None:
             return False
-        return (stamp_ns - self._last_scan_ns) * 1e-9 <= self.node_params["max_scan_age_s"]
+        # abs(): a usable scan stamped after this pair (a bogus future stamp) is no evidence now
+        return abs(stamp_ns - self._last_scan_ns) * 1e-9 <= self.node_params["max_scan_age_s"]
 
     def _publish_pose(self, stamp, stamp_ns: int) -> None:
         x, y, theta = self.filter.estimate

@@ -49,9 +49,9 @@ class FakeGraph:
                                       self.amcl.append, 10)
         self.node.create_subscription(PoseArray, "/particles", self.particles.append, 10)
 
-    def publish(self, ranges=None, **scan_fields):
+    def publish(self, ranges=None, time_offset=0.0, **scan_fields):
         sim = self.sim
-        stamp = seconds_to_time(sim.time)
+        stamp = seconds_to_time(sim.time + time_offset)
         _, z_v, z_w = sim.measure()
         self.last_odometry_pose = sim.odometry_pose
         self.odometry.publish(odometry_message(stamp, "odom", "base_footprint",
@@ -244,6 +244,36 @@ def test_hostile_initialposes_are_clamped_or_refused_and_the_node_goes_on(ros):
     assert node._state_machine.current_state[1] == "active"
     print(f"\n/initialpose callback: worst {1e3 * max(seconds):.1f} ms over {len(seconds)} "
           f"hostile messages")
+
+
+def test_one_pair_stamped_far_in_the_future_does_not_stop_the_odometry(ros):
+    """After a pair stamped 11 days ahead the filter integrates odometry again at once.
+
+    The old node kept the future stamp as the newest odometry: every later message "went
+    back" and the particles stopped moving (a spinning robot lost its heading). And a future
+    scan stamp must not keep a stale estimate "localized" once the scans become unusable.
+    """
+    from amr_common.geometry import wrap_angle
+    node = make_node(ros, world="lab02", initial_pose=list(Simulator("lab02", "inner").pose),
+                     initial_pose_sigma=[0.02, 0.02, 0.05])
+    graph = FakeGraph(ros, profile="ideal")
+    bring_up(ros, node, graph)
+    step_lockstep(ros, graph, 1, v=0.0, w=0.0)
+    steps = 0
+    while not graph.poses[-1].localized and steps < 200:
+        step_lockstep(ros, graph, 1, v=0.0, w=0.0)
+        steps += 1
+    assert graph.poses[-1].localized
+    step_lockstep(ros, graph, 1, v=0.0, w=0.8, time_offset=1e6)
+    step_lockstep(ros, graph, 40, v=0.0, w=0.8)  # 1.6 rad in place
+    estimate = graph.poses[-1].pose.orientation
+    heading = 2.0 * math.atan2(estimate.z, estimate.w)
+    assert abs(wrap_angle(heading - graph.sim.pose[2])) < math.radians(3.0)
+    assert graph.poses[-1].localized
+    step_lockstep(ros, graph, 1, v=0.0, w=0.0, time_offset=1e6)
+    n = graph.sim.profile.scan_rays
+    step_lockstep(ros, graph, 30, v=0.0, w=0.0, ranges=[math.nan] * n)  # 1.5 s, no usable scan
+    assert not graph.poses[-1].localized, "no usable scan for max_scan_age_s: not localized"
 
 
 def test_particles_are_throttled(ros):
