@@ -74,6 +74,16 @@ def bring_up(ros, node, graph, path=None, poses=0):
         ros.spin_until(lambda: len(graph.commands) == k, 5.0, f"answer {k}")
 
 
+def robot_mode_with_a_path(ros):
+    """A robot-mode node (data_timeout 0.3 s, dt 0.05 s), active, with L_PATH."""
+    node = make_node(ros, simulation=False, cmd_vel_stamped=False, data_timeout=0.3, dt=0.05)
+    graph = Graph(ros, stamped=False)
+    bring_up(ros, node, graph)
+    graph.send_path(L_PATH)
+    ros.spin_until(lambda: node.pursuit.path is not None, 5.0, "the path")
+    return node, graph
+
+
 def test_lockstep_answers_every_localized_pose_once_and_no_other(ros):
     node = make_node(ros)
     graph = Graph(ros)
@@ -147,11 +157,7 @@ def test_deactivate_and_shutdown_send_zero(ros):
 
 
 def test_robot_mode_zero_on_stale_pose_and_silence_after_losing_localization(ros):
-    node = make_node(ros, simulation=False, cmd_vel_stamped=False, data_timeout=0.3, dt=0.05)
-    graph = Graph(ros, stamped=False)
-    bring_up(ros, node, graph)
-    graph.send_path(L_PATH)
-    ros.spin_until(lambda: node.pursuit.path is not None, 5.0, "the path")
+    node, graph = robot_mode_with_a_path(ros)
     for k in range(10):  # fresh localized poses at 20 Hz: the timer drives
         graph.send_pose(0.05 * k)
         ros.spin_for(0.05)
@@ -263,11 +269,7 @@ def test_a_pose_far_in_the_past_gets_zero_and_the_stream_goes_on(ros):
 
 
 def test_robot_mode_recovers_from_a_future_stamp_and_ignores_stale_poses(ros):
-    node = make_node(ros, simulation=False, cmd_vel_stamped=False, data_timeout=0.3, dt=0.05)
-    graph = Graph(ros, stamped=False)
-    bring_up(ros, node, graph)
-    graph.send_path(L_PATH)
-    ros.spin_until(lambda: node.pursuit.path is not None, 5.0, "the path")
+    node, graph = robot_mode_with_a_path(ros)
     graph.send_pose(0.05)
     ros.spin_until(lambda: graph.commands and command(graph.commands[-1])[0] > 0.0, 5.0,
                    "driving")
