@@ -194,6 +194,7 @@ class ParticleFilterNode(GuardedLifecycleNode):
         self.get_logger().info(
             f"configured: world '{world.name}' ({world.source}), {mode}, {f.particle_count} "
             f"particles, {filter_params['beams']} beams, expected-range table "
+            f"{100 * f.table.resolution:g} cm x {f.table.angles} directions, "
             f"{f.table.nbytes / 1e6:.1f} MB, LiDAR at x = {filter_params['lidar_offset_x_m']} m")
         return TransitionCallbackReturn.SUCCESS
 
