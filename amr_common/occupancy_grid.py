@@ -69,13 +69,7 @@ class OccupancyGrid:
                                                 and resolution > 0):
             raise ValueError(f"resolution must be a positive number of metres, got {resolution!r}")
         resolution = float(resolution)
-        pad = 1 if padding_m is None else max(0, math.ceil(round(padding_m / resolution, 6)))
-        xmin, ymin, xmax, ymax = world.bounds
-        # Index of the cell whose centre is at k * resolution; rounding first so that -1.2 / 0.02
-        # (= -60.000000000000014 in floating point) counts as -60.
-        first = [math.floor(round(v / resolution, 6)) - pad for v in (xmin, ymin)]
-        last = [math.ceil(round(v / resolution, 6)) + pad for v in (xmax, ymax)]
-        width, height = last[0] - first[0] + 1, last[1] - first[1] + 1
+        first, (height, width) = _first_cell_and_shape(world, resolution, padding_m)
         check_grid_size(float(width), float(height), resolution,
                         f"{world.source}: the occupancy grid", "use a larger resolution")
         xs = (first[0] + np.arange(width)) * resolution
@@ -145,6 +139,22 @@ class OccupancyGrid:
         return values
 
 
+def grid_shape(world: World, resolution: float, padding_m: float | None = None
+               ) -> tuple[int, int]:
+    """(height, width) of OccupancyGrid.from_world(world, resolution, padding_m), not built."""
+    return _first_cell_and_shape(world, float(resolution), padding_m)[1]
+
+
+def _first_cell_and_shape(world: World, resolution: float, padding_m: float | None):
+    pad = 1 if padding_m is None else max(0, math.ceil(round(padding_m / resolution, 6)))
+    xmin, ymin, xmax, ymax = world.bounds
+    # Index of the cell whose centre is at k * resolution; rounding first so that -1.2 / 0.02
+    # (= -60.000000000000014 in floating point) counts as -60.
+    first = [math.floor(round(v / resolution, 6)) - pad for v in (xmin, ymin)]
+    last = [math.ceil(round(v / resolution, 6)) + pad for v in (xmax, ymax)]
+    return first, (last[1] - first[1] + 1, last[0] - first[0] + 1)
+
+
 def wall_cells(segments: np.ndarray, origin: tuple[float, float], resolution: float,
                shape: tuple[int, int]) -> np.ndarray:
     """(height, width) bool: the cells some wall passes through (walked in quarter cells)."""
@@ -159,4 +169,4 @@ def wall_cells(segments: np.ndarray, origin: tuple[float, float], resolution: fl
     return cells
 
 
-__all__ = ["OccupancyGrid", "FREE", "OCCUPIED", "UNKNOWN", "wall_cells"]
+__all__ = ["OccupancyGrid", "FREE", "OCCUPIED", "UNKNOWN", "grid_shape", "wall_cells"]

@@ -11,6 +11,11 @@ Thin: the algorithm is amr_control.pure_pursuit.PurePursuit. Handover with the w
   `data_timeout` (stale: the robot must not keep moving on old data).
 Losing localization: the pursuit stops commanding (in robot mode after one zero command) and
 forgets its path; the planner replans from the relocalized pose and the new /path is followed.
+Stamps: a /pose older than the newest one is not used (lockstep: answered with zero; robot mode:
+the newest stays, aging out after data_timeout). Older by more than data_timeout, it is taken as
+a jump back in time (or the newest stamp was bogus, e.g. far in the future): still not used, but
+later poses are compared with it, so one bad stamp never stops the pursuit for good. On a loss,
+the path is forgotten unless it was planned (stamped) at most data_timeout after the lost pose.
 /scan gives the footprint clearance for the proximity slow-down (ignored when stale).
 Safety as the wall follower: a zero command on deactivate, cleanup and shutdown (Ctrl-C
 included), never a non-finite value.
@@ -82,7 +87,8 @@ class PurePursuitNode(CommandingNode):
         self._timer = None
         self._localized = False
         self._latest = None  # robot mode: (pose, stamp ns, arrival Time) of the newest /pose
-        self._last_stamp = None  # newest answered /pose stamp (lockstep)
+        self._newest_stamp_ns: int | None = None  # newest /pose stamp (see _in_order)
+        self._last_stamp = None  # ... as a message stamp: the zero on the way down carries it
         self._path_stamp_ns = -1
         self._scan: tuple[LaserScan | None, Any] = (None, None)  # (newest, arrival Time)
 
@@ -198,25 +204,45 @@ class PurePursuitNode(CommandingNode):
             self.get_logger().warning("/pose not finite: commanding zero",
                                       throttle_duration_sec=2.0)
             pose = None
+        in_order = self._in_order(stamp_ns)
+        if self._newest_stamp_ns == stamp_ns:
+            self._last_stamp = message.header.stamp
         if not self.simulation:
-            self._latest = (pose, stamp_ns, self.get_clock().now())
+            if self._newest_stamp_ns == stamp_ns:  # the newest, or a jump back (then zero)
+                self._latest = (pose if in_order else None, stamp_ns, self.get_clock().now())
             return
         # Lockstep: the simulator waits for this answer, so always answer exactly once.
-        if self._last_stamp is not None and stamp_ns < time_to_nanoseconds(self._last_stamp):
-            self.get_logger().warning("/pose older than the previous one (out of order): "
-                                      "commanding zero", throttle_duration_sec=2.0)
-            self._output.publish(0.0, 0.0, message.header.stamp)
-            return
-        self._last_stamp = message.header.stamp
-        v, w = self._compute(pose) if pose is not None else (0.0, 0.0)
+        v, w = self._compute(pose) if pose is not None and in_order else (0.0, 0.0)
         self._output.publish(v, w, message.header.stamp)
+
+    def _in_order(self, stamp_ns: int) -> bool:
+        """True if a /pose with this stamp may be used: not older than the newest one.
+
+        Older by more than data_timeout: a jump back in time, or the newest stamp was bogus
+        (far in the future); not used either, but it becomes the newest, so the stream goes on.
+        """
+        newest = self._newest_stamp_ns
+        if newest is None or stamp_ns >= newest:
+            self._newest_stamp_ns = stamp_ns
+            return True
+        if (newest - stamp_ns) * 1e-9 > self.data_timeout:
+            self._newest_stamp_ns = stamp_ns
+            self.get_logger().warning(
+                f"/pose stamp jumped back {(newest - stamp_ns) * 1e-9:.3g} s: commanding zero "
+                "once, following the poses from this stamp on", throttle_duration_sec=2.0)
+        else:
+            self.get_logger().warning("/pose older than the previous one (out of order): "
+                                      "not used", throttle_duration_sec=2.0)
+        return False
 
     def _lose_localization(self, stamp, stamp_ns: int) -> None:
         self._localized = False
         self._latest = None
         self.get_logger().warning("localization lost: stopping; the wall follower takes over "
                                   "until the planner replans from the relocalized pose")
-        if self._path_stamp_ns <= stamp_ns:  # a path planned after this pose stays
+        # A path planned after this pose (from the relocalized one) stays; one stamped far
+        # beyond it is bogus and goes too.
+        if not 0 < self._path_stamp_ns - stamp_ns <= self.data_timeout * 1e9:
             self.pursuit.clear_path()
         if not self.simulation:
             self._output.publish(0.0, 0.0, self.get_clock().now().to_msg())

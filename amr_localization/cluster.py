@@ -13,6 +13,10 @@ import numpy as np
 
 from amr_common.jit import jit
 
+_DENSE_BINS_PER_PARTICLE = 8  # histogram array up to this many bins per particle (+ the minimum)
+_DENSE_BINS_MIN = 65536
+_SPARSE_BIN_LIMIT = 1 << 20  # bins per axis of the sorted keys (beyond: the last bin, 100 km)
+
 
 @dataclass
 class Cluster:
@@ -53,11 +57,34 @@ _mean_kernel = jit(_mean_of)
 _wrap_kernel = jit(_wrap)
 
 
+def _heaviest_sparse(keys, weights):
+    """The key carrying the most weight, by sorting the keys (any spread, O(n log n))."""
+    order = np.argsort(keys)
+    best_key = keys[order[0]]
+    best = -1.0
+    run = 0.0
+    for i in range(order.shape[0]):
+        p = order[i]
+        if i > 0 and keys[p] != keys[order[i - 1]]:
+            run = 0.0
+        run += weights[p]
+        if run > best:
+            best = run
+            best_key = keys[p]
+    return best_key
+
+
+_heaviest_sparse_kernel = jit(_heaviest_sparse)
+
+
 def cluster_python(particles, weights, radius, angle, members, stats):
     """Dominant cluster membership, its weighted mean and the covariance.
 
     members[p]: particle p belongs to the dominant cluster; stats = [x, y, theta, share,
     then the 3 x 3 covariance of all particles about (x, y, theta) row by row].
+    The histogram is an array over the particles' extent while that has at most
+    _DENSE_BINS_PER_PARTICLE bins per particle, else a sort of the particles' bin keys: its
+    size never grows with how far apart the particles are.
     """
     n = particles.shape[0]
     xmin = np.inf
@@ -69,19 +96,25 @@ def cluster_python(particles, weights, radius, angle, members, stats):
         xmax = max(xmax, particles[p, 0])
         ymin = min(ymin, particles[p, 1])
         ymax = max(ymax, particles[p, 1])
-    nbx = int((xmax - xmin) / radius) + 1
-    nby = int((ymax - ymin) / radius) + 1
     nbt = max(int(math.ceil(2.0 * math.pi / angle)), 1)
-    weight_of_bin = np.zeros(nbx * nby * nbt)
+    span_x = (xmax - xmin) / radius + 1.0  # floats: a huge spread must not overflow an int
+    span_y = (ymax - ymin) / radius + 1.0
+    dense = span_x * span_y * nbt <= _DENSE_BINS_PER_PARTICLE * n + _DENSE_BINS_MIN
+    nby = int(span_y) if dense else _SPARSE_BIN_LIMIT
     keys = np.empty(n, dtype=np.int64)
     for p in range(n):
         bt = min(int((particles[p, 2] + math.pi) / angle), nbt - 1)
         bt = max(bt, 0)
-        key = (int((particles[p, 0] - xmin) / radius) * nby
-               + int((particles[p, 1] - ymin) / radius)) * nbt + bt
-        keys[p] = key
-        weight_of_bin[key] += weights[p]
-    heaviest = int(np.argmax(weight_of_bin))
+        bx = min((particles[p, 0] - xmin) / radius, _SPARSE_BIN_LIMIT - 1.0)
+        by = min((particles[p, 1] - ymin) / radius, _SPARSE_BIN_LIMIT - 1.0)
+        keys[p] = (int(bx) * nby + int(by)) * nbt + bt
+    if dense:
+        weight_of_bin = np.zeros(int(span_x) * nby * nbt)
+        for p in range(n):
+            weight_of_bin[keys[p]] += weights[p]
+        heaviest = int(np.argmax(weight_of_bin))
+    else:
+        heaviest = _heaviest_sparse_kernel(keys, weights)
     for p in range(n):
         members[p] = keys[p] == heaviest
     x, y, theta, _ = _mean_kernel(particles, weights, members, True)

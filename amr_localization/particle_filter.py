@@ -34,18 +34,20 @@ from amr_localization.localization_check import (
     dominant_cluster,
 )
 from amr_localization.motion_model import MotionNoise, sample_motion
-from amr_localization.particle_filter_params import check_parameters
+from amr_localization.particle_filter_params import (
+    WALL_SLACK_M,
+    check_parameters,
+    check_world,
+    pose_problem,
+)
 from amr_localization.particle_sets import gaussian_poses, sample_free_poses
 from amr_localization.pose_search import PoseSearch, refine
 from amr_localization.resampling import KldResampler, effective_sample_size
 from amr_localization.scan_beams import ScanBeams
+from amr_localization.table_memory import search_stride
 from amr_localization.weighting import updated_weights
 
 log = logging.getLogger("amr_localization.particle_filter")
-
-# A particle's centre may be this much closer to a wall than the robot radius before it counts
-# as inside the wall: the table's cells are 2 cm, and the simulated robot rests ~0.5 mm deep.
-_WALL_SLACK_M = 0.02
 
 
 class ParticleFilter:
@@ -56,8 +58,13 @@ class ParticleFilter:
         p = check_parameters(params)
         self.params = p
         self.rng = np.random.default_rng(p["seed"])
-        self.table = expected_range_table(self.world, p["table_resolution_m"], p["table_angles"])
-        self._robot_ok = self.table.robot_cells(slack=_WALL_SLACK_M)
+        self.plan = check_world(self.world, p)
+        if (self.plan.resolution, self.plan.angles) != (p["table_resolution_m"],
+                                                        p["table_angles"]):
+            log.info("%s: a big map: expected-range table of %s to stay within max_memory_mb "
+                     "%g", self.world.source, self.plan.describe(), p["max_memory_mb"])
+        self.table = expected_range_table(self.world, self.plan.resolution, self.plan.angles)
+        self._robot_ok = self.table.robot_cells(slack=WALL_SLACK_M)
         self.model = BeamModel(self.table, self._robot_ok, p["lidar_offset_x_m"],
                                p["sigma_hit_m"], p["z_random"])
         self.noise = MotionNoise(p["noise_v_per_v"], p["noise_v_per_w"], p["noise_w_per_w"],
@@ -71,7 +78,8 @@ class ParticleFilter:
                                       p["max_particles"])
         self.matcher: ScanMatcher | None = None
         self.beams: ScanBeams | None = None
-        self.search = PoseSearch(self.table, self._robot_ok, p["lidar_offset_x_m"])
+        self.search = PoseSearch(self.table, self._robot_ok, p["lidar_offset_x_m"],
+                                 stride=search_stride(self.table.resolution))
         self.guard = AmbiguityGuard(p["ambiguity_match_fraction"], p["localize_match_fraction"])
         self.last_alternatives: list = []
         self._last_doubt = -10**9  # total_updates at the last search for a better pose
@@ -123,21 +131,43 @@ class ParticleFilter:
         self._set_particles(np.concatenate([poses, uniform]))
         self._seed_pending = False
 
-    def initialize_pose(self, pose, sigma=None) -> None:
+    def initialize_pose(self, pose, sigma=None) -> tuple[float, float, float]:
         """Re-initialize around a pose: Gaussian particles, not localized.
 
         Gaussian around pose (x, y, theta) with sigma [sx, sy, stheta] (default
-        initial_pose_sigma): not localized until the scans confirm it.
+        initial_pose_sigma), each clamped to the map (bounded_sigma): not localized until the
+        scans confirm it. Returns the sigma used. ValueError, with the state unchanged, for
+        values that are not finite or a pose where the robot cannot be (pose_problem).
         """
         x, y, theta = (float(v) for v in pose)
-        sx, sy, st = (float(v) for v in (sigma if sigma is not None
-                                          else self.params["initial_pose_sigma"]))
-        if not all(math.isfinite(v) for v in (x, y, theta, sx, sy, st)):
-            raise ValueError(f"initial pose {pose} / sigma {sigma} is not finite")
-        self._set_particles(gaussian_poses([(x, y, theta)], (sx, sy, st),
+        sigma = self.params["initial_pose_sigma"] if sigma is None else sigma
+        wanted = tuple(float(v) for v in sigma)
+        if not all(math.isfinite(v) for v in (x, y, theta)):
+            raise ValueError(f"initial pose ({x}, {y}, {theta}) is not finite")
+        if len(wanted) != 3 or not all(math.isfinite(v) and v >= 0.0 for v in wanted):
+            raise ValueError(f"initial pose sigma {list(wanted)} must be 3 finite numbers >= 0")
+        problem = pose_problem(self.world, x, y)
+        if problem:
+            raise ValueError(f"initial pose {problem}")
+        used = self.bounded_sigma(wanted)
+        if used != wanted:
+            log.warning("initial pose sigma %s clamped to the map: %s", _rounded(wanted),
+                        _rounded(used))
+        self._set_particles(gaussian_poses([(x, y, theta)], used,
                                            self.params["tracking_particles"], self.rng))
         self.estimate = (x, y, math.atan2(math.sin(theta), math.cos(theta)))
         self.events.append(("pose", self.total_updates))
+        return used
+
+    def bounded_sigma(self, sigma) -> tuple[float, float, float]:
+        """The sigma (sx m, sy m, stheta rad) clamped to the map: its width, its height, pi.
+
+        Wider Gaussians put nearly every particle off the map (a global search does better),
+        and their spread only costs memory and time.
+        """
+        xmin, ymin, xmax, ymax = self.world.bounds
+        limits = (xmax - xmin, ymax - ymin, math.pi)
+        return tuple(min(float(s), limit) for s, limit in zip(sigma, limits))
 
     def _set_particles(self, particles: np.ndarray) -> None:
         self._seed_pending = False
@@ -186,7 +216,8 @@ class ParticleFilter:
         p["lidar_offset_x_m"] = offset_m
         self.model = BeamModel(self.table, self._robot_ok, offset_m, p["sigma_hit_m"],
                                p["z_random"])
-        self.search = PoseSearch(self.table, self._robot_ok, offset_m)
+        self.search = PoseSearch(self.table, self._robot_ok, offset_m,
+                                 stride=search_stride(self.table.resolution))
         if self.matcher is not None:
             self.set_scan_geometry(*self._scan_geometry)
 
@@ -375,6 +406,10 @@ class ParticleFilter:
     def particle_count(self) -> int:
         """Particles now (the adaptive count)."""
         return len(self.particles)
+
+
+def _rounded(values) -> list:
+    return [float(f"{v:.3g}") for v in values]
 
 
 __all__ = ["ParticleFilter"]

@@ -17,10 +17,11 @@ Thin: messages become ParticleFilter.predict / correct calls and results become 
   /particles (geometry_msgs/PoseArray) at most every `particles_period_s` of stamp time.
 - /initialpose (RViz's and Foxglove's "2D Pose Estimate") re-initializes around that pose.
 Bad input (NaN or 0.0 everywhere, inconsistent scan geometry, non-finite odometry, stamps going
-backwards) is skipped with a throttled message, never a crash; without a usable scan for
-`max_scan_age_s` the node reports localized false. All stamps come from the messages, so the node
-works the same in lockstep (simulated stamps) and in real time; use_sim_time only changes its
-log clock.
+backwards) is skipped with a throttled message, never a crash (a jump back by more than
+max_odometry_gap_s restarts the integration from there: one stamp far in the future cannot stop
+it for good); without a usable scan for `max_scan_age_s` the node reports localized false. All
+stamps come from the messages, so the node works the same in lockstep (simulated stamps) and in
+real time; use_sim_time only changes its log clock.
 """
 from __future__ import annotations
 
@@ -206,6 +207,7 @@ class ParticleFilterNode(GuardedLifecycleNode):
         self.get_logger().info(
             f"configured: world '{world.name}' ({world.source}), {mode}, {f.particle_count} "
             f"particles, {filter_params['beams']} beams, expected-range table "
+            f"{100 * f.table.resolution:g} cm x {f.table.angles} directions, "
             f"{f.table.nbytes / 1e6:.1f} MB, LiDAR at x = {filter_params['lidar_offset_x_m']} m")
         return TransitionCallbackReturn.SUCCESS
 
@@ -239,9 +241,15 @@ class ParticleFilterNode(GuardedLifecycleNode):
             return
         dt = (stamp - last) * 1e-9
         if dt <= 0.0:
-            self.get_logger().warning(f"odometry stamp went back or repeated ({dt:+.3f} s): "
-                                      "not integrated", throttle_duration_sec=2.0)
-            self._last_odometry_ns = max(last, stamp)
+            # A late message is skipped; a jump back beyond max_odometry_gap_s (time reset, or
+            # the previous stamp was bogus, e.g. far in the future) restarts from this stamp,
+            # so one bad stamp never stops the integration for good.
+            jumped = -dt > self.node_params["max_odometry_gap_s"]
+            self.get_logger().warning(
+                f"odometry stamp went back or repeated ({dt:+.3f} s): not integrated"
+                + ("; integrating from this stamp on" if jumped else ""),
+                throttle_duration_sec=2.0)
+            self._last_odometry_ns = stamp if jumped else last
             return
         if dt > self.node_params["max_odometry_gap_s"]:
             self.get_logger().warning(f"{dt:.2f} s without odometry: the motion in the gap is "
@@ -324,7 +332,8 @@ class ParticleFilterNode(GuardedLifecycleNode):
         """The filter's flag, unless the newest usable scan is older than max_scan_age_s."""
         if self.filter is None or not self.filter.localized or self._last_scan_ns is None:
             return False
-        return (stamp_ns - self._last_scan_ns) * 1e-9 <= self.node_params["max_scan_age_s"]
+        # abs(): a usable scan stamped after this pair (a bogus future stamp) is no evidence now
+        return abs(stamp_ns - self._last_scan_ns) * 1e-9 <= self.node_params["max_scan_age_s"]
 
     def _publish_pose(self, stamp, stamp_ns: int) -> None:
         x, y, theta = self.filter.estimate
@@ -377,7 +386,13 @@ class ParticleFilterNode(GuardedLifecycleNode):
         publisher.publish(message)
 
     def _on_initial_pose(self, message: PoseWithCovarianceStamped) -> None:
-        """Re-initialize around a 2D pose estimate (sigmas from its covariance when usable)."""
+        """Re-initialize around a 2D pose estimate (sigmas from its covariance when usable).
+
+        Sigmas wider than the map are clamped to it (ParticleFilter.bounded_sigma); a pose or
+        covariance that is not finite, in another frame, or where the robot cannot be (on a
+        wall, outside the map) is ignored with a logged reason: the filter keeps its state.
+        Zero or negative variances mean "not given": initial_pose_sigma is used.
+        """
         if self.filter is None:
             return
         frame = message.header.frame_id
@@ -390,17 +405,30 @@ class ParticleFilterNode(GuardedLifecycleNode):
         except ValueError as exc:
             self._warn(f"/initialpose ignored: {exc}")
             return
-        if not (math.isfinite(x) and math.isfinite(y)) or \
-                not self.filter.world.contains(x, y):
-            self._warn(f"/initialpose ({x:.2f}, {y:.2f}) is outside the free space: ignored")
-            return
         cov = np.asarray(message.pose.covariance, dtype=float)
-        sigma = None
-        if cov.size == 36 and np.all(np.isfinite(cov[[0, 7, 35]])) and np.all(cov[[0, 7, 35]] > 0):
-            sigma = np.sqrt(cov[[0, 7, 35]])
-        self.filter.initialize_pose((x, y, theta), sigma)
-        self.get_logger().info(f"re-initialized around ({x:.2f}, {y:.2f}, {theta:.2f}) from "
-                               "/initialpose: not localized until the scans confirm it")
+        variances = cov[[0, 7, 35]] if cov.size == 36 else np.zeros(3)
+        if not all(math.isfinite(v) for v in (x, y, theta, *variances)):
+            self._warn(f"/initialpose ignored: pose ({x}, {y}, {theta}) or variances "
+                       f"{variances.tolist()} not finite")
+            return
+        sigma = np.sqrt(variances) if np.all(variances > 0.0) else None
+        try:
+            used = self.filter.initialize_pose((x, y, theta), sigma)
+        except ValueError as exc:
+            self._warn(f"/initialpose ignored: {exc}")
+            return
+        clamped = sigma is not None and not np.allclose(used, sigma, rtol=0.0, atol=0.0)
+        note = f" (clamped to the map from {_rounded(sigma)})" if clamped else ""
+        text = (f"re-initialized around ({x:.2f}, {y:.2f}, {theta:.2f}) from /initialpose, "
+                f"sigma {_rounded(used)}{note}: not localized until the scans confirm it")
+        if clamped:
+            self.get_logger().warning(text)
+        else:
+            self.get_logger().info(text)
+
+
+def _rounded(values) -> list[float]:
+    return [float(f"{float(v):.3g}") for v in values]
 
 
 def _fill_pose(pose: Pose, xyt) -> None:

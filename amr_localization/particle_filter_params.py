@@ -2,6 +2,11 @@
 
 The ParticleFilter's parameters: name -> (default, description with units), and their
 checking. No rclpy import; the particle_filter node declares each as a ROS parameter.
+
+Run scripts check `--pf-param` values before anything runs with the same two functions the
+filter uses: check_parameters(overrides) (the values alone) and check_world(world, values)
+(against the map: its size and memory, the initial pose); both raise ValueError naming every
+problem.
 """
 from __future__ import annotations
 
@@ -9,6 +14,14 @@ import math
 from typing import Any
 
 from amr_common.parameter_table import finite, table_values
+from amr_common.robot import ROBOT_RADIUS
+from amr_common.world import World
+from amr_localization.table_memory import MemoryPlan, choose_table
+
+# A particle's centre may be this much closer to a wall than the robot radius before it counts
+# as inside the wall: the table's cells are 2 cm, and the simulated robot rests ~0.5 mm deep.
+WALL_SLACK_M = 0.02
+MAX_PARTICLES = 200_000  # ~20 ms per measurement update at 60 beams: the node stays responsive
 
 # name: (default, description). The defaults localize in both simulator profiles.
 PARAMETERS: dict[str, tuple[Any, str]] = {
@@ -30,8 +43,14 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     "sigma_hit_m": (0.03, "Standard deviation of a beam's range around the expected range [m]."),
     "z_random": (0.05, "Weight of the uniform part of a beam's likelihood: a beam that misses "
                        "costs log(z_random), whatever the miss (robust to clutter)."),
-    "table_resolution_m": (0.02, "Cell size of the expected-range table [m]."),
-    "table_angles": (360, "Directions of the expected-range table over 360 degrees."),
+    "table_resolution_m": (0.02, "Cell size of the expected-range table [m] (the finest: "
+                                 "see max_memory_mb)."),
+    "table_angles": (360, "Directions of the expected-range table over 360 degrees (the "
+                          "most: see max_memory_mb)."),
+    "max_memory_mb": (600.0, "Most memory for the map's data [MB] (expected-range table, "
+                             "grids): a bigger map gets half the table's directions, then "
+                             "twice its cell size (up to 4 cm); a map too big even then is "
+                             "refused, saying what it would need."),
     "noise_v_per_v": (0.1, "Linear-speed noise per unit of linear speed [(m/s)/(m/s)]."),
     "noise_v_per_w": (0.01, "Linear-speed noise per unit of turn rate [(m/s)/(rad/s)]."),
     "noise_w_per_w": (0.1, "Turn-rate noise per unit of turn rate [(rad/s)/(rad/s)]."),
@@ -83,6 +102,15 @@ _FRACTIONS = {"z_random", "seed_uniform_share", "resample_ess_fraction", "search
               "cluster_min_share", "inject_share", "ambiguity_match_fraction",
               "localize_match_fraction", "keep_match_fraction", "reinit_match_fraction"}
 _VECTORS = {"initial_pose", "initial_pose_sigma"}
+# Bounds beyond which a value costs absurd memory or time (or is meaningless): name -> (low, high)
+_RANGES = {"max_particles": (1, MAX_PARTICLES), "min_particles": (1, MAX_PARTICLES),
+           "tracking_particles": (1, MAX_PARTICLES), "beams": (1, 4096),
+           "table_angles": (8, 4096), "table_resolution_m": (0.005, 0.2),
+           "max_memory_mb": (1.0, 1e6), "kld_bin_xy_m": (0.005, 10.0),
+           "kld_bin_theta_rad": (0.005, 2 * math.pi), "cluster_radius_m": (0.001, 10.0),
+           "cluster_angle_rad": (0.001, 2 * math.pi), "noise_v_per_v": (0.0, 10.0),
+           "noise_v_per_w": (0.0, 10.0), "noise_w_per_w": (0.0, 10.0),
+           "noise_w_per_v": (0.0, 10.0)}
 
 
 def check_parameters(overrides: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -113,6 +141,10 @@ def check_parameters(overrides: dict[str, Any] | None = None) -> dict[str, Any]:
                  "match_tolerance_m"):
         if isinstance(values[name], float) and values[name] <= 0.0:
             problems.append(f"{name} must be > 0 (got {values[name]!r})")
+    for name, (low, high) in _RANGES.items():
+        if isinstance(values[name], (int, float)) and not low <= values[name] <= high \
+                and not any(p.startswith(f"{name} ") for p in problems):
+            problems.append(f"{name} must be in [{low:g}, {high:g}] (got {values[name]!r})")
     if isinstance(values["z_random"], float) and not 0.0 < values["z_random"] < 1.0:
         problems.append(f"z_random must be in (0, 1) (got {values['z_random']!r})")
     for name in ("max_particles", "min_particles", "tracking_particles"):
@@ -134,6 +166,36 @@ def check_parameters(overrides: dict[str, Any] | None = None) -> dict[str, Any]:
     return values
 
 
+def check_world(world: World, values: dict[str, Any]) -> MemoryPlan:
+    """The expected-range table the filter will use on `world`, after checking the values there.
+
+    `values`: check_parameters' result. ValueError if the initial pose is where the robot cannot
+    be; table_memory.MapTooBigError (a ValueError) if the map needs more than max_memory_mb,
+    saying how much it would need. Costs milliseconds: nothing is built.
+    """
+    pose = values["initial_pose"]
+    problem = pose_problem(world, pose[0], pose[1]) if pose is not None else None
+    if problem:
+        raise ValueError(f"initial_pose {list(pose)}: {problem}")
+    return choose_table(world, values)
+
+
+def pose_problem(world: World, x: float, y: float) -> str | None:
+    """Why the robot's centre cannot be at (x, y) in `world` (None if it can).
+
+    It must be in the free space and at least ROBOT_RADIUS - WALL_SLACK_M from every wall
+    (where the filter keeps its particles).
+    """
+    if not (math.isfinite(x) and math.isfinite(y)):
+        return f"({x}, {y}) is not finite"
+    if not world.contains(x, y):
+        return f"({x:.3f}, {y:.3f}) is outside the map's free space"
+    if world.clearance(x, y) < ROBOT_RADIUS - WALL_SLACK_M:
+        return (f"({x:.3f}, {y:.3f}) is on or too close to a wall: the robot's centre must be "
+                f"at least {ROBOT_RADIUS - WALL_SLACK_M:.3f} m from every wall")
+    return None
+
+
 def _vector(value: Any, lengths: tuple[int, ...], name: str, problems: list[str]):
     try:
         items = tuple(float(v) for v in value if not isinstance(v, bool))
@@ -142,7 +204,7 @@ def _vector(value: Any, lengths: tuple[int, ...], name: str, problems: list[str]
     except (TypeError, ValueError):
         ok, items = False, ()
     if not ok:
-        sizes = " or ".join(f"{n} numbers" for n in lengths)
+        sizes = " or ".join("[]" if n == 0 else f"{n} finite numbers" for n in lengths)
         problems.append(f"{name} must be {sizes} (got {value!r})")
         return None
     return items

@@ -23,16 +23,19 @@ from amr_localization.localization_check import ScanMatcher
 from amr_localization.scan_beams import ScanBeams
 
 SEARCH_BEAMS = 30
+_CHUNK_CELLS = 4096  # cells scored at a time (x 120 headings x 4 bytes: 2 MB)
+_ALTERNATIVE_POSES = 4000  # best grid poses among which alternatives() picks its candidates
 
 
-def score_poses_python(cells, centres, headings, table, angles, x0, y0, resolution, nx,
+def score_poses_python(centres, headings, table, rows, angles, x0, y0, resolution, nx,
                        lidar_offset, beam_bins, z_mm, tolerance_mm, range_min_mm, range_max_mm,
                        max_misses, out):
-    """out[c, h] = beams matched by the robot centred at cells[c] with heading h * 2 pi / H.
+    """out[c, h] = beams matched by the robot centred at centres[c] with heading h * 2 pi / H.
 
     A pose is dropped (scored by what it matched so far) after more than max_misses misses:
     most poses are wrong, and their misses come early because beam_bins is in an interleaved
-    order (see PoseSearch).
+    order (see PoseSearch). A coarse ranking: no sub-cell correction (beam_model's would cost
+    half as much again here, and the tolerance is wide).
     """
     inv_res = 1.0 / resolution
     n_beams = beam_bins.shape[0]
@@ -42,13 +45,13 @@ def score_poses_python(cells, centres, headings, table, angles, x0, y0, resoluti
     for h in range(headings):
         offset_x[h] = lidar_offset * math.cos(h * (2.0 * math.pi / headings)) - x0
         offset_y[h] = lidar_offset * math.sin(h * (2.0 * math.pi / headings)) - y0
-    for c in range(cells.shape[0]):
-        cx = centres[cells[c], 0]
-        cy = centres[cells[c], 1]
+    for c in range(centres.shape[0]):
+        cx = centres[c, 0]
+        cy = centres[c, 1]
         for h in range(headings):
             li = int((cx + offset_x[h]) * inv_res)
             lj = int((cy + offset_y[h]) * inv_res)
-            row = lj * nx + li
+            row = rows[lj * nx + li]
             t = h * bins_per_heading + 0.5
             matched = 0
             misses = 0
@@ -76,7 +79,7 @@ def score_poses_python(cells, centres, headings, table, angles, x0, y0, resoluti
 score_poses_kernel = jit(score_poses_python)
 
 
-def score_poses_numpy(cells, centres, headings, table, angles, x0, y0, resolution, nx,
+def score_poses_numpy(centres, headings, table, rows, angles, x0, y0, resolution, nx,
                       lidar_offset, beam_bins, z_mm, tolerance_mm, range_min_mm, range_max_mm,
                       max_misses, out):
     """The same scores as numpy operations, one heading at a time.
@@ -84,13 +87,14 @@ def score_poses_numpy(cells, centres, headings, table, angles, x0, y0, resolutio
     The same scores as numpy operations, one heading at a time (a pose's misses after the
     (max_misses + 1)-th no longer hide its later matches: the same ranking above the cut).
     """
-    cx, cy = centres[cells, 0], centres[cells, 1]
-    for h in range(headings):
+    cx, cy = centres[:, 0], centres[:, 1]
+    inv_res = 1.0 / resolution
+    for h in range(headings):  # the kernel's arithmetic, operation for operation
         theta = h * (2.0 * math.pi / headings)
-        li = ((cx + lidar_offset * math.cos(theta) - x0) / resolution).astype(np.int64)
-        lj = ((cy + lidar_offset * math.sin(theta) - y0) / resolution).astype(np.int64)
-        k = (h * angles / headings + 0.5 + beam_bins).astype(np.int64) % angles
-        r = table[(lj * nx + li)[:, None], k[None, :]].astype(np.int32)
+        li = ((cx + (lidar_offset * math.cos(theta) - x0)) * inv_res).astype(np.int64)
+        lj = ((cy + (lidar_offset * math.sin(theta) - y0)) * inv_res).astype(np.int64)
+        k = ((h * (angles / headings) + 0.5) + beam_bins).astype(np.int64) % angles
+        r = table[rows[lj * nx + li][:, None], k[None, :]].astype(np.int32)
         hit = np.where(z_mm[None, :] < 0, (r < range_min_mm) | (r > range_max_mm),
                        np.abs(z_mm[None, :] - r) <= tolerance_mm)
         misses = np.cumsum(~hit, axis=1)
@@ -117,7 +121,11 @@ def interleaved_order(count: int) -> np.ndarray:
 
 
 class PoseSearch:
-    """Coarse exhaustive scoring + exact refinement of the best distinct candidates."""
+    """Coarse exhaustive scoring + exact refinement of the best distinct candidates.
+
+    The grid's poses are scored in chunks of _CHUNK_CELLS cells, keeping only the best poses
+    found so far: the memory stays the same on any map.
+    """
 
     def __init__(self, table: ExpectedRangeTable, robot_ok: np.ndarray, lidar_offset: float,
                  stride: int = 2, headings: int = 120, tolerance_m: float = 0.06,
@@ -129,7 +137,7 @@ class PoseSearch:
         first_col, first_row = (round(v / table.resolution + 0.5) for v in (table.x0, table.y0))
         mask[-first_row % stride::stride, -first_col % stride::stride] = True
         self.cells = np.flatnonzero((keep & mask).ravel()).astype(np.int64)
-        self.centres = table.cell_centres()
+        self.centres = np.ascontiguousarray(table.cell_centres(self.cells))  # of self.cells
         self.table = table
         self.lidar_offset = float(lidar_offset)
         self.headings = int(headings)
@@ -137,23 +145,39 @@ class PoseSearch:
         self.candidates = int(candidates)
         self.miss_share = float(miss_share)
         self.step = (stride * table.resolution, 2.0 * math.pi / headings)
-        self._scores = np.empty((len(self.cells), self.headings), dtype=np.int32)
+        self._scores = np.empty((min(len(self.cells), _CHUNK_CELLS), self.headings),
+                                dtype=np.int32)
+        self._limits_mm = (0, 0)  # the scan's valid range limits (mm), set per search
 
-    def _score(self, beams: ScanBeams, z_mm: np.ndarray) -> np.ndarray:
-        """Scores of every (cell, heading) of the coarse grid, flattened (cell-major)."""
-        table, beam_bins, range_limits_mm = self.table, beams.bins, beams.limits_mm
+    def _score_into(self, centres: np.ndarray, beam_bins: np.ndarray, z_mm: np.ndarray,
+                    max_misses: int, out: np.ndarray) -> None:
+        """Scores of the poses at `centres` x every heading into out (beams in that order)."""
+        table, limits_mm = self.table, self._limits_mm
+        score_poses(np.ascontiguousarray(centres), self.headings, table.ranges, table.rows,
+                    table.angles, table.x0, table.y0, table.resolution, table.nx,
+                    self.lidar_offset, np.ascontiguousarray(beam_bins), np.ascontiguousarray(z_mm),
+                    self.tolerance_mm, limits_mm[0], limits_mm[1], max_misses, out)
+
+    def _best(self, count: int, beams: ScanBeams, z_mm: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The `count` best grid poses: (scores, flat indices cell * headings + heading).
+
+        Best first: highest score, then lowest flat index (a fixed order for equal scores).
+        """
+        beam_bins, self._limits_mm = beams.bins, beams.limits_mm
         # At most SEARCH_BEAMS beams, spread around: a coarse ranking (the candidates are then
         # refined with every ray), and half the lookups of 60 beams.
         keep = np.arange(0, len(beam_bins), max(1, -(-len(beam_bins) // SEARCH_BEAMS)))
         beam_bins, z_mm = beam_bins[keep], z_mm[keep]
         order = interleaved_order(len(beam_bins))
-        score_poses(self.cells, self.centres, self.headings, table.ranges, table.angles,
-                    table.x0, table.y0, table.resolution, table.nx, self.lidar_offset,
-                    np.ascontiguousarray(beam_bins[order]), np.ascontiguousarray(z_mm[order]),
-                    self.tolerance_mm, range_limits_mm[0], range_limits_mm[1],
-                    int(self.miss_share * len(beam_bins)), self._scores)
         self.scored_beams = len(beam_bins)
-        return self._scores.ravel()
+        best = _TopScores(count)
+        for first in range(0, len(self.cells), _CHUNK_CELLS):
+            centres = self.centres[first:first + _CHUNK_CELLS]
+            out = self._scores[:len(centres)]
+            self._score_into(centres, beam_bins[order], z_mm[order],
+                             int(self.miss_share * len(beam_bins)), out)
+            best.add(out.ravel(), first * self.headings)
+        return best.scores, best.flat
 
     def best_poses(self, count: int, beams: ScanBeams, z_mm: np.ndarray,
                    rng: np.random.Generator) -> np.ndarray:
@@ -163,14 +187,12 @@ class PoseSearch:
         uniformly within its grid step (the particles of a global search, so that every pose
         that fits the first scan, the true one and its symmetric copies alike, is represented).
         """
-        scores = self._score(beams, z_mm)
-        count = min(int(count), scores.size)
-        flat = np.argpartition(-scores, count - 1)[:count]
+        _, flat = self._best(count, beams, z_mm)
+        count = len(flat)
         cells, headings = np.divmod(flat, self.headings)
-        centres = self.centres[self.cells[cells]]
         half_xy, half_theta = self.step[0] / 2.0, self.step[1] / 2.0
         poses = np.empty((count, 3))
-        poses[:, :2] = centres + rng.uniform(-half_xy, half_xy, (count, 2))
+        poses[:, :2] = self.centres[cells] + rng.uniform(-half_xy, half_xy, (count, 2))
         theta = headings * self.step[1] + rng.uniform(-half_theta, half_theta, count)
         poses[:, 2] = wrap_angles(theta)
         return poses
@@ -185,26 +207,21 @@ class PoseSearch:
         `pose` itself) refined exactly. Used before calling a hypothesis refuted: refuted must
         mean that NO pose near it explains the scan, not that its current pose drifted.
         """
-        table, beam_bins, range_limits_mm = self.table, beams.bins, beams.limits_mm
-        centres = self.centres[self.cells]
-        near = np.flatnonzero(np.hypot(centres[:, 0] - pose[0], centres[:, 1] - pose[1])
-                              <= radius)
+        beam_bins, self._limits_mm = beams.bins, beams.limits_mm
+        near = np.flatnonzero(np.hypot(self.centres[:, 0] - pose[0],
+                                       self.centres[:, 1] - pose[1]) <= radius)
         candidates = [tuple(pose)]
         if near.size:
-            cells = np.ascontiguousarray(self.cells[near])
-            scores = np.empty((len(cells), self.headings), dtype=np.int32)
+            centres = self.centres[near]
+            scores = np.empty((len(centres), self.headings), dtype=np.int32)
             order = interleaved_order(len(beam_bins))
-            score_poses(cells, self.centres, self.headings, table.ranges, table.angles,
-                        table.x0, table.y0, table.resolution, table.nx, self.lidar_offset,
-                        np.ascontiguousarray(beam_bins[order]),
-                        np.ascontiguousarray(z_mm[order]), self.tolerance_mm,
-                        range_limits_mm[0], range_limits_mm[1], len(beam_bins), scores)
+            self._score_into(centres, beam_bins[order], z_mm[order], len(beam_bins), scores)
             headings = np.arange(self.headings) * self.step[1]
             off = np.abs(wrap_angles(headings - pose[2]))
             scores[:, off > angle] = -1
             for flat in np.argsort(-scores.ravel(), kind="stable")[:64]:
                 c, h = divmod(int(flat), self.headings)
-                x, y = self.centres[cells[c]]
+                x, y = centres[c]
                 candidate = (float(x), float(y), math.remainder(h * self.step[1], 2.0 * math.pi))
                 if not any(close_poses(candidate, other, 0.05, math.radians(5.0))
                            for other in candidates):
@@ -223,15 +240,14 @@ class PoseSearch:
         The best distinct poses farther than exclusion_m / exclusion_rad from `estimate`,
         each refined locally, best first.
         """
-        scores = self._score(beams, z_mm)
+        scores, flat = self._best(_ALTERNATIVE_POSES, beams, z_mm)
         # Candidates: the poses within a few beams of the best (a rival explaining >= 90 % of
         # the rays matches nearly every beam at this tolerance), best first.
-        best = np.flatnonzero(scores >= scores.max() - max(self.scored_beams // 6, 2))
-        best = best[np.argsort(-scores[best], kind="stable")][:4000]
+        flat = flat[scores >= scores[0] - max(self.scored_beams // 6, 2)] if len(flat) else flat
         chosen: list[tuple[float, float, float]] = []
-        for flat in best:
-            c, h = divmod(int(flat), self.headings)
-            x, y = self.centres[self.cells[c]]
+        for index in flat:
+            c, h = divmod(int(index), self.headings)
+            x, y = self.centres[c]
             theta = math.remainder(h * self.step[1], 2.0 * math.pi)
             pose = (float(x), float(y), theta)
             if close_poses(pose, estimate, exclusion_m, exclusion_rad):
@@ -243,6 +259,32 @@ class PoseSearch:
                 break
         refined = [refine(pose, matcher, ranges, match_tolerance, self.step) for pose in chosen]
         return sorted(refined, key=lambda a: -a.match_fraction)
+
+
+class _TopScores:
+    """The `count` highest scores seen so far and their flat indices (ties: lowest index)."""
+
+    def __init__(self, count: int) -> None:
+        self.count = int(count)
+        self.scores = np.zeros(0, dtype=np.int32)
+        self.flat = np.zeros(0, dtype=np.int64)
+
+    def add(self, scores: np.ndarray, offset: int) -> None:
+        """Offer scores[i] at flat index offset + i (offsets increasing from call to call)."""
+        if len(self.scores) == self.count:  # full: only a strictly higher score gets in
+            index = np.flatnonzero(scores > self.scores[-1])
+        elif scores.size > self.count:  # the chunk's own best `count` (ties: lowest index)
+            kth = np.partition(scores, scores.size - self.count)[scores.size - self.count]
+            above = np.flatnonzero(scores > kth)
+            index = np.sort(np.r_[above, np.flatnonzero(scores == kth)[:self.count - len(above)]])
+        else:
+            index = np.arange(scores.size)
+        if index.size == 0:
+            return
+        merged_scores = np.r_[self.scores, scores[index]]
+        merged_flat = np.r_[self.flat, offset + index]
+        keep = np.lexsort((merged_flat, -merged_scores))[:self.count]
+        self.scores, self.flat = merged_scores[keep], merged_flat[keep]
 
 
 def refine(pose, matcher: ScanMatcher, ranges: np.ndarray, tolerance: float,

@@ -10,17 +10,24 @@
    beams (target <= 1 ms), vs the measurement model alone.
 3. Headless localization episode (simulator + wall follower + filter) in simulated seconds per
    CPU second (target >= 200x real time), vs the same episode without the filter.
+4. (--memory) Big maps: peak memory (RSS) of a headless global-localization episode on generated
+   office floors (tools/make_building_world.py), each in a fresh process: 40 x 40 m
+   (tests/worlds/building_40m.yaml) and 20 x 20 m with the default max_memory_mb, vs 20 x 20 m
+   with the 2 cm x 360 table every map had before (target: 40 x 40 m within 1 GB).
 Rates are per CPU second of this process (time.process_time: on a shared machine the
 wall-clock figure also counts waiting for a CPU); wall-clock figures are printed alongside.
 
-Usage: .venv/bin/python scripts/bench_localization.py [--quick] [--measurement-only]
+Usage: .venv/bin/python scripts/bench_localization.py [--quick] [--measurement-only] [--memory]
 """
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -37,6 +44,29 @@ from amr_sim.lidar import Lidar  # noqa: E402
 TARGET_UPDATES_PER_S = 5e6
 TARGET_UPDATE_MS = 1.0
 TARGET_REAL_TIME = 200.0
+TARGET_PEAK_MB = 1000.0
+REPO = Path(__file__).resolve().parents[1]
+# One episode in a fresh process: its peak RSS is the episode's (imports included).
+_EPISODE = """
+import json, resource, sys, time
+sys.path.insert(0, {repo!r})
+from amr_common.world import World
+from amr_evaluation.localization_episode import run_localization_episode
+from amr_localization.particle_filter import ParticleFilter
+world = World.load({world!r})
+cpu = time.process_time()
+table = ParticleFilter(world, **{params!r}).table
+build = time.process_time() - cpu
+result = run_localization_episode(world, {start!r}, profile="turtlebot3", seed=0,
+                                  duration={duration!r}, record=False, filter_params={params!r})
+print(json.dumps({{"peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+                  "table": f"{{100 * table.resolution:g}} cm x {{table.angles}}",
+                  "table_mb": table.nbytes / 1e6, "build_cpu_s": build,
+                  "episode_cpu_s": time.process_time() - cpu - build,
+                  "time_to_localized_s": result.time_to_localized_s,
+                  "false_localizations": result.false_localizations,
+                  "tracking_error_mean_m": result.tracking_error_mean_m}}))
+"""
 
 
 
@@ -159,13 +189,52 @@ def bench_episode(duration: float) -> dict:
     return figures
 
 
+def bench_memory(duration: float) -> dict:
+    """Peak RSS of a global-localization episode on office floors, one fresh process each."""
+    sys.path.insert(0, str(REPO / "tools"))
+    from make_building_world import building, to_yaml
+    figures = {}
+    with tempfile.TemporaryDirectory() as folder:
+        floor_20 = Path(folder) / "building_20m.yaml"
+        floor_20.write_text(to_yaml(building(20, 18)))
+        cases = {"40 x 40 m": (REPO / "tests" / "worlds" / "building_40m.yaml", {}),
+                 "20 x 20 m": (floor_20, {}),
+                 "20 x 20 m, the old 2 cm x 360 table": (floor_20, {"max_memory_mb": 5000.0})}
+        for name, (world, params) in cases.items():
+            code = _EPISODE.format(repo=str(REPO), world=str(world), params=params,
+                                   start="corridor_west", duration=duration)
+            run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                                 check=True)
+            figures[name] = json.loads(run.stdout.strip().splitlines()[-1])
+    return figures
+
+
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--measurement-only", action="store_true",
                         help="only the measurement update (1.)")
+    parser.add_argument("--memory", action="store_true",
+                        help="only the big maps' peak memory (4.)")
     args = parser.parse_args(argv)
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    if args.memory:
+        figures = bench_memory(30.0 if args.quick else 60.0)
+        reference = figures["20 x 20 m, the old 2 cm x 360 table"]["peak_mb"]
+        for name, f in figures.items():
+            localized = "never" if f["time_to_localized_s"] is None else \
+                f"after {f['time_to_localized_s']:.1f} s"
+            error = "" if f["tracking_error_mean_m"] is None else \
+                f", tracking error mean {100 * f['tracking_error_mean_m']:.2f} cm"
+            print(f"{name}: peak {f['peak_mb']:.0f} MB ({f['peak_mb'] / reference:.2f}x the old "
+                  f"table's on 20 x 20 m), table {f['table']} directions {f['table_mb']:.0f} MB "
+                  f"built in {f['build_cpu_s']:.1f} s CPU; localized {localized}, "
+                  f"{f['false_localizations']} false{error}; episode {f['episode_cpu_s']:.1f} s "
+                  f"CPU")
+        print(f"target: 40 x 40 m within {TARGET_PEAK_MB:.0f} MB: "
+              f"{'met' if figures['40 x 40 m']['peak_mb'] <= TARGET_PEAK_MB else 'MISSED'}; "
+              f"load average {load:.1f} on {os.cpu_count()} cores")
+        return {"memory": figures, "load": load}
     m = bench_measurement(50000, 5 if args.quick else 10, 3 if args.quick else 7)
     print(f"measurement update: {m['numba_updates_per_s'] / 1e6:.1f} M particle updates/s at "
           f"{m['beams']} beams spread over the map (median of {m['rounds']} rounds, best "

@@ -145,15 +145,17 @@ def test_expected_range_table_is_the_simulators_lidar_at_cell_centres():
     inside = np.flatnonzero(table.grid.clearance.ravel() > 0.05)
     for cell in rng.choice(inside, 20, replace=False):
         x, y = table.cell_centres()[cell]
-        np.testing.assert_allclose(table.ranges[cell] / 1000.0, lidar.scan(x, y, 0.0),
+        np.testing.assert_allclose(table.cell_ranges(cell) / 1000.0, lidar.scan(x, y, 0.0),
                                    atol=0.0006)
 
 
 # --- measurement model ----------------------------------------------------------------------
 
-def _scores(world, poses, scan_pose, kernel, lidar_offset=0.0, rays=240, angle_min=0.0):
-    table = expected_range_table(world)
-    model = beam_model.BeamModel(table, table.robot_cells(slack=0.02), lidar_offset, 0.03, 0.05)
+def _scores(world, poses, scan_pose, kernel, lidar_offset=0.0, rays=240, angle_min=0.0,
+            sub_cell=False, resolution=0.02):
+    table = expected_range_table(world, resolution)
+    model = beam_model.BeamModel(table, table.robot_cells(slack=0.02), lidar_offset, 0.03, 0.05,
+                                 sub_cell=sub_cell)
     beams = ScanBeams.from_geometry(angle_min, 2 * math.pi / rays, rays, 0.016, 8.0, 60,
                                     table.angles)
     lidar = Lidar(world.segments, rays, angle_min, 2 * math.pi / rays, 0.016, 8.0, math.nan)
@@ -179,8 +181,9 @@ def test_beam_model_ranks_the_true_pose_above_rotated_poses_on_a_symmetric_corri
     assert twin_scores[1] < twin_scores[0] - 20.0
 
 
+@pytest.mark.parametrize("sub_cell", [False, True])
 @pytest.mark.parametrize("rays, angle_min", [(240, 0.0), (230, -3.1)])  # whole / fractional bins
-def test_beam_model_paths_agree_and_walls_get_no_weight(rays, angle_min):
+def test_beam_model_paths_agree_and_walls_get_no_weight(rays, angle_min, sub_cell):
     world = World.load("lab02")
     rng = np.random.default_rng(6)
     poses = np.column_stack([rng.uniform(-1.3, 1.3, 3000), rng.uniform(-1.3, 1.3, 3000),
@@ -190,7 +193,7 @@ def test_beam_model_paths_agree_and_walls_get_no_weight(rays, angle_min):
     poses[2] = (math.nan, 0.0, 0.0)
     poses[3] = (1.0, -1.0, math.pi / 2)  # the scan's own pose
     scores = {kernel: _scores(world, poses, (1.0, -1.0, math.pi / 2), kernel, lidar_offset=-0.032,
-                              rays=rays, angle_min=angle_min)
+                              rays=rays, angle_min=angle_min, sub_cell=sub_cell)
               for kernel in (beam_model.log_likelihoods_kernel, beam_model.log_likelihoods_python,
                              beam_model.log_likelihoods_numpy)}
     jit = scores[beam_model.log_likelihoods_kernel]
@@ -200,6 +203,22 @@ def test_beam_model_paths_agree_and_walls_get_no_weight(rays, angle_min):
     assert jit[3] == np.nanmax(jit[np.isfinite(jit)]) and jit[3] > -0.2 * 60
     clear = world.clearances(poses[4:, :2]) < ROBOT_RADIUS - 0.05
     assert np.all(np.isneginf(jit[4:][clear]))
+
+
+def test_the_sub_cell_correction_places_the_robot_within_a_4_cm_cell():
+    """Without it every pose whose LiDAR is in the same cell scores the same (a 4 cm plateau)."""
+    world = World.load("lab02")
+    truth = (1.013, -0.987, 0.3)
+    xs = np.arange(0.99, 1.037, 0.002)
+    poses = np.column_stack([xs, np.full(xs.size, truth[1]), np.full(xs.size, truth[2])])
+    for sub_cell in (True, False):
+        scores = _scores(world, poses, truth, beam_model.log_likelihoods_kernel, rays=360,
+                         sub_cell=sub_cell, resolution=0.04)
+        best = xs[scores == scores.max()]
+        if sub_cell:
+            assert np.all(np.abs(best - truth[0]) <= 0.006), best
+        else:
+            assert best.max() - best.min() >= 0.025, "a plateau over the cell"
 
 
 def test_scan_beams_fall_on_whole_table_bins_for_the_course_scans():
@@ -225,11 +244,13 @@ def test_pose_scores_paths_agree():
     beams = ScanBeams.from_geometry(0.0, 2 * math.pi / 240, 240, 0.016, 8.0, 60, table.angles)
     z_mm = beams.readings_mm(ranges)
     outputs = []
-    for kernel in (pose_search.score_poses_kernel, pose_search.score_poses_numpy):
+    for kernel in (pose_search.score_poses_kernel, pose_search.score_poses_numpy,
+                   pose_search.score_poses_python):
         out = np.empty((len(search.cells), 36), dtype=np.int32)
-        kernel(search.cells, search.centres, 36, table.ranges, table.angles, table.x0, table.y0,
-               table.resolution, table.nx, 0.0, beams.bins, z_mm, 60, 16, 8000, 15, out)
+        kernel(search.centres, 36, table.ranges, table.rows, table.angles, table.x0, table.y0,
+               table.resolution, table.nx, -0.032, beams.bins, z_mm, 60, 16, 8000, 15, out)
         outputs.append(out)
+    assert np.array_equal(outputs[0], outputs[2])
     assert np.array_equal(outputs[0], outputs[1])
     assert outputs[0].max() == 60
 
@@ -292,6 +313,20 @@ def test_parameters_are_checked_with_every_problem_named():
         check_parameters({"no_such": 1})
 
 
+@pytest.mark.parametrize("name, value", [("max_particles", 100_000_000),
+                                         ("tracking_particles", 10**9), ("beams", 10**6),
+                                         ("kld_bin_xy_m", 1e-9), ("cluster_angle_rad", 1e-12),
+                                         ("table_resolution_m", 1e-4), ("noise_w_per_v", 1e9)])
+def test_values_that_would_cost_absurd_memory_or_time_are_refused(name, value):
+    """Caught by the checks run scripts call before starting the nodes (issue 18, item 6).
+
+    max_particles 1e8 spent 75 s in configure; tiny KLD or cluster bins allocated histograms
+    beyond the machine's memory.
+    """
+    with pytest.raises(ValueError, match=rf"{name} must be in \["):
+        check_parameters({name: value})
+
+
 def test_adaptive_count_shrinks_when_tracking():
     """Tracking converges to the minimum count; a search starts at the maximum.
 
@@ -312,3 +347,56 @@ def test_adaptive_count_shrinks_when_tracking():
     assert math.hypot(pf.estimate[0] - pose[0], pf.estimate[1] - pose[1]) < 0.03
     assert pf.localized, "a standing robot is confirmed by repeated updates"
     assert ParticleFilter(world).particle_count == 8000
+
+
+# --- hostile initial poses (issue 18, item 1) ------------------------------------------------
+
+def test_dominant_cluster_of_particles_spread_over_kilometres():
+    """A histogram over the particles' extent must not grow with it (was a MemoryError)."""
+    from amr_localization import cluster
+    rng = np.random.default_rng(8)
+    spread = np.column_stack([rng.normal(0.0, 1e4, 2000), rng.normal(0.0, 1e4, 2000),
+                              rng.uniform(-math.pi, math.pi, 2000)])
+    spread[:300] = rng.normal([5.0, 5.0, 0.5], [0.01, 0.01, 0.02], (300, 3))  # one tight group
+    found = dominant_cluster(spread, np.full(2000, 1 / 2000), 0.1, 0.35)
+    assert found.pose[:2] == pytest.approx((5.0, 5.0), abs=0.01)
+    assert found.share == pytest.approx(0.15, abs=0.01)
+    assert np.all(np.isfinite(found.covariance))
+    for kernel in (cluster.cluster_kernel, cluster.cluster_python):  # the twins agree
+        members, stats = np.zeros(2000, dtype=np.bool_), np.zeros(13)
+        kernel(spread, np.full(2000, 1 / 2000), 0.1, 0.35, members, stats)
+        assert np.array_equal(members, found.members) and stats[3] == found.share
+
+
+def test_initial_pose_sigma_is_clamped_to_the_map_and_logged(caplog):
+    world = World.load("lab02")
+    x, y, theta = world.starts["inner"]
+    with caplog.at_level("WARNING", logger="amr_localization.particle_filter"):
+        pf = ParticleFilter(world, initial_pose=[x, y, theta],
+                            initial_pose_sigma=[1e6, 1e6, 1.0])
+    assert "clamped" in caplog.text
+    xmin, ymin, xmax, ymax = world.bounds
+    assert np.std(pf.particles[:, 0]) <= 1.2 * (xmax - xmin)
+    used = pf.initialize_pose((x, y, theta), (1e4, 1e300, 1e9))
+    assert used == pytest.approx((xmax - xmin, ymax - ymin, math.pi))
+    assert np.std(pf.particles[:, 1]) <= 1.2 * (ymax - ymin)
+    assert pf.initialize_pose((x, y, theta), (0.02, 0.03, 0.1)) == (0.02, 0.03, 0.1)
+
+
+@pytest.mark.parametrize("pose, reason", [((0.0, -0.8, 0.0), "wall"),  # on a wall of lab02
+                                          ((0.6, -0.73, 0.0), "wall"),  # 7 cm from one
+                                          ((5.0, 5.0, 0.0), "outside"),
+                                          ((math.nan, 0.0, 0.0), "finite"),
+                                          ((0.6, -0.6, math.inf), "finite")])
+def test_an_initial_pose_where_the_robot_cannot_be_is_refused_and_the_state_kept(pose, reason):
+    world = World.load("lab02")
+    pf = ParticleFilter(world, max_particles=500)
+    particles, events = pf.particles.copy(), list(pf.events)
+    with pytest.raises(ValueError, match=reason):
+        pf.initialize_pose(pose)
+    assert np.array_equal(pf.particles, particles) and pf.events == events
+    with pytest.raises(ValueError, match="sigma"):
+        pf.initialize_pose((0.6, -0.6, 0.0), (0.1, math.nan, 0.1))
+    if math.isfinite(pose[0]):
+        with pytest.raises(ValueError, match=reason):  # the parameter: configure fails
+            ParticleFilter(world, initial_pose=list(pose))

@@ -49,9 +49,9 @@ class FakeGraph:
                                       self.amcl.append, 10)
         self.node.create_subscription(PoseArray, "/particles", self.particles.append, 10)
 
-    def publish(self, ranges=None, **scan_fields):
+    def publish(self, ranges=None, time_offset=0.0, **scan_fields):
         sim = self.sim
-        stamp = seconds_to_time(sim.time)
+        stamp = seconds_to_time(sim.time + time_offset)
         _, z_v, z_w = sim.measure()
         self.last_odometry_pose = sim.odometry_pose
         self.odometry.publish(odometry_message(stamp, "odom", "base_footprint",
@@ -184,6 +184,96 @@ def test_initialpose_reinitializes_around_the_given_pose(ros):
     graph.initialpose.publish(message)
     ros.spin_for(0.3)
     assert node.filter.events == events and node.filter.localized
+
+
+def _initialpose(x, y, yaw, variances, frame_id="map"):
+    from amr_common.ros_conversions import yaw_to_quaternion
+    message = PoseWithCovarianceStamped()
+    message.header.frame_id = frame_id
+    message.pose.pose.position.x, message.pose.pose.position.y = x, y
+    yaw_to_quaternion(yaw, message.pose.pose.orientation)
+    covariance = np.zeros(36)
+    covariance[[0, 7, 35]] = variances
+    message.pose.covariance = covariance.tolist()
+    return message
+
+
+def test_hostile_initialposes_are_clamped_or_refused_and_the_node_goes_on(ros):
+    """Huge covariances are clamped to the map; NaN, inf and poses on walls are refused.
+
+    Refused: logged, the filter keeps its state. Each callback's time is printed (the report's
+    worst case); the old code died of a MemoryError at 1e8 and spent ~23 s at 1e4.
+    """
+    import time
+    node = make_node(ros, world="lab02")
+    handle, seconds = node._on_initial_pose, []
+
+    def timed(message):
+        start = time.perf_counter()
+        handle(message)
+        seconds.append(time.perf_counter() - start)
+
+    node._on_initial_pose = timed  # before configure: the subscription takes this one
+    warnings = []
+    graph = FakeGraph(ros, profile="ideal")
+    bring_up(ros, node, graph)
+    node.get_logger().warning = lambda text, **kw: warnings.append(text)
+    step_lockstep(ros, graph, 2)
+    xmin, ymin, xmax, ymax = node.filter.world.bounds
+    for variance in (1e8, 1e4, 1e300):
+        graph.initialpose.publish(_initialpose(0.6, -0.6, 0.0, [variance, variance, variance]))
+        ros.spin_until(lambda: len(seconds) == 1 + [1e8, 1e4, 1e300].index(variance), 30.0,
+                       f"the /initialpose with variance {variance}")
+        assert node.filter.events[-1][0] == "pose" and "clamped" in warnings[-1]
+        assert np.std(node.filter.particles[:, 0]) <= 1.2 * (xmax - xmin)
+    events = list(node.filter.events)
+    refused = [(_initialpose(0.6, -0.6, 0.0, [math.nan, 0.01, 0.01]), "not finite"),
+               (_initialpose(0.6, -0.6, 0.0, [0.01, math.inf, 0.01]), "not finite"),
+               (_initialpose(math.nan, -0.6, 0.0, [0.01, 0.01, 0.01]), "not finite"),
+               (_initialpose(0.6, math.inf, 0.0, [0.01, 0.01, 0.01]), "not finite"),
+               (_initialpose(0.0, -0.8, 0.0, [0.01, 0.01, 0.01]), "wall"),
+               (_initialpose(5.0, 5.0, 0.0, [0.01, 0.01, 0.01]), "outside")]
+    for message, reason in refused:
+        count = len(seconds)
+        graph.initialpose.publish(message)
+        ros.spin_until(lambda: len(seconds) == count + 1, 5.0, f"the refused /initialpose "
+                       f"({reason})")
+        assert reason in warnings[-1] and "ignored" in warnings[-1], warnings[-1]
+    assert node.filter.events == events, "refused: the filter kept its state"
+    step_lockstep(ros, graph, 3)  # and the node goes on
+    assert node._state_machine.current_state[1] == "active"
+    print(f"\n/initialpose callback: worst {1e3 * max(seconds):.1f} ms over {len(seconds)} "
+          f"hostile messages")
+
+
+def test_one_pair_stamped_far_in_the_future_does_not_stop_the_odometry(ros):
+    """After a pair stamped 11 days ahead the filter integrates odometry again at once.
+
+    The old node kept the future stamp as the newest odometry: every later message "went
+    back" and the particles stopped moving (a spinning robot lost its heading). And a future
+    scan stamp must not keep a stale estimate "localized" once the scans become unusable.
+    """
+    from amr_common.geometry import wrap_angle
+    node = make_node(ros, world="lab02", initial_pose=list(Simulator("lab02", "inner").pose),
+                     initial_pose_sigma=[0.02, 0.02, 0.05])
+    graph = FakeGraph(ros, profile="ideal")
+    bring_up(ros, node, graph)
+    step_lockstep(ros, graph, 1, v=0.0, w=0.0)
+    steps = 0
+    while not graph.poses[-1].localized and steps < 200:
+        step_lockstep(ros, graph, 1, v=0.0, w=0.0)
+        steps += 1
+    assert graph.poses[-1].localized
+    step_lockstep(ros, graph, 1, v=0.0, w=0.8, time_offset=1e6)
+    step_lockstep(ros, graph, 40, v=0.0, w=0.8)  # 1.6 rad in place
+    estimate = graph.poses[-1].pose.orientation
+    heading = 2.0 * math.atan2(estimate.z, estimate.w)
+    assert abs(wrap_angle(heading - graph.sim.pose[2])) < math.radians(3.0)
+    assert graph.poses[-1].localized
+    step_lockstep(ros, graph, 1, v=0.0, w=0.0, time_offset=1e6)
+    n = graph.sim.profile.scan_rays
+    step_lockstep(ros, graph, 30, v=0.0, w=0.0, ranges=[math.nan] * n)  # 1.5 s, no usable scan
+    assert not graph.poses[-1].localized, "no usable scan for max_scan_age_s: not localized"
 
 
 def test_particles_are_throttled(ros):

@@ -117,6 +117,26 @@ def test_replans_from_the_relocalized_pose(ros):
     assert path_points(graph.paths[1])[-1] == pytest.approx((3.0, 2.2))
 
 
+def test_a_pose_stamped_far_in_the_future_does_not_stick(ros):
+    """The planner keeps no stamp order that one bad stamp could block (issue 18, item 7).
+
+    After a pose stamped 11 days ahead, a /goal_pose plans from the newest pose that arrived,
+    and the path carries that pose's stamp (the pursuit forgets a path stamped far beyond a
+    lost pose).
+    """
+    node = make_node(ros, world="lab02")
+    graph = Graph(ros)
+    bring_up(ros, node, graph)
+    graph.send_pose(1e6, 1.0, -1.0)
+    ros.spin_until(lambda: len(graph.paths) == 1, 5.0, "the first path")
+    graph.send_pose(0.2, 1.0, -0.6)
+    ros.spin_for(0.2)
+    graph.send_goal(0.6, -0.2)
+    ros.spin_until(lambda: len(graph.paths) == 2, 5.0, "the path to the new goal")
+    assert path_points(graph.paths[1])[0] == pytest.approx((1.0, -0.6))
+    assert time_to_seconds(graph.paths[1].header.stamp) == pytest.approx(0.2)
+
+
 def test_no_goal_anywhere_gives_an_empty_path_and_a_start_in_a_wall_too(ros, tmp_path):
     world = tmp_path / "empty_room.yaml"
     world.write_text("boundary: [[0, 0], [2, 0], [2, 1], [0, 1]]\n")

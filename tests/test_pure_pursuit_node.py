@@ -74,6 +74,16 @@ def bring_up(ros, node, graph, path=None, poses=0):
         ros.spin_until(lambda: len(graph.commands) == k, 5.0, f"answer {k}")
 
 
+def robot_mode_with_a_path(ros):
+    """A robot-mode node (data_timeout 0.3 s, dt 0.05 s), active, with L_PATH."""
+    node = make_node(ros, simulation=False, cmd_vel_stamped=False, data_timeout=0.3, dt=0.05)
+    graph = Graph(ros, stamped=False)
+    bring_up(ros, node, graph)
+    graph.send_path(L_PATH)
+    ros.spin_until(lambda: node.pursuit.path is not None, 5.0, "the path")
+    return node, graph
+
+
 def test_lockstep_answers_every_localized_pose_once_and_no_other(ros):
     node = make_node(ros)
     graph = Graph(ros)
@@ -147,11 +157,7 @@ def test_deactivate_and_shutdown_send_zero(ros):
 
 
 def test_robot_mode_zero_on_stale_pose_and_silence_after_losing_localization(ros):
-    node = make_node(ros, simulation=False, cmd_vel_stamped=False, data_timeout=0.3, dt=0.05)
-    graph = Graph(ros, stamped=False)
-    bring_up(ros, node, graph)
-    graph.send_path(L_PATH)
-    ros.spin_until(lambda: node.pursuit.path is not None, 5.0, "the path")
+    node, graph = robot_mode_with_a_path(ros)
     for k in range(10):  # fresh localized poses at 20 Hz: the timer drives
         graph.send_pose(0.05 * k)
         ros.spin_for(0.05)
@@ -227,3 +233,68 @@ def test_a_close_obstacle_on_the_scan_slows_the_robot(ros):
     v_fast, v_slow = command(graph.commands[-1])[0], command(slowed[-1])[0]
     assert v_fast == pytest.approx(0.22)
     assert v_slow == pytest.approx(0.22 * 0.02 / 0.06, rel=0.05)
+
+
+def test_one_pose_stamped_far_in_the_future_does_not_stop_the_pursuit_for_good(ros):
+    """Lockstep: after a pose stamped 11 days ahead, valid poses are followed again.
+
+    The pose after it is answered with zero (older than the previous one by more than
+    data_timeout: a jump back in time, or the previous stamp was bogus), the next ones
+    normally; a new /path is followed too. The old node answered zero for good.
+    """
+    node = make_node(ros)
+    graph = Graph(ros)
+    bring_up(ros, node, graph, L_PATH, poses=10)
+    graph.send_pose(1e6)
+    ros.spin_until(lambda: len(graph.commands) == 11, 5.0, "the answer to the future pose")
+    graph.send_path(L_PATH, t=0.5)
+    ros.spin_until(lambda: node.pursuit.path is not None, 5.0, "the new path")
+    for k in range(11, 16):
+        graph.send_pose(0.05 * k)
+        ros.spin_until(lambda: len(graph.commands) == k + 1, 5.0, f"answer {k}")
+    after = [command(c) for c in graph.commands[11:]]
+    assert after[0] == (0.0, 0.0), "the first pose after the jump: zero (it could be stale)"
+    assert all(v > 0.0 for v, _ in after[1:]), after
+
+
+def test_a_pose_far_in_the_past_gets_zero_and_the_stream_goes_on(ros):
+    node = make_node(ros, data_timeout=0.3)
+    graph = Graph(ros)
+    bring_up(ros, node, graph, L_PATH, poses=10)
+    graph.send_pose(0.1)  # 0.4 s older than the newest: stale
+    graph.send_pose(0.55)
+    ros.spin_until(lambda: len(graph.commands) == 12, 5.0, "two answers")
+    assert command(graph.commands[10]) == (0.0, 0.0)
+    assert command(graph.commands[11])[0] > 0.0
+
+
+def test_robot_mode_recovers_from_a_future_stamp_and_ignores_stale_poses(ros):
+    node, graph = robot_mode_with_a_path(ros)
+    graph.send_pose(0.05)
+    ros.spin_until(lambda: graph.commands and command(graph.commands[-1])[0] > 0.0, 5.0,
+                   "driving")
+    graph.send_pose(1e6)
+    ros.spin_for(0.1)
+    for k in range(2, 8):  # fresh poses with valid stamps, at 20 Hz
+        graph.send_pose(0.05 * k)
+        ros.spin_for(0.05)
+    ros.spin_for(0.05)
+    assert command(graph.commands[-1])[0] > 0.0, "driving on the valid poses again"
+    count = len(graph.commands)
+    graph.send_pose(0.2, x=0.3)  # a stale pose arriving late: not used as the newest
+    ros.spin_for(0.1)
+    assert node._latest[1] == int(0.35e9)
+    assert len(graph.commands) > count
+
+
+def test_a_path_stamped_in_the_future_is_forgotten_when_localization_is_lost(ros):
+    node = make_node(ros)
+    graph = Graph(ros)
+    bring_up(ros, node, graph)
+    graph.send_path(L_PATH, t=1e6)  # planned from a bogus future pose
+    ros.spin_until(lambda: node.pursuit.path is not None, 5.0, "the path")
+    graph.send_pose(0.05)
+    ros.spin_until(lambda: len(graph.commands) == 1, 5.0, "the answer")
+    graph.send_pose(0.10, localized=False)
+    ros.spin_until(lambda: not node._localized, 5.0, "the loss")
+    assert node.pursuit.path is None, "a stale path is not followed after relocalization"

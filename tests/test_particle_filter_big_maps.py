@@ -1,0 +1,148 @@
+"""The particle filter on big maps (issue 18, item 9): the table it can afford, or a refusal.
+
+The expected-range table grows with the free area: a 40 x 40 m office floor gets 4 cm cells and
+180 directions within max_memory_mb (the old 2 cm x 360 table would need ~2.9 GB; the old code
+refused the map only when configuring, its grid having more than 4 M cells); a map too big even
+then is refused before anything is built, saying what it would need. Peak memory is measured by
+scripts/bench_localization.py (--memory), not here.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rclpy.parameter import Parameter
+
+from amr_common.raycast import scan_kernel
+from amr_common.world import World
+from amr_localization.expected_ranges import NO_RANGE_MM, build_expected_range_table
+from amr_localization.particle_filter import ParticleFilter
+from amr_localization.particle_filter_node import ParticleFilterNode
+from amr_localization.particle_filter_params import check_parameters, check_world
+from amr_localization.table_memory import MapTooBigError, candidate_plans, choose_table
+from tools.make_building_world import building, to_yaml
+
+BUILDING_40M = Path(__file__).resolve().parent / "worlds" / "building_40m.yaml"
+
+
+def _building(tmp_path, size: float) -> World:
+    path = tmp_path / f"building_{size:g}m.yaml"
+    path.write_text(to_yaml(building(size, 18)))
+    return World.load(path)
+
+
+def test_a_40_m_floor_gets_a_4_cm_180_direction_table_within_the_budget():
+    world = World.load(BUILDING_40M)
+    values = check_parameters({})
+    plan = check_world(world, values)
+    assert (plan.resolution, plan.angles) == (0.04, 180)
+    assert plan.total_bytes <= values["max_memory_mb"] * 1e6
+    assert 300e6 < plan.table_bytes < 400e6
+    # The old 2 cm x 360 table: ~2.9 GB, on a grid over the cell limit (refused at configure).
+    finest = candidate_plans(world, values)[0]
+    assert (finest.resolution, finest.angles) == (0.02, 360)
+    assert finest.table_bytes > 2.8e9 and finest.cells > 4_000_000
+    # More memory allowed: the finest table that fits it and the grid's cell limit.
+    assert choose_table(world, dict(values, max_memory_mb=1e5)).angles == 360
+    # The course's mazes keep their table.
+    for name in ("lab02", "room_obstacles", "twin_maze"):
+        small = check_world(World.load(name), values)
+        assert (small.resolution, small.angles) == (0.02, 360)
+
+
+def test_a_map_too_big_is_refused_before_anything_is_built_saying_what_it_needs(tmp_path):
+    world = _building(tmp_path, 60)
+    values = check_parameters({})
+    with pytest.raises(MapTooBigError, match=r"60\.0 x 60\.0 m .* would need 1,0\d\d MB .*"
+                       r"4 cm x 180 directions.*max_memory_mb is 600"):
+        check_world(world, values)
+    assert check_world(world, dict(values, max_memory_mb=1200)).resolution == 0.04
+    with pytest.raises(ValueError, match="too big"):
+        ParticleFilter(world)
+    huge = tmp_path / "huge.yaml"
+    huge.write_text("boundary: [[0, 0], [100, 0], [100, 100], [0, 100]]\n")
+    with pytest.raises(MapTooBigError, match=r"2,\d\d\d MB.*grid has 6,\d{3},\d{3} cells"):
+        check_world(World.load(huge), values)
+
+
+def test_the_initial_pose_is_checked_against_the_map_up_front():
+    values = check_parameters({"initial_pose": [0.0, -0.8, 0.0]})  # on a wall of lab02
+    with pytest.raises(ValueError, match="initial_pose .* wall"):
+        check_world(World.load("lab02"), values)
+
+
+def test_a_coarse_table_stores_rows_only_for_the_free_space_with_exact_ranges(tmp_path):
+    """The byte size is the free cells' rows; every range is the simulator's kernel's, exactly.
+
+    A 12 m floor forced onto the big-map table (4 cm x 180): its rays reach past the first two
+    wall sets the build casts against (1.5 m, 5 m around each block), so all three are checked.
+    """
+    world = _building(tmp_path, 12)
+    plan = check_world(world, check_parameters({"max_memory_mb": 50}))
+    assert (plan.resolution, plan.angles) == (0.04, 180)
+    table = build_expected_range_table(world, plan.resolution, plan.angles)
+    stored = np.count_nonzero(table.grid.clearance >= 0.01)
+    assert table.ranges.shape == (stored + 1, 180) and not table.ranges[0].any()
+    assert table.nbytes == (stored + 1) * 180 * 2 + table.cells * 4 <= plan.table_bytes
+    assert stored < 0.99 * table.cells, "cells on or beside walls (and outside) get no row"
+    directions = np.arange(180) * (2 * math.pi / 180)
+    ranges, zeros = np.empty(180), np.zeros(180)
+    rng = np.random.default_rng(9)
+    cells = rng.choice(np.flatnonzero(table.rows), 300, replace=False)
+    far = 0
+    for cell in cells:
+        x, y = table.cell_centres([cell])[0]
+        scan_kernel(world.segments, x, y, 0.0, np.cos(directions), np.sin(directions), 0.0,
+                    np.inf, np.inf, zeros, ranges)
+        mm = np.where(ranges * 1000.0 < NO_RANGE_MM, np.round(ranges * 1000.0), NO_RANGE_MM)
+        assert np.array_equal(table.cell_ranges(cell), mm.astype(np.uint16))
+        far += np.count_nonzero(ranges > 5.0)
+    assert far > 0, "some rays reach beyond the 5 m wall set"
+
+
+def test_a_filter_on_the_coarse_table_tracks_a_standing_robot_within_a_cell(tmp_path):
+    from amr_sim.lidar import Lidar
+    world = _building(tmp_path, 12)
+    pose = world.starts["corridor_crossing"]
+    pf = ParticleFilter(world, initial_pose=list(pose), max_memory_mb=50,
+                        initial_pose_sigma=[0.05, 0.05, 0.05])
+    assert (pf.table.resolution, pf.table.angles) == (0.04, 180) and pf.model.sub_cell
+    pf.set_scan_geometry(0.0, 2 * math.pi / 360, 360, 0.12, 3.5)
+    scan = Lidar(world.segments, 360, 0.0, 2 * math.pi / 360, 0.12, 3.5, 0.0).scan(*pose)
+    for _ in range(12):
+        pf.correct(scan, force=True)
+    assert math.hypot(pf.estimate[0] - pose[0], pf.estimate[1] - pose[1]) < 0.015
+
+
+def test_the_node_refuses_a_map_too_big_when_configuring(ros, tmp_path):
+    path = tmp_path / "huge.yaml"
+    path.write_text("boundary: [[0, 0], [100, 0], [100, 100], [0, 100]]\n")
+    messages = []
+    node = ros.add(ParticleFilterNode(context=ros.context, parameter_overrides=[
+        Parameter("world", value=str(path))]))
+    node.get_logger().error = lambda text, **kw: messages.append(text)
+    assert node.trigger_configure().name == "FAILURE"
+    assert "too big" in messages[-1] and "would need" in messages[-1]
+
+
+def test_the_pose_search_of_a_coarse_table_finds_the_exact_twin_in_corridor_loop():
+    """On 4 cm cells the search grid stays 4 cm, holding the corridors' centre lines.
+
+    With every second 4 cm cell (an 8 cm grid, off the 0.2 m centre lines) the half-turn twin
+    of this pose scored 19 of 30 beams, was never checked, and the filter declared the wrong
+    copy (2 of 200 episodes of evaluate.py --localize on the big-map table).
+    """
+    from amr_sim.lidar import Lidar
+    world = World.load("corridor_loop")
+    pose = (0.456, 2.201, -math.pi)
+    pf = ParticleFilter(world, initial_pose=list(pose), table_resolution_m=0.04,
+                        table_angles=180)
+    pf.set_scan_geometry(0.0, 2 * math.pi / 240, 240, 0.016, 8.0)
+    scan = Lidar(world.segments, 240, 0.0, 2 * math.pi / 240, 0.016, 8.0, math.nan).scan(*pose)
+    xmin, ymin, xmax, ymax = world.bounds
+    twin = (xmin + xmax - pose[0], ymin + ymax - pose[1])
+    rivals = [a for a in pf._alternatives(scan) if a.match_fraction >= 0.9]
+    assert any(math.hypot(a.pose[0] - twin[0], a.pose[1] - twin[1]) < 0.05 for a in rivals), \
+        [(a.pose, a.match_fraction) for a in pf.last_alternatives]
