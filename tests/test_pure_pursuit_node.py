@@ -227,3 +227,27 @@ def test_a_close_obstacle_on_the_scan_slows_the_robot(ros):
     v_fast, v_slow = command(graph.commands[-1])[0], command(slowed[-1])[0]
     assert v_fast == pytest.approx(0.22)
     assert v_slow == pytest.approx(0.22 * 0.02 / 0.06, rel=0.05)
+
+
+def test_an_obstacle_in_the_way_on_the_scan_halts_the_robot(ros):
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import LaserScan
+
+    from amr_common.ros_conversions import laser_scan
+    node = make_node(ros)
+    graph = Graph(ros)
+    scans = graph.node.create_publisher(LaserScan, "/scan", QoSProfile(
+        depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
+    bring_up(ros, node, graph, L_PATH)
+    ros.spin_until(lambda: node.count_publishers("/scan") >= 1, 5.0, "the scan publisher")
+    # Something 12.5 cm straight ahead (2 cm from the footprint) that the map lacks.
+    scans.publish(laser_scan([0.125] + [3.0] * 359, stamp=seconds_to_time(0.0),
+                             frame_id="base_scan", angle_min=0.0,
+                             angle_increment=2 * math.pi / 360, range_min=0.12, range_max=3.5,
+                             scan_time=0.2))
+    ros.spin_until(lambda: node._scan[0] is not None, 5.0, "the scan")
+    for k in range(1, 11):
+        graph.send_pose(0.05 * k)
+        ros.spin_until(lambda: len(graph.commands) == k, 5.0, f"answer {k}")
+    assert all(command(message) == (0.0, 0.0) for message in graph.commands)
+    assert node.pursuit.state == "blocked"
