@@ -260,10 +260,11 @@ class PurePursuitNode(CommandingNode):
             self.get_logger().warning(
                 f"farther than {self.pursuit.params['max_path_deviation_m']} m from the path: "
                 f"commanding zero until back on it or a new path comes")
-        elif state == "blocked":
+        elif state == "blocked":  # (range noise may let it creep on and halt again)
             self.get_logger().warning(
                 f"something the map lacks is in the way (/scan): halted "
-                f"{self.pursuit.params['obstacle_stop_distance_m']} m short of it, waiting")
+                f"{self.pursuit.params['obstacle_stop_distance_m']} m short of it, waiting",
+                throttle_duration_sec=10.0)
 
 
 
