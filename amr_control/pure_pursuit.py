@@ -122,15 +122,11 @@ def scan_clearance(ranges: np.ndarray, angle_min: float, angle_increment: float,
     None without a valid reading. Readings outside [range_min, range_max], NaN and inf are no
     returns.
     """
-    r = np.asarray(ranges, dtype=np.float64)
-    with np.errstate(invalid="ignore"):
-        valid = np.isfinite(r) & (r >= range_min) & (r <= range_max)
-    if not valid.any():
+    points = _scan_points(ranges, angle_min, angle_increment, range_min, range_max,
+                          lidar_offset_x)
+    if points is None:
         return None
-    cos_a, sin_a = _ray_directions(float(angle_min), float(angle_increment), len(r))
-    r = r[valid]
-    distance = np.hypot(lidar_offset_x + r * cos_a[valid], r * sin_a[valid])
-    return float(distance.min() - robot_radius)
+    return float(np.hypot(*points).min() - robot_radius)
 
 
 def scan_free_ahead(ranges: np.ndarray, angle_min: float, angle_increment: float,
@@ -141,6 +137,23 @@ def scan_free_ahead(ranges: np.ndarray, angle_min: float, angle_increment: float
     0 if a point is inside the footprint already, inf if no point lies in the footprint's way,
     None without a valid reading (no returns: see scan_clearance).
     """
+    points = _scan_points(ranges, angle_min, angle_increment, range_min, range_max,
+                          lidar_offset_x)
+    if points is None:
+        return None
+    x, y = points
+    half_chord = np.sqrt(np.maximum(robot_radius * robot_radius - y * y, 0.0))
+    # In the swept band and not behind the footprint's back edge.
+    in_way = (np.abs(y) < robot_radius) & (x > -half_chord)
+    if not in_way.any():
+        return math.inf
+    return float(max((x[in_way] - half_chord[in_way]).min(), 0.0))
+
+
+def _scan_points(ranges: np.ndarray, angle_min: float, angle_increment: float,
+                 range_min: float, range_max: float,
+                 lidar_offset_x: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """(x, y) of the valid readings in the robot's frame (m), or None if there is none."""
     r = np.asarray(ranges, dtype=np.float64)
     with np.errstate(invalid="ignore"):
         valid = np.isfinite(r) & (r >= range_min) & (r <= range_max)
@@ -148,14 +161,7 @@ def scan_free_ahead(ranges: np.ndarray, angle_min: float, angle_increment: float
         return None
     cos_a, sin_a = _ray_directions(float(angle_min), float(angle_increment), len(r))
     r = r[valid]
-    x = lidar_offset_x + r * cos_a[valid]
-    y = r * sin_a[valid]
-    half_chord = np.sqrt(np.maximum(robot_radius * robot_radius - y * y, 0.0))
-    # In the swept band and not behind the footprint's back edge.
-    in_way = (np.abs(y) < robot_radius) & (x > -half_chord)
-    if not in_way.any():
-        return math.inf
-    return float(max((x[in_way] - half_chord[in_way]).min(), 0.0))
+    return lidar_offset_x + r * cos_a[valid], r * sin_a[valid]
 
 
 @functools.lru_cache(maxsize=8)
