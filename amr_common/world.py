@@ -245,7 +245,7 @@ class World:
         Outside the free space or within `min_clearance` of a wall (the planner passes its own
         inflation radius).
         """
-        problem = self._pose_problem(x, y, what)
+        problem = self.pose_problem(x, y, what)
         if problem is None and (c := self.clearance(x, y)) < min_clearance:
             problem = (f"{what} ({x:g}, {y:g}) is too close to a wall: clearance {c:.3f} m < "
                        f"{min_clearance:.3f} m (robot radius + safety margin: a path there "
@@ -258,11 +258,11 @@ class World:
             raise WorldError(f"{self.source}: {problem}")
 
     def _check_pose(self, pose: tuple[float, float, float], what: str) -> None:
-        problem = self._pose_problem(pose[0], pose[1], what)
+        problem = self.pose_problem(pose[0], pose[1], what)
         if problem is not None:
             raise WorldError(f"{self.source}: {problem}")
 
-    def _pose_problem(self, x: float, y: float, what: str) -> str | None:
+    def pose_problem(self, x: float, y: float, what: str = "pose") -> str | None:
         """Why the robot cannot stand at (x, y), or None."""
         xmin, ymin, xmax, ymax = self.bounds
         # Beyond every wall first: the polygon tests would overflow on huge coordinates.

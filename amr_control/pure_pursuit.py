@@ -22,6 +22,12 @@ Policy (after Nav2's Regulated Pure Pursuit, tightened for 0.4 m corridors):
   min_proximity_scale), before a stop (approach_gain_per_s * distance left, at least
   min_approach_speed_mps), by max_linear_accel_mps2, and so both wheels stay within the Burger's
   limit (curvature kept).
+- Obstacle ahead (from the scan: `free_ahead_m`, how far the footprint can drive straight on
+  before it touches a scan point): something the map lacks (an unmapped box, a moved wall)
+  before the section's end makes the robot brake to a halt obstacle_stop_distance_m short of
+  it (v <= approach_gain_per_s * the room left, no minimum speed) and wait there (state
+  "blocked") until it moves away or a new path comes - as Nav2's Regulated Pure Pursuit stops
+  for a collision ahead. Turning in place needs no room: the footprint is round.
 - Stop: within goal_tolerance_m of the path's end, or once past it: `arrived`, zero from then on
   until a new path (no creeping back and forth at the goal).
 - Farther than max_path_deviation_m from the path: zero (state "off_path") until back or a new
@@ -65,6 +71,8 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     "approach_gain_per_s": (2.0, "Before a stop the speed is at most this times the distance "
                                  "left [1/s]."),
     "min_approach_speed_mps": (0.02, "Slowest forward speed while approaching a stop [m/s]."),
+    "obstacle_stop_distance_m": (0.02, "Halt this far short of a scan point in the way (footprint "
+                                       "straight ahead; an obstacle the map lacks) [m]."),
     "goal_tolerance_m": (0.005, "The path's end (or a sharp corner) is reached within this [m]."),
     "max_path_deviation_m": (0.3, "Farther than this from the path: command zero [m]."),
     "robot_radius_m": (ROBOT_RADIUS, "Robot footprint radius, for the scan clearance [m]."),
@@ -114,6 +122,38 @@ def scan_clearance(ranges: np.ndarray, angle_min: float, angle_increment: float,
     None without a valid reading. Readings outside [range_min, range_max], NaN and inf are no
     returns.
     """
+    points = _scan_points(ranges, angle_min, angle_increment, range_min, range_max,
+                          lidar_offset_x)
+    if points is None:
+        return None
+    return float(np.hypot(*points).min() - robot_radius)
+
+
+def scan_free_ahead(ranges: np.ndarray, angle_min: float, angle_increment: float,
+                    range_min: float, range_max: float, lidar_offset_x: float,
+                    robot_radius: float) -> float | None:
+    """How far the round footprint can drive straight ahead before it touches a scan point (m).
+
+    0 if a point is inside the footprint already, inf if no point lies in the footprint's way,
+    None without a valid reading (no returns: see scan_clearance).
+    """
+    points = _scan_points(ranges, angle_min, angle_increment, range_min, range_max,
+                          lidar_offset_x)
+    if points is None:
+        return None
+    x, y = points
+    half_chord = np.sqrt(np.maximum(robot_radius * robot_radius - y * y, 0.0))
+    # In the swept band and not behind the footprint's back edge.
+    in_way = (np.abs(y) < robot_radius) & (x > -half_chord)
+    if not in_way.any():
+        return math.inf
+    return float(max((x[in_way] - half_chord[in_way]).min(), 0.0))
+
+
+def _scan_points(ranges: np.ndarray, angle_min: float, angle_increment: float,
+                 range_min: float, range_max: float,
+                 lidar_offset_x: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """(x, y) of the valid readings in the robot's frame (m), or None if there is none."""
     r = np.asarray(ranges, dtype=np.float64)
     with np.errstate(invalid="ignore"):
         valid = np.isfinite(r) & (r >= range_min) & (r <= range_max)
@@ -121,8 +161,7 @@ def scan_clearance(ranges: np.ndarray, angle_min: float, angle_increment: float,
         return None
     cos_a, sin_a = _ray_directions(float(angle_min), float(angle_increment), len(r))
     r = r[valid]
-    distance = np.hypot(lidar_offset_x + r * cos_a[valid], r * sin_a[valid])
-    return float(distance.min() - robot_radius)
+    return lidar_offset_x + r * cos_a[valid], r * sin_a[valid]
 
 
 @functools.lru_cache(maxsize=8)
@@ -194,11 +233,13 @@ class PurePursuit:
 
     # --- control -------------------------------------------------------------------------
     def compute_commands(self, x: float, y: float, theta: float,
-                         obstacle_clearance_m: float | None = None) -> tuple[float, float]:
+                         obstacle_clearance_m: float | None = None,
+                         free_ahead_m: float | None = None) -> tuple[float, float]:
         """(v, w) for the robot at pose (x, y, theta) in the path's frame.
 
         obstacle_clearance_m: footprint clearance from the newest scan (None = unknown, no
-        proximity slow-down).
+        proximity slow-down); free_ahead_m: room straight ahead from it (scan_free_ahead; None =
+        unknown, no stop for an obstacle in the way).
         """
         if self._points is None or self.arrived:
             return 0.0, 0.0
@@ -235,6 +276,8 @@ class PurePursuit:
                         p["max_lookahead_m"])
         tx, ty = self._target(s_robot + lookahead, end_point, end_dir)
         alpha = wrap_angle(math.atan2(ty - y, tx - x) - theta)
+        if self.state == "blocked":
+            self.state = "track"  # until _track finds the way still blocked
         if self.state == "rotate" and abs(alpha) <= p["heading_tolerance_rad"]:
             self.state = "track"
         elif self.state == "track" and abs(alpha) > p["rotate_to_heading_angle_rad"]:
@@ -244,10 +287,12 @@ class PurePursuit:
             speed = min(max(p["rotate_gain_per_s"] * abs(alpha), p["min_rotate_speed_radps"]),
                         p["rotate_speed_radps"], p["max_angular_speed_radps"])
             return 0.0, math.copysign(speed, alpha)
-        return self._track(alpha, math.hypot(tx - x, ty - y), remaining, obstacle_clearance_m)
+        return self._track(alpha, math.hypot(tx - x, ty - y), remaining, obstacle_clearance_m,
+                           free_ahead_m)
 
     def _track(self, alpha: float, distance: float, remaining: float,
-               obstacle_clearance_m: float | None) -> tuple[float, float]:
+               obstacle_clearance_m: float | None,
+               free_ahead_m: float | None) -> tuple[float, float]:
         p = self.params
         curvature = 2.0 * math.sin(alpha) / max(distance, 1e-6)
         v = p["max_linear_speed_mps"]
@@ -257,6 +302,13 @@ class PurePursuit:
             v *= max(p["min_proximity_scale"],
                      max(obstacle_clearance_m, 0.0) / p["proximity_distance_m"])
         v = min(v, max(p["min_approach_speed_mps"], p["approach_gain_per_s"] * remaining))
+        if free_ahead_m is not None and free_ahead_m - p["obstacle_stop_distance_m"] < remaining:
+            # Something in the way before the stop the path asks for: halt short of it.
+            room = max(free_ahead_m - p["obstacle_stop_distance_m"], 0.0)
+            v = min(v, p["approach_gain_per_s"] * room)
+            if v < 1e-3:
+                self.state, self._v_last = "blocked", 0.0
+                return 0.0, 0.0
         v = min(v, self._v_last + p["max_linear_accel_mps2"] * self.dt)
         w = curvature * v
         if abs(w) > p["max_angular_speed_radps"]:
@@ -308,4 +360,4 @@ class PurePursuit:
                 float(self._points[k, 1] + along * self._dirs[k, 1]))
 
 
-__all__ = ["PurePursuit", "PARAMETERS", "check_parameters", "scan_clearance"]
+__all__ = ["PurePursuit", "PARAMETERS", "check_parameters", "scan_clearance", "scan_free_ahead"]

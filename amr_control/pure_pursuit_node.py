@@ -16,7 +16,8 @@ the newest stays, aging out after data_timeout). Older by more than data_timeout
 a jump back in time (or the newest stamp was bogus, e.g. far in the future): still not used, but
 later poses are compared with it, so one bad stamp never stops the pursuit for good. On a loss,
 the path is forgotten unless it was planned (stamped) at most data_timeout after the lost pose.
-/scan gives the footprint clearance for the proximity slow-down (ignored when stale).
+/scan gives the footprint clearance for the proximity slow-down and the room straight ahead
+for the stop short of an obstacle the map lacks (both ignored when stale).
 Safety as the wall follower: a zero command on deactivate, cleanup and shutdown (Ctrl-C
 included), never a non-finite value.
 """
@@ -47,7 +48,7 @@ from amr_control.command_output import (
     command_parameter_problems,
     limit_command,
 )
-from amr_control.pure_pursuit import PurePursuit, scan_clearance
+from amr_control.pure_pursuit import PurePursuit, scan_clearance, scan_free_ahead
 
 _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
     "simulation": (True, "true: answer each localized /pose (lockstep with the simulator); "
@@ -171,19 +172,22 @@ class PurePursuitNode(CommandingNode):
         # Kept as is: the clearance is worked out only when the pursuit commands.
         self._scan = (message, self.get_clock().now())
 
-    def _scan_clearance(self) -> float | None:
-        """Footprint clearance from the newest /scan; None if none, stale or unusable."""
+    def _scan_obstacles(self) -> tuple[float | None, float | None]:
+        """(footprint clearance, room straight ahead) from the newest /scan.
+
+        (None, None) if there is none, or it is stale or unusable.
+        """
         message, arrival = self._scan
         if message is None or (not self.simulation and (
                 self.get_clock().now() - arrival).nanoseconds * 1e-9 > self.data_timeout):
-            return None  # a stale scan says nothing about the obstacles now
+            return None, None  # a stale scan says nothing about the obstacles now
         geometry = (message.angle_min, message.angle_increment, message.range_min,
                     message.range_max)
         if len(message.ranges) == 0 or not all(math.isfinite(v) for v in geometry):
-            return None
+            return None, None
         p = self.pursuit.params
-        return scan_clearance(scan_ranges(message), *geometry, p["lidar_offset_x_m"],
-                              p["robot_radius_m"])
+        scan = (scan_ranges(message), *geometry, p["lidar_offset_x_m"], p["robot_radius_m"])
+        return scan_clearance(*scan), scan_free_ahead(*scan)
 
     def _on_pose(self, message) -> None:
         if not self.is_active or self.pursuit is None:
@@ -265,8 +269,8 @@ class PurePursuitNode(CommandingNode):
     def _compute(self, pose: tuple[float, float, float]) -> tuple[float, float]:
         state = self.pursuit.state
         try:
-            clearance = self._scan_clearance() if self.pursuit.path is not None else None
-            v, w = self.pursuit.compute_commands(*pose, clearance)
+            obstacles = self._scan_obstacles() if self.pursuit.path is not None else (None, None)
+            v, w = self.pursuit.compute_commands(*pose, *obstacles)
         except Exception as exc:  # never take the node down: stop instead
             self.get_logger().error(f"pure pursuit raised {exc!r}: commanding zero",
                                     throttle_duration_sec=2.0)
@@ -282,6 +286,11 @@ class PurePursuitNode(CommandingNode):
             self.get_logger().warning(
                 f"farther than {self.pursuit.params['max_path_deviation_m']} m from the path: "
                 f"commanding zero until back on it or a new path comes")
+        elif state == "blocked":  # (range noise may let it creep on and halt again)
+            self.get_logger().warning(
+                f"something the map lacks is in the way (/scan): halted "
+                f"{self.pursuit.params['obstacle_stop_distance_m']} m short of it, waiting",
+                throttle_duration_sec=10.0)
 
 
 

@@ -64,6 +64,7 @@ class EpisodeSpec:
     params: tuple[tuple[str, Any], ...] = ()
     goal: str | None = None  # a named goal or "x,y": a navigation episode
     pose_source: str = "filter"  # of a navigation episode: "filter" or "truth"
+    map: str | None = None  # the filter's and the planner's map (None: the world)
 
     def __post_init__(self) -> None:
         if isinstance(self.params, Mapping):
@@ -80,11 +81,12 @@ class EpisodeSpec:
 
     @property
     def label(self) -> str:
-        """world/start[->goal]/profile/seed N, for tables and progress lines."""
+        """world[@map]/start[->goal]/profile/seed N, for tables and progress lines."""
         from amr_common.world import start_label
         goal = f"->{self.goal}" if self.goal else ""
-        return (f"{Path(self.world).stem}/{start_label(self.start) or '-'}{goal}/{self.profile}/"
-                f"seed {self.seed}")
+        on_map = f"@{Path(self.map).stem}" if self.map else ""
+        return (f"{Path(self.world).stem}{on_map}/{start_label(self.start) or '-'}{goal}/"
+                f"{self.profile}/seed {self.seed}")
 
 
 @dataclass
@@ -104,7 +106,8 @@ def expand_grid(worlds: str | Sequence[str], starts: str | Sequence[str] = "all"
                 duration: float = 600.0, dt: float = 0.05, controller: str = DEFAULT_CONTROLLER,
                 params: Mapping[str, Any] | None = None,
                 goals: str | Sequence[str] | None = None,
-                pose_source: str = "filter") -> list[EpisodeSpec]:
+                pose_source: str = "filter", map: str | None = None,
+                warnings: list[str] | None = None) -> list[EpisodeSpec]:
     """Every combination of world x start [x goal] x profile x seed, in that nesting order.
 
     `worlds` "all" means every bundled world; `starts` "all" means every named start of each world.
@@ -113,6 +116,10 @@ def expand_grid(worlds: str | Sequence[str], starts: str | Sequence[str] = "all"
     (the course's map JSON) needs poses. `goals` (navigation episodes): "all" = every named goal
     of each world, or names, applied like the start names; None: wall-following episodes.
     An empty list given for starts, profiles or goals is an error (not 'all' or 'none').
+    `map`: the map of the filter and the planner while the simulator drives in the
+    world (amr_common.map_vs_world; one world only): the goals are checked against it, and
+    what the map and the world disagree on (a start the map lacks, a goal the world blocks) is
+    appended to `warnings`.
     """
     from amr_common.world import World, WorldError, bundled_worlds
     from amr_sim.profiles import get_profile
@@ -168,12 +175,14 @@ def expand_grid(worlds: str | Sequence[str], starts: str | Sequence[str] = "all"
     if missing:
         raise EvaluationError(f"goal(s) {', '.join(missing)} exist in none of the worlds "
                               f"{', '.join(world_names)}")
+    if map is not None:
+        _check_map(map, world_names, loaded, world_goals, warnings)
     if pose_source not in POSE_SOURCES:
         raise EvaluationError(f"pose_source must be one of {', '.join(POSE_SOURCES)}, got "
                               f"{pose_source!r}")
     specs = [EpisodeSpec(world=w, start=s, profile=p, seed=seed, duration=duration, dt=dt,
                          controller=controller, params=dict(params or {}), goal=g,
-                         pose_source=pose_source)
+                         pose_source=pose_source, map=map)
              for w in world_names for s in loaded[w] for g in world_goals[w]
              for p in profile_names for seed in seed_list]
     if len(specs) > MAX_EPISODES:
@@ -188,6 +197,31 @@ def _given(parsed: list, value: Any, what: str, default: list, hint: str) -> lis
     if not parsed:
         raise EvaluationError(f"no {what} given (an empty list): {hint}")
     return parsed
+
+
+def _check_map(map_source: str, world_names: list[str], starts: dict, goals: dict,
+               warnings: list[str] | None) -> None:
+    """The map loads, stands for one world and takes its goals; warnings for the rest."""
+    from amr_common.map_vs_world import load_map, resolve_goal_on_map, start_warning
+    from amr_common.world import World, WorldError
+    if len(world_names) != 1:
+        raise EvaluationError(f"a map stands for one world: give one world with it (got "
+                              f"{', '.join(world_names)})")
+    world = World.load(world_names[0])
+    try:
+        map_world = load_map(map_source, world)
+    except WorldError as exc:
+        raise EvaluationError(f"map: {exc}") from None
+    found = [start_warning(world.resolve_start(s), map_world, world) for s in
+             starts[world_names[0]]]
+    for goal in goals[world_names[0]]:
+        if goal is not None:
+            try:
+                found.append(resolve_goal_on_map(goal, map_world, world)[1])
+            except WorldError as exc:
+                raise EvaluationError(f"goal '{goal}' on the map: {exc}") from None
+    if warnings is not None:
+        warnings += [w for w in found if w is not None and w not in warnings]
 
 
 def _world_goals(world_name: str, available: list[str],
@@ -242,7 +276,7 @@ def run_one(spec: EpisodeSpec, trajectory: bool = True) -> EpisodeOutcome:
                 spec.world, spec.start, spec.goal, profile=spec.profile, seed=spec.seed,
                 duration=spec.duration, dt=spec.dt, pose_source=spec.pose_source,
                 wall_follower=controller_class(spec.dt, **params),
-                record_trajectory=trajectory)
+                record_trajectory=trajectory, map=spec.map)
         else:
             result = run_episode(spec.world, spec.start, profile=spec.profile, seed=spec.seed,
                                  duration=spec.duration, dt=spec.dt,

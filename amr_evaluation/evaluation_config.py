@@ -16,8 +16,8 @@ from typing import Any, Sequence
 from amr_common.controller_loader import described_parameters
 from amr_common.parameter_table import finite
 
-CONFIG_KEYS = ("worlds", "starts", "goals", "pose_source", "profiles", "seeds", "duration", "dt",
-               "controller", "params_file", "params", "jobs")
+CONFIG_KEYS = ("worlds", "map", "starts", "goals", "pose_source", "profiles", "seeds", "duration",
+               "dt", "controller", "params_file", "params", "jobs")
 POSE_SOURCES = ("filter", "truth")
 MAX_EPISODES = 10_000
 
@@ -183,6 +183,13 @@ def load_config(path: str | os.PathLike) -> dict[str, Any]:
     if "jobs" in config and (isinstance(config["jobs"], bool)
                              or not isinstance(config["jobs"], int) or config["jobs"] < 1):
         raise EvaluationError(f"{path}: 'jobs' must be a positive integer, got {config['jobs']!r}")
+    if "map" in config:
+        if not isinstance(config["map"], str):
+            raise EvaluationError(f"{path}: 'map' must be a map file or a world name, got "
+                                  f"{config['map']!r}")
+        beside = path.parent / config["map"]  # a relative path is relative to the config file
+        if not Path(config["map"]).is_absolute() and beside.is_file():
+            config["map"] = str(beside)
     params_file = config.get("params_file")
     if params_file is not None:
         if not isinstance(params_file, str):

@@ -49,17 +49,24 @@ def _finite_or_none(value: Any) -> Any:
 
 
 def columns_of(outcomes: Sequence[EpisodeOutcome]) -> tuple[str, ...]:
-    """The columns of a set of outcomes: navigation ones if any episode has a goal."""
-    return NAVIGATION_COLUMNS if any(o.spec.goal for o in outcomes) else RESULT_COLUMNS
+    """The columns of a set of outcomes: navigation ones if any episode has a goal.
+
+    With a map of its own (--map), a map column follows the world's.
+    """
+    columns = NAVIGATION_COLUMNS if any(o.spec.goal for o in outcomes) else RESULT_COLUMNS
+    if any(o.spec.map for o in outcomes):
+        columns = (columns[0], "map", *columns[1:])
+    return columns
 
 
 def outcome_row(outcome: EpisodeOutcome) -> dict[str, Any]:
     """The flat per-episode metrics (JSON-safe: non-finite numbers become None)."""
     spec, result = outcome.spec, outcome.result
-    world = (Path(spec.world).stem if spec.world.endswith((".yaml", ".yml", ".json"))
-             else spec.world)
+    world = _name(spec.world)
     row: dict[str, Any] = {"world": world, "start": start_label(spec.start) or None,
                            "profile": spec.profile, "seed": spec.seed}
+    if spec.map:  # the filter's and the planner's own map
+        row = {"world": world, "map": _name(spec.map), **row}
     columns = NAVIGATION_COLUMNS if spec.goal else RESULT_COLUMNS
     if spec.goal:
         row["goal"] = spec.goal
@@ -70,6 +77,11 @@ def outcome_row(outcome: EpisodeOutcome) -> dict[str, Any]:
     row["wall_time_s"] = round(outcome.wall_time_s, 3)
     row["error"] = outcome.error
     return row
+
+
+def _name(source: str) -> str:
+    """A world's or a map's name for the table: a bundled name, or the file's stem."""
+    return Path(source).stem if source.endswith((".yaml", ".yml", ".json")) else source
 
 
 def write_json(path: str | os.PathLike, outcomes: Sequence[EpisodeOutcome],
@@ -116,13 +128,15 @@ _NAVIGATION_TABLE = (
     ("path m", "path_length_m", lambda v: f"{v:.2f}"), ("plans", "plans", str),
     ("wall s", "wall_time_s", lambda v: f"{v:.1f}"),
 )
-_LEFT_ALIGNED = {"world", "start", "goal", "profile"}
+_LEFT_ALIGNED = {"world", "map", "start", "goal", "profile"}
 
 
 def format_table(rows: Iterable[Mapping[str, Any]]) -> str:
     """Aligned text table of outcome rows; an episode that failed shows its error instead."""
     rows = list(rows)
     table = _NAVIGATION_TABLE if any(r.get("goal") for r in rows) else _TABLE
+    if any(r.get("map") for r in rows):
+        table = (table[0], ("map", "map", str), *table[1:])
     cells = [[h for h, _, _ in table]]
     errors: list[str] = []
     for row in rows:

@@ -22,6 +22,10 @@ Metrics (errors of the estimate against the true pose, every step):
 - tracking_error_*: position error while localized (mean, p95, max, m), heading p95 (deg).
 - relocalization_times_s: each later false -> true transition.
 - kidnap: loss_reported_after_s (first localized false after it) and relocalized_after_s.
+
+`map` (default the world): the map the filter uses while the simulator drives in the world
+(amr_common.map_vs_world): the metrics above then say what an unmapped box, a moved wall or a
+SLAM map does to localization - against the truth, so a confident wrong pose counts as false.
 """
 from __future__ import annotations
 
@@ -33,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from amr_common.geometry import wrap_angles
+from amr_common.map_vs_world import load_map
 from amr_common.world import World
 from amr_evaluation.episode import default_controller
 from amr_localization.particle_filter import ParticleFilter
@@ -56,6 +61,7 @@ class LocalizationResult:
     sim_time_s: float
     wall_time_s: float
     filter_wall_time_s: float
+    map: str  # the name of the map the filter used (the world's by default)
     collisions: int
     distance_m: float
     time_to_localized_s: float | None
@@ -97,7 +103,9 @@ class LocalizationResult:
             f"{fmt(self.loss_reported_after_s, ' s', digits=2)}, relocalized after "
             f"{fmt(self.relocalized_after_s, ' s')}")
         to_localized = fmt(self.distance_to_localized_m, " m", digits=2)
-        return (f"{self.world} / {self.start} / {self.profile} / seed {self.seed}: localized "
+        on_map = f" (map {self.map})" if self.map != self.world else ""
+        return (f"{self.world}{on_map} / {self.start} / {self.profile} / seed {self.seed}: "
+                f"localized "
                 f"after {fmt(self.time_to_localized_s, ' s')} ({to_localized}), "
                 f"false {self.false_localizations}, error mean "
                 f"{fmt(self.tracking_error_mean_m, ' cm', 100)} p95 "
@@ -113,15 +121,17 @@ def run_localization_episode(world: World | str, start=None,
                              duration: float = 60.0, dt: float = 0.05,
                              kidnap: tuple[float, float, float, float] | None = None,
                              filter_params: dict[str, Any] | None = None, controller=None,
-                             stop_when_localized: bool = False,
-                             record: bool = True) -> LocalizationResult:
+                             stop_when_localized: bool = False, record: bool = True,
+                             map: World | str | None = None) -> LocalizationResult:
     """Run the wall follower with the particle filter for `duration` simulated seconds.
 
     kidnap (t, x, y, theta): teleport the robot at simulated time t (Simulator.teleport).
     filter_params: ParticleFilter parameters (seed and lidar_offset_x_m default to the episode's
-    seed and the profile's LiDAR position).
+    seed and the profile's LiDAR position). map: the filter's map (None: the world; see the
+    module docstring).
     """
     world_obj = world if isinstance(world, World) else World.load(world)
+    map_obj = load_map(map, world_obj)
     prof = get_profile(profile)
     sim = Simulator(world_obj, start=start, dt=dt, profile=prof, seed=seed)
     if controller is None:
@@ -130,7 +140,7 @@ def run_localization_episode(world: World | str, start=None,
         controller.set_scan_geometry(prof.angle_min, prof.angle_increment, prof.range_min,
                                      prof.range_max)
     params = {"seed": seed, "lidar_offset_x_m": prof.lidar_offset_x, **(filter_params or {})}
-    pf = ParticleFilter(world_obj, **params)
+    pf = ParticleFilter(map_obj, **params)
     pf.set_scan_geometry(prof.angle_min, prof.angle_increment, prof.scan_rays, prof.range_min,
                          prof.range_max)
 
@@ -186,8 +196,8 @@ def run_localization_episode(world: World | str, start=None,
         else [float(c) for c in sim.start])
     metrics = localization_metrics(truth, estimate, distances, kidnap)
     return LocalizationResult(
-        world=world_obj.name, start=start_label, profile=prof.name, seed=int(seed),
-        steps=sim.steps, sim_time_s=sim.time, wall_time_s=wall_time,
+        world=world_obj.name, map=map_obj.name, start=start_label, profile=prof.name,
+        seed=int(seed), steps=sim.steps, sim_time_s=sim.time, wall_time_s=wall_time,
         filter_wall_time_s=filter_time, collisions=sim.collisions, distance_m=sim.distance,
         global_searches=pf.global_searches, particles_max=particles_max,
         particles_final=pf.particle_count, kidnap=list(kidnap) if kidnap else None,

@@ -32,12 +32,15 @@ class LocalizationSpec:
     filter_params: tuple[tuple[str, Any], ...] = ()
     controller: str = "amr_control.wall_follower:WallFollower"
     controller_params: tuple[tuple[str, Any], ...] = ()
+    map: str | None = None  # the filter's map (None: the world)
 
     @property
     def label(self) -> str:
-        """A short name for logs: world/start/profile/seed[/kidnap@t]."""
+        """A short name for logs: world[@map]/start/profile/seed[/kidnap@t]."""
         kidnap = "" if self.kidnap is None else f"/kidnap@{self.kidnap[0]:g}s"
-        return f"{self.world}/{self.start or '-'}/{self.profile}/seed {self.seed}{kidnap}"
+        on_map = f"@{Path(self.map).stem}" if self.map else ""
+        return (f"{self.world}{on_map}/{self.start or '-'}/{self.profile}/seed "
+                f"{self.seed}{kidnap}")
 
 
 @dataclass
@@ -83,7 +86,7 @@ def run_one(spec: LocalizationSpec) -> LocalizationOutcome:
                                           kidnap=spec.kidnap,
                                           filter_params=dict(spec.filter_params),
                                           controller=controller_class(0.05, **params),
-                                          record=False)
+                                          record=False, map=spec.map)
         return LocalizationOutcome(spec, result=result,
                                    wall_time_s=time.perf_counter() - started)
     except Exception as exc:  # one broken episode must not lose the others
@@ -160,6 +163,8 @@ def outcome_row(outcome: LocalizationOutcome) -> dict[str, Any]:
     spec, result = outcome.spec, outcome.result
     row: dict[str, Any] = {"world": spec.world, "start": spec.start, "profile": spec.profile,
                            "seed": spec.seed, "kidnap_s": spec.kidnap[0] if spec.kidnap else None}
+    if spec.map:  # the filter's own map: its column (the world's map otherwise)
+        row = {"world": spec.world, "map": spec.map, **row}
     if result is None:
         row["error"] = outcome.error
         return row
@@ -187,15 +192,21 @@ _TABLE = [("world", "world", "{}"), ("start", "start", "{}"), ("profile", "profi
 
 
 def format_table(rows: Sequence[dict[str, Any]]) -> str:
-    """Aligned text table of outcome rows (errors in cm, relocalizations counted)."""
-    lines = [[header for header, _, _ in _TABLE]]
+    """Aligned text table of outcome rows (errors in cm, relocalizations counted).
+
+    A map column follows the world's when the filter had its own map.
+    """
+    own_map = any(row.get("map") for row in rows)
+    table = [_TABLE[0], ("map", "map", "{}"), *_TABLE[1:]] if own_map else _TABLE
+    spec_keys = ["world", "map", "start", "profile", "seed"] if own_map else \
+        ["world", "start", "profile", "seed"]
+    lines = [[header for header, _, _ in table]]
     for row in rows:
         if "error" in row:
-            lines.append([str(row[k]) for k in ("world", "start", "profile", "seed")]
-                         + [f"ERROR {row['error']}"])
+            lines.append([str(row.get(k)) for k in spec_keys] + [f"ERROR {row['error']}"])
             continue
         cells = []
-        for _, key, fmt in _TABLE:
+        for _, key, fmt in table:
             value = row.get(key)
             if value is None:
                 cells.append("-")
@@ -206,7 +217,7 @@ def format_table(rows: Sequence[dict[str, Any]]) -> str:
             else:
                 cells.append(fmt.format(value))
         lines.append(cells)
-    widths = [max(len(line[i]) for line in lines if i < len(line)) for i in range(len(_TABLE))]
+    widths = [max(len(line[i]) for line in lines if i < len(line)) for i in range(len(table))]
     return "\n".join("  ".join(cell.ljust(w) for cell, w in zip(line, widths)).rstrip()
                      for line in lines)
 
@@ -226,10 +237,12 @@ def evaluate_main(specs, settings: dict[str, Any], args, out: Path, executor=Non
     controller_params = tuple(sorted(settings["params"].items()))
     local = [LocalizationSpec(s.world, s.start, s.profile, s.seed, s.duration,
                               kidnap_pose(s.world, s.start, kidnap_at) if kidnap_at else None,
-                              filter_params, settings["controller"], controller_params)
+                              filter_params, settings["controller"], controller_params, s.map)
              for s in specs]
     print(f"evaluate: {len(local)} localization episodes of {settings['duration']:g} s"
-          + (f", kidnapped at {kidnap_at:g} s" if kidnap_at else ""), flush=True)
+          + (f", kidnapped at {kidnap_at:g} s" if kidnap_at else "")
+          + (f", the filter on map {settings['map']}" if settings.get("map") else ""),
+          flush=True)
     started = time.monotonic()
 
     def progress(done, total, outcome):
@@ -241,6 +254,7 @@ def evaluate_main(specs, settings: dict[str, Any], args, out: Path, executor=Non
                                       executor=executor)
     summary = summarize(outcomes)
     summary["wall_time_s"] = round(time.monotonic() - started, 1)
+    summary["map"] = settings.get("map")  # the filter's map; None: each world's own
     rows = [outcome_row(o) for o in outcomes]
     out.mkdir(parents=True, exist_ok=True)
     (out / "results.json").write_text(json.dumps({"summary": summary, "episodes": rows},

@@ -19,8 +19,11 @@ from amr_evaluation.plot import draw_navigation, draw_world
 
 
 def plot_localization(world: World | str, report: dict[str, Any], path: str | Path,
-                      title: str | None = None) -> Path:
-    """Map (truth, estimate while localized / searching, particles) and errors over time."""
+                      title: str | None = None, map_world: World | None = None) -> Path:
+    """Map (truth, estimate while localized / searching, particles) and errors over time.
+
+    `map_world`: the filter's map when it is not the world, drawn under the world's walls.
+    """
     world = world if isinstance(world, World) else World.load(world)
     truth = np.asarray(report["trajectory"], dtype=np.float64).reshape(-1, 4)
     estimate = np.asarray(report["estimate"], dtype=np.float64).reshape(-1, 5)
@@ -28,7 +31,7 @@ def plot_localization(world: World | str, report: dict[str, Any], path: str | Pa
     fig = Figure(figsize=(12, 5.6), dpi=110)
     FigureCanvasAgg(fig)
     ax = fig.add_subplot(1, 2, 1)
-    draw_world(ax, world, show_starts=False)
+    draw_world(ax, world, show_starts=False, map_world=map_world)
     ax.plot(truth[:, 1], truth[:, 2], color="0.55", linewidth=2.2, label="truth", zorder=4)
     draw_navigation(ax, report.get("path"), report.get("goal"))  # navigation runs have them
     localized = estimate[:, 4] > 0.5

@@ -20,6 +20,11 @@ graph runs it: predicted with every odometry twist, corrected with every new sca
 (`GroundTruthPose`: the true pose, localized from the start), or any object with
 `update(sim, z_scan, z_v, z_w) -> ((x, y, theta), localized)` called once per step with the
 newest measurement and odometry twist.
+
+`map` (default the world): the map the pose source and the planner use while the simulator
+drives in the world (amr_common.map_vs_world): an unmapped box, a moved wall, a SLAM map. The
+goal is checked against the map (the planner's), `goal_warning` says when the world blocks it;
+the pursuit still slows near what the scan sees, and every figure is measured in the world.
 """
 from __future__ import annotations
 
@@ -30,8 +35,9 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from amr_common.map_vs_world import load_map, resolve_goal_on_map
 from amr_common.world import World
-from amr_control.pure_pursuit import PurePursuit, scan_clearance
+from amr_control.pure_pursuit import PurePursuit, scan_clearance, scan_free_ahead
 from amr_evaluation.episode import default_controller
 from amr_planning.planner import Planner, PlanningError
 from amr_sim.profiles import get_profile
@@ -123,6 +129,8 @@ class NavigationResult:
     kidnap: list[float] | None = None  # [t, x, y, theta]
     stalled: bool = False  # localized with zero commands for stall_timeout_s before the goal
     dt: float = 0.05
+    map: str = ""  # the name of the map the filter and the planner used (the world's default)
+    goal_warning: str | None = None  # the world blocks the goal the map has free
     trajectory: list[list[float]] = field(default_factory=list)  # [[t, x, y, theta], ...]
     path: list[list[float]] = field(default_factory=list)  # the last planned path [[x, y], ...]
     collision_points: list[list[float]] = field(default_factory=list)  # [[x, y], ...]
@@ -140,7 +148,8 @@ class NavigationResult:
         """One line for a terminal."""
         def when(t):
             return "never" if t is None else f"{t:.1f} s"
-        return (f"{self.world} / {self.start} -> ({self.goal[0]:g}, {self.goal[1]:g}) / "
+        on_map = f" (map {self.map})" if self.map and self.map != self.world else ""
+        return (f"{self.world}{on_map} / {self.start} -> ({self.goal[0]:g}, {self.goal[1]:g}) / "
                 f"{self.profile}: localized {when(self.localized_time_s)}, goal reached "
                 f"{when(self.goal_reached_time_s)}, stopped {when(self.stopped_time_s)}, path "
                 f"{self.path_length_m or 0:.2f} m, final error "
@@ -185,25 +194,27 @@ def run_navigation_episode(
         planner: Planner | None = None, planner_params: dict | None = None,
         pursuit_params: dict | None = None, wall_follower: Any = None,
         goal_tolerance: float = GOAL_TOLERANCE_M, stall_timeout_s: float = 30.0,
-        record_trajectory: bool = True) -> NavigationResult:
+        record_trajectory: bool = True, map: World | str | None = None) -> NavigationResult:
     """Drive from `start` to `goal` and measure it; see the module docstring.
 
     start: a name, (x, y, theta) or None (the first start); goal: a name, "x,y", (x, y) or None
-    (the world's goal). `planner` may be passed prebuilt (its grid costs are built once per
-    world). kidnap (t, x, y, theta): the robot is teleported at simulated time t (the filter
-    must notice and relocalize). Stalled: localized and commanded zero for stall_timeout_s
-    before reaching the goal (the episode then ends).
+    (the map's goal, else the world's). `planner` may be passed prebuilt on the map (its grid
+    costs are built once per map). `map`: see the module docstring (None: the world). kidnap
+    (t, x, y, theta): the robot is teleported at simulated time t (the filter must notice and
+    relocalize). Stalled: localized and commanded zero for stall_timeout_s before reaching the
+    goal (the episode then ends) - also when something the map lacks blocks the way.
     """
     duration = float(duration)
     if not (math.isfinite(duration) and duration >= 0.0):
         raise ValueError(f"duration must be a finite number of seconds >= 0, got {duration}")
     world_obj = world if isinstance(world, World) else World.load(world)
-    goal_xy = world_obj.resolve_goal(goal)
+    map_obj = load_map(map, world_obj)
+    goal_xy, goal_warning = resolve_goal_on_map(goal, map_obj, world_obj)
     prof = get_profile(profile)
     sim = Simulator(world_obj, start=start, dt=dt, profile=prof, seed=seed)
     source_name = pose_source if isinstance(pose_source, str) else type(pose_source).__name__
-    pose_source = make_pose_source(pose_source, world_obj, sim, seed, filter_params)
-    planner = planner if planner is not None else Planner(world_obj, **(planner_params or {}))
+    pose_source = make_pose_source(pose_source, map_obj, sim, seed, filter_params)
+    planner = planner if planner is not None else Planner(map_obj, **(planner_params or {}))
     params = {"lidar_offset_x_m": prof.lidar_offset_x, **(pursuit_params or {})}
     pursuit = PurePursuit(sim.dt, **params)
     radius = pursuit.params["robot_radius_m"]
@@ -239,10 +250,10 @@ def run_navigation_episode(
                 except PlanningError as exc:
                     errors.append(f"t={sim.time:.2f} s: {exc}")
                     pursuit.clear_path()
-            clearance = scan_clearance(z_scan, prof.angle_min, prof.angle_increment,
-                                       prof.range_min, prof.range_max, prof.lidar_offset_x,
-                                       radius)
-            v, w = pursuit.compute_commands(*estimate, clearance)
+            geometry = (z_scan, prof.angle_min, prof.angle_increment, prof.range_min,
+                        prof.range_max, prof.lidar_offset_x, radius)
+            v, w = pursuit.compute_commands(*estimate, scan_clearance(*geometry),
+                                            scan_free_ahead(*geometry))
             if pursuit.state in ("track", "rotate"):
                 pursued.append(sim.pose[:2])
         else:
@@ -300,7 +311,7 @@ def run_navigation_episode(
         "stalled" if stalled else "duration",
         invalid_commands=sim.bad_commands,
         kidnap=[float(k) for k in kidnap] if kidnap is not None else None, stalled=stalled,
-        dt=sim.dt, trajectory=trajectory,
+        dt=sim.dt, map=map_obj.name, goal_warning=goal_warning, trajectory=trajectory,
         path=path.points.tolist() if path is not None else [],
         collision_points=[[float(px), float(py)] for px, py in sim.collision_points])
 

@@ -19,29 +19,36 @@ from amr_common.robot import ROBOT_RADIUS
 from amr_common.world import World
 
 _WALL_COLOUR = "#222222"
+_MAP_COLOUR = "#66c2a5"  # the map's walls when it is not the world (teal: not an estimate colour)
 
 
 def draw_world(ax, world: World, show_starts: bool = True, show_grid: bool = False,
-               show_goals: bool | None = None) -> None:
+               show_goals: bool | None = None, map_world: World | None = None) -> None:
     """Walls and optionally named starts, named goals and the corridor grid on an Axes.
 
     A map world also shows its cells (free white, unknown light grey, occupied dark grey).
+    With `map_world` (the map the filter and the planner used, when it is not the world), the
+    map's cells (or its walls, orange) lie under the world's true walls, so their differences
+    show; the world's own cells are then not drawn.
 
     Goals are shown with the starts unless show_goals says otherwise.
     """
     segs = world.segments.reshape(-1, 2, 2)
-    if world.raster is not None:  # a map: its cells as map viewers show them, edges thin
-        r = world.raster
-        rows, cols = r.values.shape
-        shade = np.where(r.values == 0, 1.0, np.where(r.values == -1, 0.8, 0.35))
-        ax.imshow(shade, cmap="gray", vmin=0.0, vmax=1.0, origin="lower", zorder=1,
-                  interpolation="nearest", extent=(r.origin[0], r.origin[0] + cols * r.resolution,
-                                                   r.origin[1], r.origin[1] + rows * r.resolution))
+    own_map = map_world is not None and map_world is not world
+    if own_map:
+        _draw_map(ax, map_world)
+    elif world.raster is not None:  # a map: its cells as map viewers show them, edges thin
+        _draw_cells(ax, world)
     ax.add_collection(LineCollection(segs, colors=_WALL_COLOUR, capstyle="round", zorder=3,
-                                     linewidths=2.0 if world.raster is None else 0.8))
+                                     linewidths=2.0 if world.raster is None else 0.8,
+                                     label="world (true walls)" if own_map else None))
     for hole in world.holes:
         ax.fill(hole[:, 0], hole[:, 1], color="#bbbbbb", zorder=2)
     xmin, ymin, xmax, ymax = world.bounds
+    if own_map:  # the map's walls may lie beyond the world's
+        mxmin, mymin, mxmax, mymax = map_world.bounds
+        xmin, ymin, xmax, ymax = min(xmin, mxmin), min(ymin, mymin), max(xmax, mxmax), \
+            max(ymax, mymax)
     pad = 0.1
     ax.set_xlim(xmin - pad, xmax + pad)
     ax.set_ylim(ymin - pad, ymax + pad)
@@ -65,6 +72,29 @@ def draw_world(ax, world: World, show_starts: bool = True, show_grid: bool = Fal
                         color="darkred", zorder=6)
         if world.goal is not None and world.goal not in world.goals.values():
             _draw_goal(ax, *world.goal)
+
+
+def _draw_cells(ax, world: World, zorder: float = 1) -> None:
+    """A map world's cells: free white, unknown light grey, occupied dark grey."""
+    r = world.raster
+    rows, cols = r.values.shape
+    shade = np.where(r.values == 0, 1.0, np.where(r.values == -1, 0.8, 0.35))
+    ax.imshow(shade, cmap="gray", vmin=0.0, vmax=1.0, origin="lower", zorder=zorder,
+              interpolation="nearest", extent=(r.origin[0], r.origin[0] + cols * r.resolution,
+                                               r.origin[1], r.origin[1] + rows * r.resolution))
+
+
+def _draw_map(ax, map_world: World) -> None:
+    """The map of the filter and the planner, under the world: its cells, else its walls."""
+    if map_world.raster is not None:
+        _draw_cells(ax, map_world, zorder=0.5)
+        ax.fill([], [], color="0.35", label=f"map {map_world.name} (occupied cells)")
+        return
+    for hole in map_world.holes:
+        ax.fill(hole[:, 0], hole[:, 1], color=_MAP_COLOUR, alpha=0.25, zorder=0.5)
+    ax.add_collection(LineCollection(map_world.segments.reshape(-1, 2, 2), colors=_MAP_COLOUR,
+                                     linewidths=4.0, alpha=0.6, zorder=0.6,
+                                     label=f"map {map_world.name} (walls)"))
 
 
 def draw_navigation(ax, planned_path: Any = None, goal: Sequence[float] | None = None) -> None:
@@ -129,14 +159,16 @@ def _episode_parts(trajectory: Any, collision_points: Iterable) -> tuple[np.ndar
 
 def draw_episode(ax, world: World, trajectory: Any, collision_points: Iterable = (),
                  colourbar: bool = True, small: bool = False, planned_path: Any = None,
-                 goal: Sequence[float] | None = None) -> dict[str, float]:
+                 goal: Sequence[float] | None = None,
+                 map_world: World | None = None) -> dict[str, float]:
     """Walls, the trajectory coloured by time, start/end markers and collisions on an Axes.
 
-    With navigation also the planned path (dashed) and the goal (a star). Returns the figures
-    shown (collisions, min clearance, distance).
+    With navigation also the planned path (dashed) and the goal (a star); with `map_world`
+    the map under the world's walls (draw_world). Returns the figures shown (collisions, min
+    clearance, distance).
     """
     traj, points, result = _episode_parts(trajectory, collision_points)
-    draw_world(ax, world, show_starts=False)
+    draw_world(ax, world, show_starts=False, map_world=map_world)
     figures = _figures(world, traj, points, result)
     draw_navigation(ax, planned_path, goal)
     if len(traj) >= 2:
@@ -188,10 +220,12 @@ def _title(world: World, result, figures: dict[str, float], title: str | None) -
 
 def plot_episode(world: World | str, trajectory: Any, collision_points: Iterable = (),
                  path: str | Path = "x.png", title: str | None = None,
-                 planned_path: Any = None, goal: Sequence[float] | None = None) -> Path:
+                 planned_path: Any = None, goal: Sequence[float] | None = None,
+                 map_world: World | None = None) -> Path:
     """Draw one episode to a PNG: walls, trajectory coloured by time, start, end, collisions.
 
-    For navigation also the planned path and the goal.
+    For navigation also the planned path and the goal; with `map_world` (the map of the filter
+    and the planner) its cells or walls under the world's true walls.
     `trajectory` is [[t, x, y, theta], ...] or an EpisodeResult (or its to_dict()), whose start,
     profile and figures then go into the title.
     """
@@ -200,7 +234,8 @@ def plot_episode(world: World | str, trajectory: Any, collision_points: Iterable
     FigureCanvasAgg(fig)
     ax = fig.add_subplot(1, 1, 1)
     traj, points, result = _episode_parts(trajectory, collision_points)
-    figures = draw_episode(ax, world, traj, points, planned_path=planned_path, goal=goal)
+    figures = draw_episode(ax, world, traj, points, planned_path=planned_path, goal=goal,
+                           map_world=map_world)
     ax.set_title(_title(world, result, figures, title), fontsize=10)
     return _save(fig, path)
 

@@ -21,6 +21,8 @@ Examples:
   .venv/bin/python scripts/evaluate.py --localize --worlds twin_maze --seeds 0-9 --kidnap-at 25
   .venv/bin/python scripts/evaluate.py --worlds lab02,maze_deadends --goals all \
       --profiles ideal,turtlebot3 --seeds 0-2 --duration 300   # navigation to named goals
+  .venv/bin/python scripts/evaluate.py --worlds evaluations/worlds/lab02_box.yaml --map lab02 \
+      --goals inner_far --profiles turtlebot3 --seeds 0-4 --duration 200  # a box the map lacks
 Options given on the command line override the same keys of --config.
 """
 from __future__ import annotations
@@ -67,10 +69,15 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter,
                                      epilog=__doc__.split("\n", 1)[1])
-    parser.add_argument("--config", default=None, help="episode-set YAML (keys: worlds, starts, "
-                        "profiles, seeds, duration, dt, controller, params_file, params, jobs)")
+    parser.add_argument("--config", default=None, help="episode-set YAML (keys: worlds, map, "
+                        "starts, profiles, seeds, duration, dt, controller, params_file, params, "
+                        "jobs)")
     parser.add_argument("--worlds", default=None, help="comma-separated world names or paths, "
                         "or 'all' (default lab02)")
+    parser.add_argument("--map", default=None, help="with --goals or --localize: the map of "
+                        "the particle filter and the planner (a Nav2 map YAML or any world "
+                        "source) while the episodes drive in the one world of --worlds "
+                        "(default: the world)")
     parser.add_argument("--starts", default=None, help="'all', or comma-separated start names "
                         "and X,Y,THETA poses (m, m, rad; a pose applies to every world; default "
                         "all)")
@@ -130,14 +137,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 def resolve_settings(args: argparse.Namespace) -> dict:
     """Config-file values, overridden by the command-line options that were given."""
-    settings: dict = {"worlds": "lab02", "starts": "all", "goals": None,
+    settings: dict = {"worlds": "lab02", "map": None, "starts": "all", "goals": None,
                       "pose_source": "filter", "profiles": "ideal", "seeds": "0",
                       "duration": 600.0, "dt": 0.05, "controller": DEFAULT_CONTROLLER,
                       "params": {}, "jobs": None}
     if args.config:
         settings.update(load_config(args.config))
-    for key in ("worlds", "starts", "goals", "pose_source", "profiles", "seeds", "duration",
-                "dt", "controller", "params_file", "jobs"):
+    for key in ("worlds", "map", "starts", "goals", "pose_source", "profiles", "seeds",
+                "duration", "dt", "controller", "params_file", "jobs"):
         value = getattr(args, key)
         if value is not None:
             settings[key] = value
@@ -205,11 +212,15 @@ def check_localization_options(args: argparse.Namespace, settings: dict, specs) 
 
 def episode_specs(settings: dict) -> list:
     """The episodes of resolved settings; the controller built once with its parameters."""
+    warnings: list[str] = []
     specs = expand_grid(settings["worlds"], settings["starts"], settings["profiles"],
                         settings["seeds"], duration=settings["duration"], dt=settings["dt"],
                         controller=settings["controller"], params=settings["params"],
-                        goals=settings["goals"], pose_source=settings["pose_source"])
+                        goals=settings["goals"], pose_source=settings["pose_source"],
+                        map=settings["map"], warnings=warnings)
     check_controller(settings["controller"], settings["params"], settings["dt"])
+    for warning in warnings:  # the map and the world disagree: allowed, said
+        print(f"evaluate: warning: {warning}", file=sys.stderr)
     return specs
 
 
@@ -273,6 +284,9 @@ def main(argv: list[str] | None = None) -> int:
         settings = resolve_settings(args)
         if args.localize and settings["goals"]:
             raise EvaluationError("--goals (navigation) and --localize exclude each other")
+        if settings["map"] and not (args.localize or settings["goals"]):
+            raise EvaluationError("--map needs --goals or --localize (wall following uses no "
+                                  "map)")
         specs = episode_specs(settings)
         if args.localize:
             check_localization_options(args, settings, specs)
@@ -320,6 +334,7 @@ def run_and_report(args, settings: dict, specs, executor, out: Path, started) ->
             "duration_s": settings["duration"], "dt_s": settings["dt"],
             "episode_timeout_s": settings["episode_timeout"],
             "goals": settings["goals"], "pose_source": settings["pose_source"],
+            "map": settings["map"],
             "config": args.config, "command": " ".join(sys.argv),
             "python": platform.python_version(), "host": platform.node()}
     write_json(out / "results.json", outcomes, meta)

@@ -71,6 +71,16 @@ def make_viewer_nodes(context, args, *, use_sim_time: bool = False) -> list:
                                parameter_overrides=overrides_to_parameters(values))]
 
 
+def make_map_publisher(context, map_source: str, *, use_sim_time: bool = False):
+    """amr_map_publisher with `map_source` (any world source) as /map and /map_markers.
+
+    The robot's /map, and the simulation's when the map is not the world.
+    """
+    from amr_common.map_publisher import MapPublisherNode
+    return MapPublisherNode(context=context, parameter_overrides=overrides_to_parameters(
+        {"world": str(map_source), "use_sim_time": use_sim_time}))
+
+
 def add_localization_options(parser) -> None:
     """--localize and the particle filter's --pf-param NAME:=VALUE, shared by the run scripts."""
     parser.add_argument("--localize", action="store_true", help="also run the particle filter "

@@ -9,10 +9,12 @@ does not change discovery, it prints what it uses.
   .venv/bin/python scripts/run_robot.py --domain-id 30 --cmd-vel stamped   # Jazzy bringup
   .venv/bin/python scripts/run_robot.py --domain-id 30 --cmd-vel twist     # Humble bringup
   .venv/bin/python scripts/run_robot.py --domain-id 30 --foxglove --map course_map.json
-  .venv/bin/python scripts/run_robot.py --domain-id 30 --localize --world lab02  # + localization
-  .venv/bin/python scripts/run_robot.py --domain-id 30 --world lab02 --goal -1.0,0.6
-With --world and --goal: also the particle filter, the planner and the pure pursuit (robot
-mode): explore until localized, then drive to the goal and stop there.
+  .venv/bin/python scripts/run_robot.py --domain-id 30 --localize --map lab02  # + localization
+  .venv/bin/python scripts/run_robot.py --domain-id 30 --map ~/map.yaml --goal -1.0,0.6
+--map is THE map, as Nav2's `map:=`: published as /map (amr_map_publisher), the particle
+filter's with --localize, the planner's with --goal. With --goal: also the particle filter, the
+planner and the pure pursuit (robot mode): explore until localized, then drive to the goal and
+stop there. (--world is an old name of --map: on the robot there is no simulated world.)
 Ctrl-C stops the robot: the controllers publish a zero command before exiting.
 """
 from __future__ import annotations
@@ -42,7 +44,7 @@ from launch_common import (  # noqa: E402
 # Node parameters run_robot sets itself: a -p / --pf-param would contradict them.
 WALL_FOLLOWER_SET = {"simulation": "(robot mode)", "dt": "from --dt",
                      "cmd_vel_stamped": "from --cmd-vel", "controller": "from --controller"}
-FILTER_SET = {"world": "from --world",
+FILTER_SET = {"world": "from --map",
               "lidar_offset_x_m": "(the Burger's LiDAR position; the robot's /tf_static gives it)"}
 
 
@@ -58,16 +60,16 @@ def parse_args(argv=None) -> argparse.Namespace:
     add_controller_options(parser, str(ROBOT_PARAMS), "wall follower ROS params YAML "
                            "(default params/turtlebot3.yaml)")
     parser.add_argument("--dt", type=float, default=None, help="control period in seconds")
-    parser.add_argument("--map", default=None, metavar="MAP", help="also publish this course "
-                        "map JSON / world YAML / Nav2 map YAML as /map and /map_markers "
-                        "(amr_map_publisher)")
+    parser.add_argument("--map", default=None, metavar="MAP", help="the map of the room: "
+                        "Nav2 map YAML (map_saver's), course map JSON, world YAML or bundled "
+                        "world name; published as /map and /map_markers (amr_map_publisher), "
+                        "the particle filter's and the planner's map")
     add_foxglove_options(parser)
     add_localization_options(parser)
-    parser.add_argument("--world", default=None, help="with --localize or --goal: the map the "
-                        "robot is in (bundled world name or world YAML / course map JSON / Nav2 "
-                        "map YAML; default --map)")
+    parser.add_argument("--world", default=None, metavar="MAP", help="deprecated: the old name "
+                        "of --map (there is no simulated world on the robot)")
     parser.add_argument("--goal", default=None, help="navigate to X,Y (metres, negative numbers "
-                        "typed as is) or a named goal of --world: also the particle filter, the "
+                        "typed as is) or a named goal of --map: also the particle filter, the "
                         "planner and the pure pursuit")
     args = parser.parse_args(join_negative_values(argv, ["--goal"]))
     if args.domain_id is None:
@@ -77,15 +79,18 @@ def parse_args(argv=None) -> argparse.Namespace:
             parser.error(str(exc))
     check_common_options(parser, args, "run_robot", WALL_FOLLOWER_SET, FILTER_SET)
     args.localize = args.localize or args.goal is not None  # navigation needs the filter
-    if args.localize and args.world is None:
-        args.world = args.map
-    if args.localize and args.world is None:
-        parser.error(f"{'--goal' if args.goal else '--localize'} needs --world (the map the "
-                     f"robot drives in)")
-    if args.world is not None:
+    args.deprecated_world = args.world is not None
+    if args.world is not None and args.map is not None and args.world != args.map:
+        parser.error("--world and --map name different maps: give --map only (the robot has "
+                     "one map; --world is its old name)")
+    args.map = args.map or args.world
+    if args.localize and args.map is None:
+        parser.error(f"{'--goal' if args.goal else '--localize'} needs --map (the map of the "
+                     f"room the robot is in)")
+    if args.map is not None:
         from amr_common.world import World, WorldError
         try:
-            world = World.load(args.world)
+            world = World.load(args.map)
             if args.goal is not None:
                 args.goal = world.resolve_goal(args.goal)
         except WorldError as exc:
@@ -95,6 +100,9 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def main(argv=None) -> int:
     args = parse_args(argv)
+    if args.deprecated_world:
+        print("run_robot: --world is deprecated: use --map (the map of the filter, the planner "
+              "and /map; the robot has no simulated world)", file=sys.stderr)
     use_domain_id(args)
     import rclpy
     from rclpy.signals import SignalHandlerOptions
@@ -111,13 +119,11 @@ def main(argv=None) -> int:
     nodes = make_robot_graph(None, params_file=args.params_file, dt=args.dt,
                              cmd_vel_stamped=stamped, controller=args.controller,
                              tuning=args.overrides,
-                             localize_world=args.world if args.localize else None,
+                             localize_world=args.map if args.localize else None,
                              filter_overrides=args.pf_overrides, goal=args.goal)
     if args.map:
-        from amr_common.map_publisher import MapPublisherNode
-        from launch_common import overrides_to_parameters
-        nodes.insert(0, MapPublisherNode(parameter_overrides=overrides_to_parameters(
-            {"world": args.map})))
+        from launch_common import make_map_publisher
+        nodes.insert(0, make_map_publisher(None, args.map))
     nodes = make_viewer_nodes(None, args) + nodes  # shut down last (reverse order)
     manager = LifecycleManager([node.get_name() for node in nodes])
     manager.get_logger().info(f"run_robot: {describe_graph_settings()}; Ctrl-C stops the robot")

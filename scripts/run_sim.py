@@ -25,6 +25,10 @@ Examples:
   .venv/bin/python scripts/run_sim.py --world maze_deadends --localize --kidnap 25,1.4,1,0
   .venv/bin/python scripts/run_sim.py --world lab02 --goal inner_far --plot out/nav.png
   .venv/bin/python scripts/run_sim.py --world lab02 --goal -1.0,0.6 --kidnap 40,0.2,1,3.14
+  .venv/bin/python scripts/run_sim.py --world evaluations/worlds/lab02_box.yaml --map lab02 \
+      --goal inner_far --profile turtlebot3 --plot out/box.png   # a box the map lacks
+`--map`: the particle filter, the planner and /map use this map while the simulator drives in
+`--world` (default: the world): a map SLAM built, or an old map of a changed room.
 Local runs are isolated: loopback discovery and a free ROS_DOMAIN_ID (printed at startup).
 Ctrl-C ends the whole run: the controller commands zero and the partial report is written,
 marked "interrupted": true (exit code 130).
@@ -67,7 +71,7 @@ INTERRUPTED = 130  # exit code after Ctrl-C / SIGTERM, as a shell reports it
 WALL_FOLLOWER_SET = {"dt": "from --dt", "simulation": "from --realtime and --profile",
                      "enable_localization": "from --enable-localization, --localize and --goal",
                      "controller": "from --controller"}
-FILTER_SET = {"world": "from --world",
+FILTER_SET = {"world": "from --map (default --world)",
               "lidar_offset_x_m": "from --profile (where the simulated LiDAR sits)"}
 
 
@@ -77,6 +81,9 @@ def parse_args(argv=None) -> argparse.Namespace:
                                    epilog=__doc__.split("\n\n", 1)[1])
     parser.add_argument("--world", default="lab02", help="bundled world name or a path to a "
                         "world YAML / course map JSON / Nav2 map YAML (default lab02)")
+    parser.add_argument("--map", default=None, help="the map of the particle filter, the "
+                        "planner and /map, as --world takes it (default: the world itself); "
+                        "the robot drives in --world")
     parser.add_argument("--start", default=None, help="named start, X,Y,THETA (m, m, rad; e.g. "
                         "--start -1.0,-1.0,1.57), or 'all' to run every named start in turn "
                         "(default: the world's first start)")
@@ -172,33 +179,47 @@ def main(argv=None) -> int:
 
 
 def _prepare(args):
-    """(world, starts, outputs) with every start and output path checked, or exit code 2."""
+    """(world, map, starts, outputs) with every start and output checked, or exit code 2.
+
+    The starts and the kidnap pose are checked against the world (where the robot is), the goal
+    against the map (where the planner plans); what the world and the map disagree on is
+    printed as a warning and kept in args.map_warnings for the report.
+    """
     import sim_session  # noqa: F401  (the slow imports, while Ctrl-C can still simply abort)
 
+    from amr_common.map_vs_world import load_map, resolve_goal_on_map, start_warning
     from amr_common.world import World, WorldError, start_label
     try:
         isolate_local_graph(args.domain_id)
         world = World.load(args.world)
+        try:
+            map_world = load_map(args.map, world)
+        except WorldError as exc:
+            raise WorldError(f"--map {exc}") from None
         if args.start in ("all", None) and not world.starts:
             raise WorldError(f"{world.source} names no start poses"
                              + (", so '--start all' runs nothing" if args.start else "")
                              + ": give one with --start X,Y,THETA")
         starts = list(world.starts) if args.start == "all" else [args.start]
-        for start in starts:
-            world.resolve_start(start)  # fail early with the world's own message
+        warnings = [start_warning(world.resolve_start(start), map_world, world)
+                    for start in starts]  # fail early with the world's own message
         if args.kidnap is not None:
             world.resolve_start(args.kidnap[1:], what="kidnap pose")
-        if args.goal is not None:  # a name or X,Y, checked against the walls
-            args.goal = world.resolve_goal(args.goal)
+        if args.goal is not None:  # a name or X,Y, checked against the map's walls
+            args.goal, goal_warning = resolve_goal_on_map(args.goal, map_world, world)
+            warnings.append(goal_warning)
         starts = [next(iter(world.starts)) if s is None else s for s in starts]
         outputs = _check_outputs(args, [start_label(s) for s in starts])
     except ValueError as exc:  # WorldError, a bad domain id or output path
         print(f"run_sim: {exc}", file=sys.stderr)
         return 2
-    return world, starts, outputs
+    args.map_warnings = [w for w in warnings if w is not None]
+    for warning in args.map_warnings:
+        print(f"run_sim: warning: {warning}", file=sys.stderr)
+    return world, map_world, starts, outputs
 
 
-def _simulate(args, world, starts, outputs, stop) -> int:
+def _simulate(args, world, map_world, starts, outputs, stop) -> int:
     """Run each start in turn until done or stopped; write the outputs; the exit code."""
     from sim_report import report_before_start
     from sim_session import SimSession
@@ -209,17 +230,18 @@ def _simulate(args, world, starts, outputs, stop) -> int:
     for start in starts:
         if stop.requested:
             if not reports:  # stopped before any node existed: nothing moved, nothing to stop
-                reports.append(report_before_start(args, world, start))
+                reports.append(report_before_start(args, world, start, map_world))
             break
         session = SimSession(args, world, start, stop=stop,
-                             record_path=outputs["record"].get(start_label(start)))
+                             record_path=outputs["record"].get(start_label(start)),
+                             map_world=map_world)
         try:
             report = session.run()
         finally:
             session.close()
         reports.append(report)
         print(session.summary_line(report))
-    _write_outputs(world, reports, outputs, several_starts=len(starts) > 1)
+    _write_outputs(world, map_world, reports, outputs, several_starts=len(starts) > 1)
     if stop.requested:
         print("run_sim: interrupted", file=sys.stderr)
         return INTERRUPTED
@@ -243,16 +265,21 @@ def _check_outputs(args, labels: list[str]) -> dict:
             "record": per_start(args.record, "--record") if args.record else {}}
 
 
-def _write_outputs(world, reports, outputs, several_starts: bool) -> None:
-    """The report (a list for several starts, even if stopped after one) and the plots."""
+def _write_outputs(world, map_world, reports, outputs, several_starts: bool) -> None:
+    """The report (a list for several starts, even if stopped after one) and the plots.
+
+    A map that is not the world is drawn as its cells (or walls) under the world's true walls.
+    """
     if outputs["report"] is not None:
         path = outputs["report"]
         path.write_text(json.dumps(reports if several_starts else reports[0], indent=1))
         print(f"run_sim: report written to {path}")
     if outputs["plot"]:
+        from sim_report import world_label
+
         from amr_evaluation.plot import plot_episode
         for report in reports:
-            title = f"{report['world']} / {report['start']} / {report['profile']}" + \
+            title = f"{world_label(report)} / {report['start']} / {report['profile']}" + \
                 (" (interrupted)" if report["interrupted"] else "")
             if report.get("goal") is not None:
                 reached = report["goal_reached_time_s"]
@@ -264,10 +291,11 @@ def _write_outputs(world, reports, outputs, several_starts: bool) -> None:
                 from amr_evaluation.localization_plot import plot_localization
                 written = plot_localization(world, report,
                                             path=str(outputs["plot"][report["start"]]),
-                                            title=title)
+                                            title=title, map_world=map_world)
             else:
                 written = plot_episode(world, report["trajectory"], report["collision_points"],
-                                       path=str(outputs["plot"][report["start"]]), title=title)
+                                       path=str(outputs["plot"][report["start"]]), title=title,
+                                       map_world=map_world)
             print(f"run_sim: plot written to {written}")
 
 

@@ -1,8 +1,9 @@
 """The report of one run_sim.py start and its summary line (sim_session.py builds them).
 
-Keys: what ran (world, start, profile, mode, nodes), the simulator's figures, the trajectory
-metrics; with the particle filter its localization figures, with a goal the navigation ones.
-A run stopped before its graph ran gets the same keys (report_before_start).
+Keys: what ran (world, the map of the filter and the planner with what it and the world disagree
+on, start, profile, mode, nodes), the simulator's figures, the trajectory metrics (in the
+world); with the particle filter its localization figures, with a goal the navigation ones. A
+run stopped before its graph ran gets the same keys (report_before_start).
 """
 from __future__ import annotations
 
@@ -15,13 +16,19 @@ from amr_evaluation.episode import trajectory_metrics
 
 
 def run_report(args, world, start, sim, trajectory, wall_errors, wall_time: float,
-            interrupted: bool, graph: dict) -> dict:
-    """The JSON report of one start; `sim` is the Simulator (or its figures before any step)."""
+               interrupted: bool, graph: dict, map_world=None) -> dict:
+    """The JSON report of one start; `sim` is the Simulator (or its figures before any step).
+
+    `map_world`: the map of the filter and the planner (None: the world).
+    """
     positions = np.array([row[1:3] for row in trajectory])
     rms = (math.sqrt(sum(e * e for e in wall_errors) / len(wall_errors))
            if wall_errors else None)
     return {
-        "world": world.name, "start": start_label(start), "interrupted": interrupted,
+        "world": world.name, "world_source": world.source, "map": (map_world or world).name,
+        "map_source": (map_world or world).source,
+        "map_warnings": list(getattr(args, "map_warnings", [])),
+        "start": start_label(start), "interrupted": interrupted,
         "profile": args.profile, "mode": "realtime" if args.realtime else "lockstep",
         "seed": args.seed, "dt": args.dt, **graph,
         "steps": sim.steps, "sim_time_s": round(sim.time, 6),
@@ -37,7 +44,7 @@ def run_report(args, world, start, sim, trajectory, wall_errors, wall_time: floa
     }
 
 
-def report_before_start(args, world, start) -> dict:
+def report_before_start(args, world, start, map_world=None) -> dict:
     """The report of a run stopped before its graph ran: nothing simulated, interrupted.
 
     The keys of a run's report, localization and navigation ones included.
@@ -51,7 +58,8 @@ def report_before_start(args, world, start) -> dict:
                           collision_points=[])
     trajectory = [[0.0, x, y, theta]]
     report = run_report(args, world, start, sim, trajectory, [], 0.0, True, graph={
-        "controller": args.controller_spec, "nodes": [], "controller_mode": None})
+        "controller": args.controller_spec, "nodes": [], "controller_mode": None},
+        map_world=map_world)
     goal = getattr(args, "goal", None)
     if getattr(args, "localize", False) or goal is not None:
         report |= localization_fields(args, trajectory, [], [])
@@ -89,6 +97,13 @@ def navigation_fields(goal, summary: dict, plan, estimate: list,
     }
 
 
+def world_label(report: dict) -> str:
+    """'lab02', or 'lab02_box on map lab02' when the filter and the planner had their own map."""
+    if report["map_source"] == report["world_source"]:
+        return report["world"]
+    return f"{report['world']} on map {report['map']}"
+
+
 def localization_line(report: dict) -> str:
     m = report.get("localization")
     if m is None:
@@ -116,7 +131,7 @@ def navigation_line(report: dict) -> str:
     path = "no path" if report["path_length_m"] is None else \
         f"path {report['path_length_m']:.2f} m"
     factor = report["real_time_factor"]
-    return (f"run_sim: {report['world']} / {report['start']} -> goal "
+    return (f"run_sim: {world_label(report)} / {report['start']} -> goal "
             f"({report['goal'][0]:g}, {report['goal'][1]:g}) / {report['profile']} "
             f"({report['mode']}): localized {when('localized_time_s')}, goal reached "
             f"{when('goal_reached_time_s')}, stopped {when('stopped_time_s')}, {path}, "

@@ -7,6 +7,8 @@ run_robot.py (amr_odometry + wall follower in robot mode, params/turtlebot3.yaml
 With a goal (`--goal`), both add the particle filter, the planner and the pure pursuit: the wall
 follower explores until /pose is localized, the simulator ends the run once the robot rests at
 the goal.
+With a map that is not the world (`--map`), the particle filter and the planner load the map,
+and /map is the map (amr_map_publisher, as on the robot; the simulator publishes none).
 """
 from __future__ import annotations
 
@@ -23,6 +25,7 @@ from sim_report import (
     navigation_line,
     report_before_start,
     run_report,
+    world_label,
 )
 
 from amr_common.lifecycle_manager import LifecycleManager, LifecycleStartupError
@@ -33,6 +36,7 @@ from launch_common import (
     ROBOT_PARAMS,
     SIM_PARAMS,
     localizing_wall_follower,
+    make_map_publisher,
     make_navigators,
     make_particle_filter,
     make_robot_graph,
@@ -69,12 +73,18 @@ class SimSession:
     """One start of a run_sim.py run: the graph in one process, its report and outputs.
 
     `stop` (an amr_common.node_runner.StopFlag) ends the run early: the report is then marked
-    interrupted. `record_path`: an MCAP file for this start's topics.
+    interrupted. `record_path`: an MCAP file for this start's topics. `map_world`: the map of
+    the filter, the planner and /map (None or `world`: the world; then args.map is not used).
     """
 
-    def __init__(self, args, world, start, stop=None, record_path=None) -> None:
+    def __init__(self, args, world, start, stop=None, record_path=None,
+                 map_world=None) -> None:
         self.args = args
         self.world = world
+        self.map_world = map_world if map_world is not None else world
+        # What the filter and the planner load: the map's file, else the world's.
+        own_map = self.map_world is not world
+        map_source = args.map if own_map else args.world
         self.start = start if start is not None else next(iter(world.starts))
         self.stop = stop
         self.record_path = record_path
@@ -95,7 +105,8 @@ class SimSession:
                       "enable_localization": args.enable_localization or localize,
                       # Viewers get a whole TF tree: the particle filter sends map -> odom when
                       # it runs; without it (or a user's own localization node) the truth does.
-                      "map_to_odom_from_truth": not (args.enable_localization or localize)}
+                      "map_to_odom_from_truth": not (args.enable_localization or localize),
+                      "publish_map": not own_map}  # the map publisher below sends the map
         if args.goal:
             sim_values["goal"] = list(args.goal)
         if getattr(args, "kidnap", None):
@@ -110,7 +121,7 @@ class SimSession:
         if self.rehearsal:
             self.control_nodes = make_robot_graph(
                 self.context, params_file=args.params_file or ROBOT_PARAMS, dt=args.dt,
-                tuning=tuning, localize_world=args.world if localize else None,
+                tuning=tuning, localize_world=map_source if localize else None,
                 filter_overrides=filter_overrides,
                 goal=args.goal if self.navigating else None)
         else:
@@ -131,11 +142,11 @@ class SimSession:
                 from amr_sim.profiles import get_profile
                 lidar_offset_x = get_profile(args.profile).lidar_offset_x
                 self.control_nodes.append(make_particle_filter(
-                    self.context, world=args.world, lidar_offset_x_m=lidar_offset_x,
+                    self.context, world=map_source, lidar_offset_x_m=lidar_offset_x,
                     overrides=filter_overrides))
             if self.navigating:
                 self.control_nodes += make_navigators(
-                    self.context, world=args.world, goal=args.goal,
+                    self.context, world=map_source, goal=args.goal,
                     wall_follower=self.control_nodes[0], lidar_offset_x_m=lidar_offset_x)
         self.wall_follower = next(n for n in self.control_nodes
                                   if n.get_name() == "wall_follower")
@@ -149,6 +160,9 @@ class SimSession:
             self.particle_filter.on_pose.append(self._on_pose)
         # Viewers (the Foxglove bridge) first: they see the graph from its first message.
         self.viewer_nodes = make_viewer_nodes(self.context, args, use_sim_time=True)
+        if own_map:
+            self.viewer_nodes.append(make_map_publisher(self.context, map_source,
+                                                        use_sim_time=True))
         order = [node.get_name() for node in [*self.viewer_nodes, *self.control_nodes]] + [
             self.simulator_node.get_name()]
         self.manager = LifecycleManager(order, context=self.context)
@@ -190,14 +204,15 @@ class SimSession:
         if self.record_path:
             from amr_common.mcap_recorder import McapRecorder
             self.recorder = McapRecorder(self.record_path, metadata={
-                "world": self.world.name, "start": start_label(self.start),
+                "world": self.world.name, "map": self.map_world.name,
+                "start": start_label(self.start),
                 "profile": args.profile, "seed": str(args.seed), "dt": str(args.dt),
                 "mode": "realtime" if args.realtime else "lockstep"})
             self._attach_recorder()
         self.simulator_node.on_step.append(self._on_step)
         self.stop_requested = False
         if self._stop_requested():  # stopped while the nodes were being built: none started
-            return report_before_start(args, self.world, self.start)
+            return report_before_start(args, self.world, self.start, self.map_world)
         try:
             self.manager.startup(self.executor)
         except LifecycleStartupError as exc:
@@ -275,7 +290,8 @@ class SimSession:
                               "controller": self.wall_follower.get_parameter("controller").value,
                               "nodes": self.manager.node_startup_order,
                               "controller_mode": "simulation" if self.wall_follower.get_parameter(
-                                  "simulation").value else "robot (timer)"}) \
+                                  "simulation").value else "robot (timer)"},
+                          map_world=self.map_world) \
             | self._localization_report() | self._navigation_report()
 
     def _localization_report(self) -> dict:
@@ -301,7 +317,7 @@ class SimSession:
             return navigation_line(report)
         laps = report["laps"]
         factor = report["real_time_factor"]
-        return (f"run_sim: {report['world']} / {report['start']} / {report['profile']} "
+        return (f"run_sim: {world_label(report)} / {report['start']} / {report['profile']} "
                 f"({report['mode']}): {report['sim_time_s']:.1f} s simulated in "
                 f"{report['wall_time_s']:.1f} s ({f'{factor}x' if factor else 'n/a'} real "
                 f"time), "

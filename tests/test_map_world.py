@@ -248,7 +248,7 @@ def test_a_bad_map_is_a_one_line_error_before_anything_runs(tmp_path, capsys):
     assert run_sim.main(["--world", str(path), "--start", "0.5,0.5,0"]) == 2
     assert capsys.readouterr().err.strip() == f"run_sim: {message}"
     with pytest.raises(SystemExit) as exit_info:
-        run_robot.parse_args(["--world", str(path), "--localize"])
+        run_robot.parse_args(["--map", str(path), "--localize"])
     err = capsys.readouterr().err.strip()
     assert exit_info.value.code == 2 and len(err.splitlines()) == 1 and message in err
     assert evaluate.main(["--worlds", str(path), "--starts", "0.5,0.5,0", "--out",

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from amr_common.robot import MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED, TRACK, unicycle_step
-from amr_control.pure_pursuit import PurePursuit, scan_clearance
+from amr_control.pure_pursuit import PurePursuit, scan_clearance, scan_free_ahead
 from amr_evaluation.navigation_episode import distances_to_polyline
 
 DT = 0.05
@@ -136,3 +136,83 @@ def test_scan_clearance_from_the_lidar_position_ignoring_invalid_rays():
     assert scan_clearance(ranges, 0.0, increment, 0.12, 3.5, -0.032, 0.105) == \
         pytest.approx(0.232 - 0.105)
     assert scan_clearance(np.zeros(360), 0.0, increment, 0.12, 3.5, 0.0, 0.105) is None
+
+
+# --- an obstacle the map lacks, in the way -------------------------------------------------
+
+RAYS = 360
+INCREMENT = 2 * math.pi / RAYS
+
+
+def scan_of_points(pose, points, noise=0.0, rng=None):
+    """A 360-ray scan (LiDAR at the centre) that sees each world point on its nearest ray."""
+    x, y, theta = pose
+    ranges = np.full(RAYS, np.inf)
+    for px, py in points:
+        r = math.hypot(px - x, py - y)
+        k = round((math.atan2(py - y, px - x) - theta) / INCREMENT) % RAYS
+        ranges[k] = min(ranges[k], r + (rng.normal(0.0, noise) if noise else 0.0))
+    return ranges
+
+
+def drive_with_obstacle(path, pose, obstacle, steps=1200, noise=0.0, removed_at=None):
+    """Follow `path` with the scan of `obstacle` points; (positions, commands, pursuit)."""
+    rng = np.random.default_rng(0)
+    pursuit = PurePursuit(DT)
+    pursuit.set_path(path)
+    x, y, theta = pose
+    positions, commands = [(x, y)], []
+    for step in range(steps):
+        seen = obstacle if removed_at is None or step < removed_at else []
+        scan = scan_of_points((x, y, theta), seen, noise, rng)
+        geometry = (scan, 0.0, INCREMENT, 0.12, 3.5, 0.0, 0.105)
+        v, w = pursuit.compute_commands(x, y, theta, scan_clearance(*geometry),
+                                        scan_free_ahead(*geometry))
+        commands.append((v, w, pursuit.state))
+        x, y, theta = unicycle_step(x, y, theta, v, w, DT)
+        positions.append((x, y))
+        if pursuit.arrived:
+            break
+    return np.array(positions), commands, pursuit
+
+
+def test_free_ahead_is_the_room_of_the_footprint_straight_on():
+    def free(points, offset=0.0):
+        ranges = scan_of_points((offset, 0.0, 0.0), points)  # the LiDAR at (offset, 0)
+        return scan_free_ahead(ranges, 0.0, INCREMENT, 0.12, 3.5, offset, 0.105)
+
+    assert free([(0.4, 0.0)]) == pytest.approx(0.4 - 0.105)
+    # Off-centre: the footprint's edge meets it later (the circle's chord).
+    ahead, side = 0.4 * math.cos(INCREMENT * 12), 0.4 * math.sin(INCREMENT * 12)
+    assert free([(ahead, side)]) == pytest.approx(ahead - math.sqrt(0.105**2 - side**2))
+    assert free([(0.3, 0.2), (-0.3, 0.0), (0.0, -0.3)]) == math.inf  # beside and behind
+    assert free([(0.3, 0.0)], offset=-0.032) == pytest.approx(0.3 - 0.105)
+    assert free([(0.05, 0.0)], offset=-0.1) == 0.0  # inside the footprint already
+    assert scan_free_ahead(np.zeros(RAYS), 0.0, INCREMENT, 0.12, 3.5, 0.0, 0.105) is None
+
+
+def test_a_box_in_the_way_stops_the_robot_short_of_it_until_it_goes():
+    box = [(0.6 + dx, dy) for dx in np.linspace(0.0, 0.2, 11) for dy in np.linspace(-0.1, 0.1, 11)]
+    positions, commands, pursuit = drive_with_obstacle(L_PATH, (0.0, 0.0, 0.0), box, steps=300)
+    assert not pursuit.arrived and pursuit.state == "blocked"
+    assert all(c[:2] == (0.0, 0.0) for c in commands[-100:])  # waits there, no creeping
+    front = 0.6 - positions[-1][0] - 0.105  # footprint to the box's near face
+    assert 0.015 <= front <= 0.03, front
+    # The way clears: the pursuit drives on to the goal.
+    positions, commands, pursuit = drive_with_obstacle(L_PATH, (0.0, 0.0, 0.0), box,
+                                                       removed_at=300, steps=3000)
+    assert pursuit.arrived and math.dist(positions[-1], L_PATH[-1]) <= 0.03
+    assert (np.array(positions)[:300, 0] <= 0.6 - 0.105).all()
+
+
+def test_a_wall_just_beyond_the_goal_does_not_stop_it_short():
+    # The goal keeps GOAL_CLEARANCE (0.135 m) from the wall straight ahead of the last leg: the
+    # footprint has 3 cm of room at the goal, beyond the stop the path asks for.
+    wall = [(L_PATH[-1][0] + dx, L_PATH[-1][1] + 0.135) for dx in np.linspace(-0.4, 0.4, 81)]
+    exact, noisy = (drive_with_obstacle(L_PATH, (0.0, 0.0, 0.0), wall, noise=noise, steps=3000)
+                    for noise in (0.0, 0.01))
+    for positions, _, pursuit in (exact, noisy):
+        assert pursuit.arrived and math.dist(positions[-1], L_PATH[-1]) <= 0.01
+    assert "blocked" not in {c[2] for c in exact[1]}
+    # 1 cm range noise (the LDS-01's) on every ray: at most a few halting steps on the way in.
+    assert len(noisy[1]) <= len(exact[1]) + 20

@@ -206,26 +206,34 @@ def test_integer_values_are_accepted_for_float_parameters(ros):
     assert math.isclose(node.dt, 1.0)
 
 
-def test_a_close_obstacle_on_the_scan_slows_the_robot(ros):
+def scan_publisher(graph):
+    """The test's /scan publisher (best effort, as a LiDAR driver's)."""
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import LaserScan
+    return graph.node.create_publisher(LaserScan, "/scan", QoSProfile(
+        depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
 
+
+def publish_scan(publisher, ranges) -> None:
+    """A 360-ray scan from ray 0 straight ahead, counter-clockwise (the LDS-01's)."""
     from amr_common.ros_conversions import laser_scan
+    publisher.publish(laser_scan(ranges, stamp=seconds_to_time(0.0), frame_id="base_scan",
+                                 angle_min=0.0, angle_increment=2 * math.pi / 360,
+                                 range_min=0.12, range_max=3.5, scan_time=0.2))
+
+
+def test_a_close_obstacle_on_the_scan_slows_the_robot(ros):
     fast = make_node(ros, scan_topic="/no_scan")  # sees no scan: no slow-down
     slow = make_node(ros, "pure_pursuit_slow", cmd_vel_topic="/cmd_slow")
     graph = Graph(ros)
     slowed = []
     graph.node.create_subscription(TwistStamped, "/cmd_slow", slowed.append, 10)
-    scans = graph.node.create_publisher(LaserScan, "/scan", QoSProfile(
-        depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
+    scans = scan_publisher(graph)
     bring_up(ros, fast, graph, L_PATH)
     ros.bring_up(slow, lambda: slow.count_publishers("/scan") >= 1)
     ros.spin_until(lambda: slow.pursuit.path is not None, 5.0, "the latched path")
     # 12.5 cm to a wall on the left: 2 cm footprint clearance for the second node only.
-    scans.publish(laser_scan([3.0] * 89 + [0.125] + [3.0] * 270, stamp=seconds_to_time(0.0),
-                             frame_id="base_scan", angle_min=0.0,
-                             angle_increment=2 * math.pi / 360, range_min=0.12, range_max=3.5,
-                             scan_time=0.2))
+    publish_scan(scans, [3.0] * 89 + [0.125] + [3.0] * 270)
     ros.spin_until(lambda: slow._scan[0] is not None, 5.0, "the scan")
     for k in range(1, 21):
         graph.send_pose(0.05 * k)
@@ -298,3 +306,19 @@ def test_a_path_stamped_in_the_future_is_forgotten_when_localization_is_lost(ros
     graph.send_pose(0.10, localized=False)
     ros.spin_until(lambda: not node._localized, 5.0, "the loss")
     assert node.pursuit.path is None, "a stale path is not followed after relocalization"
+
+
+def test_an_obstacle_in_the_way_on_the_scan_halts_the_robot(ros):
+    node = make_node(ros)
+    graph = Graph(ros)
+    scans = scan_publisher(graph)
+    bring_up(ros, node, graph, L_PATH)
+    ros.spin_until(lambda: node.count_publishers("/scan") >= 1, 5.0, "the scan publisher")
+    # Something 12.5 cm straight ahead (2 cm from the footprint) that the map lacks.
+    publish_scan(scans, [0.125] + [3.0] * 359)
+    ros.spin_until(lambda: node._scan[0] is not None, 5.0, "the scan")
+    for k in range(1, 11):
+        graph.send_pose(0.05 * k)
+        ros.spin_until(lambda: len(graph.commands) == k, 5.0, f"answer {k}")
+    assert all(command(message) == (0.0, 0.0) for message in graph.commands)
+    assert node.pursuit.state == "blocked"

@@ -92,11 +92,11 @@ def test_realtime_rehearsal_runs_the_robot_graph_with_the_filter(tmp_path):
     assert report["distance_m"] > 0.5
 
 
-def test_run_robot_localize_needs_a_world(capsys):
+def test_run_robot_localize_needs_a_map(capsys):
     with pytest.raises(SystemExit):
         run_robot.parse_args(["--localize"])
-    assert "--world" in capsys.readouterr().err
-    args = run_robot.parse_args(["--localize", "--world", "lab02", "--pf-param", "beams:=90"])
+    assert "--localize needs --map" in capsys.readouterr().err
+    args = run_robot.parse_args(["--localize", "--map", "lab02", "--pf-param", "beams:=90"])
     assert args.localize and args.pf_overrides == {"beams": 90}
 
 
