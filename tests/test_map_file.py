@@ -265,4 +265,4 @@ def test_broken_yaml_is_a_one_line_error(tmp_path):
 def test_a_named_start_off_the_free_cells_is_refused(tmp_path):
     pgm(tmp_path / "map.pgm", np.full((20, 20), 254, dtype=np.uint8))
     _refused(map_yaml(tmp_path, extra="starts:\n  out: [5.0, 5.0, 0]\n"),
-             "start 'out' (5, 5) is not in a free cell of the map", WorldError)
+             "start 'out' (5, 5) is outside the map", WorldError)
