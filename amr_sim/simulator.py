@@ -37,6 +37,7 @@ from amr_common.robot import COMMAND_CLIP  # |v|, |w| beyond this are absurd
 from amr_common.world import World
 from amr_sim.lidar import Lidar
 from amr_sim.profiles import SensorProfile, get_profile
+from amr_sim.reality import RealRobot, dead_reckon
 
 
 def _constrain_velocity_python(segments, px, py, vx, vy, h, radius, allowed_penetration):
@@ -120,8 +121,12 @@ class Simulator:
         self._space, self._body, self._shape = space, body, shape  # shapes hold weak body refs
 
         p = self._profile
-        self._lidar = Lidar(self._segments, p.scan_rays, p.angle_min, p.angle_increment,
-                            p.range_min, p.range_max, p.no_return)
+        # The reality gap (profiles with effects): drivetrain, scanner and their random streams.
+        self._real = None if p.effects is None else RealRobot(p, self._segments, seed,
+                                                              (x, y, theta), dt)
+        self._lidar = self._real.lidar if self._real else Lidar(
+            self._segments, p.scan_rays, p.angle_min, p.angle_increment, p.range_min,
+            p.range_max, p.no_return)
         self._x, self._y, self._theta = x, y, theta  # theta continuous (not wrapped)
         self._steps = 0
         self._distance = 0.0
@@ -161,13 +166,17 @@ class Simulator:
         if self._quantum:  # turtlebot3_node sends int(v * 100): truncation toward zero
             v = math.trunc(v * self._quantum) / self._quantum
             w = math.trunc(w * self._quantum) / self._quantum
-        if p.clamp_commands:
-            v = min(max(v, -p.max_linear), p.max_linear)
-            w = min(max(w, -p.max_angular), p.max_angular)
-        v, w = robot.saturate(v, w)  # wheel-speed limit: one factor on both wheels
+        dt = self._dt
+        if self._real is not None:  # latency, firmware clamps, motors, wheel errors, slip
+            ds, dth = self._real.drive.step(v, w, self._steps * dt, dt)
+            v, w = ds / dt, dth / dt
+        else:
+            if p.clamp_commands:
+                v = min(max(v, -p.max_linear), p.max_linear)
+                w = min(max(w, -p.max_angular), p.max_angular)
+            v, w = robot.saturate(v, w)  # wheel-speed limit: one factor on both wheels
         self._command = (v, w)
 
-        dt = self._dt
         x0, y0, th0 = self._x, self._y, self._theta
         chord_speed = v * robot.sinc_half(w * dt)  # exact unicycle arc: its chord, mid heading
         mid = th0 + 0.5 * w * dt
@@ -192,17 +201,25 @@ class Simulator:
         mid = th0 + 0.5 * dth
         chord = dx * math.cos(mid) + dy * math.sin(mid)
         ds = chord / robot.sinc_half(dth)
-        dphi_l, dphi_r = robot.encoder_increments(ds, dth)
         wheels = self._wheel_angles
-        wheels[0] += dphi_l
-        wheels[1] += dphi_r
-        self._z_v, self._z_w = robot.twist_from_increments(dphi_l, dphi_r, dt)
-        # Dead reckoning (the encoders do not see sideways sliding along a wall).
-        odom = self._odom
-        odom_mid = odom[2] + 0.5 * dth
-        odom[0] += chord * math.cos(odom_mid)
-        odom[1] += chord * math.sin(odom_mid)
-        odom[2] += dth
+        if self._real is not None:  # encoders, odometry with the IMU heading (it drifts)
+            dphi_l, dphi_r, ds_odom, dth_odom = self._real.sense(ds, dth, dt)
+            self._z_v, self._z_w = ds_odom / dt, dth_odom / dt
+            dead_reckon(self._odom, ds_odom, dth_odom)
+            self._lidar.record(now, x1, y1, th1)
+            wheels[0] += dphi_l
+            wheels[1] += dphi_r
+        else:
+            dphi_l, dphi_r = robot.encoder_increments(ds, dth)
+            wheels[0] += dphi_l
+            wheels[1] += dphi_r
+            self._z_v, self._z_w = robot.twist_from_increments(dphi_l, dphi_r, dt)
+            # Dead reckoning (the encoders do not see sideways sliding along a wall).
+            odom = self._odom
+            odom_mid = odom[2] + 0.5 * dth
+            odom[0] += chord * math.cos(odom_mid)
+            odom[1] += chord * math.sin(odom_mid)
+            odom[2] += dth
         self._distance += math.hypot(dx, dy)
 
         clearance = nearest_wall(self._segments, x1, y1)[0] - _ROBOT_RADIUS
@@ -235,8 +252,12 @@ class Simulator:
         body.angular_velocity = 0.0
         self._space.reindex_shapes_for_body(body)
         self._x, self._y, self._theta = x, y, theta
+        if self._real is not None:  # the scan's pose history starts again here
+            self._lidar.reset(self.time, x, y, theta)
 
     def _new_scan(self) -> np.ndarray:
+        if self._real is not None:  # the revolution ends now (the driver's stamp)
+            return self._lidar.scan(self._steps * self._dt)
         p = self._profile
         noise = (self._rng.standard_normal(p.scan_rays) * p.range_noise_sigma
                  if p.range_noise_sigma > 0 else None)
@@ -304,6 +325,22 @@ class Simulator:
     def executed_command(self) -> tuple[float, float]:
         """The twist (v, w) the robot executed in the last step, after quantisation and limits."""
         return self._command
+
+    @property
+    def effects(self):
+        """The reality-gap effects of this run (amr_sim.effects.Effects), or None (clean)."""
+        return self._real.effects if self._real is not None else None
+
+    @property
+    def scan_geometry(self) -> tuple[float, float, int, float, float]:
+        """(angle_min, angle_increment, rays, range_min, range_max) of the newest scan.
+
+        The profile's, except with the LDS-02, whose rays change from scan to scan.
+        """
+        p = self._profile
+        if self._real is not None:
+            return (*self._lidar.geometry, p.range_min, p.range_max)
+        return (p.angle_min, p.angle_increment, p.scan_rays, p.range_min, p.range_max)
 
     @property
     def lidar(self) -> Lidar:
