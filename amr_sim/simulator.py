@@ -9,16 +9,17 @@ clipped as the profile's robot does (turtlebot3 only), and saturated by the whee
 (robot.py: both wheels scaled by one factor, which keeps the curvature). The
 executed twist becomes the velocity of a pymunk dynamic body (the chord of the exact unicycle arc
 along the mid-step heading, so free motion equals the exact unicycle solution with no lag).
-Walls stop the robot through a speculative contact constraint: the velocity component towards
-every wall within reach this step is limited so the robot ends at most 0.5 mm inside it (below
-pymunk's collision_slop of 1 mm, so the contact persists without jitter). Pymunk detects the
-contacts (begin/separate callbacks count collisions) and its solver pushes out any deeper overlap.
-Why not force control as in simulation.md: pymunk integrates positions before velocities, so a
-force-driven body executes each command one step late; setting the velocity blindly instead sinks
-~42 mm into walls. Constraining the velocity against nearby walls avoids both.
+Walls stop the robot through a speculative contact constraint (amr_sim.contact): the robot ends
+at most 0.5 mm inside a wall. Pymunk detects the contacts (begin/separate callbacks count
+collisions) and its solver pushes out any deeper overlap.
 
 Sensors come from the body's actual motion: encoder increments (so z_v/z_w reflect collisions and
 saturation), a dead-reckoned odometry pose, and the LiDAR at the robot centre (lidar.py).
+
+A profile with reality-gap effects (turtlebot3_real, turtlebot3_lds02; amr_sim.reality) replaces
+the command path by the real drivetrain (latency, firmware clamps, motors, wheel errors, slip),
+the odometry by encoders + a drifting IMU heading, and the LiDAR by the real scanner (skew,
+range error by band, dropouts, the LDS-02's changing rays). Without effects, nothing changes.
 """
 from __future__ import annotations
 
@@ -31,54 +32,18 @@ import pymunk
 
 from amr_common import robot
 from amr_common.geometry import wrap_angle
-from amr_common.jit import jit
-from amr_common.raycast import nearest_wall, segment_offset
+from amr_common.raycast import nearest_wall
 from amr_common.robot import COMMAND_CLIP  # |v|, |w| beyond this are absurd
 from amr_common.world import World
+from amr_sim.contact import ALLOWED_PENETRATION, constrain_velocity
 from amr_sim.lidar import Lidar
 from amr_sim.profiles import SensorProfile, get_profile
 from amr_sim.reality import RealRobot, dead_reckon
-
-
-def _constrain_velocity_python(segments, px, py, vx, vy, h, radius, allowed_penetration):
-    """Limit (vx, vy) so that after moving h seconds no wall is closer than radius - allowed.
-
-    The distance to a segment along a straight motion is convex in time, so the linear bound
-    d(t) >= d0 - (v . n) t is safe: v . n <= (d0 - radius + allowed) / h for the unit vector n
-    towards each wall within reach. Several walls (corners): alternating projections.
-    """
-    reach = radius + math.sqrt(vx * vx + vy * vy) * h + 1e-3
-    normals = np.empty((8, 3))
-    count = 0
-    for k in range(segments.shape[0]):
-        cx, cy, d = segment_offset(segments, k, px, py)
-        if d < reach and d > 0.0 and count < 8:
-            normals[count, 0] = cx / d
-            normals[count, 1] = cy / d
-            normals[count, 2] = max(d - radius + allowed_penetration, 0.0) / h
-            count += 1
-    if count == 0:
-        return vx, vy
-    for _ in range(16):  # converges in 1-3 passes for 1-3 walls
-        worst = 0.0
-        for j in range(count):
-            excess = vx * normals[j, 0] + vy * normals[j, 1] - normals[j, 2]
-            if excess > 0.0:
-                vx -= excess * normals[j, 0]
-                vy -= excess * normals[j, 1]
-                worst = max(worst, excess)
-        if worst < 1e-12:
-            return vx, vy
-    return 0.0, 0.0  # not converged (a narrow wedge): stopping is always safe
-
-
-_constrain_velocity = jit(_constrain_velocity_python)
 
 log = logging.getLogger("amr_sim.simulator")
 
 _ROBOT_TYPE = 1
 _WALL_TYPE = 2
-ALLOWED_PENETRATION = 0.0005  # m: resting contact depth, below collision_slop so it is stable
 _ROBOT_RADIUS = robot.ROBOT_RADIUS
 _WARN_INTERVAL = 5.0  # s of wall time between repeated bad-command warnings
 
@@ -127,6 +92,8 @@ class Simulator:
         self._lidar = self._real.lidar if self._real else Lidar(
             self._segments, p.scan_rays, p.angle_min, p.angle_increment, p.range_min,
             p.range_max, p.no_return)
+        self._scan_geometry = (p.angle_min, p.angle_increment, p.scan_rays, p.range_min,
+                               p.range_max)
         self._x, self._y, self._theta = x, y, theta  # theta continuous (not wrapped)
         self._steps = 0
         self._distance = 0.0
@@ -180,9 +147,9 @@ class Simulator:
         x0, y0, th0 = self._x, self._y, self._theta
         chord_speed = v * robot.sinc_half(w * dt)  # exact unicycle arc: its chord, mid heading
         mid = th0 + 0.5 * w * dt
-        vx, vy = _constrain_velocity(self._segments, x0, y0, chord_speed * math.cos(mid),
-                                     chord_speed * math.sin(mid), dt, _ROBOT_RADIUS,
-                                     ALLOWED_PENETRATION)
+        vx, vy = constrain_velocity(self._segments, x0, y0, chord_speed * math.cos(mid),
+                                    chord_speed * math.sin(mid), dt, _ROBOT_RADIUS,
+                                    ALLOWED_PENETRATION)
         body = self._body
         body.velocity = (vx, vy)
         body.angular_velocity = w
@@ -257,7 +224,10 @@ class Simulator:
 
     def _new_scan(self) -> np.ndarray:
         if self._real is not None:  # the revolution ends now (the driver's stamp)
-            return self._lidar.scan(self._steps * self._dt)
+            scan = self._lidar.scan(self._steps * self._dt)
+            if self._lidar.geometry != self._scan_geometry[:3]:  # LDS-02: every scan
+                self._scan_geometry = (*self._lidar.geometry, *self._scan_geometry[3:])
+            return scan
         p = self._profile
         noise = (self._rng.standard_normal(p.scan_rays) * p.range_noise_sigma
                  if p.range_noise_sigma > 0 else None)
@@ -335,12 +305,10 @@ class Simulator:
     def scan_geometry(self) -> tuple[float, float, int, float, float]:
         """(angle_min, angle_increment, rays, range_min, range_max) of the newest scan.
 
-        The profile's, except with the LDS-02, whose rays change from scan to scan.
+        The profile's, except with the LDS-02, whose rays change from scan to scan. The same
+        tuple object until the geometry changes (`is not` tells a change cheaply).
         """
-        p = self._profile
-        if self._real is not None:
-            return (*self._lidar.geometry, p.range_min, p.range_max)
-        return (p.angle_min, p.angle_increment, p.scan_rays, p.range_min, p.range_max)
+        return self._scan_geometry
 
     @property
     def lidar(self) -> Lidar:
