@@ -78,6 +78,7 @@ def _report(args, world, start, sim, trajectory, wall_errors, wall_time: float,
         "rms_wall_error_m": rms,
         "trajectory": trajectory,
         "collision_points": [list(p) for p in sim.collision_points],
+        "effects": sim.effects.as_dict() if getattr(sim, "effects", None) else None,
     }
 
 
@@ -145,7 +146,8 @@ class SimSession:
         self.record_path = record_path
         self.interrupted = False
         self._sim_time_ns = 0  # the recorder's clock in real time: the newest simulated time
-        self.rehearsal = args.realtime and args.profile == "turtlebot3"
+        from amr_sim.profiles import get_profile
+        self.rehearsal = args.realtime and get_profile(args.profile).odom_topic == "/odom"
         self.context = rclpy.Context()
         rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
         self.executor = make_executor(self.context)
