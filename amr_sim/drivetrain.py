@@ -17,7 +17,7 @@ import numpy as np
 
 from amr_common.jit import jit
 from amr_common.robot import TRACK, WHEEL_RADIUS
-from amr_sim.effects import Effects
+from amr_sim.effects import NO_LIMIT, Effects
 
 RPM = 2.0 * math.pi / 60.0  # rad/s per rpm
 FIRMWARE_MOTOR_RPM = 61.0  # TurtleBot3Core::begin: model_motor_rpm for the Burger
@@ -39,9 +39,9 @@ def accelerate_python(state, params, h, turned):
         speed = state[SPEED + i]
         goal = state[GOAL + i]
         gap = goal - speed
-        reach = acceleration * h
+        reach = acceleration * h  # h > 0
         if abs(gap) <= reach:
-            ramp = abs(gap) / acceleration
+            ramp = abs(gap) / acceleration  # 0 without a limit (acceleration inf)
             turned[i] += 0.5 * (speed + goal) * ramp + goal * (h - ramp)
             state[SPEED + i] = goal
         else:
@@ -61,7 +61,7 @@ def drive_step_python(state, params, pending, draws, v, w, now, dt):
     latency; the wheels follow the goals at the acceleration limit; the floor sees the true
     radii, this step's slip (from `draws`) and the true separation.
     """
-    v = min(max(v, -params[MAX_LINEAR]), params[MAX_LINEAR])
+    v = min(max(v, -params[MAX_LINEAR]), params[MAX_LINEAR])  # inf: no firmware clamp
     w = min(max(w, -params[MAX_ANGULAR]), params[MAX_ANGULAR])
     limit = params[LIMIT]
     capacity = pending.shape[0]
@@ -113,12 +113,15 @@ class Drivetrain:
         self.yaw_drift = math.radians(effects.imu_yaw_drift_deg_per_min) / 60.0  # rad/s
         params = np.zeros(N_PARAMS)
         params[LATENCY] = self.latency
-        params[ACCELERATION] = effects.wheel_acceleration / WHEEL_RADIUS  # rad/s^2 of a wheel
-        params[LIMIT] = min(effects.wheel_speed_limit_rpm * RPM, FIRMWARE_WHEEL_LIMIT)
+        params[ACCELERATION] = math.inf if effects.wheel_acceleration >= NO_LIMIT else \
+            effects.wheel_acceleration / WHEEL_RADIUS  # rad/s^2 of a wheel
+        params[LIMIT] = min(effects.wheel_speed_limit_rpm * RPM,
+                            FIRMWARE_WHEEL_LIMIT if effects.firmware_clamp else math.inf)
         params[RADIUS], params[RADIUS + 1] = self.radii
         params[TRACK_TRUE] = self.track
         params[SLIP_SIGMA] = effects.wheel_slip_sigma
-        params[MAX_LINEAR], params[MAX_ANGULAR] = FIRMWARE_MAX_LINEAR, FIRMWARE_MAX_ANGULAR
+        params[MAX_LINEAR], params[MAX_ANGULAR] = (FIRMWARE_MAX_LINEAR, FIRMWARE_MAX_ANGULAR) \
+            if effects.firmware_clamp else (math.inf, math.inf)
         self.params = params
         self.state = np.zeros(N_STATE)
         self._pending = np.zeros((int(math.ceil(self.latency / dt)) + 3, 3))

@@ -30,6 +30,8 @@ class EffectSpec:
     source: str
 
 
+NO_LIMIT = 1e6  # the largest wheel acceleration / top speed: no limit at all
+
 EFFECTS: dict[str, EffectSpec] = {
     # --- the LiDAR -------------------------------------------------------------------------
     "range_bias_share": EffectSpec(
@@ -63,15 +65,19 @@ EFFECTS: dict[str, EffectSpec] = {
         "from a /cmd_vel to the wheels (DDS, turtlebot3_node, the OpenCR's 20 ms motor loop)",
         "OpenCR turtlebot3_ros2 firmware (INTERVAL_MS_TO_CONTROL_MOTOR = 20)"),
     "wheel_acceleration": EffectSpec(
-        1.0, (1.0, 3.0), (1e-3, 1e3), "m/s^2",
-        "largest change of each wheel's rim speed per second",
+        1.0, (1.0, 3.0), (1e-3, NO_LIMIT), "m/s^2",
+        f"largest change of each wheel's rim speed per second ({NO_LIMIT:g}: no limit)",
         "turtlebot3_gazebo burger model.sdf (max_linear_acceleration 1.0); Nav2 burger.yaml "
         "(acc_lim_x 2.5-3.0)"),
+    "firmware_clamp": EffectSpec(
+        1.0, (1.0, 1.0), (0.0, 1.0), "0/1",
+        "the firmware clips v and w separately to the speeds of 61 rpm wheels (0.211 m/s, "
+        "2.64 rad/s), not keeping the curvature",
+        "OpenCR turtlebot3_ros2 firmware: model_motor_rpm 61, constrain() on each"),
     "wheel_speed_limit_rpm": EffectSpec(
-        61.0, (57.0, 61.0), (1.0, 1000.0), "rpm",
-        "each wheel's top speed (the firmware also clamps v and w at 61 rpm: 0.211 m/s, "
-        "2.64 rad/s)",
-        "OpenCR firmware (model_motor_rpm 61); XL430-W250: 57 rpm at 11.1 V, 61 at 12 V"),
+        61.0, (57.0, 61.0), (1.0, NO_LIMIT), "rpm",
+        "each wheel's top speed (clipped per wheel: a turn slows the outer wheel only)",
+        "XL430-W250: 57 rpm at 11.1 V, 61 at 12 V; Velocity Limit 265 x 0.229 rpm"),
     "wheel_radius_error": EffectSpec(
         -0.01, (-0.02, 0.02), (-0.5, 0.5), "",
         "true mean wheel radius / 0.033 m - 1 (the firmware and odometry assume 0.033 m)",
@@ -117,6 +123,7 @@ class Effects:
     dropout_grazing_share: float = EFFECTS["dropout_grazing_share"].typical
     command_latency_s: float = EFFECTS["command_latency_s"].typical
     wheel_acceleration: float = EFFECTS["wheel_acceleration"].typical
+    firmware_clamp: float = EFFECTS["firmware_clamp"].typical
     wheel_speed_limit_rpm: float = EFFECTS["wheel_speed_limit_rpm"].typical
     wheel_radius_error: float = EFFECTS["wheel_radius_error"].typical
     wheel_radius_difference: float = EFFECTS["wheel_radius_difference"].typical
@@ -150,6 +157,11 @@ class Effects:
                              f"{', '.join(EFFECT_NAMES)}")
         return Effects(**{**self.as_dict(), **values})
 
+    @classmethod
+    def none(cls) -> "Effects":
+        """Every effect off (accelerations and top speeds at the largest valid values)."""
+        return cls(**{name: 0.0 for name in EFFECT_NAMES if name not in _OFF}, **_OFF)
+
     def summary(self) -> str:
         """One short line of every value, for tables and logs."""
         return " ".join(f"{_SHORT[name]}={_fmt(value)}" for name, value in self.as_dict().items())
@@ -159,11 +171,13 @@ EFFECT_NAMES: tuple[str, ...] = tuple(f.name for f in fields(Effects))
 _SHORT = {"range_bias_share": "bias", "range_noise_share": "noise", "scan_skew": "skew",
           "dropout_share": "drop", "dropout_far_share": "drop_far",
           "dropout_grazing_share": "drop_graze", "command_latency_s": "latency_s",
-          "wheel_acceleration": "acc", "wheel_speed_limit_rpm": "rpm",
+          "wheel_acceleration": "acc", "firmware_clamp": "clamp", "wheel_speed_limit_rpm": "rpm",
           "wheel_radius_error": "radius", "wheel_radius_difference": "radius_lr",
           "track_error": "track", "wheel_slip_sigma": "slip",
           "imu_yaw_drift_deg_per_min": "imu_deg_min", "scan_loss_share": "loss",
           "scan_jitter_s": "jitter_s"}
+_OFF = {"wheel_acceleration": EFFECTS["wheel_acceleration"].valid[1],
+        "wheel_speed_limit_rpm": EFFECTS["wheel_speed_limit_rpm"].valid[1]}
 assert set(EFFECT_NAMES) == set(EFFECTS) == set(_SHORT)
 
 
@@ -205,5 +219,5 @@ def draw_effects(rng: np.random.Generator) -> Effects:
                       for name in EFFECT_NAMES})
 
 
-__all__ = ["EFFECTS", "EFFECT_NAMES", "EffectSpec", "Effects", "draw_effects",
+__all__ = ["EFFECTS", "EFFECT_NAMES", "NO_LIMIT", "EffectSpec", "Effects", "draw_effects",
            "parse_effect_value"]

@@ -14,7 +14,8 @@ track errors, slip, IMU heading drift, and in real time /scan jitter and loss);
 `turtlebot3_lds02` is the same robot with the newer LDS-02 (LD08 driver: the ray count and
 angles change from scan to scan, NaN for no return, range_min 0 and range_max 100 as published).
 A profile name takes options after colons: `turtlebot3_real:randomized` draws every effect
-within its documented range from the seed; `turtlebot3_real:command_latency_s=0.1` sets one.
+within its documented range from the seed; `turtlebot3_real:command_latency_s=0.1` sets one;
+`turtlebot3_real:off:scan_skew=1` starts from every effect off (to see what one effect does).
 """
 from __future__ import annotations
 
@@ -25,6 +26,7 @@ from amr_common.robot import LIDAR_OFFSET_X, MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED
 from amr_sim.effects import Effects, parse_effect_value
 
 RANDOMIZED = "randomized"  # the profile option that draws the effects from the seed
+OFF = "off"  # the profile option that turns every effect off (then EFFECT=VALUE turns some on)
 
 
 @dataclass(frozen=True)
@@ -133,9 +135,9 @@ PROFILES: dict[str, SensorProfile] = {
 def get_profile(name: str | SensorProfile) -> SensorProfile:
     """The profile `name` ("ideal", "turtlebot3", ...) with its options; a SensorProfile passes.
 
-    Options follow the name after colons: `randomized` (draw every effect from the seed) and
-    EFFECT=VALUE (amr_sim.effects); e.g. "turtlebot3_real:randomized:command_latency_s=0.1".
-    ValueError names what is wrong.
+    Options follow the name after colons: `randomized` (draw every effect from the seed), `off`
+    (every effect off) and EFFECT=VALUE (amr_sim.effects), applied last; e.g.
+    "turtlebot3_real:randomized:command_latency_s=0.1". ValueError names what is wrong.
     """
     if isinstance(name, SensorProfile):
         return name
@@ -147,23 +149,26 @@ def get_profile(name: str | SensorProfile) -> SensorProfile:
     profile = PROFILES[base]
     if not options:
         return profile
-    randomize, overrides = False, {}
+    randomize, off, overrides = False, False, {}
     for option in options:
-        if option == RANDOMIZED:
-            randomize = True
+        if option in (RANDOMIZED, OFF):
+            randomize, off = randomize or option == RANDOMIZED, off or option == OFF
         elif "=" in option:
             key, value = (part.strip() for part in option.split("=", 1))
             overrides[key] = parse_effect_value(key, value)
         else:
-            raise ValueError(f"profile option {option!r} is neither '{RANDOMIZED}' nor "
-                             f"EFFECT=VALUE (in profile {name!r})")
+            raise ValueError(f"profile option {option!r} is none of '{RANDOMIZED}', '{OFF}' "
+                             f"and EFFECT=VALUE (in profile {name!r})")
     if profile.effects is None:
         raise ValueError(f"profile {base!r} has no reality-gap effects to "
                          f"{'randomize' if randomize else 'set'}; use turtlebot3_real or "
                          f"turtlebot3_lds02")
-    canonical = ":".join([base] + [RANDOMIZED] * randomize
+    if randomize and off:
+        raise ValueError(f"profile {name!r}: '{RANDOMIZED}' and '{OFF}' exclude each other")
+    canonical = ":".join([base] + [RANDOMIZED] * randomize + [OFF] * off
                          + [f"{k}={v:g}" for k, v in overrides.items()])
-    return replace(profile, name=canonical, effects=profile.effects.with_values(overrides),
+    effects = Effects.none() if off else profile.effects
+    return replace(profile, name=canonical, effects=effects.with_values(overrides),
                    randomize=randomize, effect_overrides=tuple(overrides.items()))
 
 
