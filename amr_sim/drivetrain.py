@@ -29,7 +29,7 @@ _SLIP_BLOCK = 1024  # Gaussian draws taken at once (one numpy call per 512 steps
 # count, the next slip draw. params: see Drivetrain.__init__.
 GOAL, SPEED, SLIP, HEAD, COUNT, DRAW, N_STATE = 0, 2, 4, 6, 7, 8, 9
 (LATENCY, ACCELERATION, LIMIT, RADIUS, TRACK_TRUE, SLIP_SIGMA, MAX_LINEAR, MAX_ANGULAR,
- N_PARAMS) = (0, 1, 2, 3, 5, 6, 7, 8, 9)
+ YAW_DRIFT, N_PARAMS) = (0, 1, 2, 3, 5, 6, 7, 8, 9, 10)
 
 
 def accelerate_python(state, params, h, turned):
@@ -96,11 +96,38 @@ def drive_step_python(state, params, pending, draws, v, w, now, dt):
 _drive_step = jit(drive_step_python)
 
 
+def sense_python(state, params, odom, ds, dtheta, dt):
+    """What the robot reports of an actual motion (ds, dtheta) over dt.
+
+    Returns (dphi_left, dphi_right, z_v, z_w) and advances `odom` [x, y, theta] in place:
+    the encoders count the wheels' rotation (the inverse of the floor motion with this step's
+    slip: the wheels' own turns unless a wall stopped the robot); turtlebot3_node's odometry
+    takes the distance from the counts with the nominal radius and the heading from the IMU,
+    which drifts.
+    """
+    half = dtheta * params[TRACK_TRUE] / 2.0
+    left = (ds - half) / (params[RADIUS] * (1.0 + state[SLIP]))
+    right = (ds + half) / (params[RADIUS + 1] * (1.0 + state[SLIP + 1]))
+    ds_odom = WHEEL_RADIUS * (left + right) / 2.0
+    turn = dtheta + params[YAW_DRIFT] * dt
+    half_turn = 0.5 * turn
+    chord = ds_odom * (1.0 - half_turn * half_turn / 6.0 if abs(half_turn) < 1e-6
+                       else math.sin(half_turn) / half_turn)  # robot.sinc_half
+    mid = odom[2] + half_turn
+    odom[0] += chord * math.cos(mid)
+    odom[1] += chord * math.sin(mid)
+    odom[2] += turn
+    return left, right, ds_odom / dt, turn / dt
+
+
+_sense = jit(sense_python)
+
+
 class Drivetrain:
     """Wheels driven by delayed, clamped, acceleration-limited commands, on imperfect geometry.
 
-    step(v, w, now, dt) -> (ds, dtheta) on the floor; encoders(ds, dtheta) and imu_turn(...)
-    what the robot's sensors report of an actual motion.
+    step(v, w, now, dt) -> (ds, dtheta) on the floor; sense(ds, dtheta, dt) what the robot's
+    encoders and odometry report of the actual motion (`odom`: the /odom pose).
     """
 
     def __init__(self, effects: Effects, rng: np.random.Generator, dt: float,
@@ -122,13 +149,16 @@ class Drivetrain:
         params[SLIP_SIGMA] = effects.wheel_slip_sigma
         params[MAX_LINEAR], params[MAX_ANGULAR] = (FIRMWARE_MAX_LINEAR, FIRMWARE_MAX_ANGULAR) \
             if effects.firmware_clamp else (math.inf, math.inf)
+        params[YAW_DRIFT] = self.yaw_drift
         self.params = params
+        self.odom = np.zeros(3)  # the /odom pose [x, y, theta]: the start is (0, 0, 0)
         self.state = np.zeros(N_STATE)
         self._pending = np.zeros((int(math.ceil(self.latency / dt)) + 3, 3))
         self._rng = rng
         self._draws = np.zeros(_SLIP_BLOCK)
         self._steps_left = 0  # on the current block of slip draws
         self._step = _drive_step if use_numba else drive_step_python
+        self._sense = _sense if use_numba else sense_python
 
     def step(self, v: float, w: float, now: float, dt: float) -> tuple[float, float]:
         """(ds, dtheta) on the floor over [now, now + dt] after the command (v, w) at `now`."""
@@ -144,17 +174,6 @@ class Drivetrain:
         """The wheels' speeds (left, right), rad/s."""
         return float(self.state[SPEED]), float(self.state[SPEED + 1])
 
-    def encoders(self, ds: float, dtheta: float) -> tuple[float, float]:
-        """Wheel rotations (rad) the encoders count for an actual motion (ds, dtheta).
-
-        The inverse of the floor motion with this step's slip: the wheels' own rotation unless
-        a wall stopped the robot.
-        """
-        half = dtheta * self.track / 2.0
-        state = self.state
-        return ((ds - half) / (self.radii[0] * (1.0 + float(state[SLIP]))),
-                (ds + half) / (self.radii[1] * (1.0 + float(state[SLIP + 1]))))
-
-    def imu_turn(self, dtheta: float, dt: float) -> float:
-        """The heading change the IMU reports for an actual turn dtheta over dt (with drift)."""
-        return dtheta + self.yaw_drift * dt
+    def sense(self, ds: float, dtheta: float, dt: float) -> tuple[float, float, float, float]:
+        """(dphi_left, dphi_right, z_v, z_w) for the actual motion; advances `odom`."""
+        return self._sense(self.state, self.params, self.odom, ds, dtheta, dt)

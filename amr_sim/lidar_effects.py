@@ -155,6 +155,83 @@ def scan_rays_numpy(segments, history, head, angles, base_cos, base_sin, bands, 
     out[:] = np.where(valid, measured, params[NO_RETURN])
 
 
+def ld08_scan_python(segments, history, head, phase, spacing, count, increment, bands, params,
+                     gauss, uniform):
+    """An LD08 revolution binned as ld08_driver bins it: (ranges, angle_min, rays).
+
+    Samples at (phase + k) spacing (k < count, below 2 pi), each measured with the scanner's
+    effects (scan_rays_python); the valid ones go to bin floor((angle - angle_min) /
+    increment), angle_min = the first valid sample's angle, rays = ceil((last - first) /
+    increment); a bin keeps its shortest sample, NaN (no_return) where none fell. Without any
+    valid sample: one no-return ray at angle 0.
+    """
+    angles = np.empty(count)
+    cos = np.empty(count)
+    sin = np.empty(count)
+    c, s = math.cos(phase * spacing), math.sin(phase * spacing)
+    step_c, step_s = math.cos(spacing), math.sin(spacing)
+    n = 0
+    for k in range(count):
+        angle = (phase + k) * spacing
+        if angle >= 2.0 * math.pi:
+            break
+        angles[k] = angle
+        cos[k] = c
+        sin[k] = s
+        c, s = c * step_c - s * step_s, s * step_c + c * step_s  # rotate by one spacing
+        n += 1
+    samples = np.empty(n)
+    _scan_rays(segments, history, head, angles[:n], cos[:n], sin[:n], bands, params, gauss[:n],
+               uniform[:n], samples)
+    first, last = -1, -1
+    for k in range(n):
+        if samples[k] > 0.0:  # NaN (no return) compares False
+            last = k
+            if first < 0:
+                first = k
+    if first < 0:
+        out = np.empty(1)
+        out[0] = params[NO_RETURN]
+        return out, 0.0, 1
+    angle_min = angles[first]
+    rays = max(1, int(math.ceil((angles[last] - angle_min) / increment)))
+    out = np.full(rays, np.inf)
+    for k in range(first, last + 1):
+        index = int((angles[k] - angle_min) / increment)
+        if samples[k] > 0.0 and index < rays and samples[k] < out[index]:
+            out[index] = samples[k]
+    for i in range(rays):
+        if out[i] == np.inf:
+            out[i] = params[NO_RETURN]
+    return out, angle_min, rays
+
+
+_scan_rays = scan_rays_kernel
+ld08_scan_kernel = jit(ld08_scan_python)
+
+
+def ld08_scan_numpy(segments, history, head, phase, spacing, count, increment, bands, params,
+                    gauss, uniform):
+    """ld08_scan_python with numpy arrays (the fallback without numba, and its tested twin)."""
+    angles = (phase + np.arange(count)) * spacing
+    n = int(np.count_nonzero(angles < 2.0 * math.pi))
+    angles = angles[:n]
+    samples = np.empty(n)
+    scan_rays_numpy(segments, history, head, angles, np.cos(angles), np.sin(angles), bands,
+                    params, gauss[:n], uniform[:n], samples)
+    valid = samples > 0.0
+    if not valid.any():
+        return np.full(1, params[NO_RETURN]), 0.0, 1
+    angle_min = float(angles[valid][0])
+    rays = max(1, math.ceil((float(angles[valid][-1]) - angle_min) / increment))
+    index = ((angles[valid] - angle_min) / increment).astype(np.int64)
+    keep = index < rays
+    out = np.full(rays, np.inf)
+    np.minimum.at(out, index[keep], samples[valid][keep])
+    out[np.isinf(out)] = params[NO_RETURN]
+    return out, angle_min, rays
+
+
 def band_table(model: LidarModel, effects: Effects) -> np.ndarray:
     """The kernel's bands: [upper edge, bias abs, bias rel, sigma abs, sigma rel] per band."""
     edges = [*model.band_edges, math.inf]
@@ -188,7 +265,9 @@ class RealLidar:
         self.params = params
         self.no_return = profile.no_return
         self._rng = rng
-        self._kernel = scan_rays_kernel if (use_numba and HAVE_NUMBA) else scan_rays_numpy
+        numba = use_numba and HAVE_NUMBA
+        self._kernel = scan_rays_kernel if numba else scan_rays_numpy
+        self._ld08_kernel = ld08_scan_kernel if numba else ld08_scan_numpy
         self.history = np.zeros((HISTORY, 5))
         self._head = 0
         angles = (profile.angle_min + profile.angle_increment
@@ -245,26 +324,17 @@ class RealLidar:
         random. The reported angle_increment (speed / 2300) is the last packet's speed, a
         little off the revolution's mean; angle_min/max = the first and last valid sample,
         rays = ceil((max - min) / increment), each sample in bin floor((angle - min) /
-        increment) keeping the shortest, NaN where none fell.
+        increment) keeping the shortest, NaN where none fell (ld08_scan_python).
         """
-        model, rng = self.model, self._rng
+        model, rng, params = self.model, self._rng, self.params
         revolution = model.revolution_s * (1.0 + model.speed_sigma * rng.standard_normal())
         spacing = TWO_PI / (model.samples_per_s * revolution)
-        angles = spacing * (rng.random() + np.arange(int(TWO_PI / spacing)))
-        angles = angles[angles < TWO_PI]
-        ranges = self.cast(t_end, angles)
+        phase = rng.random()
         increment = spacing * (1.0 + model.increment_sigma * rng.standard_normal())
-        valid = np.isfinite(ranges) & (ranges > 0.0)
-        if not valid.any():  # nothing in sight: one NaN ray keeps the message well-formed
-            self.geometry = (0.0, increment, 1)
-            return np.full(1, self.no_return)
-        angles, ranges = angles[valid], ranges[valid]
-        angle_min = float(angles[0])
-        rays = max(1, math.ceil((float(angles[-1]) - angle_min) / increment))
-        index = ((angles - angle_min) / increment).astype(np.int64)
-        keep = index < rays
-        out = np.full(rays, np.inf)
-        np.minimum.at(out, index[keep], ranges[keep])
-        out[np.isinf(out)] = self.no_return
-        self.geometry = (angle_min, increment, rays)
+        count = int(TWO_PI / spacing) + 1
+        params[T_END] = t_end
+        out, angle_min, rays = self._ld08_kernel(
+            self.segments, self.history, self._head, phase, spacing, count, increment,
+            self.bands, params, rng.standard_normal(count), rng.random(count, dtype=np.float32))
+        self.geometry = (float(angle_min), increment, int(rays))
         return out

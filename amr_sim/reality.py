@@ -8,11 +8,8 @@ effect does not reshuffle the others' random numbers.
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
-from amr_common.robot import WHEEL_RADIUS, sinc_half
 from amr_sim.drivetrain import Drivetrain
 from amr_sim.effects import Effects, draw_effects
 from amr_sim.lidar_effects import RealLidar
@@ -41,7 +38,7 @@ def delivery_stream(seed: int) -> np.random.Generator:
 
 
 class RealRobot:
-    """The effects of one run: `drive.step` (command -> motion on the floor), `sense`, `lidar`."""
+    """The effects of one run: its drivetrain (`drive`) and scanner (`lidar`)."""
 
     def __init__(self, profile: SensorProfile, segments: np.ndarray, seed: int,
                  pose: tuple[float, float, float], dt: float) -> None:
@@ -49,22 +46,3 @@ class RealRobot:
         self.drive = Drivetrain(self.effects, stream(seed, _DRIVE), dt)
         self.lidar = RealLidar(segments, profile, self.effects, stream(seed, _LIDAR))
         self.lidar.reset(0.0, *pose)
-
-    def sense(self, ds: float, dtheta: float, dt: float) -> tuple[float, float, float, float]:
-        """(dphi_left, dphi_right, ds_odom, dtheta_odom) for the actual motion (ds, dtheta).
-
-        Encoder counts, and turtlebot3_node's odometry increments: distance from the counts
-        with the nominal radius, heading change from the IMU.
-        """
-        dphi_left, dphi_right = self.drive.encoders(ds, dtheta)
-        return (dphi_left, dphi_right, WHEEL_RADIUS * (dphi_left + dphi_right) / 2.0,
-                self.drive.imu_turn(dtheta, dt))
-
-
-def dead_reckon(odom: list[float], ds: float, dtheta: float) -> None:
-    """Advance an odometry pose [x, y, theta] by an arc ds with turn dtheta (in place)."""
-    mid = odom[2] + 0.5 * dtheta
-    chord = ds * sinc_half(dtheta)
-    odom[0] += chord * math.cos(mid)
-    odom[1] += chord * math.sin(mid)
-    odom[2] += dtheta

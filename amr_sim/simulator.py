@@ -38,7 +38,7 @@ from amr_common.world import World
 from amr_sim.contact import ALLOWED_PENETRATION, constrain_velocity
 from amr_sim.lidar import Lidar
 from amr_sim.profiles import SensorProfile, get_profile
-from amr_sim.reality import RealRobot, dead_reckon
+from amr_sim.reality import RealRobot
 
 log = logging.getLogger("amr_sim.simulator")
 
@@ -102,7 +102,8 @@ class Simulator:
         self._collision_points: list[tuple[float, float]] = []
         self._active_contacts = 0
         self._min_clearance = nearest_wall(self._segments, x, y)[0] - robot.ROBOT_RADIUS
-        self._odom = [0.0, 0.0, 0.0]  # odom frame = the start pose, like a robot's /odom at boot
+        # odom frame = the start pose, like a robot's /odom at boot (the drivetrain's, if real)
+        self._odom = [0.0, 0.0, 0.0] if self._real is None else self._real.drive.odom
         self._wheel_angles = [0.0, 0.0]
         self._z_v = 0.0
         self._z_w = 0.0
@@ -170,9 +171,7 @@ class Simulator:
         ds = chord / robot.sinc_half(dth)
         wheels = self._wheel_angles
         if self._real is not None:  # encoders, odometry with the IMU heading (it drifts)
-            dphi_l, dphi_r, ds_odom, dth_odom = self._real.sense(ds, dth, dt)
-            self._z_v, self._z_w = ds_odom / dt, dth_odom / dt
-            dead_reckon(self._odom, ds_odom, dth_odom)
+            dphi_l, dphi_r, self._z_v, self._z_w = self._real.drive.sense(ds, dth, dt)
             self._lidar.record(now, x1, y1, th1)
             wheels[0] += dphi_l
             wheels[1] += dphi_r
@@ -284,7 +283,8 @@ class Simulator:
 
         The start pose is (0, 0, 0).
         """
-        return (self._odom[0], self._odom[1], wrap_angle(self._odom[2]))
+        odom = self._odom
+        return (float(odom[0]), float(odom[1]), wrap_angle(float(odom[2])))
 
     @property
     def wheel_angles(self) -> tuple[float, float]:
