@@ -250,6 +250,8 @@ def test_inactive_node_publishes_nothing_and_does_not_step(ros):
     ({"start": "nowhere"}, "nowhere"),
     ({"start": "0,0,0"}, "start"),  # lab02's origin lies in a wall or outside: rejected
     ({"profile": "gazebo"}, "gazebo"),
+    ({"profile": "turtlebot3_real:command_latency_s=-1"}, "command_latency_s must be"),
+    ({"profile": "turtlebot3_real:dropout_share=nan"}, "dropout_share must be"),
     ({"mode": "fast"}, "mode"),
     ({"dt": -0.05}, "dt"),
     ({"goal": [1.0]}, "goal"),
