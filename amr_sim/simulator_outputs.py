@@ -160,7 +160,9 @@ class SimulatorOutputs:
                 messages["odom"]))
         if publish_scan and self._real_scanner:
             angle_min, increment, _, range_min, range_max = simulator.scan_geometry
-            scan = laser_scan(z_scan, stamp=stamp, frame_id=p["scan_frame"],
+            # A new message and stamp: a late scan is published after `stamp` is reused.
+            scan = laser_scan(z_scan, stamp=seconds_to_time(simulator.time),
+                              frame_id=p["scan_frame"],
                               angle_min=angle_min, angle_increment=increment,
                               range_min=range_min, range_max=range_max,
                               scan_time=self._scan_time)

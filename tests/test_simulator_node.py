@@ -474,11 +474,20 @@ def test_scan_delivery_loses_some_scans_and_delays_the_others():
     assert not node.timers and delivery.sent == 10
 
 
-def test_realtime_scans_are_lost_as_configured(ros):
+@pytest.mark.parametrize("loss, jitter", [(1.0, 0.02), (0.0, 0.05)])
+def test_realtime_scans_are_lost_or_late_as_configured(ros, loss, jitter):
     probe = Probe(ros, stamped=False)
     node = start_simulator(ros, probe, mode="realtime", cmd_vel_stamped=False,
-                           profile="turtlebot3_real:scan_loss_share=1:scan_jitter_s=0.02")
-    ros.spin_for(1.0)
+                           profile=f"turtlebot3_real:scan_loss_share={loss}:"
+                                   f"scan_jitter_s={jitter}")
+    ros.spin_for(1.2)
     assert node.trigger_deactivate() == TransitionCallbackReturn.SUCCESS
+    ros.spin_for(0.1)
+    delivery = node._outputs._delivery
     assert node.simulator.steps >= 5 and len(probe.received["odom"]) >= 5
-    assert probe.count()["scan"] == 0 and node._outputs._delivery.lost >= 2
+    if loss == 1.0:
+        assert probe.count()["scan"] == 0 and delivery.lost >= 2
+    else:  # late, but every scan arrives, stamped at its revolution's end (5 Hz)
+        stamps = [time_to_nanoseconds(m.header.stamp) for m in probe.received["scan"]]
+        assert len(stamps) == delivery.sent >= 2 and delivery.lost == 0
+        assert np.all(np.diff(stamps) == 4 * DT_NS)
