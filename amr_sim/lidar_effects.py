@@ -19,7 +19,6 @@ from amr_sim.effects import Effects
 from amr_sim.profiles import LidarModel, SensorProfile
 
 TWO_PI = 2.0 * math.pi
-HISTORY = 16  # poses kept: covers a 0.2 s revolution down to dt = 0.0134 s
 # params layout of the kernels (one float array: fewer arguments, cheaper numba dispatch)
 (T_END, SKEW_S, SENSE_MIN, SENSE_MAX, NO_RETURN, DROP, DROP_FAR, DROP_GRAZE,
  N_PARAMS) = range(9)
@@ -28,7 +27,7 @@ HISTORY = 16  # poses kept: covers a 0.2 s revolution down to dt = 0.0134 s
 def ray_poses_python(history, head, angles, base_cos, base_sin, params, ox, oy, dx, dy):
     """Origin and unit direction of each ray from the LiDAR pose at the ray's time.
 
-    history: (HISTORY, 5) ring of [t, lidar x, lidar y, cos theta, sin theta], the newest at
+    history: ring of [t, lidar x, lidar y, cos theta, sin theta] rows, the newest at
     `head`. Ray i (at angle angles[i], increasing) is measured at t_end - SKEW_S angles[i] /
     2 pi (clockwise rotation); its pose is interpolated between the two history rows around
     that time: the position linearly, the heading's unit vector linearly and normalised (no
@@ -252,7 +251,7 @@ class RealLidar:
     """
 
     def __init__(self, segments: np.ndarray, profile: SensorProfile, effects: Effects,
-                 rng: np.random.Generator, use_numba: bool = True) -> None:
+                 rng: np.random.Generator, dt: float = 0.05, use_numba: bool = True) -> None:
         model = profile.lidar_model
         self.model = model
         self.segments = np.ascontiguousarray(segments, dtype=np.float64)
@@ -271,7 +270,8 @@ class RealLidar:
         numba = use_numba and HAVE_NUMBA
         self._kernel = scan_rays_kernel if numba else scan_rays_numpy
         self._ld08_kernel = ld08_scan_kernel if numba else ld08_scan_numpy
-        self.history = np.zeros((HISTORY, 5))
+        # Poses of the steps a revolution spans (dt: the simulator's step), and a spare.
+        self.history = np.zeros((int(math.ceil(model.revolution_s / dt)) + 3, 5))
         self._head = 0
         angles = (profile.angle_min + profile.angle_increment
                   * np.arange(profile.scan_rays)) % TWO_PI
@@ -292,7 +292,7 @@ class RealLidar:
 
     def record(self, t: float, x: float, y: float, theta: float) -> None:
         """The robot's pose at time t (the end of a step)."""
-        self._head = (self._head + 1) % HISTORY
+        self._head = (self._head + 1) % self.history.shape[0]
         c, s = math.cos(theta), math.sin(theta)
         self.history[self._head] = (t, x + self.offset_x * c, y + self.offset_x * s, c, s)
 

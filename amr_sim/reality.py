@@ -44,5 +44,5 @@ class RealRobot:
                  pose: tuple[float, float, float], dt: float) -> None:
         self.effects = effects_of(profile, seed)
         self.drive = Drivetrain(self.effects, stream(seed, _DRIVE), dt)
-        self.lidar = RealLidar(segments, profile, self.effects, stream(seed, _LIDAR))
+        self.lidar = RealLidar(segments, profile, self.effects, stream(seed, _LIDAR), dt)
         self.lidar.reset(0.0, *pose)

@@ -91,12 +91,13 @@ def unicycle(pose, v, w, t):
             y - v / w * (math.cos(heading) - math.cos(theta)), heading)
 
 
-def test_skewed_scan_equals_each_ray_cast_from_the_pose_at_its_time(room):
+@pytest.mark.parametrize("dt", [0.05, 0.01])
+def test_skewed_scan_equals_each_ray_cast_from_the_pose_at_its_time(room, dt):
     start, v, w = (1.5, 1.5, 0.0), 0.2, 1.5
     scans = {}
     for skew in (1, 0):
-        sim = Simulator(room, start=start, profile=f"turtlebot3_real:off:scan_skew={skew}")
-        for _ in range(8):  # 0.4 s at constant (v, w): a scan at 0.2 s and one at 0.4 s
+        sim = Simulator(room, start=start, dt=dt, profile=f"turtlebot3_real:off:scan_skew={skew}")
+        for _ in range(round(0.4 / dt)):  # constant (v, w): a scan at 0.2 s and one at 0.4 s
             z, _, _ = sim.step(v, w)
         assert sim.scan_time == pytest.approx(0.4) and sim.collisions == 0
         scans[skew] = z
