@@ -97,9 +97,69 @@ def clearances_python(segments, points, out):
         out[i] = best
 
 
+def cast_rays_python(segments, ox, oy, dx, dy, out_range, out_cos):
+    """Ray i from (ox[i], oy[i]) along the unit vector (dx[i], dy[i]): range and incidence.
+
+    out_range[i]: distance to the first wall hit (inf for none); out_cos[i]: |cos| of the
+    angle between the ray and that wall's normal (1 head-on, 0 grazing; 0 without a hit).
+    Each ray has its own origin (a scan taken while the robot moves). Segments outside and rays
+    inside, branch-free, on local arrays only (so numba vectorises the inner loop).
+    """
+    n = ox.shape[0]
+    rdx = np.empty(n)
+    rdy = np.empty(n)
+    cross = np.empty(n)  # o x d: the ray's offset term in u
+    best = np.empty(n)
+    best_cos = np.zeros(n)
+    for i in range(n):
+        rdx[i] = dx[i]
+        rdy[i] = dy[i]
+        cross[i] = ox[i] * dy[i] - oy[i] * dx[i]
+        best[i] = np.inf
+    ox_local = ox.copy()
+    oy_local = oy.copy()
+    for k in range(segments.shape[0]):
+        x1 = segments[k, 0]
+        y1 = segments[k, 1]
+        ex = segments[k, 2] - x1
+        ey = segments[k, 3] - y1
+        p_cross_e = x1 * ey - y1 * ex
+        inv_length = 1.0 / math.sqrt(ex * ex + ey * ey)
+        for i in range(n):
+            den = rdx[i] * ey - rdy[i] * ex
+            inv_den = 1.0 / den  # inf when parallel: then hit is False
+            t = (p_cross_e - (ox_local[i] * ey - oy_local[i] * ex)) * inv_den
+            u = (x1 * rdy[i] - y1 * rdx[i] - cross[i]) * inv_den
+            hit = (t > 0.0) & (u >= 0.0) & (u <= 1.0) & (t < best[i])
+            best[i] = t if hit else best[i]
+            best_cos[i] = abs(den) * inv_length if hit else best_cos[i]
+    for i in range(n):
+        out_range[i] = best[i]
+        out_cos[i] = best_cos[i]
+
+
+def cast_rays_numpy(segments, ox, oy, dx, dy, out_range, out_cos):
+    """cast_rays_python as a rays x segments matrix (fallback without numba, and its twin)."""
+    x1, y1 = segments[:, 0], segments[:, 1]
+    ex, ey = segments[:, 2] - x1, segments[:, 3] - y1
+    dx, dy = dx[:, None], dy[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        den = dx * ey - dy * ex
+        inv_den = 1.0 / den
+        t = (x1 * ey - y1 * ex - (ox[:, None] * ey - oy[:, None] * ex)) * inv_den
+        u = (x1 * dy - y1 * dx - (ox * dy[:, 0] - oy * dx[:, 0])[:, None]) * inv_den
+        t = np.where((t > 0.0) & (u >= 0.0) & (u <= 1.0), t, np.inf)
+    k = np.argmin(t, axis=1)
+    rows = np.arange(len(k))
+    out_range[:] = t[rows, k]
+    cos = np.abs(den[rows, k]) * (1.0 / np.sqrt(ex[k] * ex[k] + ey[k] * ey[k]))
+    out_cos[:] = np.where(np.isfinite(out_range), cos, 0.0)
+
+
 scan_kernel = jit(scan_python)
 nearest_wall_kernel = jit(nearest_wall_python)
 clearances_kernel = jit(clearances_python)
+cast_rays_kernel = jit(cast_rays_python)
 
 
 def scan_numpy(segments, ox, oy, theta, base_cos, base_sin, range_min, range_max, no_return,

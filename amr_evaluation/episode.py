@@ -6,7 +6,8 @@
 
 The controller is any object with `compute_commands(z_scan, z_v, z_w) -> (v, w)`; by default
 `amr_control.wall_follower.WallFollower(dt)`. If it has `set_scan_geometry(angle_min,
-angle_increment, range_min, range_max)` it is told the profile's scan geometry first.
+angle_increment, range_min, range_max)` it is told the scan geometry first, and again whenever
+it changes (the LDS-02's changes every scan: profile turtlebot3_lds02).
 
 Timing: with `ideal` the loop is the course's lockstep (measure, compute, step, ...). With
 `turtlebot3` it emulates the real robot: the controller still runs every dt, on the newest scan
@@ -70,6 +71,7 @@ class EpisodeResult:
     collision_points: list[list[float]] = field(default_factory=list)  # [[x, y], ...]
     invalid_commands: int = 0  # commands that were not finite numbers (the robot stopped)
     metric_errors: dict[str, str] = field(default_factory=dict)  # metric -> why it is None
+    effects: dict[str, float] | None = None  # the reality-gap effects in use (drawn if randomized)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-serialisable dict (floats, ints, strings, lists, None)."""
@@ -117,6 +119,20 @@ def robot_parameters(controller_class: Any, profile: SensorProfile) -> dict[str,
     return {"lidar_offset_x_m": profile.lidar_offset_x} if "lidar_offset_x_m" in names else {}
 
 
+def tell_scan_geometry(target: Any, geometry: tuple, with_rays: bool = False) -> None:
+    """target.set_scan_geometry(...) with a Simulator.scan_geometry, if target has it.
+
+    Controllers take (angle_min, angle_increment, range_min, range_max); the particle filter
+    (with_rays) also the ray count.
+    """
+    if callable(getattr(target, "set_scan_geometry", None)):
+        angle_min, increment, rays, range_min, range_max = geometry
+        if with_rays:
+            target.set_scan_geometry(angle_min, increment, rays, range_min, range_max)
+        else:
+            target.set_scan_geometry(angle_min, increment, range_min, range_max)
+
+
 def run_episode(world: World | str, start=None, profile: str | SensorProfile = "ideal",
                 seed: int = 0, duration: float = 600.0, dt: float = 0.05, controller=None,
                 controller_factory: Callable[[float], Any] | None = None,
@@ -135,9 +151,8 @@ def run_episode(world: World | str, start=None, profile: str | SensorProfile = "
     if controller is None:
         controller = controller_factory(sim.dt) if controller_factory is not None else \
             default_controller(sim.dt, prof)
-    if callable(getattr(controller, "set_scan_geometry", None)):
-        controller.set_scan_geometry(prof.angle_min, prof.angle_increment, prof.range_min,
-                                     prof.range_max)
+    geometry = sim.scan_geometry
+    tell_scan_geometry(controller, geometry)
 
     n_steps = int(round(duration / sim.dt))
     positions = np.empty((n_steps + 1, 2))
@@ -162,6 +177,9 @@ def run_episode(world: World | str, start=None, profile: str | SensorProfile = "
             wall_err_sq += float(err) ** 2
             wall_err_n += 1
         z_scan, z_v, z_w = sim.step(v, w)
+        if sim.scan_geometry is not geometry:  # the LDS-02: every scan
+            geometry = sim.scan_geometry
+            tell_scan_geometry(controller, geometry)
         if odom_period is None or sim.time >= next_odom - 1e-9:
             held_v, held_w = z_v, z_w  # the real robot's twist only changes with each /odom
             if odom_period is not None:
@@ -188,7 +206,8 @@ def run_episode(world: World | str, start=None, profile: str | SensorProfile = "
         dt=sim.dt, controller=type(controller).__module__ + ":" + type(controller).__qualname__,
         start_pose=[float(c) for c in sim.start], trajectory=trajectory,
         collision_points=[[float(px), float(py)] for px, py in sim.collision_points],
-        invalid_commands=sim.bad_commands, metric_errors=metrics["metric_errors"])
+        invalid_commands=sim.bad_commands, metric_errors=metrics["metric_errors"],
+        effects=sim.effects.as_dict() if sim.effects else None)
 
 
 def explored_fraction(world: World, positions: np.ndarray) -> float:

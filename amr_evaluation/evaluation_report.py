@@ -22,7 +22,7 @@ from amr_evaluation.evaluation import EpisodeOutcome
 
 __all__ = [
     "RESULT_COLUMNS", "NAVIGATION_COLUMNS", "columns_of", "outcome_row", "write_json",
-    "write_csv", "format_table", "verdict", "ProgressBar",
+    "write_csv", "format_table", "effects_block", "verdict", "ProgressBar",
 ]
 
 RESULT_COLUMNS = ("world", "start", "profile", "seed", "sim_time_s", "collisions",
@@ -76,6 +76,8 @@ def outcome_row(outcome: EpisodeOutcome) -> dict[str, Any]:
             row[column] = _finite_or_none(getattr(result, column, None))
     row["wall_time_s"] = round(outcome.wall_time_s, 3)
     row["error"] = outcome.error
+    if getattr(result, "effects", None):  # the reality-gap effects used (drawn: randomized)
+        row["effects"] = result.effects
     return row
 
 
@@ -96,12 +98,31 @@ def write_json(path: str | os.PathLike, outcomes: Sequence[EpisodeOutcome],
 def write_csv(path: str | os.PathLike, outcomes: Sequence[EpisodeOutcome]) -> Path:
     """results.csv: one row per episode (columns_of), empty cells for missing values."""
     path = Path(path)
+    rows = [outcome_row(outcome) for outcome in outcomes]
+    effects = ("effects",) if any("effects" in row for row in rows) else ()
     with path.open("w", newline="", encoding="utf-8") as stream:
-        writer = csv.DictWriter(stream, fieldnames=columns_of(outcomes), extrasaction="ignore")
+        writer = csv.DictWriter(stream, fieldnames=columns_of(outcomes) + effects,
+                                extrasaction="ignore")
         writer.writeheader()
-        for outcome in outcomes:
-            writer.writerow({k: ("" if v is None else v) for k, v in outcome_row(outcome).items()})
+        for row in rows:
+            if "effects" in row:
+                row["effects"] = _effects_summary(row["effects"])
+            writer.writerow({k: ("" if v is None else v) for k, v in row.items()})
     return path
+
+
+def _effects_summary(effects: Mapping[str, float]) -> str:
+    from amr_sim.effects import Effects
+    return Effects(**effects).summary()
+
+
+def effects_block(rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    """Lines listing each episode's reality-gap effects (drawn from its seed when randomized)."""
+    rows = [row for row in rows if row.get("effects")]
+    if not rows:
+        return []
+    return (["effects (docs/reality-gap.md):"]
+            + [f"  {_short(row)}: {_effects_summary(row['effects'])}" for row in rows])
 
 
 _TABLE = (  # header, row key, formatter
@@ -154,7 +175,7 @@ def format_table(rows: Iterable[Mapping[str, Any]]) -> str:
         lines.append("  ".join(c.ljust(w) if table[i][1] in _LEFT_ALIGNED else c.rjust(w)
                                for i, (c, w) in enumerate(zip(r, widths))).rstrip())
     lines.insert(1, "  ".join("-" * w for w in widths))
-    return "\n".join(lines + errors)
+    return "\n".join(lines + errors + effects_block(rows))
 
 
 def verdict(outcomes: Sequence[EpisodeOutcome]) -> tuple[str, int]:

@@ -39,7 +39,7 @@ import numpy as np
 from amr_common.geometry import wrap_angles
 from amr_common.map_vs_world import load_map
 from amr_common.world import World
-from amr_evaluation.episode import default_controller
+from amr_evaluation.episode import default_controller, tell_scan_geometry
 from amr_localization.particle_filter import ParticleFilter
 from amr_sim.profiles import SensorProfile, get_profile
 from amr_sim.simulator import Simulator
@@ -84,6 +84,7 @@ class LocalizationResult:
     trajectory: list[list[float]] = field(default_factory=list)  # [t, x, y, theta]
     estimate: list[list[float]] = field(default_factory=list)  # [t, x, y, theta, localized]
     particles_snapshot: list[list[float]] = field(default_factory=list)  # [x, y, theta]
+    effects: dict[str, float] | None = None  # the reality-gap effects in use (drawn if randomized)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-serialisable dict."""
@@ -136,13 +137,11 @@ def run_localization_episode(world: World | str, start=None,
     sim = Simulator(world_obj, start=start, dt=dt, profile=prof, seed=seed)
     if controller is None:
         controller = default_controller(sim.dt, prof)
-    if callable(getattr(controller, "set_scan_geometry", None)):
-        controller.set_scan_geometry(prof.angle_min, prof.angle_increment, prof.range_min,
-                                     prof.range_max)
+    geometry = sim.scan_geometry
+    tell_scan_geometry(controller, geometry)
     params = {"seed": seed, "lidar_offset_x_m": prof.lidar_offset_x, **(filter_params or {})}
     pf = ParticleFilter(map_obj, **params)
-    pf.set_scan_geometry(prof.angle_min, prof.angle_increment, prof.scan_rays, prof.range_min,
-                         prof.range_max)
+    tell_scan_geometry(pf, geometry, with_rays=True)
 
     n_steps = int(round(float(duration) / sim.dt))
     truth = np.empty((n_steps + 1, 4))
@@ -181,6 +180,10 @@ def run_localization_episode(world: World | str, start=None,
         pf.predict(held_v, held_w, sim.dt)
         new_scan = sim.scan_time != scan_time
         scan_time = sim.scan_time
+        if sim.scan_geometry is not geometry:  # the LDS-02: every scan
+            geometry = sim.scan_geometry
+            tell_scan_geometry(controller, geometry)
+            tell_scan_geometry(pf, geometry, with_rays=True)
         pf.correct(z_scan, new_scan=new_scan)
         filter_time += time.perf_counter() - started
         particles_max = max(particles_max, pf.particle_count)
@@ -204,7 +207,8 @@ def run_localization_episode(world: World | str, start=None,
         start_pose=[float(c) for c in sim.start],
         trajectory=truth.tolist() if record else [],
         estimate=estimate.tolist() if record else [],
-        particles_snapshot=snapshot if record else [], **metrics)
+        particles_snapshot=snapshot if record else [],
+        effects=sim.effects.as_dict() if sim.effects else None, **metrics)
 
 
 def metrics_from_rows(trajectory, estimate, kidnap=None) -> dict[str, Any]:

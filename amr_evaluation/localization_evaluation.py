@@ -18,6 +18,8 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from amr_evaluation.evaluation_report import effects_block
+
 
 @dataclass(frozen=True)
 class LocalizationSpec:
@@ -176,6 +178,8 @@ def outcome_row(outcome: LocalizationOutcome) -> dict[str, Any]:
                 "particles_max", "particles_final", "collisions", "distance_m"):
         row[key] = data[key]
     row["real_time_factor"] = round(result.real_time_factor, 1)
+    if data.get("effects"):  # the reality-gap effects used (drawn: randomized)
+        row["effects"] = data["effects"]
     return row
 
 
@@ -218,8 +222,8 @@ def format_table(rows: Sequence[dict[str, Any]]) -> str:
                 cells.append(fmt.format(value))
         lines.append(cells)
     widths = [max(len(line[i]) for line in lines if i < len(line)) for i in range(len(table))]
-    return "\n".join("  ".join(cell.ljust(w) for cell, w in zip(line, widths)).rstrip()
-                     for line in lines)
+    return "\n".join(["  ".join(cell.ljust(w) for cell, w in zip(line, widths)).rstrip()
+                      for line in lines] + effects_block(rows))
 
 
 def evaluate_main(specs, settings: dict[str, Any], args, out: Path, executor=None) -> int:

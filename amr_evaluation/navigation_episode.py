@@ -38,7 +38,7 @@ import numpy as np
 from amr_common.map_vs_world import load_map, resolve_goal_on_map
 from amr_common.world import World
 from amr_control.pure_pursuit import PurePursuit, scan_clearance, scan_free_ahead
-from amr_evaluation.episode import default_controller
+from amr_evaluation.episode import default_controller, tell_scan_geometry
 from amr_planning.planner import Planner, PlanningError
 from amr_sim.profiles import get_profile
 from amr_sim.simulator import Simulator
@@ -80,8 +80,8 @@ class ParticleFilterPose:
         prof = sim.profile
         params = {"seed": seed, "lidar_offset_x_m": prof.lidar_offset_x, **filter_params}
         self.filter = ParticleFilter(world, **params)
-        self.filter.set_scan_geometry(prof.angle_min, prof.angle_increment, prof.scan_rays,
-                                      prof.range_min, prof.range_max)
+        self._geometry = sim.scan_geometry
+        tell_scan_geometry(self.filter, self._geometry, with_rays=True)
         self._scan_time: float | None = None
         self._time = sim.time
 
@@ -91,6 +91,9 @@ class ParticleFilterPose:
             self.filter.predict(z_v, z_w, sim.time - self._time)
             self._time = sim.time
         if sim.scan_time != self._scan_time:
+            if sim.scan_geometry is not self._geometry:  # the LDS-02: every scan
+                self._geometry = sim.scan_geometry
+                tell_scan_geometry(self.filter, self._geometry, with_rays=True)
             self.filter.correct(z_scan, force=self._scan_time is None)
             self._scan_time = sim.scan_time
         return tuple(self.filter.estimate), bool(self.filter.localized)
@@ -134,6 +137,7 @@ class NavigationResult:
     trajectory: list[list[float]] = field(default_factory=list)  # [[t, x, y, theta], ...]
     path: list[list[float]] = field(default_factory=list)  # the last planned path [[x, y], ...]
     collision_points: list[list[float]] = field(default_factory=list)  # [[x, y], ...]
+    effects: dict[str, float] | None = None  # the reality-gap effects in use (drawn if randomized)
 
     @property
     def goal_reached(self) -> bool:
@@ -220,9 +224,8 @@ def run_navigation_episode(
     radius = pursuit.params["robot_radius_m"]
     if wall_follower is None:
         wall_follower = default_controller(sim.dt, prof)
-    if callable(getattr(wall_follower, "set_scan_geometry", None)):
-        wall_follower.set_scan_geometry(prof.angle_min, prof.angle_increment, prof.range_min,
-                                        prof.range_max)
+    geometry = sim.scan_geometry
+    tell_scan_geometry(wall_follower, geometry)
 
     n_steps = int(round(duration / sim.dt))
     trajectory = [[0.0, *sim.pose]] if record_trajectory else []
@@ -250,10 +253,10 @@ def run_navigation_episode(
                 except PlanningError as exc:
                     errors.append(f"t={sim.time:.2f} s: {exc}")
                     pursuit.clear_path()
-            geometry = (z_scan, prof.angle_min, prof.angle_increment, prof.range_min,
-                        prof.range_max, prof.lidar_offset_x, radius)
-            v, w = pursuit.compute_commands(*estimate, scan_clearance(*geometry),
-                                            scan_free_ahead(*geometry))
+            scan = (z_scan, geometry[0], geometry[1], geometry[3], geometry[4],
+                    prof.lidar_offset_x, radius)
+            v, w = pursuit.compute_commands(*estimate, scan_clearance(*scan),
+                                            scan_free_ahead(*scan))
             if pursuit.state in ("track", "rotate"):
                 pursued.append(sim.pose[:2])
         else:
@@ -276,6 +279,9 @@ def run_navigation_episode(
             sim.teleport(kidnap[1:])
             kidnapped = True
         z_scan, z_v, z_w = sim.step(v, w)
+        if sim.scan_geometry is not geometry:  # the LDS-02: every scan
+            geometry = sim.scan_geometry
+            tell_scan_geometry(wall_follower, geometry)
         if prof.odom_period is None or sim.time >= next_odom - 1e-9:
             held_v, held_w = z_v, z_w  # the real robot's twist only changes with each /odom
             if prof.odom_period is not None:
@@ -313,7 +319,8 @@ def run_navigation_episode(
         kidnap=[float(k) for k in kidnap] if kidnap is not None else None, stalled=stalled,
         dt=sim.dt, map=map_obj.name, goal_warning=goal_warning, trajectory=trajectory,
         path=path.points.tolist() if path is not None else [],
-        collision_points=[[float(px), float(py)] for px, py in sim.collision_points])
+        collision_points=[[float(px), float(py)] for px, py in sim.collision_points],
+        effects=sim.effects.as_dict() if sim.effects else None)
 
 
 __all__ = ["run_navigation_episode", "NavigationResult", "GroundTruthPose",

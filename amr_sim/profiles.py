@@ -6,13 +6,68 @@ step. `turtlebot3` imitates the real TurtleBot3 Burger with its LDS-01: 360 rays
 base_scan, 32 mm behind the robot centre, 0.12-3.5 m, 0.0 for no return, Gaussian range noise
 (sigma 0.01 m), a new scan every 0.2 s (5 Hz), /odom with a pose only at 20 Hz, and commands
 quantised like turtlebot3_node (int(v * 100) / 100) and limited to 0.22 m/s and 2.84 rad/s.
+
+The reality gap (amr_sim.effects, docs/reality-gap.md): `turtlebot3_real` is `turtlebot3` with
+every effect at its typical value (LDS-01 range error and noise by distance band, scan skew,
+dropouts, command latency, motor acceleration, the firmware's 61 rpm clamp, wheel radius and
+track errors, slip, IMU heading drift, and in real time /scan jitter and loss);
+`turtlebot3_lds02` is the same robot with the newer LDS-02 (LD08 driver: the ray count and
+angles change from scan to scan, NaN for no return, range_min 0 and range_max 100 as published).
+A profile name takes options after colons: `turtlebot3_real:randomized` draws every effect
+within its documented range from the seed; `turtlebot3_real:command_latency_s=0.1` sets one;
+`turtlebot3_real:off:scan_skew=1` starts from every effect off (to see what one effect does).
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from amr_common.robot import LIDAR_OFFSET_X, MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED
+from amr_sim.effects import Effects, parse_effect_value
+
+RANDOMIZED = "randomized"  # the profile option that draws the effects from the seed
+OFF = "off"  # the profile option that turns every effect off (then EFFECT=VALUE turns some on)
+
+
+@dataclass(frozen=True)
+class LidarModel:
+    """What a real scanner adds to the ideal ray cast: its datasheet's bands and its driver.
+
+    Distance bands: below band_edges[0] band 0, and so on; each band's accuracy and precision
+    bound is abs_m + rel * range (datasheet figures). Rays are measured clockwise, so a ray at
+    angle a (rad, counter-clockwise) is measured revolution_s * a / (2 pi) before the
+    revolution's end, when the driver stamps the scan. With samples_per_s (LD08) the samples
+    are binned per scan as ld08_driver does: the ray count and angle_min change every scan.
+    """
+
+    name: str
+    revolution_s: float
+    band_edges: tuple[float, ...]
+    accuracy: tuple[tuple[float, float], ...]  # (abs_m, rel) per band
+    precision: tuple[tuple[float, float], ...]
+    sensing_min: float  # m: shorter true ranges return nothing
+    sensing_max: float  # m: longer ones too
+    samples_per_s: float | None = None  # LD08: 2300 samples/s, binned per scan
+    speed_sigma: float = 0.0  # relative rotation-speed change from scan to scan
+    # Relative error of the reported angle_increment (the driver takes the speed of the last
+    # packet, not the revolution's mean): the binning then leaves a gap or merges two samples
+    # every 1 / error rays.
+    increment_sigma: float = 0.0
+
+
+# emanual.robotis.com turtlebot3 appendix_lds_01: accuracy 15 mm (120-499 mm) / 5 % (500-3,500),
+# precision 10 mm / 3.5 %, 300 +- 10 rpm. hls_lfcd_lds_driver: ranges[359 - index] (clockwise).
+LDS01 = LidarModel(name="LDS-01", revolution_s=0.2, band_edges=(0.5,),
+                   accuracy=((0.015, 0.0), (0.0, 0.05)), precision=((0.010, 0.0), (0.0, 0.035)),
+                   sensing_min=0.12, sensing_max=3.5)
+# appendix_lds_02: 160-8,000 mm, 2.3 kHz fixed sampling, >= 5 Hz; accuracy 10 mm (160-300 mm),
+# 3 % (300-6,000 mm), 5 % (6,000-8,000 mm; the page labels it precision). No separate precision
+# figure: the same bounds are used.
+LDS02 = LidarModel(name="LDS-02", revolution_s=0.2, band_edges=(0.3, 6.0),
+                   accuracy=((0.010, 0.0), (0.0, 0.03), (0.0, 0.05)),
+                   precision=((0.010, 0.0), (0.0, 0.03), (0.0, 0.05)),
+                   sensing_min=0.16, sensing_max=8.0, samples_per_s=2300.0, speed_sigma=0.01,
+                   increment_sigma=0.005)
 
 
 @dataclass(frozen=True)
@@ -20,7 +75,7 @@ class SensorProfile:
     """What the simulated robot's sensors and command path look like (ideal or turtlebot3)."""
 
     name: str
-    scan_rays: int
+    scan_rays: int  # nominal (turtlebot3_lds02: it changes from scan to scan)
     angle_min: float  # rad, relative to the robot heading; rays go counter-clockwise
     angle_increment: float  # rad
     range_min: float  # m
@@ -39,6 +94,11 @@ class SensorProfile:
     clamp_commands: bool = False
     # m, forward position of the LiDAR (the scan's origin) from the robot centre, along its axis.
     lidar_offset_x: float = 0.0
+    # The reality gap: None = the clean model above (ideal, turtlebot3), bit for bit as before.
+    effects: Effects | None = None
+    lidar_model: LidarModel | None = None
+    randomize: bool = False  # draw `effects` from the seed (then apply effect_overrides)
+    effect_overrides: tuple[tuple[str, float], ...] = ()
 
     @property
     def angle_max(self) -> float:
@@ -59,14 +119,66 @@ TURTLEBOT3 = SensorProfile(
     max_linear=MAX_LINEAR_SPEED, max_angular=MAX_ANGULAR_SPEED, clamp_commands=True,
     lidar_offset_x=LIDAR_OFFSET_X)  # base_scan at (-0.032, 0, 0.172) from base_link
 
-PROFILES: dict[str, SensorProfile] = {p.name: p for p in (IDEAL, TURTLEBOT3)}
+TURTLEBOT3_REAL = replace(TURTLEBOT3, name="turtlebot3_real", range_noise_sigma=0.0,
+                          effects=Effects(), lidar_model=LDS01)
+
+# ld08_driver: angle_increment = speed / 2300 samples/s (0.78 deg at 5 Hz, ~460 rays),
+# angle_min/angle_max = the first/last valid sample, range_min 0, range_max 100, NaN = no return.
+TURTLEBOT3_LDS02 = replace(TURTLEBOT3_REAL, name="turtlebot3_lds02", scan_rays=460,
+                           angle_increment=2.0 * math.pi / 460, range_min=0.0, range_max=100.0,
+                           no_return=math.nan, lidar_model=LDS02)
+
+PROFILES: dict[str, SensorProfile] = {
+    p.name: p for p in (IDEAL, TURTLEBOT3, TURTLEBOT3_REAL, TURTLEBOT3_LDS02)}
 
 
 def get_profile(name: str | SensorProfile) -> SensorProfile:
-    """The profile called `name` ("ideal" or "turtlebot3"); a SensorProfile passes through."""
+    """The profile `name` ("ideal", "turtlebot3", ...) with its options; a SensorProfile passes.
+
+    Options follow the name after colons: `randomized` (draw every effect from the seed), `off`
+    (every effect off) and EFFECT=VALUE (amr_sim.effects), applied last; e.g.
+    "turtlebot3_real:randomized:command_latency_s=0.1". ValueError names what is wrong.
+    """
     if isinstance(name, SensorProfile):
         return name
-    try:
-        return PROFILES[name]
-    except (KeyError, TypeError):
-        raise ValueError(f"unknown profile {name!r}; choose one of {sorted(PROFILES)}") from None
+    if not isinstance(name, str):
+        raise ValueError(f"unknown profile {name!r}; choose one of {sorted(PROFILES)}")
+    base, *options = [part.strip() for part in name.split(":")]
+    if base not in PROFILES:
+        raise ValueError(f"unknown profile {base!r}; choose one of {sorted(PROFILES)}")
+    profile = PROFILES[base]
+    if not options:
+        return profile
+    randomize, off, overrides = False, False, {}
+    for option in options:
+        if option in (RANDOMIZED, OFF):
+            randomize, off = randomize or option == RANDOMIZED, off or option == OFF
+        elif "=" in option:
+            key, value = (part.strip() for part in option.split("=", 1))
+            overrides[key] = parse_effect_value(key, value)
+        else:
+            raise ValueError(f"profile option {option!r} is none of '{RANDOMIZED}', '{OFF}' "
+                             f"and EFFECT=VALUE (in profile {name!r})")
+    if profile.effects is None:
+        raise ValueError(f"profile {base!r} has no reality-gap effects to "
+                         f"{'randomize' if randomize else 'set'}; use turtlebot3_real or "
+                         f"turtlebot3_lds02")
+    if randomize and off:
+        raise ValueError(f"profile {name!r}: '{RANDOMIZED}' and '{OFF}' exclude each other")
+    canonical = ":".join([base] + [RANDOMIZED] * randomize + [OFF] * off
+                         + [f"{k}={v:g}" for k, v in overrides.items()])
+    effects = Effects.none() if off else profile.effects
+    return replace(profile, name=canonical, effects=effects.with_values(overrides),
+                   randomize=randomize, effect_overrides=tuple(overrides.items()))
+
+
+def randomized_profile_name(name: str) -> str:
+    """`name` with the `randomized` option (--randomize); ValueError without effects."""
+    profile = get_profile(name)
+    if profile.effects is None:
+        raise ValueError(f"--randomize: profile {profile.name!r} has no reality-gap effects "
+                         f"to draw; use turtlebot3_real or turtlebot3_lds02")
+    if profile.randomize:
+        return profile.name
+    base, _, rest = profile.name.partition(":")
+    return ":".join([base, RANDOMIZED] + ([rest] if rest else []))

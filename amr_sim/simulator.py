@@ -9,16 +9,17 @@ clipped as the profile's robot does (turtlebot3 only), and saturated by the whee
 (robot.py: both wheels scaled by one factor, which keeps the curvature). The
 executed twist becomes the velocity of a pymunk dynamic body (the chord of the exact unicycle arc
 along the mid-step heading, so free motion equals the exact unicycle solution with no lag).
-Walls stop the robot through a speculative contact constraint: the velocity component towards
-every wall within reach this step is limited so the robot ends at most 0.5 mm inside it (below
-pymunk's collision_slop of 1 mm, so the contact persists without jitter). Pymunk detects the
-contacts (begin/separate callbacks count collisions) and its solver pushes out any deeper overlap.
-Why not force control as in simulation.md: pymunk integrates positions before velocities, so a
-force-driven body executes each command one step late; setting the velocity blindly instead sinks
-~42 mm into walls. Constraining the velocity against nearby walls avoids both.
+Walls stop the robot through a speculative contact constraint (amr_sim.contact): the robot ends
+at most 0.5 mm inside a wall. Pymunk detects the contacts (begin/separate callbacks count
+collisions) and its solver pushes out any deeper overlap.
 
 Sensors come from the body's actual motion: encoder increments (so z_v/z_w reflect collisions and
 saturation), a dead-reckoned odometry pose, and the LiDAR at the robot centre (lidar.py).
+
+A profile with reality-gap effects (turtlebot3_real, turtlebot3_lds02; amr_sim.reality) replaces
+the command path by the real drivetrain (latency, firmware clamps, motors, wheel errors, slip),
+the odometry by encoders + a drifting IMU heading, and the LiDAR by the real scanner (skew,
+range error by band, dropouts, the LDS-02's changing rays). Without effects, nothing changes.
 """
 from __future__ import annotations
 
@@ -31,53 +32,18 @@ import pymunk
 
 from amr_common import robot
 from amr_common.geometry import wrap_angle
-from amr_common.jit import jit
-from amr_common.raycast import nearest_wall, segment_offset
+from amr_common.raycast import nearest_wall
 from amr_common.robot import COMMAND_CLIP  # |v|, |w| beyond this are absurd
 from amr_common.world import World
+from amr_sim.contact import ALLOWED_PENETRATION, constrain_velocity
 from amr_sim.lidar import Lidar
 from amr_sim.profiles import SensorProfile, get_profile
-
-
-def _constrain_velocity_python(segments, px, py, vx, vy, h, radius, allowed_penetration):
-    """Limit (vx, vy) so that after moving h seconds no wall is closer than radius - allowed.
-
-    The distance to a segment along a straight motion is convex in time, so the linear bound
-    d(t) >= d0 - (v . n) t is safe: v . n <= (d0 - radius + allowed) / h for the unit vector n
-    towards each wall within reach. Several walls (corners): alternating projections.
-    """
-    reach = radius + math.sqrt(vx * vx + vy * vy) * h + 1e-3
-    normals = np.empty((8, 3))
-    count = 0
-    for k in range(segments.shape[0]):
-        cx, cy, d = segment_offset(segments, k, px, py)
-        if d < reach and d > 0.0 and count < 8:
-            normals[count, 0] = cx / d
-            normals[count, 1] = cy / d
-            normals[count, 2] = max(d - radius + allowed_penetration, 0.0) / h
-            count += 1
-    if count == 0:
-        return vx, vy
-    for _ in range(16):  # converges in 1-3 passes for 1-3 walls
-        worst = 0.0
-        for j in range(count):
-            excess = vx * normals[j, 0] + vy * normals[j, 1] - normals[j, 2]
-            if excess > 0.0:
-                vx -= excess * normals[j, 0]
-                vy -= excess * normals[j, 1]
-                worst = max(worst, excess)
-        if worst < 1e-12:
-            return vx, vy
-    return 0.0, 0.0  # not converged (a narrow wedge): stopping is always safe
-
-
-_constrain_velocity = jit(_constrain_velocity_python)
+from amr_sim.reality import RealRobot
 
 log = logging.getLogger("amr_sim.simulator")
 
 _ROBOT_TYPE = 1
 _WALL_TYPE = 2
-ALLOWED_PENETRATION = 0.0005  # m: resting contact depth, below collision_slop so it is stable
 _ROBOT_RADIUS = robot.ROBOT_RADIUS
 _WARN_INTERVAL = 5.0  # s of wall time between repeated bad-command warnings
 
@@ -120,8 +86,14 @@ class Simulator:
         self._space, self._body, self._shape = space, body, shape  # shapes hold weak body refs
 
         p = self._profile
-        self._lidar = Lidar(self._segments, p.scan_rays, p.angle_min, p.angle_increment,
-                            p.range_min, p.range_max, p.no_return, grid=self._world.march_grid)
+        # The reality gap (profiles with effects): drivetrain, scanner and their random streams.
+        self._real = None if p.effects is None else RealRobot(p, self._segments, seed,
+                                                              (x, y, theta), dt)
+        self._lidar = self._real.lidar if self._real else Lidar(
+            self._segments, p.scan_rays, p.angle_min, p.angle_increment, p.range_min,
+            p.range_max, p.no_return, grid=self._world.march_grid)
+        self._scan_geometry = (p.angle_min, p.angle_increment, p.scan_rays, p.range_min,
+                               p.range_max)
         self._x, self._y, self._theta = x, y, theta  # theta continuous (not wrapped)
         self._steps = 0
         self._distance = 0.0
@@ -130,7 +102,8 @@ class Simulator:
         self._collision_points: list[tuple[float, float]] = []
         self._active_contacts = 0
         self._min_clearance = nearest_wall(self._segments, x, y)[0] - robot.ROBOT_RADIUS
-        self._odom = [0.0, 0.0, 0.0]  # odom frame = the start pose, like a robot's /odom at boot
+        # odom frame = the start pose, like a robot's /odom at boot (the drivetrain's, if real)
+        self._odom = [0.0, 0.0, 0.0] if self._real is None else self._real.drive.odom
         self._wheel_angles = [0.0, 0.0]
         self._z_v = 0.0
         self._z_w = 0.0
@@ -161,19 +134,23 @@ class Simulator:
         if self._quantum:  # turtlebot3_node sends int(v * 100): truncation toward zero
             v = math.trunc(v * self._quantum) / self._quantum
             w = math.trunc(w * self._quantum) / self._quantum
-        if p.clamp_commands:
-            v = min(max(v, -p.max_linear), p.max_linear)
-            w = min(max(w, -p.max_angular), p.max_angular)
-        v, w = robot.saturate(v, w)  # wheel-speed limit: one factor on both wheels
+        dt = self._dt
+        if self._real is not None:  # latency, firmware clamps, motors, wheel errors, slip
+            ds, dth = self._real.drive.step(v, w, self._steps * dt, dt)
+            v, w = ds / dt, dth / dt
+        else:
+            if p.clamp_commands:
+                v = min(max(v, -p.max_linear), p.max_linear)
+                w = min(max(w, -p.max_angular), p.max_angular)
+            v, w = robot.saturate(v, w)  # wheel-speed limit: one factor on both wheels
         self._command = (v, w)
 
-        dt = self._dt
         x0, y0, th0 = self._x, self._y, self._theta
         chord_speed = v * robot.sinc_half(w * dt)  # exact unicycle arc: its chord, mid heading
         mid = th0 + 0.5 * w * dt
-        vx, vy = _constrain_velocity(self._segments, x0, y0, chord_speed * math.cos(mid),
-                                     chord_speed * math.sin(mid), dt, _ROBOT_RADIUS,
-                                     ALLOWED_PENETRATION)
+        vx, vy = constrain_velocity(self._segments, x0, y0, chord_speed * math.cos(mid),
+                                    chord_speed * math.sin(mid), dt, _ROBOT_RADIUS,
+                                    ALLOWED_PENETRATION)
         body = self._body
         body.velocity = (vx, vy)
         body.angular_velocity = w
@@ -192,17 +169,23 @@ class Simulator:
         mid = th0 + 0.5 * dth
         chord = dx * math.cos(mid) + dy * math.sin(mid)
         ds = chord / robot.sinc_half(dth)
-        dphi_l, dphi_r = robot.encoder_increments(ds, dth)
         wheels = self._wheel_angles
-        wheels[0] += dphi_l
-        wheels[1] += dphi_r
-        self._z_v, self._z_w = robot.twist_from_increments(dphi_l, dphi_r, dt)
-        # Dead reckoning (the encoders do not see sideways sliding along a wall).
-        odom = self._odom
-        odom_mid = odom[2] + 0.5 * dth
-        odom[0] += chord * math.cos(odom_mid)
-        odom[1] += chord * math.sin(odom_mid)
-        odom[2] += dth
+        if self._real is not None:  # encoders, odometry with the IMU heading (it drifts)
+            dphi_l, dphi_r, self._z_v, self._z_w = self._real.drive.sense(ds, dth, dt)
+            self._lidar.record(now, x1, y1, th1)
+            wheels[0] += dphi_l
+            wheels[1] += dphi_r
+        else:
+            dphi_l, dphi_r = robot.encoder_increments(ds, dth)
+            wheels[0] += dphi_l
+            wheels[1] += dphi_r
+            self._z_v, self._z_w = robot.twist_from_increments(dphi_l, dphi_r, dt)
+            # Dead reckoning (the encoders do not see sideways sliding along a wall).
+            odom = self._odom
+            odom_mid = odom[2] + 0.5 * dth
+            odom[0] += chord * math.cos(odom_mid)
+            odom[1] += chord * math.sin(odom_mid)
+            odom[2] += dth
         self._distance += math.hypot(dx, dy)
 
         clearance = nearest_wall(self._segments, x1, y1)[0] - _ROBOT_RADIUS
@@ -235,8 +218,15 @@ class Simulator:
         body.angular_velocity = 0.0
         self._space.reindex_shapes_for_body(body)
         self._x, self._y, self._theta = x, y, theta
+        if self._real is not None:  # the scan's pose history starts again here
+            self._lidar.reset(self.time, x, y, theta)
 
     def _new_scan(self) -> np.ndarray:
+        if self._real is not None:  # the revolution ends now (the driver's stamp)
+            scan = self._lidar.scan(self._steps * self._dt)
+            if self._lidar.geometry != self._scan_geometry[:3]:  # LDS-02: every scan
+                self._scan_geometry = (*self._lidar.geometry, *self._scan_geometry[3:])
+            return scan
         p = self._profile
         noise = (self._rng.standard_normal(p.scan_rays) * p.range_noise_sigma
                  if p.range_noise_sigma > 0 else None)
@@ -293,7 +283,8 @@ class Simulator:
 
         The start pose is (0, 0, 0).
         """
-        return (self._odom[0], self._odom[1], wrap_angle(self._odom[2]))
+        odom = self._odom
+        return (float(odom[0]), float(odom[1]), wrap_angle(float(odom[2])))
 
     @property
     def wheel_angles(self) -> tuple[float, float]:
@@ -304,6 +295,20 @@ class Simulator:
     def executed_command(self) -> tuple[float, float]:
         """The twist (v, w) the robot executed in the last step, after quantisation and limits."""
         return self._command
+
+    @property
+    def effects(self):
+        """The reality-gap effects of this run (amr_sim.effects.Effects), or None (clean)."""
+        return self._real.effects if self._real is not None else None
+
+    @property
+    def scan_geometry(self) -> tuple[float, float, int, float, float]:
+        """(angle_min, angle_increment, rays, range_min, range_max) of the newest scan.
+
+        The profile's, except with the LDS-02, whose rays change from scan to scan. The same
+        tuple object until the geometry changes (`is not` tells a change cheaply).
+        """
+        return self._scan_geometry
 
     @property
     def lidar(self) -> Lidar:

@@ -136,7 +136,9 @@ class SimulatorNode(GuardedLifecycleNode):
         self.get_logger().info(
             f"configured: world '{world.name}' ({world.source}), start ({x:.3f}, {y:.3f}, "
             f"{theta:.3f}), profile {profile.name}, {p['mode']}, dt {p['dt']} s, goal "
-            f"{self.goal}, localization {'on' if p['enable_localization'] else 'off'}")
+            f"{self.goal}, localization {'on' if p['enable_localization'] else 'off'}"
+            + (f"; effects {self.simulator.effects.summary()}" if self.simulator.effects
+               else ""))
         return TransitionCallbackReturn.SUCCESS
 
     def _create_inputs(self, p: dict[str, Any]) -> None:
@@ -206,9 +208,12 @@ class SimulatorNode(GuardedLifecycleNode):
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Pause: destroy the real-time timer, ignore commands, disable the publishers.
 
-        The simulator keeps its state, so a later activate resumes the same run.
+        Scans still on their way (real time with a reality-gap profile) are dropped. The
+        simulator keeps its state, so a later activate resumes the same run.
         """
         self._stop_timer()
+        if self._outputs is not None:
+            self._outputs.cancel_late_scans()
         return super().on_deactivate(state)
 
     # --- commands --------------------------------------------------------------------------
@@ -372,6 +377,7 @@ class SimulatorNode(GuardedLifecycleNode):
             "collisions": int(simulator.collisions),
             "min_clearance_m": float(simulator.min_clearance),
             "distance_m": float(simulator.distance),
+            "effects": simulator.effects.as_dict() if simulator.effects else None,
         }
 
 

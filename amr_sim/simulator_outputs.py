@@ -8,6 +8,8 @@ only a simulator knows: the true pose on /ground_truth and as map -> base_footpr
 for viewers when no localization node runs, the perfect map -> odom (`map_to_odom_from_truth`).
 The world is published as /map and /map_markers, latched. Publishers are lifecycle publishers
 of the simulator node, created in its on_configure and destroyed by `destroy()`.
+With a reality-gap profile each /scan carries its own geometry (the LDS-02's changes every scan)
+and, in real time, ScanDelivery loses some and delays the others as a Wi-Fi link does.
 """
 from __future__ import annotations
 
@@ -16,6 +18,7 @@ from typing import Any
 
 from builtin_interfaces.msg import Time
 from nav_msgs.msg import Odometry
+from rclpy.clock import Clock, ClockType
 from rosgraph_msgs.msg import Clock as ClockMessage
 from sensor_msgs.msg import LaserScan
 from tf2_msgs.msg import TFMessage
@@ -27,6 +30,7 @@ from amr_common.qos import LATCHED, RELIABLE_10, scan_qos
 from amr_common.robot import LIDAR_HEIGHT
 from amr_common.ros_conversions import (
     float32_array,
+    laser_scan,
     laser_scan_from_profile,
     odometry_message,
     seconds_to_time,
@@ -38,6 +42,7 @@ from amr_common.tf import (
     map_to_odom,
     planar_transform,
 )
+from amr_sim.reality import delivery_stream
 
 
 def true_velocity(before: tuple, after: tuple, dt: float) -> tuple[float, float]:
@@ -75,7 +80,7 @@ class SimulatorOutputs:
             "clock": create(ClockMessage, "/clock", RELIABLE_10),
             "odom": create(Odometry, odometry_topic, RELIABLE_10),
             "scan": create(LaserScan, "/scan",
-                           scan_qos(5 if profile.name == "turtlebot3" else 10)),
+                           scan_qos(5 if profile.odom_topic == "/odom" else 10)),
         }
         if p["publish_ground_truth"]:
             self.publishers["truth"] = create(Odometry, "/ground_truth", RELIABLE_10)
@@ -86,10 +91,20 @@ class SimulatorOutputs:
             self.destroy()
             raise
         scan_time = profile.scan_period if realtime and profile.scan_period else p["dt"]
-        laser_scan_from_profile(simulator.last_scan, profile, stamp=Time(),
-                                frame_id=p["scan_frame"], scan_time=scan_time,
-                                message=self._messages["scan"])
+        # A real scanner's scan: its revolution, the geometry of each scan (the LDS-02's).
+        self._real_scanner = profile.lidar_model is not None
+        if self._real_scanner:
+            scan_time = profile.lidar_model.revolution_s
+        else:
+            laser_scan_from_profile(simulator.last_scan, profile, stamp=Time(),
+                                    frame_id=p["scan_frame"], scan_time=scan_time,
+                                    message=self._messages["scan"])
+        self._scan_time = scan_time
         self._next_publish = {"odom": 0.0, "scan": 0.0}
+        effects = simulator.effects
+        self._delivery = ScanDelivery(node, self.publishers["scan"], delivery_stream(p["seed"]),
+                                      effects.scan_loss_share, effects.scan_jitter_s) \
+            if realtime and effects is not None else None
 
     def publish_first(self, z_scan, z_v: float, z_w: float) -> None:
         """/tf_static and the map, then the current measurement (it starts a lockstep loop).
@@ -143,15 +158,33 @@ class SimulatorOutputs:
             publishers["odom"].publish(odometry_message(
                 stamp, p["odom_frame"], p["base_frame"], simulator.odometry_pose, twist,
                 messages["odom"]))
-        if publish_scan:
+        if publish_scan and self._real_scanner:
+            angle_min, increment, _, range_min, range_max = simulator.scan_geometry
+            # A new message and stamp: a late scan is published after `stamp` is reused.
+            scan = laser_scan(z_scan, stamp=seconds_to_time(simulator.time),
+                              frame_id=p["scan_frame"],
+                              angle_min=angle_min, angle_increment=increment,
+                              range_min=range_min, range_max=range_max,
+                              scan_time=self._scan_time)
+            if self._delivery is not None:  # real time: lost or late, as over Wi-Fi
+                self._delivery.send(scan)
+            else:
+                publishers["scan"].publish(scan)
+        elif publish_scan:
             # Every other field was filled in on construction.
             scan = messages["scan"]
             scan.header.stamp = stamp
             scan.ranges = float32_array(z_scan)
             publishers["scan"].publish(scan)
 
+    def cancel_late_scans(self) -> None:
+        """Drop the real-time scans still on their way (deactivate: nothing arrives later)."""
+        if self._delivery is not None:
+            self._delivery.destroy()
+
     def destroy(self) -> None:
-        """Destroy every publisher this object created. Idempotent."""
+        """Destroy every publisher this object created (pending late scans too). Idempotent."""
+        self.cancel_late_scans()
         for publisher in self.publishers.values():
             self._node.destroy_lifecycle_publisher(publisher)
         self.publishers = {}
@@ -219,3 +252,56 @@ class SimulatorTf:
         for publisher in [self._tf, self._static.publisher, *self._map_publishers]:
             self._node.destroy_lifecycle_publisher(publisher)
         self._map_publishers = []
+
+
+class ScanDelivery:
+    """Best-effort /scan over a lossy link: some scans lost, the others late.
+
+    Each scan is lost with probability `loss`; the others are published after a random delay
+    in [0, jitter] s (a one-shot steady-clock timer each). `destroy()` drops the scans still
+    on their way (on deactivate/cleanup nothing is sent late).
+    """
+
+    def __init__(self, node, publisher, rng, loss: float, jitter: float) -> None:
+        self._node = node
+        self._publisher = publisher
+        self._rng = rng
+        self._loss = float(loss)
+        self._jitter = float(jitter)
+        self._timers: list = []
+        self.sent = 0
+        self.lost = 0
+
+    def send(self, message) -> None:
+        """Publish `message` now, later, or never."""
+        if self._rng.random() < self._loss:
+            self.lost += 1
+            return
+        delay = self._jitter * self._rng.random()
+        if delay <= 0.0:
+            self._publish(message)
+            return
+        timer = None
+
+        def deliver() -> None:
+            self._forget(timer)
+            self._publish(message)
+
+        timer = self._node.create_timer(delay, deliver,
+                                        clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self._timers.append(timer)
+
+    def _publish(self, message) -> None:
+        self.sent += 1
+        self._publisher.publish(message)
+
+    def _forget(self, timer) -> None:
+        if timer in self._timers:
+            self._timers.remove(timer)
+            timer.cancel()
+            self._node.destroy_timer(timer)
+
+    def destroy(self) -> None:
+        """Cancel the scans still on their way."""
+        for timer in list(self._timers):
+            self._forget(timer)

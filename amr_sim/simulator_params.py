@@ -19,10 +19,15 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     "start": (DEFAULT_START, "Start pose: a name from the world file or 'x,y,theta' "
                              "(m, m, rad); '' or the default 'outer' in a world without "
                              "it = the world's first start"),
-    "profile": ("ideal", "Sensor profile: 'ideal' (CoppeliaSim robot) or 'turtlebot3' "
-                         "(the real Burger: LDS-01 at 5 Hz, /odom pose at 20 Hz)"),
+    "profile": ("ideal", "Sensor profile: 'ideal' (CoppeliaSim robot), 'turtlebot3' (the "
+                         "real Burger: LDS-01 at 5 Hz, /odom pose at 20 Hz), "
+                         "'turtlebot3_real' (+ the reality-gap effects at typical values) or "
+                         "'turtlebot3_lds02' (+ effects, LDS-02); options after colons: "
+                         "':randomized' draws the effects from the seed, ':EFFECT=VALUE' sets "
+                         "one (docs/reality-gap.md)"),
     "dt": (0.05, "Simulation step in seconds (0 < dt <= 1)"),
-    "seed": (0, "Seed of the sensor noise: the same seed gives the same run"),
+    "seed": (0, "Seed of the sensor noise (and of the drawn effects): the same seed gives "
+                "the same run"),
     "mode": ("lockstep", "'lockstep': each /cmd_vel advances one dt; 'realtime': a "
                          "wall-clock timer advances one dt with the newest command"),
     "cmd_vel_stamped": (True, "Subscribe /cmd_vel as geometry_msgs/TwistStamped (Jazzy); "

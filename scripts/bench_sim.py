@@ -6,8 +6,11 @@ so that each step pays for a full scan). Measured in the same run, with the same
 - the same step with the scan done by pymunk's per-ray space.segment_query_first (the slow
   reference: ~100x slower according to simulation.md),
 - the same step with the scan as a numpy rays x segments matrix,
-- the turtlebot3 profile as configured (a new scan only every 0.2 s, i.e. every 4th step).
-Target: >= 10,000 core steps/s. `main()` returns the figures as a dict (scripts/bench.py uses it).
+- the turtlebot3 profile as configured (a new scan only every 0.2 s, i.e. every 4th step),
+- the reality gap: turtlebot3_real (every effect on) against turtlebot3, both scanning every
+  step and both as configured, and turtlebot3_lds02 as configured, interleaved run by run.
+Targets: >= 10,000 core steps/s; a step with every effect on costs at most 1.5x a clean step.
+`main()` returns the figures as a dict (scripts/bench.py uses it).
 
 Rates are given per CPU second of this process (time.process_time) and per wall-clock second.
 On a shared machine the wall-clock figure also counts time spent waiting for a CPU (it varied
@@ -33,10 +36,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import pymunk  # noqa: E402
 
 from amr_sim.lidar import Lidar  # noqa: E402
-from amr_sim.profiles import TURTLEBOT3  # noqa: E402
+from amr_sim.profiles import TURTLEBOT3, TURTLEBOT3_LDS02, TURTLEBOT3_REAL  # noqa: E402
 from amr_sim.simulator import Simulator  # noqa: E402
 
 TARGET_STEPS_PER_S = 10_000
+TARGET_EFFECTS_COST = 1.5  # a step with every effect on, per clean step
 WORLD, START = "lab02", "outer"
 
 
@@ -95,6 +99,40 @@ def time_steps(profile, steps: int, repeats: int, scanner: str = "numba") -> tup
     return best_cpu, best_wall
 
 
+def effects_costs(steps: int, chunks: int = 40) -> dict:
+    """CPU time per step of the effect profiles over their clean twins.
+
+    The clean simulator and its effect twin take turns in `chunks` short runs of the same
+    commands, so a load change on the shared machine hits both alike; the cost ratio is their
+    total CPU times' ratio (the range: over the first and second half of the chunks).
+    """
+    pairs = {"scan every step": (dataclasses.replace(TURTLEBOT3, scan_period=None),
+                                 dataclasses.replace(TURTLEBOT3_REAL, scan_period=None)),
+             "as configured (5 Hz scans)": (TURTLEBOT3, TURTLEBOT3_REAL),
+             "LDS-02 as configured": (TURTLEBOT3, TURTLEBOT3_LDS02)}
+    size = max(1, steps // chunks)
+    cmds = [(float(v), float(w)) for v, w in commands(size * chunks)]
+    out = {}
+    for name, profiles in pairs.items():
+        sims = [Simulator(WORLD, start=START, profile=p, seed=0) for p in profiles]
+        cpu = np.zeros((chunks, 2))
+        for k in range(chunks):
+            part = cmds[k * size:(k + 1) * size]
+            for i, sim in enumerate(sims):
+                step = sim.step
+                c0 = time.process_time()
+                for v, w in part:
+                    step(v, w)
+                cpu[k, i] = time.process_time() - c0
+        halves = [cpu[: chunks // 2].sum(axis=0), cpu[chunks // 2:].sum(axis=0)]
+        total = cpu.sum(axis=0)
+        out[name] = {"clean_steps_per_s": size * chunks / total[0],
+                     "effects_steps_per_s": size * chunks / total[1],
+                     "cost_ratio": float(total[1] / total[0]),
+                     "cost_ratio_range": sorted(float(h[1] / h[0]) for h in halves)}
+    return out
+
+
 def scan_us(scanner, repeats: int = 200) -> float:
     """CPU microseconds per scan."""
     c0 = time.process_time()
@@ -107,6 +145,8 @@ def main(steps: int = 20_000, repeats: int = 3, verbose: bool = True) -> dict:
     """Measure, print (unless verbose=False) and return the figures."""
     every_step = dataclasses.replace(TURTLEBOT3, scan_period=None)  # a full scan in every step
     time_steps(every_step, 200, 1)  # warm-up: numba compile / cache load
+    for warm in (TURTLEBOT3_REAL, TURTLEBOT3_LDS02):
+        time_steps(warm, 200, 1)
     dt = 0.05
     load_before = os.getloadavg()[0]
     core, core_wall = time_steps(every_step, steps, repeats)
@@ -114,6 +154,7 @@ def main(steps: int = 20_000, repeats: int = 3, verbose: bool = True) -> dict:
     numpy_ref, numpy_wall = time_steps(every_step, max(200, steps // 20), repeats, scanner="numpy")
     pymunk_ref, pymunk_wall = time_steps(every_step, max(100, steps // 100), repeats,
                                          scanner="pymunk")
+    effects = effects_costs(steps * repeats)
 
     sim = Simulator(WORLD, start=START, profile=every_step)
     p = sim.profile
@@ -148,6 +189,10 @@ def main(steps: int = 20_000, repeats: int = 3, verbose: bool = True) -> dict:
         "scan_max_abs_difference_pymunk_vs_numba_m": agree,
         "target_steps_per_s": TARGET_STEPS_PER_S,
         "meets_target": core >= TARGET_STEPS_PER_S,
+        "effects": effects,
+        "target_effects_cost": TARGET_EFFECTS_COST,
+        "meets_effects_target": all(e["cost_ratio"] <= TARGET_EFFECTS_COST
+                                    for e in effects.values()),
     }
     if verbose:
         _print(result)
@@ -179,6 +224,15 @@ def _print(r: dict) -> None:
           f"{r['scan_max_abs_difference_pymunk_vs_numba_m']:.1e} m")
     verdict = "meets" if r["meets_target"] else "MISSES"
     print(f"  target {r['target_steps_per_s']:,} steps/s: {verdict}")
+    print("reality gap (every effect on; turtlebot3_real / turtlebot3_lds02 against "
+          "turtlebot3, same run, CPU time per step):")
+    for name, e in r["effects"].items():
+        low, high = e["cost_ratio_range"]
+        print(f"  {name:<28} clean {e['clean_steps_per_s']:>7,.0f} steps/s, effects "
+              f"{e['effects_steps_per_s']:>7,.0f} steps/s: {e['cost_ratio']:.2f}x a clean step "
+              f"(halves {low:.2f}, {high:.2f})")
+    verdict = "meets" if r["meets_effects_target"] else "MISSES"
+    print(f"  target <= {r['target_effects_cost']}x: {verdict}")
 
 
 if __name__ == "__main__":

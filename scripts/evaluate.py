@@ -87,7 +87,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--pose-source", default=None, choices=["filter", "truth"],
                         help="navigation: the particle filter (default) or the true pose")
     parser.add_argument("--profiles", default=None, help="comma-separated sensor profiles: ideal, "
-                        "turtlebot3 (default ideal)")
+                        "turtlebot3, turtlebot3_real, turtlebot3_lds02 (default ideal)")
+    parser.add_argument("--randomize", action="store_true", help="draw every reality-gap "
+                        "effect within its documented range from each episode's seed "
+                        "(profiles turtlebot3_real, turtlebot3_lds02; listed under the table)")
     parser.add_argument("--seeds", default=None, help="comma-separated seeds or ranges, e.g. "
                         "0,1,2 or 0-9 (default 0)")
     parser.add_argument("--duration", type=float, default=None,
@@ -164,6 +167,11 @@ def resolve_settings(args: argparse.Namespace) -> dict:
                           **parse_overrides(args.param)}
     if settings["jobs"] is not None and settings["jobs"] < 1:
         raise EvaluationError(f"--jobs must be >= 1, got {settings['jobs']}")
+    if args.randomize:
+        from amr_evaluation.evaluation_config import parse_name_list
+        from amr_sim.profiles import randomized_profile_name
+        settings["profiles"] = [randomized_profile_name(name)
+                                for name in parse_name_list(settings["profiles"])]
     timeout = args.episode_timeout
     if timeout is not None and not 0 <= timeout < math.inf:  # also NaN
         raise EvaluationError(f"--episode-timeout must be a number of seconds > 0 (0: no "

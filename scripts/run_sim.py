@@ -87,7 +87,13 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--start", default=None, help="named start, X,Y,THETA (m, m, rad; e.g. "
                         "--start -1.0,-1.0,1.57), or 'all' to run every named start in turn "
                         "(default: the world's first start)")
-    parser.add_argument("--profile", default="ideal", choices=["ideal", "turtlebot3"])
+    parser.add_argument("--profile", default="ideal", help="ideal (default), turtlebot3, "
+                        "turtlebot3_real or turtlebot3_lds02 (the Burger with the reality-gap "
+                        "effects; options after colons: turtlebot3_real:command_latency_s=0.1, "
+                        "see docs/reality-gap.md)")
+    parser.add_argument("--randomize", action="store_true", help="draw every reality-gap "
+                        "effect within its documented range from --seed (the report lists the "
+                        "drawn values)")
     parser.add_argument("--duration", type=float, default=600.0,
                         help="simulated seconds to run (default 600)")
     parser.add_argument("--dt", type=float, default=0.05)
@@ -122,8 +128,15 @@ def parse_args(argv=None) -> argparse.Namespace:
     args = parser.parse_args(join_negative_values(argv, ["--start", "--goal", "--kidnap"]))
     if not (math.isfinite(args.duration) and args.duration > 0):
         parser.error("--duration must be > 0")
+    from amr_sim.profiles import get_profile, randomized_profile_name
+    try:
+        if args.randomize:
+            args.profile = randomized_profile_name(args.profile)
+        args.profile = get_profile(args.profile).name
+    except ValueError as exc:
+        parser.error(str(exc))
     if args.params_file is None:
-        rehearsal = args.realtime and args.profile == "turtlebot3"
+        rehearsal = args.realtime and get_profile(args.profile).odom_topic == "/odom"
         args.params_file = str(ROBOT_PARAMS if rehearsal else SIM_PARAMS)
     _check_simulator_options(parser, args)
     check_common_options(parser, args, "run_sim", WALL_FOLLOWER_SET, FILTER_SET)

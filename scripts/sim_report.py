@@ -41,6 +41,7 @@ def run_report(args, world, start, sim, trajectory, wall_errors, wall_time: floa
         "rms_wall_error_m": rms,
         "trajectory": trajectory,
         "collision_points": [list(p) for p in sim.collision_points],
+        "effects": sim.effects.as_dict() if getattr(sim, "effects", None) else None,
     }
 
 

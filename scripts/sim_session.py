@@ -90,7 +90,8 @@ class SimSession:
         self.record_path = record_path
         self.interrupted = False
         self._sim_time_ns = 0  # the recorder's clock in real time: the newest simulated time
-        self.rehearsal = args.realtime and args.profile == "turtlebot3"
+        from amr_sim.profiles import get_profile
+        self.rehearsal = args.realtime and get_profile(args.profile).odom_topic == "/odom"
         self.context = rclpy.Context()
         # No arguments for rcl: by default it reads the script's own command line (a value
         # such as '__node:=x' would rename every node, 'name:=value' warns as a remap rule).

@@ -4,8 +4,10 @@ r"""Search a controller's parameters over episodes with Ray Tune; write the best
 Each trial (one parameter set) runs every episode of the set headless and is scored by the
 objective; trials run in parallel on a Ray cluster, by default a local Ray instance on this
 machine (127.0.0.1). The episode set takes evaluate.py's options (--worlds, --starts, --profiles,
---seeds, --duration, --dt, --controller, --params-file, -p, --config, --jobs, --episode-timeout:
-an episode that hangs or ends its process is a bad episode of its trial). Writes to --out:
+--randomize, --seeds, --duration, --dt, --controller, --params-file, -p, --config, --jobs,
+--episode-timeout: an episode that hangs or ends its process is a bad episode of its trial; with
+--randomize every seed is a robot with its own reality-gap effects, so the default objective
+keeps the parameters that hold on all of them). Writes to --out:
 best_params.yaml (a ROS 2 params file for the wall_follower node: run_sim.py --params-file and
 --ros-args --params-file take it), trials.csv, best.json and Tune's own logs (ray_results/).
 

@@ -134,13 +134,13 @@ def test_random_commands_never_leave_the_world_nor_sink():
 
 
 def test_velocity_constraint_kernel_matches_python_version():
-    from amr_sim.simulator import _constrain_velocity, _constrain_velocity_python
+    from amr_sim.contact import constrain_velocity, constrain_velocity_python
 
     segments = np.array([[0.0, 0.0, 2.0, 0.0], [0.0, 0.0, 0.0, 2.0]])  # a corner at the origin
     for px, py, vx, vy in [(1.0, 0.106, 0.0, -0.3), (0.106, 0.106, -0.2, -0.2),
                            (1.0, 1.0, 0.2, 0.1), (0.5, 0.104, 0.3, -0.3)]:
-        fast = _constrain_velocity(segments, px, py, vx, vy, 0.05, 0.105, 0.0005)
-        slow = _constrain_velocity_python(segments, px, py, vx, vy, 0.05, 0.105, 0.0005)
+        fast = constrain_velocity(segments, px, py, vx, vy, 0.05, 0.105, 0.0005)
+        slow = constrain_velocity_python(segments, px, py, vx, vy, 0.05, 0.105, 0.0005)
         assert fast == pytest.approx(slow, abs=1e-12)
         # never ends deeper than the allowed 0.5 mm in either wall
         assert py + fast[1] * 0.05 >= 0.105 - 0.0005 - 1e-12 or py < 0.105

@@ -250,6 +250,8 @@ def test_inactive_node_publishes_nothing_and_does_not_step(ros):
     ({"start": "nowhere"}, "nowhere"),
     ({"start": "0,0,0"}, "start"),  # lab02's origin lies in a wall or outside: rejected
     ({"profile": "gazebo"}, "gazebo"),
+    ({"profile": "turtlebot3_real:command_latency_s=-1"}, "command_latency_s must be"),
+    ({"profile": "turtlebot3_real:dropout_share=nan"}, "dropout_share must be"),
     ({"mode": "fast"}, "mode"),
     ({"dt": -0.05}, "dt"),
     ({"goal": [1.0]}, "goal"),
@@ -413,3 +415,79 @@ def test_after_the_goal_the_run_goes_on_until_the_robot_rests(ros):
     assert reached < stopped and summary["sim_time_s"] == pytest.approx(stopped + 0.2)
     assert node.simulator.pose[1] == pytest.approx(-0.80, abs=0.01), "drove on after reaching"
     assert summary["final_position_error_m"] == pytest.approx(0.05, abs=0.01)
+
+
+# --- the reality gap ----------------------------------------------------------------------
+
+def test_lds02_scans_carry_their_own_geometry_and_the_summary_the_effects(ros):
+    probe = Probe(ros)
+    node = start_simulator(ros, probe, profile="turtlebot3_lds02", seed=3)
+    for _ in range(12):
+        step_once(ros, probe, 0.1, 0.5)
+    scans = probe.received["scan"]
+    assert len({len(s.ranges) for s in scans}) > 1 and len({s.angle_min for s in scans}) > 1
+    for scan in scans:
+        n = len(scan.ranges)
+        assert (scan.range_min, scan.range_max) == (0.0, 100.0)  # as ld08_driver publishes
+        assert scan.scan_time == pytest.approx(0.2)
+        assert scan.time_increment == pytest.approx(0.2 / n, rel=1e-5)
+        assert scan.angle_max == pytest.approx(scan.angle_min + (n - 1) * scan.angle_increment,
+                                               rel=1e-5)
+        ranges = scan_ranges(scan)
+        assert not (ranges == 0.0).any() and np.all(ranges[np.isfinite(ranges)] >= 0.16)
+    assert any(np.isnan(scan_ranges(s)).any() for s in scans)
+    assert node.summary()["effects"]["command_latency_s"] == pytest.approx(0.03)
+    assert node.summary()["profile"] == "turtlebot3_lds02"
+
+
+class FakeTimerNode:
+    """Just what ScanDelivery needs of a node: one-shot timers, fired by the test."""
+
+    def __init__(self) -> None:
+        self.timers = []
+
+    def create_timer(self, delay, callback, clock=None):
+        timer = type("Timer", (), {"cancel": lambda self: None})()
+        self.timers.append((delay, callback, timer))
+        return timer
+
+    def destroy_timer(self, timer) -> None:
+        self.timers = [t for t in self.timers if t[2] is not timer]
+
+
+def test_scan_delivery_loses_some_scans_and_delays_the_others():
+    from amr_sim.simulator_outputs import ScanDelivery
+    node, published = FakeTimerNode(), []
+    publisher = type("Publisher", (), {"publish": lambda self, m: published.append(m)})()
+    delivery = ScanDelivery(node, publisher, np.random.default_rng(0), loss=0.2, jitter=0.03)
+    for k in range(2000):
+        delivery.send(k)
+    assert delivery.lost == pytest.approx(400, abs=60) and not published
+    delays = [delay for delay, _, _ in node.timers]
+    assert len(delays) == 2000 - delivery.lost
+    assert 0.0 < min(delays) and max(delays) < 0.03 and np.mean(delays) == pytest.approx(0.015,
+                                                                                       rel=0.1)
+    for _, deliver, _ in list(node.timers)[:10]:
+        deliver()  # a timer fires once: published, then forgotten
+    assert len(published) == 10 and len(node.timers) == len(delays) - 10
+    delivery.destroy()  # deactivate: the rest never arrives
+    assert not node.timers and delivery.sent == 10
+
+
+@pytest.mark.parametrize("loss, jitter", [(1.0, 0.02), (0.0, 0.05)])
+def test_realtime_scans_are_lost_or_late_as_configured(ros, loss, jitter):
+    probe = Probe(ros, stamped=False)
+    node = start_simulator(ros, probe, mode="realtime", cmd_vel_stamped=False,
+                           profile=f"turtlebot3_real:scan_loss_share={loss}:"
+                                   f"scan_jitter_s={jitter}")
+    ros.spin_for(1.2)
+    assert node.trigger_deactivate() == TransitionCallbackReturn.SUCCESS
+    ros.spin_for(0.1)
+    delivery = node._outputs._delivery
+    assert node.simulator.steps >= 5 and len(probe.received["odom"]) >= 5
+    if loss == 1.0:
+        assert probe.count()["scan"] == 0 and delivery.lost >= 2
+    else:  # late, but every scan arrives, stamped at its revolution's end (5 Hz)
+        stamps = [time_to_nanoseconds(m.header.stamp) for m in probe.received["scan"]]
+        assert len(stamps) == delivery.sent >= 2 and delivery.lost == 0
+        assert np.all(np.diff(stamps) == 4 * DT_NS)
