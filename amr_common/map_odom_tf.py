@@ -1,10 +1,12 @@
-"""The particle filter node's TF side (REP 105): map -> odom out, the LiDAR position in.
+"""The TF side of a node that estimates the robot's pose in the map (REP 105).
 
-- map -> odom on /tf with every /pose whose estimate is finite: the transform that makes
-  map -> odom -> base_footprint equal the estimate, given the synchronized /odometry pose (what
-  AMCL sends; /pose's `localized` says whether to trust it). Stamped with the scan's stamp.
+The particle filter and the SLAM node both send map -> odom and both need the LiDAR position:
+- map -> odom on /tf: `publish_map_to_odom(estimate, odometry, stamp)` sends the transform that
+  makes map -> odom -> base_footprint equal the estimate, given an Odometry message's pose (what
+  AMCL sends, with every /pose whose estimate is finite); `publish(transform, stamp)` sends one
+  the node computed itself (SLAM). Stamped with the scan's stamp.
 - base_footprint -> base_scan from /tf_static (the simulator and the Burger's bringup publish
-  it): its x is the LiDAR position the filter uses; `lidar_offset_x_m` is the fallback.
+  it): its x is the LiDAR position the node uses; its `lidar_offset_x_m` is the fallback.
 """
 from __future__ import annotations
 
@@ -24,7 +26,7 @@ from amr_common.tf import (
 )
 
 
-class LocalizationTf:
+class MapOdomTf:
     """Publisher of map -> odom and listener of the LiDAR's static frame, for one node."""
 
     def __init__(self, node, frames: dict[str, str],
@@ -53,9 +55,14 @@ class LocalizationTf:
             return False
         if not all(math.isfinite(v) for v in odom_to_base):
             return False
-        x, y, yaw = map_to_odom(estimate, odom_to_base)
+        return self.publish(map_to_odom(estimate, odom_to_base), stamp)
+
+    def publish(self, transform: tuple[float, float, float], stamp) -> bool:
+        """Send map -> odom = `transform` (x, y, yaw); False (nothing sent) if not finite."""
+        if not all(math.isfinite(v) for v in transform):
+            return False
         f = self._frames
-        planar_transform(stamp, f["map_frame"], f["odom_frame"], x, y, yaw,
+        planar_transform(stamp, f["map_frame"], f["odom_frame"], *transform,
                          message=self._message.transforms[0])
         self.publisher.publish(self._message)
         return True
