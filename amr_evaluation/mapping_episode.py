@@ -28,12 +28,7 @@ import numpy as np
 from amr_common.geometry import compose, inverse
 from amr_common.world import World
 from amr_evaluation.episode import default_controller
-from amr_evaluation.mapping_metrics import (
-    RayHits,
-    map_precision,
-    map_recall,
-    trajectory_errors,
-)
+from amr_evaluation.mapping_metrics import RayHits, mapping_figures, trajectory_errors
 from amr_mapping.mapper import Mapper
 from amr_mapping.scan_points import Scan
 from amr_sim.profiles import SensorProfile, get_profile
@@ -170,9 +165,9 @@ def run_mapping_episode(world: World | str, start=None, profile: str | SensorPro
     run = _explore(sim, controller, mapper, odometry, hits, duration)
     raster = mapper.occupancy_raster()
     rows = np.asarray(run.estimate, dtype=np.float64).reshape(-1, 4)
-    errors = trajectory_errors(sim.start, np.asarray(run.truth), rows[:, 1:])
+    figures = mapping_figures(world_obj, sim.start, np.asarray(run.truth), rows[:, 1:], raster,
+                              hits)
     odom_errors = trajectory_errors(sim.start, np.asarray(run.truth), np.asarray(run.odometry))
-    recall, seen = map_recall(raster, world_obj, sim.start, hits)
     stats = mapper.statistics()
     start_label = start if isinstance(start, str) else (
         next(iter(world_obj.starts)) if start is None and world_obj.starts
@@ -185,8 +180,7 @@ def run_mapping_episode(world: World | str, start=None, profile: str | SensorPro
         slam_wall_time_s=run.slam_time,
         collisions=sim.collisions, distance_m=sim.distance, scans=len(rows),
         keyframes=stats["keyframes"], loop_closures=stats["loop_closures"],
-        odometry_max_error_m=odom_errors["trajectory_max_m"], **errors,
-        precision=map_precision(raster, world_obj, sim.start), recall=recall, seen_wall_m=seen,
+        odometry_max_error_m=odom_errors["trajectory_max_m"], **figures,
         update_ms_median=stats["update_cpu_ms"]["median"],
         update_ms_p90=stats["update_cpu_ms"]["p90"], update_ms_max=stats["update_cpu_ms"]["max"],
         loop_closure_ms_median=stats["loop_closed_cpu_ms"]["median"],

@@ -31,12 +31,7 @@ def draw_world(ax, world: World, show_starts: bool = True, show_grid: bool = Fal
     """
     segs = world.segments.reshape(-1, 2, 2)
     if world.raster is not None:  # a map: its cells as map viewers show them, edges thin
-        r = world.raster
-        rows, cols = r.values.shape
-        shade = np.where(r.values == 0, 1.0, np.where(r.values == -1, 0.8, 0.35))
-        ax.imshow(shade, cmap="gray", vmin=0.0, vmax=1.0, origin="lower", zorder=1,
-                  interpolation="nearest", extent=(r.origin[0], r.origin[0] + cols * r.resolution,
-                                                   r.origin[1], r.origin[1] + rows * r.resolution))
+        draw_raster(ax, world.raster)
     ax.add_collection(LineCollection(segs, colors=_WALL_COLOUR, capstyle="round", zorder=3,
                                      linewidths=2.0 if world.raster is None else 0.8))
     for hole in world.holes:
@@ -65,6 +60,16 @@ def draw_world(ax, world: World, show_starts: bool = True, show_grid: bool = Fal
                         color="darkred", zorder=6)
         if world.goal is not None and world.goal not in world.goals.values():
             _draw_goal(ax, *world.goal)
+
+
+def draw_raster(ax, raster) -> None:
+    """A raster's cells as map viewers show them: free white, unknown light, occupied dark."""
+    rows, cols = raster.values.shape
+    shade = np.where(raster.values == 0, 1.0, np.where(raster.values == -1, 0.8, 0.35))
+    x0, y0 = raster.origin
+    ax.imshow(shade, cmap="gray", vmin=0.0, vmax=1.0, origin="lower", zorder=1,
+              interpolation="nearest", extent=(x0, x0 + cols * raster.resolution,
+                                               y0, y0 + rows * raster.resolution))
 
 
 def draw_navigation(ax, planned_path: Any = None, goal: Sequence[float] | None = None) -> None:

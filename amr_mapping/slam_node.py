@@ -326,8 +326,9 @@ class SlamNode(GuardedLifecycleNode):
             return  # nothing mapped yet: no map frame
         if stamp_ns < self._last_tf_ns:  # time went back: start again from here
             self._last_tf_ns = stamp_ns
-        if stamp_ns - self._last_tf_ns < self.node_params["transform_publish_period_s"] * 1e9:
-            return
+        if stamp_ns - self._last_tf_ns < self.node_params["transform_publish_period_s"] * 1e9 \
+                or self._tf.publisher.get_subscription_count() == 0:
+            return  # (nobody listens in a lockstep run: ~30 us a step saved)
         self._tf.publish(self.map_to_odom, stamp)
         self._last_tf_ns = stamp_ns
 
