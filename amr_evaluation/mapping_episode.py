@@ -143,16 +143,19 @@ def run_mapping_episode(world: World | str, start=None, profile: str | SensorPro
                         "turtlebot3", seed: int = 0, duration: float = 300.0, dt: float = 0.05,
                         loop_closure: bool = True, drift: OdometryDrift | None = TYPICAL_DRIFT,
                         mapper_params: dict[str, Any] | None = None,
-                        record: bool = False, mapper=None) -> MappingResult:
+                        record: bool = False, mapper=None, controller=None) -> MappingResult:
     """Explore `world` with the wall follower for `duration` s while the Mapper maps it.
 
     mapper: a ready Mapper (or an object with its update / occupancy_raster / statistics /
     p); by default one with the profile's LiDAR offset, `loop_closure` and `mapper_params`.
+    controller: the explorer (compute_commands(z_scan, z_v, z_w)); by default the project's
+    wall follower told where the profile's LiDAR sits.
     """
     world_obj = world if isinstance(world, World) else World.load(world)
     prof = get_profile(profile)
     sim = Simulator(world_obj, start=start, dt=dt, profile=prof, seed=seed)
-    controller = default_controller(sim.dt, prof)
+    if controller is None:
+        controller = default_controller(sim.dt, prof)
     if callable(getattr(controller, "set_scan_geometry", None)):
         controller.set_scan_geometry(prof.angle_min, prof.angle_increment, prof.range_min,
                                      prof.range_max)

@@ -114,3 +114,11 @@ def make_slam_node(context, *, lidar_offset_x_m: float, output_prefix: str = "",
         values["map_start_pose"] = [float(v) for v in start_pose]
     values.update(overrides or {})
     return SlamNode(context=context, parameter_overrides=overrides_to_parameters(values))
+
+
+def without_controller(nodes: list) -> list:
+    """`nodes` without the wall follower (destroyed): --no-controller, the user drives."""
+    for node in [n for n in nodes if n.get_name() == "wall_follower"]:
+        nodes.remove(node)
+        node.destroy_node()
+    return nodes

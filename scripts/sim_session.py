@@ -121,9 +121,8 @@ class SimSession:
                 filter_overrides=filter_overrides,
                 goal=args.goal if self.navigating else None)
             if getattr(args, "no_controller", False):  # the user drives (teleop.py)
-                for node in [n for n in self.control_nodes if n.get_name() == "wall_follower"]:
-                    self.control_nodes.remove(node)
-                    node.destroy_node()
+                from launch_slam import without_controller
+                without_controller(self.control_nodes)
         else:
             base = {"simulation": True, "dt": args.dt}
             if args.enable_localization:  # a localization node of the user's
