@@ -60,7 +60,7 @@ from amr_common.map_messages import occupancy_grid
 from amr_common.map_odom_tf import MapOdomTf
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameters import declare_parameters, read_parameters
-from amr_common.pose_history import LATER, PoseHistory
+from amr_common.pose_history import LATER, OLDER, PoseHistory
 from amr_common.qos import LATCHED, RELIABLE_10, scan_qos
 from amr_common.ros_conversions import pose_from_message, time_to_nanoseconds, yaw_to_quaternion
 from amr_mapping.mapper import Mapper, MappingEstimate
@@ -254,6 +254,8 @@ class SlamNode(GuardedLifecycleNode):
             if odom == LATER:
                 return  # the odometry of its stamp comes with a later message
             self._pending.popleft()
+            if odom == OLDER and not self.mapped_scans:
+                continue  # a scan from before the odometry started (amr_odometry skips its first)
             if isinstance(odom, str):
                 self._warn("no_odometry", f"scan at t={stamp_ns * 1e-9:.3f} s skipped: "
                            + ("it is older than the odometry kept" if odom == "older" else

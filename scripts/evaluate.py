@@ -21,8 +21,8 @@ Examples:
   .venv/bin/python scripts/evaluate.py --localize --worlds twin_maze --seeds 0-9 --kidnap-at 25
   .venv/bin/python scripts/evaluate.py --worlds lab02,maze_deadends --goals all \
       --profiles ideal,turtlebot3 --seeds 0-2 --duration 300   # navigation to named goals
-  .venv/bin/python scripts/evaluate.py --slam --worlds all --starts south_west,outer,south \
-      --profiles turtlebot3 --seeds 0-4 --duration 300   # SLAM: mapping figures per episode
+  .venv/bin/python scripts/evaluate.py --slam --worlds all --profiles turtlebot3 --seeds 0-4 \
+      --starts south_west,outer,south,south_east --duration 300   # SLAM: mapping figures
 Options given on the command line override the same keys of --config.
 """
 from __future__ import annotations
