@@ -298,6 +298,16 @@ def test_a_scan_waits_for_the_odometry_of_its_stamp_and_is_placed_between_messag
     ros.spin_until(lambda: robot.poses, 5.0, "/slam_pose")
     pose = pose_from_message(robot.poses[0].pose)
     assert pose == pytest.approx((0.05, 0.0, 0.1), abs=1e-6), "halfway between the two"
+    # Two scans ahead of the odometry (the executor took them before it): both wait, both
+    # are mapped, in order, when the odometry reaches them.
+    for t in (1.1, 1.2):
+        scan.header.stamp = stamp(t)
+        scan.ranges = [r + 0.001 for r in scan.ranges]  # not a repeated scan
+        robot.scan.publish(scan)
+        ros.spin_for(0.1)
+    robot.odometry.publish(odometry_message(stamp(1.25), "odom", "base_footprint",
+                                            (0.2, 0.0, 0.2)))
+    ros.spin_until(lambda: node.mapped_scans == 3, 5.0, "both waiting scans to be mapped")
 
 
 def test_lidar_position_from_tf_static(ros):
