@@ -1,43 +1,26 @@
 """The `slam` lifecycle node (`amr_slam`): /scan + the odometry pose -> /map, map -> odom, pose.
 
-Online graph SLAM (amr_mapping.mapper.Mapper) for users coming from slam_toolbox:
+Online graph SLAM (amr_mapping.mapper.Mapper) for users coming from slam_toolbox (README, "The
+slam node and the mapping runs", has the why of each choice):
 
     .venv/bin/amr_slam --ros-args -p autostart:=true -p output_prefix:=$HOME/maps/room
     ros2 service call /slam/save_map amr_msgs/srv/SaveMap "{name: $HOME/maps/room}"
 
 Thin: messages become Mapper.update calls, results become messages.
-Inputs
-- /scan (sensor_msgs/LaserScan, best effort like the LiDAR drivers): every new scan is mapped.
-  A scan with exactly the ranges of the one before is skipped (skip_repeated_scans): the
-  lockstep simulator sends its held 5 Hz scan again every step, stamped anew.
-- The odometry POSE at the scan's stamp, from `odometry_topic` (nav_msgs/Odometry): by default
-  /odometry, which every graph of the project has (the simulator's, with its pose, in both
-  profiles; on the robot amr_odometry's copy of /odom, pose and stamp kept); `-p
-  odometry_topic:=/odom` reads a robot's /odom directly. The poses of the last seconds are
-  interpolated at the scan's stamp (amr_common.pose_history: at 2.84 rad/s the nearest 20 Hz
-  message can be 0.07 rad off); a scan newer than the newest odometry waits for the next one.
-  A topic rather than slam_toolbox's odom -> base_footprint TF lookup: the project has no tf2
-  buffer (amr_common.tf), and the topic carries the same pose with the same stamps.
-- /tf_static base_footprint -> base_scan: the LiDAR position (lidar_offset_x_m is the fallback,
-  used until it arrives; a position arriving after mapping started is logged and not used).
-Outputs
-- /map (nav_msgs/OccupancyGrid, transient local) when the map changed, at most every
-  map_update_interval_s of the node's clock (1 s), and once more on deactivate.
-- map -> odom on /tf with every mapped scan (its stamp) and, between scans, with the odometry
-  (at most every transform_publish_period_s of stamp time), so TF reaches the newest odometry.
-- /slam_pose (amr_msgs/PoseStamped, map frame, the scan's stamp) with every mapped scan;
-  `localized` is true when the scan was matched to the map, false when the pose followed the
-  odometry alone. Not /pose (the particle filter's), nor slam_toolbox's /pose (a
-  PoseWithCovarianceStamped): both graphs may run side by side.
-- ~/save_map (amr_msgs/srv/SaveMap, i.e. /slam/save_map): PREFIX.yaml + PREFIX.pgm, Nav2
-  map_saver's format (amr_common.map_file), of the map so far; answered once configured.
-- With `output_prefix` set, the map is saved on deactivate and on shutdown (Ctrl-C of amr_slam
-  or of a run script): a session's map is not lost.
-The map frame is the odometry frame at the first scan, moved by `map_start_pose` (slam_toolbox's
-parameter): a simulation passes the start pose, so the map lies in the world's frame.
+- In: every new /scan (best effort; a scan repeating the previous one's ranges is skipped: the
+  lockstep simulator re-sends its held scan) with the odometry POSE interpolated at its stamp
+  (amr_common.pose_history) from `odometry_topic` (nav_msgs/Odometry, default /odometry); a
+  scan newer than the newest odometry waits for it. The LiDAR position from /tf_static
+  (lidar_offset_x_m until it arrives, if no scan was mapped yet).
+- Out: /map (transient local) when changed, at most every map_update_interval_s of the node's
+  clock and on deactivate; map -> odom on /tf with every mapped scan and, between scans, with
+  the odometry; /slam_pose (amr_msgs/PoseStamped; localized: matched to the map; not /pose,
+  the particle filter's); ~/save_map (amr_msgs/srv/SaveMap: Nav2 map files); with
+  output_prefix, the map saved on deactivate and shutdown (Ctrl-C included).
+- The map frame is the odometry frame at the first scan moved by `map_start_pose`.
 Bad input (NaN/inf/0 ranges, a changing ray count, odometry jumps, stamps going backwards): the
-Mapper and the odometry history skip or distrust it and log (throttled, through this node's
-logger); nothing NaN is published, no callback raises.
+Mapper and the odometry history skip or distrust it and log (throttled per kind); nothing NaN is
+published, no callback raises.
 """
 from __future__ import annotations
 
