@@ -278,8 +278,12 @@ def write_map(raster: Raster, prefix: str | Path, image_format: str = "pgm",
         unknown = set(extras) - PROJECT_KEYS
         if unknown:
             raise MapFileError(f"{yaml_path}: unknown extra key(s) {sorted(unknown)}")
-        text += ("# This project's keys (amr_common.map_file); Nav2's map_server ignores them.\n"
-                 + yaml.safe_dump(_plain(extras), sort_keys=False, default_flow_style=None))
+        # One top-level key at a time: a mapping of scalars only would be dumped as one
+        # flow line ({name: x}), which is no YAML after the block keys above.
+        text += "# This project's keys (amr_common.map_file); Nav2's map_server ignores them.\n"
+        for key, value in _plain(extras).items():
+            text += yaml.safe_dump({key: value}, sort_keys=False, default_flow_style=(
+                None if isinstance(value, (dict, list)) else False))
     try:
         yaml_path.parent.mkdir(parents=True, exist_ok=True)
         _replace_atomically(image_path, lambda f: _write_image(f, pixels, image_format,

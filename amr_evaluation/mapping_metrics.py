@@ -158,5 +158,21 @@ def map_recall(raster: Raster, world: World, start, hits: RayHits,
         float(seen.sum() * SAMPLE_SPACING_M)
 
 
-__all__ = ["RayHits", "TOLERANCE_M", "map_precision", "map_recall", "near_occupied",
-           "occupied_centres", "trajectory_errors", "transform_points", "wall_samples"]
+def mapping_figures(world: World, start, truth: np.ndarray, estimate: np.ndarray,
+                    raster: Raster, hits: RayHits) -> dict[str, float]:
+    """The figures of a mapping run: trajectory RMSE / max / heading RMSE, precision, recall.
+
+    `start`: the pose of the map frame in the world (the robot's start when the map frame is
+    the odometry frame at the first scan; (0, 0, 0) when the map was built in the world's
+    frame); truth: (N, 3) true poses at the estimate's rows (N, 3) [x, y, theta]; `hits`: the
+    noise-free rays of the run from the true poses.
+    """
+    recall, seen = map_recall(raster, world, start, hits)
+    return {**trajectory_errors(start, truth, estimate),
+            "precision": map_precision(raster, world, start), "recall": recall,
+            "seen_wall_m": seen}
+
+
+__all__ = ["RayHits", "TOLERANCE_M", "map_precision", "map_recall", "mapping_figures",
+           "near_occupied", "occupied_centres", "trajectory_errors", "transform_points",
+           "wall_samples"]

@@ -23,6 +23,8 @@ Examples:
       --profiles ideal,turtlebot3 --seeds 0-2 --duration 300   # navigation to named goals
   .venv/bin/python scripts/evaluate.py --worlds evaluations/worlds/lab02_box.yaml --map lab02 \
       --goals inner_far --profiles turtlebot3 --seeds 0-4 --duration 200  # a box the map lacks
+  .venv/bin/python scripts/evaluate.py --slam --worlds all --profiles turtlebot3 --seeds 0-4 \
+      --starts south_west,outer,south,south_east --duration 300   # SLAM: mapping figures
 Options given on the command line override the same keys of --config.
 """
 from __future__ import annotations
@@ -135,6 +137,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         "named start, turned by 90 deg")
     parser.add_argument("--pf-param", action="append", default=[], metavar="NAME:=VALUE",
                         help="with --localize: particle filter parameter override")
+    parser.add_argument("--slam", action="store_true", help="mapping episodes: the controller "
+                        "explores while SLAM maps; columns: trajectory RMSE / max, map "
+                        "precision and recall, loop closures, timings (the odometry drifts "
+                        "like a real Burger's: amr_evaluation.mapping_episode)")
+    parser.add_argument("--slam-param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="with --slam: Mapper parameter override, e.g. loop_closure:=false")
     return parser.parse_args(join_negative_values(argv, ["--starts"]))
 
 
@@ -193,6 +201,17 @@ def check_option_pairs(args: argparse.Namespace, settings: dict) -> None:
                 raise EvaluationError(f"{option} needs --localize")
     if args.pose_source is not None and settings["goals"] is None:
         raise EvaluationError("--pose-source needs --goals (navigation episodes)")
+    if args.slam_param and not args.slam:
+        raise EvaluationError("--slam-param needs --slam")
+    if args.slam and (args.localize or settings["goals"]):
+        raise EvaluationError("--slam (mapping) excludes --localize and --goals")
+    if args.slam:  # the Mapper's own checks
+        from amr_mapping.mapper_params import check_parameters
+        try:
+            args.mapper_params = parse_overrides(args.slam_param)
+            check_parameters(args.mapper_params)
+        except ValueError as exc:
+            raise EvaluationError(f"--slam-param: {exc}") from None
 
 
 def check_localization_options(args: argparse.Namespace, settings: dict, specs) -> None:
@@ -319,6 +338,9 @@ def run_and_report(args, settings: dict, specs, executor, out: Path, started) ->
     if args.localize:
         from amr_evaluation.localization_evaluation import evaluate_main
         return evaluate_main(specs, settings, args, out, executor=executor)
+    if args.slam:
+        from amr_evaluation.mapping_evaluation import evaluate_main as evaluate_mapping
+        return evaluate_mapping(specs, settings, args.mapper_params, out, executor=executor)
     print(f"evaluate: {len(specs)} episodes of {settings['duration']:g} s on "
           f"{executor.describe()}, controller {settings['controller']}"
           + (f" {settings['params']}" if settings["params"] else ""), flush=True)

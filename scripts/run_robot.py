@@ -15,6 +15,10 @@ does not change discovery, it prints what it uses.
 filter's with --localize, the planner's with --goal. With --goal: also the particle filter, the
 planner and the pure pursuit (robot mode): explore until localized, then drive to the goal and
 stop there. (--world is an old name of --map: on the robot there is no simulated world.)
+  .venv/bin/python scripts/run_robot.py --domain-id 30 --slam --map-out ~/maps/room  # map it
+  .venv/bin/python scripts/run_robot.py --domain-id 30 --slam --teleop --map-out ~/maps/room
+With --slam: the slam node maps while the wall follower explores (or, with --teleop, while you
+drive with scripts/teleop.py); --map-out DIR writes DIR/map.yaml + DIR/map.pgm on Ctrl-C.
 Ctrl-C stops the robot: the controllers publish a zero command before exiting.
 """
 from __future__ import annotations
@@ -40,12 +44,20 @@ from launch_common import (  # noqa: E402
     make_robot_graph,
     make_viewer_nodes,
 )
+from launch_slam import (  # noqa: E402
+    add_slam_options,
+    check_slam_options,
+    make_slam_node,
+    map_prefix,
+    without_controller,
+)
 
 # Node parameters run_robot sets itself: a -p / --pf-param would contradict them.
 WALL_FOLLOWER_SET = {"simulation": "(robot mode)", "dt": "from --dt",
                      "cmd_vel_stamped": "from --cmd-vel", "controller": "from --controller"}
 FILTER_SET = {"world": "from --map",
               "lidar_offset_x_m": "(the Burger's LiDAR position; the robot's /tf_static gives it)"}
+SLAM_SET = {"lidar_offset_x_m": FILTER_SET["lidar_offset_x_m"], "output_prefix": "from --map-out"}
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -71,6 +83,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--goal", default=None, help="navigate to X,Y (metres, negative numbers "
                         "typed as is) or a named goal of --map: also the particle filter, the "
                         "planner and the pure pursuit")
+    add_slam_options(parser, "run_robot")
     args = parser.parse_args(join_negative_values(argv, ["--goal"]))
     if args.domain_id is None:
         try:
@@ -78,6 +91,13 @@ def parse_args(argv=None) -> argparse.Namespace:
         except ValueError as exc:
             parser.error(str(exc))
     check_common_options(parser, args, "run_robot", WALL_FOLLOWER_SET, FILTER_SET)
+    try:
+        check_slam_options(args, "run_robot", SLAM_SET)
+    except ValueError as exc:
+        parser.error(str(exc))
+    if args.no_controller and args.goal is not None:
+        parser.error("--no-controller and --goal exclude each other: the pure pursuit drives "
+                     "to the goal")
     args.localize = args.localize or args.goal is not None  # navigation needs the filter
     args.deprecated_world = args.world is not None
     if args.world is not None and args.map is not None and args.world != args.map:
@@ -121,6 +141,13 @@ def main(argv=None) -> int:
                              tuning=args.overrides,
                              localize_world=args.map if args.localize else None,
                              filter_overrides=args.pf_overrides, goal=args.goal)
+    if args.no_controller:  # the user drives (scripts/teleop.py)
+        without_controller(nodes)
+    if args.slam:
+        from amr_common.robot import LIDAR_OFFSET_X
+        nodes.append(make_slam_node(None, lidar_offset_x_m=LIDAR_OFFSET_X,
+                                    output_prefix=map_prefix(args.map_out),
+                                    overrides=args.slam_overrides))
     if args.map:
         from launch_common import make_map_publisher
         nodes.insert(0, make_map_publisher(None, args.map))
