@@ -101,7 +101,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         "(default: the larger of 60 s and twice --duration; 0: no limit)")
     parser.add_argument("--jobs", "-j", type=int, default=None,
                         help="worker processes (default: all cores); with --ray and no address, "
-                        "the local Ray instance's CPUs")
+                        "the local Ray instance's CPUs; not with --ray ADDRESS (the cluster's "
+                        "CPUs run the episodes)")
     parser.add_argument("--ray", nargs="?", const="", default=None, metavar="ADDRESS",
                         help="run the episodes on Ray: no ADDRESS starts a local Ray "
                         "instance (127.0.0.1, stopped at the end); 'auto' joins the cluster "
@@ -178,6 +179,9 @@ def check_option_pairs(args: argparse.Namespace, settings: dict) -> None:
                 raise EvaluationError(f"{option} needs --localize")
     if args.pose_source is not None and settings["goals"] is None:
         raise EvaluationError("--pose-source needs --goals (navigation episodes)")
+    if args.ray is not None:
+        check_ray_options(args.ray, settings["jobs"],
+                          60.0 if args.ray_keep_workers is None else args.ray_keep_workers)
 
 
 def check_localization_options(args: argparse.Namespace, settings: dict, specs) -> None:
@@ -233,12 +237,11 @@ def ray_executor(address: str | None, jobs: int | None, runtime_env: str | None,
 
     `runtime_env`: --ray-runtime-env's JSON text or file; `keep_workers_s`:
     --ray-keep-workers; `episode_timeout_s`: the limit of one episode (None or 0: none).
-    EvaluationError with the reason.
+    EvaluationError with the reason (also for `jobs` with an address: a cluster's CPUs are
+    its own).
     """
+    check_ray_options(address, jobs, keep_workers_s)
     from amr_evaluation.ray_executor import RayExecutor, RaySetupError
-    if not math.isfinite(keep_workers_s) or keep_workers_s < 0:
-        raise EvaluationError(f"--ray-keep-workers must be a number of seconds >= 0, got "
-                              f"{keep_workers_s:g}")
     executor = RayExecutor(address or None, num_cpus=jobs,
                            runtime_env=read_runtime_env(runtime_env) if runtime_env else None,
                            keep_workers_s=keep_workers_s, episode_timeout_s=episode_timeout_s)
@@ -247,6 +250,17 @@ def ray_executor(address: str | None, jobs: int | None, runtime_env: str | None,
     except RaySetupError as exc:
         raise EvaluationError(str(exc)) from None
     return executor
+
+
+def check_ray_options(address: str | None, jobs: int | None, keep_workers_s: float) -> None:
+    """--ray's companions, before anything runs (also tune.py's); EvaluationError if wrong."""
+    if not math.isfinite(keep_workers_s) or keep_workers_s < 0:
+        raise EvaluationError(f"--ray-keep-workers must be a number of seconds >= 0, got "
+                              f"{keep_workers_s:g}")
+    if address and jobs is not None:  # it was silently ignored
+        raise EvaluationError(f"--jobs {jobs} sets the CPUs of a local Ray instance (--ray "
+                              "without an address): with --ray ADDRESS the cluster's CPUs run "
+                              "the episodes, one per CPU (drop --jobs, or jobs in --config)")
 
 
 def read_runtime_env(value: str) -> dict:

@@ -50,7 +50,11 @@ def test_bad_inputs_are_one_line_errors_with_exit_code_2(capsys, tmp_path, monke
              (["--ray", "127.0.0.1:1", "--ray-keep-workers", "-1"],
               "--ray-keep-workers must be a number of seconds >= 0, got -1"),
              (["--ray", "127.0.0.1:1", "--ray-keep-workers", "nan"],
-              "--ray-keep-workers must be a number of seconds >= 0, got nan")]
+              "--ray-keep-workers must be a number of seconds >= 0, got nan"),
+             # Issue 18 #6: --jobs with a cluster's address was silently ignored.
+             (["--ray", "127.0.0.1:1"], "--jobs 1 sets the CPUs of a local Ray instance (--ray "
+                                        "without an address): with --ray ADDRESS"),
+             (["--ray", "auto"], "with --ray ADDRESS the cluster's CPUs run the episodes")]
     for argv, message in cases:
         code, out, err = _evaluate(capsys, "--worlds", "lab02", *argv)
         assert code == 2, (argv, err)

@@ -178,7 +178,9 @@ def test_bad_tune_options_are_one_line_errors(capsys, tmp_path):
                           (["--space", "kp=1,2", "--ray-keep-workers", "5"],
                            "--ray-keep-workers is not a tune.py option"),
                           (["--space", "kp=1,2", "--kidnap-at", "5"],
-                           "--kidnap-at needs --localize")]:
+                           "--kidnap-at needs --localize"),
+                          (["--space", "kp=1,2", "--ray", "127.0.0.1:1", "--jobs", "2"],
+                           "with --ray ADDRESS the cluster's CPUs run the episodes")]:
         code = tune.main(["--worlds", "lab02", "--duration", "1", *argv,
                           "--out", str(tmp_path / "out")])
         err = capsys.readouterr().err
