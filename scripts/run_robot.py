@@ -13,7 +13,8 @@ does not change discovery, it prints what it uses.
   .venv/bin/python scripts/run_robot.py --domain-id 30 --world lab02 --goal -1.0,0.6
 With --world and --goal: also the particle filter, the planner and the pure pursuit (robot
 mode): explore until localized, then drive to the goal and stop there.
-Ctrl-C stops the robot: the controllers publish a zero command before exiting.
+Ctrl-C stops the robot: the controllers publish a zero command before exiting (exit code 130),
+at any moment, start-up included.
 """
 from __future__ import annotations
 
@@ -22,6 +23,11 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from amr_common.stop_flag import StopFlag  # noqa: E402
+
+# Run as a script, Ctrl-C (or SIGTERM) only sets a flag from the first moment on: see main().
+_STOP = StopFlag().install() if __name__ == "__main__" else None
+
 from amr_common.ros_env import describe_graph_settings, environment_domain_id  # noqa: E402
 from cli_checks import (  # noqa: E402
     OneLineArgumentParser,
@@ -39,6 +45,7 @@ from launch_common import (  # noqa: E402
     make_viewer_nodes,
 )
 
+INTERRUPTED = 130  # exit code after Ctrl-C / SIGTERM, as a shell reports it
 # Node parameters run_robot sets itself: a -p / --pf-param would contradict them.
 WALL_FOLLOWER_SET = {"simulation": "(robot mode)", "dt": "from --dt",
                      "cmd_vel_stamped": "from --cmd-vel", "controller": "from --controller"}
@@ -94,19 +101,34 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 
 def main(argv=None) -> int:
-    args = parse_args(argv)
+    # Ctrl-C (or SIGTERM) only sets the flag, whenever it comes (own signal handling: the final
+    # zero command must go out before the context shuts down): before any node exists the
+    # script just ends; once nodes exist the manager stops starting them and every node is
+    # shut down (a configured controller sends a zero command), instead of a KeyboardInterrupt
+    # tearing through imports or callbacks.
+    stop = _STOP if _STOP is not None else StopFlag().install()
+    try:
+        args = parse_args(argv)
+        code = INTERRUPTED if stop.requested else _run(args, stop)
+    finally:
+        stop.uninstall()
+    if stop.requested:
+        print("run_robot: interrupted", file=sys.stderr)
+        return INTERRUPTED if code == 0 else code
+    return code
+
+
+def _run(args: argparse.Namespace, stop: StopFlag) -> int:
+    """Build the graph and run it until stopped; the exit code (0 after a stop)."""
     use_domain_id(args)
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
     from amr_common.lifecycle_manager import LifecycleManager, run_managed
-    from amr_common.node_runner import StopFlag
 
-    # Own signal handling: the final zero command must go out before the context shuts down.
     # No arguments for rcl: it would read the script's own command line (a '__ns:=...' value
     # as a remapping of every node).
     rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
-    stop = StopFlag().install()
     stamped = None if args.cmd_vel is None else args.cmd_vel == "stamped"
     nodes = make_robot_graph(None, params_file=args.params_file, dt=args.dt,
                              cmd_vel_stamped=stamped, controller=args.controller,
