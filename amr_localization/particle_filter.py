@@ -59,8 +59,7 @@ class ParticleFilter:
         self.params = p
         self.rng = np.random.default_rng(p["seed"])
         self.plan = check_world(self.world, p)
-        if (self.plan.resolution, self.plan.angles) != (p["table_resolution_m"],
-                                                        p["table_angles"]):
+        if self.plan.reduced:
             log.info("%s: a big map: expected-range table of %s to stay within max_memory_mb "
                      "%g", self.world.source, self.plan.describe(), p["max_memory_mb"])
         self.table = expected_range_table(self.world, self.plan.resolution, self.plan.angles)

@@ -146,3 +146,48 @@ def test_the_pose_search_of_a_coarse_table_finds_the_exact_twin_in_corridor_loop
     rivals = [a for a in pf._alternatives(scan) if a.match_fraction >= 0.9]
     assert any(math.hypot(a.pose[0] - twin[0], a.pose[1] - twin[1]) < 0.05 for a in rivals), \
         [(a.pose, a.match_fraction) for a in pf.last_alternatives]
+
+
+def _map_world(tmp_path, name: str, resolution: float) -> World:
+    """A bundled world as a Nav2 map (what scripts/world_to_map.py writes), loaded."""
+    from amr_common.map_file import world_as_map, write_map
+    raster, extras = world_as_map(World.load(name), resolution)
+    yaml_path, _ = write_map(raster, tmp_path / f"{name}_{100 * resolution:g}cm", "pgm", extras)
+    return World.load(yaml_path)
+
+
+@pytest.mark.parametrize("name, resolution", [("lab02", 0.02), ("lab02", 0.05),
+                                              ("room_obstacles", 0.02)])
+def test_a_map_worlds_plan_is_its_own_grid_and_predicts_the_tables_bytes(tmp_path, caplog, name,
+                                                                          resolution):
+    """A map world's table is on the map's cells (OccupancyGrid of a raster): so is its plan.
+
+    The plan took the world's outline at table_resolution_m (2 cm, then 4 cm for a big map)
+    and estimated the free cells: its figures were another grid's.
+    """
+    world = _map_world(tmp_path, name, resolution)
+    plan = check_world(world, check_parameters({}))
+    assert (plan.resolution, plan.angles) == (world.raster.resolution, 360)
+    table = build_expected_range_table(world, plan.resolution, plan.angles)
+    assert (table.ny, table.nx) == world.raster.values.shape and plan.cells == table.cells
+    assert plan.free_cells == len(table.ranges) - 1
+    assert plan.table_bytes == table.nbytes
+    caplog.set_level("INFO", logger="amr_localization.particle_filter")
+    ParticleFilter(world)
+    assert "big map" not in caplog.text, "a map's own cell size is not a reduced table"
+
+
+@pytest.mark.parametrize("resolution", [0.02, 0.05])
+def test_a_map_world_too_big_is_refused_with_its_own_grids_figure(tmp_path, resolution):
+    """Only the directions of a map's table can shrink: the refusal names its cells' table."""
+    world = _map_world(tmp_path, "lab02", resolution)
+    values = check_parameters({"max_memory_mb": 1})
+    plans = candidate_plans(world, values)
+    assert [(p.resolution, p.angles) for p in plans] == [(resolution, 360), (resolution, 180)]
+    table = build_expected_range_table(world, resolution, 180)
+    with pytest.raises(MapTooBigError) as error:
+        check_world(world, values)
+    assert f"({100 * resolution:g} cm x 180 directions, table {table.nbytes / 1e6:,.0f} MB)" \
+        in str(error.value)
+    assert f"would need {plans[-1].total_bytes / 1e6:,.0f} MB" in str(error.value)
+    assert plans[-1].table_bytes == table.nbytes
