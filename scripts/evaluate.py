@@ -207,6 +207,27 @@ def check_localization_options(args: argparse.Namespace, settings: dict, specs) 
         raise EvaluationError(f"--pf-param: {exc}") from None
 
 
+def check_filter_maps(specs, overrides: dict, localize: bool = False) -> None:
+    """The particle filter's checks against every map it will run on, before anything runs.
+
+    Its episodes: all with `localize`, else the navigation ones on the filter's pose. A map too
+    big for its memory budget (saying what it would need), an initial pose where the robot
+    cannot be: EvaluationError (one line). Milliseconds per map: nothing is built.
+    """
+    from amr_common.world import World
+    from amr_localization.particle_filter_params import check_parameters, check_world
+    worlds = [spec.world for spec in specs
+              if localize or (spec.goal is not None and spec.pose_source == "filter")]
+    if not worlds:
+        return
+    values = check_parameters(overrides)
+    for world in dict.fromkeys(worlds):
+        try:
+            check_world(World.load(world), values)
+        except ValueError as exc:
+            raise EvaluationError(str(exc)) from None
+
+
 def episode_specs(settings: dict) -> list:
     """The episodes of resolved settings; the controller built once with its parameters."""
     specs = expand_grid(settings["worlds"], settings["starts"], settings["profiles"],
@@ -290,6 +311,7 @@ def main(argv: list[str] | None = None) -> int:
         specs = episode_specs(settings)
         if args.localize:
             check_localization_options(args, settings, specs)
+        check_filter_maps(specs, parse_overrides(args.pf_param), args.localize)
         started = dt_module.datetime.now(dt_module.timezone.utc)
         out = check_output_folder(args.out or Path("out") / f"evaluate-{started:%Y%m%d-%H%M%S}",
                                   "--out")

@@ -41,6 +41,7 @@ from launch_common import (  # noqa: E402
     add_foxglove_options,
     add_localization_options,
     check_common_options,
+    check_filter_map,
     make_robot_graph,
     make_viewer_nodes,
 )
@@ -90,12 +91,14 @@ def parse_args(argv=None) -> argparse.Namespace:
         parser.error(f"{'--goal' if args.goal else '--localize'} needs --world (the map the "
                      f"robot drives in)")
     if args.world is not None:
-        from amr_common.world import World, WorldError
+        from amr_common.world import World
         try:
             world = World.load(args.world)
             if args.goal is not None:
                 args.goal = world.resolve_goal(args.goal)
-        except WorldError as exc:
+            if args.localize:  # the particle filter runs on `world`
+                check_filter_map(world, args.pf_overrides)
+        except ValueError as exc:  # WorldError, a map too big for the filter
             parser.error(str(exc))
     return args
 

@@ -60,6 +60,7 @@ from launch_common import (  # noqa: E402
     add_foxglove_options,
     add_localization_options,
     check_common_options,
+    check_filter_map,
 )
 
 INTERRUPTED = 130  # exit code after Ctrl-C / SIGTERM, as a shell reports it
@@ -190,9 +191,11 @@ def _prepare(args):
             world.resolve_start(args.kidnap[1:], what="kidnap pose")
         if args.goal is not None:  # a name or X,Y, checked against the walls
             args.goal = world.resolve_goal(args.goal)
+        if args.localize or args.goal is not None:  # the particle filter runs on `world`
+            check_filter_map(world, args.pf_overrides)
         starts = [next(iter(world.starts)) if s is None else s for s in starts]
         outputs = _check_outputs(args, [start_label(s) for s in starts])
-    except ValueError as exc:  # WorldError, a bad domain id or output path
+    except ValueError as exc:  # WorldError, a bad domain id or output path, a map too big
         print(f"run_sim: {exc}", file=sys.stderr)
         return 2
     return world, starts, outputs
