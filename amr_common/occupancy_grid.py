@@ -141,7 +141,13 @@ class OccupancyGrid:
 
 def grid_shape(world: World, resolution: float, padding_m: float | None = None
                ) -> tuple[int, int]:
-    """(height, width) of OccupancyGrid.from_world(world, resolution, padding_m), not built."""
+    """(height, width) of OccupancyGrid.from_world(world, resolution, padding_m), not built.
+
+    A map world's: its map's (resolution and padding_m do not apply, as in from_world).
+    """
+    if world.raster is not None:
+        height, width = world.raster.values.shape
+        return int(height), int(width)
     return _first_cell_and_shape(world, float(resolution), padding_m)[1]
 
 

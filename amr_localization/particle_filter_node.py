@@ -16,6 +16,9 @@ Thin: messages become ParticleFilter.predict / correct calls and results become 
 - /amcl_pose (geometry_msgs/PoseWithCovarianceStamped) after every measurement update;
   /particles (geometry_msgs/PoseArray) at most every `particles_period_s` of stamp time.
 - /initialpose (RViz's and Foxglove's "2D Pose Estimate") re-initializes around that pose.
+- No callback blocks the node for long: on a big map the filter's exhaustive pose searches
+  are scored a slice per scan (amr_localization.filter_searches; on the 40 x 40 m floor at most
+  ~0.15 s of CPU per call instead of ~3 s for a search in one go).
 Bad input (NaN or 0.0 everywhere, inconsistent scan geometry, non-finite odometry, stamps going
 backwards) is skipped with a throttled message, never a crash (a jump back by more than
 max_odometry_gap_s restarts the integration from there: one stamp far in the future cannot stop

@@ -209,6 +209,18 @@ def _check_particle_filter(args, script: str, set_by_script: dict[str, str]) -> 
         raise ValueError(f"--pf-param: {'; '.join(problems)}")
 
 
+def check_filter_map(world, pf_overrides: dict[str, Any]) -> None:
+    """The particle filter's checks against its map, before anything runs: ValueError (one line).
+
+    A map too big for its memory budget (saying what it would need), an initial pose where the
+    robot cannot be; with the filter's own parameters (--pf-param may also set its node's).
+    Milliseconds: nothing is built.
+    """
+    from amr_localization.particle_filter_params import PARAMETERS, check_parameters, check_world
+    check_world(world, check_parameters(
+        {name: value for name, value in pf_overrides.items() if name in PARAMETERS}))
+
+
 def _listen_problem(host: str, port: int) -> str | None:
     """Why a server (the Foxglove bridge) could not listen on host:port now, or None."""
     import socket

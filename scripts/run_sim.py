@@ -70,6 +70,7 @@ from launch_common import (  # noqa: E402
     add_foxglove_options,
     add_localization_options,
     check_common_options,
+    check_filter_map,
 )
 from launch_slam import add_slam_options, check_slam_options, map_prefix  # noqa: E402
 
@@ -241,9 +242,11 @@ def _prepare(args):
         if args.goal is not None:  # a name or X,Y, checked against the map's walls
             args.goal, goal_warning = resolve_goal_on_map(args.goal, map_world, world)
             warnings.append(goal_warning)
+        if args.localize or args.goal is not None:  # the particle filter runs on the map
+            check_filter_map(map_world, args.pf_overrides)
         starts = [next(iter(world.starts)) if s is None else s for s in starts]
         outputs = _check_outputs(args, [start_label(s) for s in starts])
-    except ValueError as exc:  # WorldError, a bad domain id or output path
+    except ValueError as exc:  # WorldError, a bad domain id or output path, a map too big
         print(f"run_sim: {exc}", file=sys.stderr)
         return 2
     args.map_warnings = [w for w in warnings if w is not None]

@@ -170,8 +170,8 @@ def test_a_foxglove_port_in_use_is_found_before_the_run(capsys):
     ("beams:=0", "beams must be a positive integer"),
     ("sigma_hit_m:=-0.03", "sigma_hit_m must be >= 0"),
     ("z_random:=2", "z_random must be in [0, 1]"),
-    ("max_particles:=100000000", "max_particles must be at most 1000000"),
-    ("initial_pose:=[0.0,0.0]", "initial_pose must be 0 numbers or 3 numbers"),
+    ("max_particles:=100000000", "max_particles must be in [1, 200000] (got 100000000)"),
+    ("initial_pose:=[0.0,0.0]", "initial_pose must be [] or 3 finite numbers"),
     ("sigma_hit_m:=nan", "--pf-param: override 'sigma_hit_m:=nan': value 'nan' is not finite"),
     ("slop:=-1", "slop must be a number >= 0"),
     ("pose_topic:=5", "pose_topic must be a string"),
@@ -222,3 +222,27 @@ def test_wall_follower_overrides_are_checked_like_the_filters(capsys, override, 
 ])
 def test_run_robot_checks_the_same_way(capsys, argv, message):
     _robot_fails_with(capsys, argv, message)
+
+
+# --- a map too big for the particle filter (issue 18 #9) -------------------------------------
+# Refused only when the filter configured (exit 1, after the nodes started); now one line, exit
+# code 2, before anything runs, saying what it would need; with the filter's own parameters
+# (a node parameter such as slop is not the filter's); a run without the filter is not refused.
+TOO_BIG = "60.0 x 60.0 m map is too big for the particle filter: it would need 1,0"
+
+
+@pytest.mark.parametrize("options", [["--localize"], ["--goal", "along"],
+                                     ["--localize", "--pf-param", "slop:=0.2"]])
+def test_a_map_too_big_for_the_filter_is_refused_before_anything_runs(capsys, big_floor,
+                                                                      options):
+    _fails_with(capsys, ["--world", str(big_floor), *options], TOO_BIG)
+    _robot_fails_with(capsys, ["--world", str(big_floor), *options], TOO_BIG)
+
+
+def test_a_big_map_is_the_filters_concern_only(capsys, big_floor):
+    _fails_with(capsys, ["--world", str(big_floor), "--localize", "--pf-param",
+                         "max_memory_mb:=2"], "max_memory_mb is 2")
+    args = run_sim.parse_args(["--world", str(big_floor), "--duration", "1"])
+    assert isinstance(run_sim._prepare(args), tuple)  # wall following: no filter, no refusal
+    args = run_robot.parse_args(["--domain-id", "5", "--map", str(big_floor)])
+    assert args.map == str(big_floor) and not args.localize
