@@ -47,7 +47,7 @@ def add_foxglove_options(parser) -> None:
 def _origin(text: str) -> str:
     import argparse
 
-    from amr_common.foxglove_gate import normalize_origin
+    from amr_tools.foxglove_gate import normalize_origin
     try:
         return normalize_origin(text)
     except ValueError as exc:
@@ -61,7 +61,7 @@ def make_viewer_nodes(context, args, *, use_sim_time: bool = False) -> list:
     """
     if not getattr(args, "foxglove", False):
         return []
-    from amr_common.foxglove_bridge import FoxgloveBridgeNode
+    from amr_tools.foxglove_bridge import FoxgloveBridgeNode
     values = {"port": args.foxglove_port, "host": args.foxglove_host,
               "client_teleop": getattr(args, "foxglove_teleop", False),
               "use_sim_time": use_sim_time}

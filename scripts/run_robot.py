@@ -114,7 +114,7 @@ def main(argv=None) -> int:
                              localize_world=args.world if args.localize else None,
                              filter_overrides=args.pf_overrides, goal=args.goal)
     if args.map:
-        from amr_common.map_publisher import MapPublisherNode
+        from amr_tools.map_publisher import MapPublisherNode
         from launch_common import overrides_to_parameters
         nodes.insert(0, MapPublisherNode(parameter_overrides=overrides_to_parameters(
             {"world": args.map})))

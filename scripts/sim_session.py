@@ -188,7 +188,7 @@ class SimSession:
             self.view = LiveView(self.world, title=f"amr_sim: {args.world} / "
                                                    f"{start_label(self.start)}")
         if self.record_path:
-            from amr_common.mcap_recorder import McapRecorder
+            from amr_tools.mcap_recorder import McapRecorder
             self.recorder = McapRecorder(self.record_path, metadata={
                 "world": self.world.name, "start": start_label(self.start),
                 "profile": args.profile, "seed": str(args.seed), "dt": str(args.dt),

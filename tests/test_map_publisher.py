@@ -16,10 +16,10 @@ from visualization_msgs.msg import Marker
 
 from amr_common.map_file import world_as_map, write_map
 from amr_common.map_messages import grid_values
-from amr_common.map_publisher import MapPublisherNode
 from amr_common.map_raster import OCCUPIED, Raster, rasterize_world
 from amr_common.qos import LATCHED
 from amr_common.world import World
+from amr_tools.map_publisher import MapPublisherNode
 from tests.tf_map_helpers import FrameProbe, check_raster_matches_world, start_with_frames
 
 

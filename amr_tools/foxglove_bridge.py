@@ -11,7 +11,7 @@ Clients may publish only on an allow-list, each topic with its types from a fixe
 schema name is looked up there, never imported): "2D Pose Estimate" -> /initialpose, "2D Goal
 Pose" -> /goal_pose, and /cmd_vel (the Teleop panel) only with `client_teleop`; a client's CDR
 message is published if it deserializes as that type. Each handshake passes the gate first
-(amr_common/foxglove_gate.py: known Origins only, both names of the protocol), which relays to
+(amr_tools/foxglove_gate.py: known Origins only, both names of the protocol), which relays to
 the SDK's server on a loopback TLS port.
 
     .venv/bin/amr_foxglove_bridge --ros-args -p autostart:=true     # ws://127.0.0.1:8765
@@ -30,17 +30,17 @@ from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
 
-from amr_common.foxglove_gate import FoxgloveGate, normalize_origin, self_signed_certificate
-from amr_common.introspection import UnknownTypeError, matched_qos, message_class
 from amr_common.lifecycle_node import GuardedLifecycleNode
-from amr_common.mcap_recorder import (
+from amr_common.node_runner import run_lifecycle_node
+from amr_common.parameters import declare_parameters, finite
+from amr_common.qos import RELIABLE_10
+from amr_tools.foxglove_gate import FoxgloveGate, normalize_origin, self_signed_certificate
+from amr_tools.introspection import UnknownTypeError, matched_qos, message_class
+from amr_tools.mcap_recorder import (
     MessageDefinitionError,
     cdr_header_stamp_ns,
     full_message_definition,
 )
-from amr_common.node_runner import run_lifecycle_node
-from amr_common.parameters import declare_parameters, finite
-from amr_common.qos import RELIABLE_10
 
 PARAMETERS: dict[str, tuple[Any, str]] = {
     "host": ("127.0.0.1", "Address the WebSocket server listens on (127.0.0.1: this machine "
