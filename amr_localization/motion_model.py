@@ -14,16 +14,20 @@ from dataclasses import dataclass
 import numpy as np
 
 from amr_common.jit import jit
+from amr_localization.particle_filter_params import PARAMETERS
 
 
 @dataclass(frozen=True)
 class MotionNoise:
-    """Standard deviations of the per-step velocity noise, proportional to the motion."""
+    """Standard deviations of the per-step velocity noise, proportional to the motion.
 
-    v_per_v: float = 0.1  # m/s of linear-speed noise per m/s of linear speed
-    v_per_w: float = 0.01  # m/s of linear-speed noise per rad/s of turn rate
-    w_per_w: float = 0.1  # rad/s of turn-rate noise per rad/s of turn rate
-    w_per_v: float = 0.5  # rad/s of turn-rate noise per m/s of linear speed
+    The defaults are the filter's parameter table's noise_* (particle_filter_params).
+    """
+
+    v_per_v: float = PARAMETERS["noise_v_per_v"][0]  # m/s of v noise per m/s of v
+    v_per_w: float = PARAMETERS["noise_v_per_w"][0]  # m/s of v noise per rad/s of w
+    w_per_w: float = PARAMETERS["noise_w_per_w"][0]  # rad/s of w noise per rad/s of w
+    w_per_v: float = PARAMETERS["noise_w_per_v"][0]  # rad/s of w noise per m/s of v
 
     def sigmas(self, v: float, w: float) -> tuple[float, float]:
         """(sigma_v m/s, sigma_w rad/s) for the twist (v, w)."""
