@@ -19,6 +19,7 @@ import math
 import numpy as np
 
 from amr_common.jit import jit
+from amr_common.scan_returns import is_return
 
 TWO_PI = 2.0 * math.pi
 MIN_LATERAL_M = 0.02   # points closer than this to the robot's x axis are on neither side
@@ -81,7 +82,7 @@ def merge_scan(cloud, ranges, ray_cos, ray_sin, angle_min, angle_increment,
     n_new = 0
     for i in range(n_rays):
         r = ranges[i]
-        ok = math.isfinite(r) and r > 0.0 and r >= range_min and r <= range_max
+        ok = is_return(r, range_min, range_max)
         valid[i] = ok
         if ok:
             n_new += 1

@@ -38,6 +38,7 @@ import numpy as np
 from amr_common.geometry import without_repeats, wrap_angle
 from amr_common.parameter_table import finite, table_values
 from amr_common.robot import MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED, ROBOT_RADIUS, TRACK
+from amr_common.scan_returns import return_mask
 
 # name: (default, description with units). The pure_pursuit node declares each as a parameter.
 PARAMETERS: dict[str, tuple[Any, str]] = {
@@ -111,12 +112,11 @@ def scan_clearance(ranges: np.ndarray, angle_min: float, angle_increment: float,
                    robot_radius: float) -> float | None:
     """Smallest distance from the robot's footprint to a scan point (m).
 
-    None without a valid reading. Readings outside [range_min, range_max], NaN and inf are no
-    returns.
+    None without a return (amr_common.scan_returns: NaN, inf, 0.0 and readings outside
+    [range_min, range_max] are none).
     """
     r = np.asarray(ranges, dtype=np.float64)
-    with np.errstate(invalid="ignore"):
-        valid = np.isfinite(r) & (r >= range_min) & (r <= range_max)
+    valid = return_mask(r, range_min, range_max)
     if not valid.any():
         return None
     cos_a, sin_a = _ray_directions(float(angle_min), float(angle_increment), len(r))

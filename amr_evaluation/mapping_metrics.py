@@ -18,6 +18,7 @@ import numpy as np
 from amr_common.geometry import compose, inverse, wrap_angles
 from amr_common.map_raster import OCCUPIED, Raster
 from amr_common.raycast import scan_into
+from amr_common.scan_returns import return_mask
 from amr_common.world import World
 
 TOLERANCE_M = 0.03
@@ -100,7 +101,7 @@ class RayHits:
         ranges = self._ranges
         scan_into(self._segments, lidar_x, lidar_y, theta, self._cos, self._sin,
                   self._limits[0], self._limits[1], math.nan, self._zeros, ranges)
-        ok = np.isfinite(ranges)
+        ok = return_mask(ranges, *self._limits)
         c, s = math.cos(theta), math.sin(theta)
         x = lidar_x + ranges[ok] * (c * self._cos[ok] - s * self._sin[ok])
         y = lidar_y + ranges[ok] * (s * self._cos[ok] + c * self._sin[ok])

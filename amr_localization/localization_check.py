@@ -30,6 +30,7 @@ import numpy as np
 
 from amr_common.jit import jit
 from amr_common.raycast import scan_into
+from amr_common.scan_returns import is_return
 from amr_localization.cluster import Cluster, dominant_cluster, weighted_pose_mean
 from amr_localization.particle_filter_params import PARAMETERS
 
@@ -43,7 +44,7 @@ def _count_matches(expected, ranges, range_min, range_max, tolerance):
     matches = 0
     for i in range(ranges.shape[0]):
         r = ranges[i]
-        valid = r >= range_min and r <= range_max and r > 0.0  # NaN fails
+        valid = is_return(r, range_min, range_max)
         e = expected[i]
         if valid:
             if e == e and abs(r - e) <= tolerance:

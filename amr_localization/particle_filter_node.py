@@ -46,6 +46,7 @@ from amr_common.ros_conversions import (
     time_to_nanoseconds,
     yaw_to_quaternion,
 )
+from amr_common.scan_returns import return_mask
 from amr_common.world import World, WorldError
 from amr_localization.localization_tf import LocalizationTf
 from amr_localization.particle_filter import ParticleFilter
@@ -315,9 +316,7 @@ class ParticleFilterNode(GuardedLifecycleNode):
                 return None
             self._scan_key = geometry
         ranges = scan_ranges(scan)
-        with np.errstate(invalid="ignore"):
-            valid = np.count_nonzero(np.isfinite(ranges) & (ranges >= scan.range_min)
-                                     & (ranges <= scan.range_max) & (ranges > 0.0))
+        valid = np.count_nonzero(return_mask(ranges, scan.range_min, scan.range_max))
         if valid < self.node_params["min_valid_share"] * n:
             self._warn(f"scan has {valid} valid readings of {n} (NaN, inf, 0.0 or outside "
                        f"[{scan.range_min}, {scan.range_max}]): skipped")

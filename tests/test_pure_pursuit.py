@@ -136,3 +136,7 @@ def test_scan_clearance_from_the_lidar_position_ignoring_invalid_rays():
     assert scan_clearance(ranges, 0.0, increment, 0.12, 3.5, -0.032, 0.105) == \
         pytest.approx(0.232 - 0.105)
     assert scan_clearance(np.zeros(360), 0.0, increment, 0.12, 3.5, 0.0, 0.105) is None
+    # A scan whose range_min is 0 (some drivers): 0.0 is still "no return", not a wall at the
+    # LiDAR (the pursuit slowed to its crawl on it).
+    assert scan_clearance(ranges, 0.0, increment, 0.0, 3.5, -0.032, 0.105) == \
+        pytest.approx(0.232 - 0.105)
