@@ -3,8 +3,9 @@
 Per particle and step, v_i = v + sigma_v * n1 and w_i = w + sigma_w * n2 (n1, n2 standard
 normal), with sigma_v = a_vv * |v| + a_vw * |w| and sigma_w = a_ww * |w| + a_wv * |v|: the noise
 grows with what the robot does and is zero while it stands still (the particles do not diffuse
-when nothing moves). The pose advances along the arc's chord at the mid-step heading (exact for
-a constant twist up to the chord factor, 1 - (w dt)^2 / 24). No rclpy import.
+when nothing moves). The pose advances along the arc's chord at the mid-step heading
+(amr_common.robot's step, with v dt for the chord: exact for a constant twist up to the chord
+factor, 1 - (w dt)^2 / 24). No rclpy import.
 """
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from amr_common.jit import jit
+from amr_common.robot import arc_displacement_kernel
 from amr_localization.particle_filter_params import PARAMETERS
 
 
@@ -41,9 +43,9 @@ def move_python(particles, count, v, w, dt, sigma_v, sigma_w, normals):
         vi = v + sigma_v * normals[p, 0]
         wi = w + sigma_w * normals[p, 1]
         theta = particles[p, 2]
-        mid = theta + 0.5 * wi * dt
-        particles[p, 0] += vi * dt * math.cos(mid)
-        particles[p, 1] += vi * dt * math.sin(mid)
+        dx, dy = arc_displacement_kernel(theta, vi * dt, wi * dt)
+        particles[p, 0] += dx
+        particles[p, 1] += dy
         theta += wi * dt
         if theta > math.pi:  # keep headings in (-pi, pi]: a step turns far less than 2 pi
             theta -= 2.0 * math.pi
