@@ -15,6 +15,7 @@ import math
 
 import numpy as np
 
+from amr_common.cell_grid import cell_index
 from amr_common.geometry import compose, inverse, wrap_angles
 from amr_common.map_raster import OCCUPIED, Raster
 from amr_common.raycast import scan_into
@@ -54,8 +55,7 @@ def trajectory_errors(start, truth: np.ndarray, estimate: np.ndarray) -> dict[st
 def occupied_centres(raster: Raster) -> np.ndarray:
     """(K, 2) centres of the OCCUPIED cells (map frame)."""
     rows, cols = np.nonzero(raster.values == OCCUPIED)
-    return np.column_stack([raster.origin[0] + (cols + 0.5) * raster.resolution,
-                            raster.origin[1] + (rows + 0.5) * raster.resolution])
+    return raster.cell_centres(rows, cols)
 
 
 def map_precision(raster: Raster, world: World, start,
@@ -108,9 +108,9 @@ class RayHits:
         self.hit[self._cells(x, y)] = True
 
     def _cells(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        rows = np.clip(((y - self._origin[1]) / _HIT_CELL_M).astype(np.int64), 0,
+        rows = np.clip(cell_index(y, self._origin[1], _HIT_CELL_M).astype(np.int64), 0,
                        self._shape[0] - 1)
-        cols = np.clip(((x - self._origin[0]) / _HIT_CELL_M).astype(np.int64), 0,
+        cols = np.clip(cell_index(x, self._origin[0], _HIT_CELL_M).astype(np.int64), 0,
                        self._shape[1] - 1)
         return rows, cols
 
@@ -131,8 +131,7 @@ def near_occupied(raster: Raster, points: np.ndarray, tolerance: float = TOLERAN
     """Bool per (N, 2) map-frame point: an OCCUPIED cell centre lies within `tolerance`."""
     res = raster.resolution
     rows_n, cols_n = raster.values.shape
-    row = np.floor((points[:, 1] - raster.origin[1]) / res).astype(np.int64)
-    col = np.floor((points[:, 0] - raster.origin[0]) / res).astype(np.int64)
+    row, col = (index.astype(np.int64) for index in raster.cells_of(points[:, 0], points[:, 1]))
     reach = int(math.ceil(tolerance / res)) + 1
     found = np.zeros(len(points), dtype=bool)
     for dr in range(-reach, reach + 1):
