@@ -115,7 +115,7 @@ def test_a_new_path_after_arriving_is_followed():
 @pytest.mark.parametrize("params, problem", [
     ({"min_lookahead_m": 0.3}, "max_lookahead_m must be >= min_lookahead_m"),
     ({"heading_tolerance_rad": 1.0}, "heading_tolerance_rad must be below"),
-    ({"goal_tolerance_m": -0.1}, "goal_tolerance_m must be a finite number >= 0"),
+    ({"goal_tolerance_m": -0.1}, "goal_tolerance_m must be > 0 \\(got -0.1\\)"),
     ({"max_linear_speed_mps": 0}, "max_linear_speed_mps must be > 0"),
     ({"speed": 1.0}, "unknown parameter"),
 ])
