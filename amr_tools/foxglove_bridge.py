@@ -32,7 +32,8 @@ from rclpy.serialization import deserialize_message
 
 from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.node_runner import run_lifecycle_node
-from amr_common.parameters import declare_parameters, finite
+from amr_common.parameter_table import Param, between, ruled
+from amr_common.parameters import declare_parameters, read_parameters
 from amr_common.qos import RELIABLE_10
 from amr_tools.foxglove_gate import FoxgloveGate, normalize_origin, self_signed_certificate
 from amr_tools.introspection import UnknownTypeError, matched_qos, message_class
@@ -42,7 +43,7 @@ from amr_tools.mcap_recorder import (
     full_message_definition,
 )
 
-PARAMETERS: dict[str, tuple[Any, str]] = {
+PARAMETERS: dict[str, Param] = ruled({
     "host": ("127.0.0.1", "Address the WebSocket server listens on (127.0.0.1: this machine "
                           "only; 0.0.0.0: every interface, e.g. the robot's LAN)"),
     "port": (8765, "WebSocket port (foxglove_bridge's 8765)"),
@@ -52,7 +53,7 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
                              "Estimate, 2D Goal Pose)"),
     "client_teleop": (False, "Also let Foxglove publish /cmd_vel (the Teleop panel): a client "
                              "then drives the robot"),
-}
+}, port=between(0, 65535), discovery_period=between(0.05, 60.0))
 # A string array without a default (rclpy cannot type an empty list): declared on its own.
 ALLOWED_ORIGINS = ("allowed_origins", "WebSocket Origins allowed besides no Origin, "
                    "https://app.foxglove.dev, file:// and http(s)://localhost, 127.0.0.1, "
@@ -116,16 +117,11 @@ class FoxgloveBridgeNode(GuardedLifecycleNode):
     # --- lifecycle -------------------------------------------------------------------------
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Start the servers (FAILURE: port taken, origin malformed, SDK missing)."""
-        p = {name: self.get_parameter(name).value for name in PARAMETERS}
-        port = p["port"]
-        if isinstance(port, bool) or not (isinstance(port, int) and 0 <= port <= 65535):
-            self.get_logger().error(f"configure failed: port must be 0-65535 (got {p['port']})")
+        p, problems = read_parameters(self, PARAMETERS)
+        if problems:
+            self.get_logger().error("configure failed: " + "; ".join(problems))
             return TransitionCallbackReturn.FAILURE
         period = p["discovery_period"]
-        if not (finite(period) and 0.05 <= period <= 60.0):
-            self.get_logger().error(f"configure failed: discovery_period must be 0.05-60 s "
-                                    f"(got {period!r})")
-            return TransitionCallbackReturn.FAILURE
         try:
             extra_origins = frozenset(normalize_origin(o) for o in self.get_parameter_or(
                 ALLOWED_ORIGINS[0], Parameter(ALLOWED_ORIGINS[0], value=[])).value)

@@ -92,14 +92,18 @@ def check_common_options(parser, args, script: str, wall_follower_set: dict[str,
     Sets args.overrides and args.pf_overrides (typed as the nodes declare them) and
     args.controller_spec (the MODULE:CLASS the wall follower will run).
     """
-    import math
-
     from amr_common.controller_loader import ControllerSpecError, parse_overrides
-    if args.dt is not None and not (math.isfinite(args.dt) and args.dt > 0):
-        parser.error("--dt must be > 0")
-    if getattr(args, "foxglove_port", 0) is not None and \
-            not 0 <= getattr(args, "foxglove_port", 0) <= 65535:
-        parser.error("--foxglove-port must be within 0-65535")
+    from amr_common.parameter_table import check_value
+    from amr_control.wall_follower_node import node_parameters
+    from amr_tools.foxglove_bridge import PARAMETERS as FOXGLOVE_PARAMETERS
+    # The options that stand for node parameters: by the rules of those parameters.
+    for option, name, table, value in (
+            ("--dt", "dt", node_parameters(), args.dt),
+            ("--foxglove-port", "port", FOXGLOVE_PARAMETERS,
+             getattr(args, "foxglove_port", None))):
+        problem = check_value(name, table[name], value)[1] if value is not None else None
+        if problem:
+            parser.error(f"{option} {value:g}: {problem}")
     if (getattr(args, "foxglove_teleop", False) or getattr(args, "foxglove_origin", [])) \
             and not args.foxglove:
         parser.error("--foxglove-teleop and --foxglove-origin need --foxglove")

@@ -174,7 +174,7 @@ def test_a_foxglove_port_in_use_is_found_before_the_run(capsys):
     ("max_particles:=100000000", "max_particles must be in [1, 200000] (got 100000000)"),
     ("initial_pose:=[0.0,0.0]", "initial_pose must be [] or 3 finite numbers"),
     ("sigma_hit_m:=nan", "--pf-param: override 'sigma_hit_m:=nan': value 'nan' is not finite"),
-    ("slop:=-1", "slop must be a number >= 0"),
+    ("slop:=-1", "slop must be >= 0 (got -1.0)"),
     ("pose_topic:=5", "pose_topic must be a string"),
     ("world:=twin_maze", "--pf-param world: run_sim sets it from --world"),
     ("lidar_offset_x_m:=0.1", "--pf-param lidar_offset_x_m: run_sim sets it from --profile"),
@@ -219,7 +219,7 @@ def test_wall_follower_overrides_are_checked_like_the_filters(capsys, override, 
      "--pf-param world: run_robot sets it from --world"),
     (["--pf-param", "beams:=90"], "--pf-param needs --localize or --goal"),
     (["-p", "simulation:=true"], "-p simulation: run_robot sets it (robot mode)"),
-    (["--dt", "0"], "--dt must be > 0"),
+    (["--dt", "0"], "--dt 0: dt must be > 0 (got 0.0)"),
 ])
 def test_run_robot_checks_the_same_way(capsys, argv, message):
     _robot_fails_with(capsys, argv, message)

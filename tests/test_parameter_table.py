@@ -101,6 +101,13 @@ TABLES = {  # owner: (module, table)
     "particle filter": ("amr_localization.particle_filter_params", "PARAMETERS"),
     "mapper": ("amr_mapping.mapper_params", "PARAMETERS"),
     "simulator": ("amr_sim.simulator_params", "PARAMETERS"),
+    "odometry node": ("amr_turtlebot3.odometry_node", "_PARAMETERS"),
+    "wall follower node": ("amr_control.wall_follower_node", "_NODE_PARAMETERS"),
+    "pure pursuit node": ("amr_control.pure_pursuit_node", "_NODE_PARAMETERS"),
+    "particle filter node": ("amr_localization.particle_filter_node", "_NODE_PARAMETERS"),
+    "planner node": ("amr_planning.planner_node", "_NODE_PARAMETERS"),
+    "map publisher": ("amr_tools.map_publisher", "_PARAMETERS"),
+    "foxglove bridge": ("amr_tools.foxglove_bridge", "PARAMETERS"),
 }
 
 
