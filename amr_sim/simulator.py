@@ -169,10 +169,9 @@ class Simulator:
 
         dt = self._dt
         x0, y0, th0 = self._x, self._y, self._theta
-        # The exact unicycle step as a velocity: its chord per second, at the mid heading.
-        chord_vx, chord_vy = robot.arc_displacement(th0, v * robot.sinc_half(w * dt), w * dt)
-        vx, vy = _constrain_velocity(self._segments, x0, y0, chord_vx, chord_vy, dt,
-                                     _ROBOT_RADIUS, ALLOWED_PENETRATION)
+        chord_v = robot.arc_displacement(th0, v * robot.sinc_half(w * dt), w * dt)  # exact arc
+        vx, vy = _constrain_velocity(self._segments, x0, y0, *chord_v, dt, _ROBOT_RADIUS,
+                                     ALLOWED_PENETRATION)
         body = self._body
         body.velocity = (vx, vy)
         body.angular_velocity = w

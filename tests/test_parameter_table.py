@@ -117,3 +117,19 @@ def test_every_tables_defaults_keep_its_own_rules(owner):
     table = getattr(importlib.import_module(module), name)
     assert check_values(table, defaults(table))[1] == []
     assert any(rule_of(entry) for entry in table.values()), f"{owner}: no parameter with a rule"
+
+
+def test_the_filters_localized_test_and_motion_noise_default_to_its_table():
+    # One home for the filter's defaults: CheckSettings once had its own (reinit 0.5 / 3 updates
+    # against the table's 0.75 / 10), so a decision built without the filter disagreed with it.
+    from amr_localization.localization_check import CheckSettings
+    from amr_localization.motion_model import MotionNoise
+    from amr_localization.particle_filter_params import check_parameters
+    table = check_parameters({})
+    settings = CheckSettings()
+    for name in CheckSettings.__dataclass_fields__:
+        assert getattr(settings, name) == table[name], name
+    noise = MotionNoise()
+    assert (noise.v_per_v, noise.v_per_w, noise.w_per_w, noise.w_per_v) == (
+        table["noise_v_per_v"], table["noise_v_per_w"], table["noise_w_per_w"],
+        table["noise_w_per_v"])

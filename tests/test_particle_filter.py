@@ -273,19 +273,6 @@ def test_dominant_cluster_needs_one_heavy_group():
     assert abs(abs(heavy.pose[2]) - 3.1) < 0.01, "circular mean across +-pi"
 
 
-def test_the_localized_test_and_motion_noise_default_to_the_parameter_table():
-    # One home for the filter's defaults: CheckSettings once had its own (reinit 0.5 / 3 updates
-    # against the table's 0.75 / 10), so a decision built without the filter disagreed with it.
-    table = check_parameters({})
-    settings = CheckSettings()
-    for name in CheckSettings.__dataclass_fields__:
-        assert getattr(settings, name) == table[name], name
-    noise = MotionNoise()
-    assert (noise.v_per_v, noise.v_per_w, noise.w_per_w, noise.w_per_v) == (
-        table["noise_v_per_v"], table["noise_v_per_w"], table["noise_w_per_w"],
-        table["noise_w_per_v"])
-
-
 def test_localized_decision_streaks():
     decision = LocalizedDecision(CheckSettings(localize_updates=3, lost_updates=2,
                                                reinit_updates=2))
