@@ -303,8 +303,7 @@ def world_as_map(world: World, resolution: float = CONVERT_RESOLUTION
     place, and the free space loses half a cell along each wall); the extras keep its name,
     starts, goals and coverage grid (write_map(raster, prefix, extras=extras)).
     """
-    grid = OccupancyGrid.from_world(world, resolution)
-    raster = Raster(grid.occupancy_values(), grid.resolution, grid.origin)
+    raster = OccupancyGrid.from_world(world, resolution).raster()
     grid_origin = world.grid_origin
     if grid_origin is None and world.boundary is not None:  # the coverage grid's default
         grid_origin = tuple(float(v) for v in world.boundary.min(axis=0))

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from amr_common.robot import arc_step
 from amr_common.world import World
 from amr_localization.ambiguity import AmbiguityGuard
 from amr_localization.beam_model import BeamModel
@@ -226,11 +227,8 @@ class ParticleFilter(FilterSearches):
             return
         sample_motion(self.particles, len(self.particles), v, w, dt, self.noise, self.rng)
         # The estimate follows the same twist until the next measurement update.
-        x, y, theta = self.estimate
-        mid = theta + 0.5 * w * dt
-        theta = theta + w * dt
-        self.estimate = (x + v * dt * math.cos(mid), y + v * dt * math.sin(mid),
-                         math.atan2(math.sin(theta), math.cos(theta)))
+        x, y, theta = arc_step(*self.estimate, v * dt, w * dt)
+        self.estimate = (x, y, math.atan2(math.sin(theta), math.cos(theta)))
         self.guard.predict(v, w, dt)
         if self._pending is not None:
             self._pending.predict(v, w, dt)

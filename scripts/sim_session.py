@@ -233,7 +233,7 @@ class SimSession:
             self.view = LiveView(self.world, title=f"amr_sim: {args.world} / "
                                                    f"{start_label(self.start)}")
         if self.record_path:
-            from amr_common.mcap_recorder import McapRecorder
+            from amr_tools.mcap_recorder import McapRecorder
             self.recorder = McapRecorder(self.record_path, metadata={
                 "world": self.world.name, "map": self.map_world.name,
                 "start": start_label(self.start),

@@ -103,7 +103,7 @@ def test_options_that_would_be_ignored_or_mean_nothing_are_one_line_errors(capsy
              (["--kidnap-at", "0.5"], "--kidnap-at needs --localize"),
              (["--pf-param", "beams:=30"], "--pf-param needs --localize"),
              (["--localize", "--pf-param", "beams:=0"],
-              "--pf-param: beams must be a positive integer (got 0)"),
+              "--pf-param: beams must be in [1, 4096] (got 0)"),
              (["--localize", "--pf-param", "bemas:=30"], "unknown parameter(s) ['bemas']"),
              (["--localize", "--pf-param", "beams"], "'beams' must look like name:=value"),
              (["--goals", ""], "no goals given (an empty list)"),

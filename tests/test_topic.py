@@ -131,7 +131,7 @@ def test_the_tools_command_line_never_reaches_rcl(monkeypatch, capfd):
     rclpy.init() reads sys.argv by default: a value like '__ns:=/evil' moved the probe node into
     that namespace, '__node:=evil' renamed it, 'a:=b' warned about a deprecated remap rule.
     """
-    from amr_common.introspection import GraphProbe
+    from amr_tools.introspection import GraphProbe
     monkeypatch.setattr(sys, "argv", ["topic.py", "echo", "/x", "a:=b", "__node:=evil",
                                       "__ns:=/evil"])
     probe = GraphProbe("topic")
