@@ -13,7 +13,7 @@ READINGS = [0.5, 0.12, 3.5, 0.119, 3.501, 0.0, -0.2, math.nan, math.inf, -math.i
 EXPECTED = [True, True, True, False, False, False, False, False, False, False, False]
 
 
-@pytest.mark.parametrize("reading, expected", zip(READINGS, EXPECTED))
+@pytest.mark.parametrize("reading, expected", list(zip(READINGS, EXPECTED)))
 def test_a_return_is_finite_positive_and_within_the_scans_limits(reading, expected):
     assert is_return(reading, 0.12, 3.5) is expected
     assert scan_returns._is_return(reading, 0.12, 3.5) is expected  # the plain-Python twin
