@@ -34,6 +34,7 @@ import numpy as np
 
 from .coverage_grid import CoverageGrid, build_coverage_grid, inside_polygon_points
 from .map_raster import Raster, boundary_segments
+from .polygons import check_polygons, closed_segments, point_in_polygon, squared_segment_distances
 from .raster_raycast import MarchGrid
 from .raycast import clearances_into
 from .robot import ROBOT_RADIUS
@@ -105,7 +106,7 @@ class World:
     def _from_file(cls, spec: WorldFile) -> "World":
         """The World of a parsed world file, checked against its walls (WorldError if not)."""
         path = spec.path
-        segs = [_closed_segments(spec.boundary)] + [_closed_segments(h) for h in spec.holes]
+        segs = [closed_segments(spec.boundary)] + [closed_segments(h) for h in spec.holes]
         segs += [np.hstack([w[:-1], w[1:]]) for w in spec.walls]
         segments = np.ascontiguousarray(np.vstack(segs), dtype=np.float64)
         lengths = np.hypot(segments[:, 2] - segments[:, 0], segments[:, 3] - segments[:, 1])
@@ -114,7 +115,7 @@ class World:
             x1, y1 = segments[bad[0], :2]
             raise WorldError(f"{path}: zero-length wall at ({x1:g}, {y1:g}) (repeated point in "
                              f"a polyline)")
-        _check_polygons(spec)
+        check_polygons(spec)
         world = cls(name=spec.name, source=str(path), segments=segments, starts=spec.starts,
                     goal=spec.goal, cell_size=spec.cell_size, description=spec.description,
                     boundary=spec.boundary, holes=spec.holes, goals=dict(spec.goals),
@@ -154,7 +155,7 @@ class World:
 
     def clearance(self, x: float, y: float) -> float:
         """Distance (m) from the point (x, y) to the nearest wall segment."""
-        return float(np.sqrt(_squared_distances(self.segments, float(x), float(y)).min()))
+        return float(np.sqrt(squared_segment_distances(self.segments, float(x), float(y)).min()))
 
     def clearances(self, points: np.ndarray) -> np.ndarray:
         """Distance from each point of a (K, 2) array to the nearest wall."""
@@ -267,7 +268,7 @@ class World:
         xmin, ymin, xmax, ymax = self.bounds
         # Beyond every wall first: the polygon tests would overflow on huge coordinates.
         beyond = not (xmin <= x <= xmax and ymin <= y <= ymax)
-        if self.boundary is not None and (beyond or not _point_in_polygon(self.boundary, x, y)):
+        if self.boundary is not None and (beyond or not point_in_polygon(self.boundary, x, y)):
             return f"{what} ({x:g}, {y:g}) is outside the boundary"
         if beyond:
             return f"{what} ({x:g}, {y:g}) is outside the map"
@@ -276,7 +277,7 @@ class World:
                     f"or off the map)")
         if not self.contains(x, y):  # inside a hole: name it
             for i, hole in enumerate(self.holes):
-                if _point_in_polygon(hole, x, y):
+                if point_in_polygon(hole, x, y):
                     return f"{what} ({x:g}, {y:g}) is inside obstacle holes[{i}]"
         c = self.clearance(x, y)
         if c < ROBOT_RADIUS:
@@ -347,85 +348,6 @@ def start_label(start: str | tuple | list | None) -> str:
     if start is None or isinstance(start, str):
         return start or ""
     return ",".join(f"{float(v):g}" for v in start)
-
-
-def _squared_distances(seg: np.ndarray, px, py) -> np.ndarray:
-    """Squared point-segment distances; px, py scalars or (K, 1) columns -> (N,) or (K, N)."""
-    x1, y1, x2, y2 = seg[:, 0], seg[:, 1], seg[:, 2], seg[:, 3]
-    ex, ey = x2 - x1, y2 - y1
-    t = np.clip(((px - x1) * ex + (py - y1) * ey) / (ex * ex + ey * ey), 0.0, 1.0)
-    dx, dy = x1 + t * ex - px, y1 + t * ey - py
-    return dx * dx + dy * dy
-
-
-def _point_in_polygon(poly: np.ndarray, x: float, y: float) -> bool:
-    """Even-odd ray crossing test."""
-    return bool(inside_polygon_points(poly, np.array([[x, y]], dtype=np.float64))[0])
-
-
-def _closed_segments(poly: np.ndarray) -> np.ndarray:
-    return np.hstack([poly, np.roll(poly, -1, axis=0)])
-
-
-def _check_polygons(spec: WorldFile) -> None:
-    """WorldError for a self-crossing boundary or hole, or a hole outside or across the boundary.
-
-    Touching is fine (a hole flush with the outer wall); free-standing walls may cross anything.
-    """
-    polygons = [("boundary", spec.boundary)] + [(f"holes[{i}]", h) for i, h in
-                                                 enumerate(spec.holes)]
-    for what, poly in polygons:
-        edges = _closed_segments(poly)
-        n = len(edges)
-        # Edges i < j that are not neighbours (neighbours share a point).
-        point = _first_crossing(edges, edges,
-                                lambda i, j: (j > i + 1) & ~((i == 0) & (j == n - 1)))
-        if point is not None:
-            raise WorldError(f"{spec.path}: '{what}' crosses itself at ({point[0]:g}, "
-                             f"{point[1]:g}): a polygon's edges may not cross")
-    boundary_edges = _closed_segments(spec.boundary)
-    for what, hole in polygons[1:]:
-        point = _first_crossing(_closed_segments(hole), boundary_edges)
-        if point is not None:
-            raise WorldError(f"{spec.path}: '{what}' crosses the boundary at ({point[0]:g}, "
-                             f"{point[1]:g}): holes are obstacles inside it")
-        outside = ~inside_polygon_points(spec.boundary, hole)
-        if outside.any():
-            gaps = np.sqrt(_squared_distances(boundary_edges, hole[outside, 0:1],
-                                              hole[outside, 1:2]).min(axis=1))
-            if (gaps > 1e-9).any():  # on the boundary is touching, not outside
-                raise WorldError(f"{spec.path}: '{what}' lies outside the boundary: holes are "
-                                 f"obstacles inside it")
-
-
-def _first_crossing(a: np.ndarray, b: np.ndarray, pairs=None, chunk: int = 256):
-    """Where a segment of `a` properly crosses one of `b` (not touching), or None.
-
-    `pairs(i, j)` (index arrays) selects the pairs to test; rows of `a` go in chunks to bound
-    the memory of long polylines.
-    """
-    def orient(p, q, r):  # sign of the turn p -> q -> r, 0 within rounding
-        value = (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - \
-                (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0])
-        return np.where(np.abs(value) < 1e-12, 0.0, np.sign(value))
-
-    q1, q2 = b[None, :, 0:2], b[None, :, 2:4]
-    for start in range(0, len(a), chunk):
-        rows = a[start:start + chunk]
-        p1, p2 = rows[:, None, 0:2], rows[:, None, 2:4]
-        crossing = ((orient(p1, p2, q1) * orient(p1, p2, q2) < 0)
-                    & (orient(q1, q2, p1) * orient(q1, q2, p2) < 0))
-        if pairs is not None:
-            i, j = np.meshgrid(np.arange(start, start + len(rows)), np.arange(len(b)),
-                               indexing="ij")
-            crossing &= pairs(i, j)
-        if crossing.any():
-            i, j = np.argwhere(crossing)[0]
-            (x1, y1, x2, y2), (x3, y3, x4, y4) = rows[i], b[j]
-            t = ((x3 - x1) * (y4 - y3) - (y3 - y1) * (x4 - x3)) / \
-                ((x2 - x1) * (y4 - y3) - (y2 - y1) * (x4 - x3))
-            return x1 + t * (x2 - x1), y1 + t * (y2 - y1)
-    return None
 
 
 # WorldError, bundled_worlds and WORLDS_DIR live in world_file.py; they are imported from here.

@@ -29,20 +29,16 @@ import math
 import os
 import time
 import traceback
-import uuid
 from collections import deque
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterator, Mapping, Sequence
 
 from amr_evaluation.executors import TaskLost, _check_limit, timed_out
+from amr_evaluation.ray_pool import WorkerLost, WorkerSet, import_hint, two_lines
 from amr_evaluation.ray_workers import (
-    NAMESPACE,
     STALE,
-    WARM_PREFIX,
     EpisodeWorker,
     release_idle_warm_workers,
-    warm_workers,
     worker_key,
 )
 
@@ -112,7 +108,7 @@ class RayExecutor:
         self._ray: Any = None
         self._owned = False
         self._worker_class: Any = None
-        self._workers: _WorkerSet | None = None
+        self._workers: WorkerSet | None = None
 
     # --- connection ----------------------------------------------------------------------
 
@@ -209,7 +205,7 @@ class RayExecutor:
         """
         self.connect()
         if self._workers is None:  # kept for later runs of this executor (close() ends them)
-            self._workers = _WorkerSet(self)
+            self._workers = WorkerSet(self)
         pool = self._workers
         pool.new_run(tuple(preload))
         waiting = deque(enumerate(specs))
@@ -226,13 +222,7 @@ class RayExecutor:
                 # worker is free first, and a worker still starting gets its share.
                 members = len(pool.ready) + len(pool.starting)
                 depth = QUEUED if len(waiting) > QUEUED * members else 1
-                for worker in pool.ready:
-                    queue = queues.setdefault(worker._actor_id, deque())
-                    while waiting and len(queue) < depth:
-                        index, spec = waiting.popleft()
-                        ref = worker.run.remote(task, pool.preload, spec)
-                        running[ref] = (worker, index, time.perf_counter())
-                        queue.append(ref)
+                self._submit(task, pool, depth, waiting, running, queues)
                 ready, _ = self._ray.wait([*running, *pool.starting], num_returns=1,
                                           timeout=1.0, fetch_local=False)
                 if ready:  # and every other one finished by now
@@ -242,31 +232,9 @@ class RayExecutor:
                 for ref in ready:
                     if ref in pool.starting:
                         pool.started(ref)
-                        continue
-                    if ref not in running:
-                        continue  # it waited behind a lost episode: queued again already
-                    worker, index, submitted = running.pop(ref)
-                    queue = queues[worker._actor_id]
-                    outcome = self._fetch(ref, time.perf_counter() - submitted)
-                    if not isinstance(outcome, _WorkerLost):
-                        queue.remove(ref)
-                        yield index, outcome
-                        continue
-                    # The worker ran its queue in order: the first one was running when it
-                    # ended (one try), the others never started.
-                    pool.discard(worker)
-                    again = []
-                    for k, lost_ref in enumerate(queues.pop(worker._actor_id)):
-                        _, lost_index, _ = running.pop(lost_ref, (None, index, None))
-                        if k == 0 and not outcome.code_changed:
-                            tries[lost_index] += 1
-                            if tries[lost_index] > RETRIES:
-                                yield lost_index, TaskLost(
-                                    outcome.why(pool, worker, tries[lost_index]),
-                                    outcome.wall_time_s)
-                                continue
-                        again.append((lost_index, specs[lost_index]))
-                    waiting.extendleft(reversed(again))
+                    elif ref in running:  # else it waited behind a lost one: queued again
+                        yield from self._finished(ref, pool, running, queues, tries, specs,
+                                                  waiting)
                 if pool.failure and not pool.ready and not pool.starting and not running:
                     for index, _ in waiting:  # no worker can be created: say why, do not wait
                         yield index, TaskLost(pool.failure)
@@ -276,20 +244,61 @@ class RayExecutor:
                     continue
                 no_cpu_since = no_cpu_since or time.monotonic()
                 if time.monotonic() - no_cpu_since >= self.no_worker_timeout_s:
-                    lost = (f"no Ray node with a CPU was alive for {self.no_worker_timeout_s:g} s "
-                            "(the cluster lost its worker nodes): the episode did not run")
-                    for ref, (worker, index, submitted) in list(running.items()):
-                        yield index, TaskLost(lost, time.perf_counter() - submitted)
-                    running.clear()
-                    queues.clear()
-                    while waiting:
-                        yield waiting.popleft()[0], TaskLost(lost)
+                    yield from self._lose_all(running, queues, waiting)
         finally:
             for ref in running:  # interrupted (Ctrl-C, an exception in the consumer)
                 try:
                     self._ray.cancel(ref)
                 except Exception:  # noqa: BLE001 - best effort while leaving
                     pass
+
+    def _submit(self, task: Callable[[Any], Any], pool: WorkerSet, depth: int, waiting: deque,
+                running: dict, queues: dict) -> None:
+        """Fill each ready worker's queue up to `depth` episodes."""
+        for worker in pool.ready:
+            queue = queues.setdefault(worker._actor_id, deque())
+            while waiting and len(queue) < depth:
+                index, spec = waiting.popleft()
+                ref = worker.run.remote(task, pool.preload, spec)
+                running[ref] = (worker, index, time.perf_counter())
+                queue.append(ref)
+
+    def _finished(self, ref: Any, pool: WorkerSet, running: dict, queues: dict,
+                  tries: list[int], specs: Sequence[Any],
+                  waiting: deque) -> Iterator[tuple[int, Any]]:
+        """A finished ref: its outcome; or its worker was lost: its queue retried or lost."""
+        worker, index, submitted = running.pop(ref)
+        outcome = self._fetch(ref, time.perf_counter() - submitted)
+        if not isinstance(outcome, WorkerLost):
+            queues[worker._actor_id].remove(ref)
+            yield index, outcome
+            return
+        # The worker ran its queue in order: the first one was running when it ended (one
+        # try), the others never started.
+        pool.discard(worker)
+        again = []
+        for k, lost_ref in enumerate(queues.pop(worker._actor_id)):
+            _, lost_index, _ = running.pop(lost_ref, (None, index, None))
+            if k == 0 and not outcome.code_changed:
+                tries[lost_index] += 1
+                if tries[lost_index] > RETRIES:
+                    yield lost_index, TaskLost(outcome.why(pool, worker, tries[lost_index]),
+                                               outcome.wall_time_s)
+                    continue
+            again.append((lost_index, specs[lost_index]))
+        waiting.extendleft(reversed(again))
+
+    def _lose_all(self, running: dict, queues: dict,
+                  waiting: deque) -> Iterator[tuple[int, Any]]:
+        """No node with a CPU for no_worker_timeout_s: every episode left is lost, said why."""
+        lost = (f"no Ray node with a CPU was alive for {self.no_worker_timeout_s:g} s (the "
+                "cluster lost its worker nodes): the episode did not run")
+        for ref, (worker, index, submitted) in list(running.items()):
+            yield index, TaskLost(lost, time.perf_counter() - submitted)
+        running.clear()
+        queues.clear()
+        while waiting:
+            yield waiting.popleft()[0], TaskLost(lost)
 
     def _end_overdue(self, running: dict, queues: dict, begun: dict, waiting: deque,
                      specs: Sequence[Any]) -> Iterator[tuple[int, Any]]:
@@ -317,13 +326,13 @@ class RayExecutor:
             yield index, timed_out(self.episode_timeout_s, now - since)
 
     def _fetch(self, ref: Any, wall_time_s: float) -> Any:
-        """The episode's outcome; _WorkerLost if its worker died or is stale; else TaskLost."""
+        """The episode's outcome; WorkerLost if its worker died or is stale; else TaskLost."""
         from ray import exceptions as rex
         try:
             outcome = self._ray.get(ref)
         except (rex.RayActorError, rex.NodeDiedError, rex.LocalRayletDiedError,
                 rex.ObjectLostError) as exc:  # the process or the node went away
-            return _WorkerLost(wall_time_s, node_lost=not isinstance(exc, rex.RayActorError))
+            return WorkerLost(wall_time_s, node_lost=not isinstance(exc, rex.RayActorError))
         except rex.OutOfMemoryError:
             why = "Ray's memory monitor killed the episode's worker"
         except rex.TaskCancelledError:
@@ -331,137 +340,11 @@ class RayExecutor:
         except rex.RayTaskError as exc:  # raised outside the episode: on the worker's side
             cause = getattr(exc, "cause", None) or exc
             detail = traceback.format_exception_only(type(cause), cause)[-1].strip()
-            why = f"the Ray task failed on the worker: {detail}{_import_hint(cause)}"
+            why = f"the Ray task failed on the worker: {detail}{import_hint(cause)}"
         except rex.RayError as exc:  # RuntimeEnvSetupError, ...: its first and last lines
-            why = f"Ray could not run the episode: {type(exc).__name__}: {_two_lines(exc)}"
+            why = f"Ray could not run the episode: {type(exc).__name__}: {two_lines(exc)}"
         else:
             if isinstance(outcome, str) and outcome == STALE:
-                return _WorkerLost(wall_time_s, code_changed=True)
+                return WorkerLost(wall_time_s, code_changed=True)
             return outcome
         return TaskLost(" ".join(why.split()), wall_time_s)
-
-
-def _import_hint(cause: BaseException | str) -> str:
-    """A hint when the workers cannot import this project."""
-    text = cause if isinstance(cause, str) else type(cause).__name__
-    return (" (do the cluster's workers import this project? see README 'Sweep on a "
-            "cluster')") if ("ImportError" in text or "ModuleNotFoundError" in text) else ""
-
-
-def _two_lines(exc: BaseException) -> str:
-    """The first and last non-empty lines of a (long) Ray error message."""
-    lines = [line.strip() for line in str(exc).splitlines() if line.strip()] or [""]
-    detail = lines[0] if len(lines) == 1 else f"{lines[0]} ... {lines[-1]}"
-    return detail[:400]
-
-
-@dataclass(frozen=True)
-class _WorkerLost:
-    """An episode that did not finish because its worker ended (or found its code changed)."""
-
-    wall_time_s: float
-    node_lost: bool = False
-    code_changed: bool = False
-
-    def why(self, pool: "_WorkerSet", worker: Any, tries: int) -> str:
-        """The episode's error after its last try."""
-        if self.node_lost or not pool.node_alive(worker):
-            return f"the Ray node running this episode was lost (tried {tries} times)"
-        return (f"the Ray worker process died during this episode (tried {tries} times): the "
-                "controller or the simulator ended the process (os._exit, a crash, out of "
-                "memory)")
-
-
-class _WorkerSet:
-    """The EpisodeWorkers of one run: ready, starting, and the node each one runs on."""
-
-    def __init__(self, executor: RayExecutor) -> None:
-        self.ray, self.preload = executor._ray, ()
-        self._executor = executor
-        self._class = executor._worker_class
-        self._keep_s = executor.keep_workers_s
-        self._key = worker_key(executor.runtime_env)
-        self.ready: list[Any] = []  # started, alive
-        self.starting: dict[Any, Any] = {}  # ready() ref -> worker
-        # actor id -> node id, kept after a worker is discarded (its loss message asks)
-        self._node: dict[Any, str | None] = {}
-        self._handles: dict[Any, Any] = {}  # actor id -> worker: the members
-        self._failed_in_a_row = 0  # worker creations
-        self.failure: str | None = None  # why no worker can be created
-        self._checked, self._cpus = 0.0, 0
-        if self._keep_s:
-            for worker in warm_workers(self.ray, self._key).values():
-                self._join(worker)
-
-    def new_run(self, preload: tuple[str, ...]) -> None:
-        """A run begins: its modules to preload; creation failures of earlier runs forgotten."""
-        self.preload, self.failure, self._failed_in_a_row = preload, None, 0
-
-    def _join(self, worker: Any) -> None:
-        self._handles[worker._actor_id] = worker
-        self._node[worker._actor_id] = None
-        self.starting[worker.ready.remote()] = worker
-
-    def top_up(self, episodes_left: int) -> None:
-        """Create workers up to the cluster's CPUs (at most one per episode left)."""
-        if self.failure:
-            return
-        if time.monotonic() - self._checked > 2.0:  # nodes may come and go
-            self._cpus, self._checked = self._executor.cluster_cpus(), time.monotonic()
-        while len(self._handles) < min(self._cpus, episodes_left):
-            if self._keep_s:
-                worker = self._class.options(
-                    name=f"{WARM_PREFIX}{self._key}-{uuid.uuid4().hex[:8]}", namespace=NAMESPACE,
-                    lifetime="detached").remote(self.preload, self._keep_s)
-            else:
-                worker = self._class.remote(self.preload)
-            self._join(worker)
-
-    def started(self, ref: Any) -> None:
-        """A worker answered ready(): ready now; or its creation failed (noted in `failure`)."""
-        worker = self.starting.pop(ref)
-        try:
-            _, node = self.ray.get(ref)
-        except Exception as exc:  # noqa: BLE001 - creation failed (import, runtime_env, ...)
-            self._forget(worker)
-            self._failed_in_a_row += 1
-            if self._failed_in_a_row >= 3:
-                text = _two_lines(exc)
-                self.failure = " ".join(
-                    f"the Ray workers cannot start an episode worker: {text}"
-                    f"{_import_hint(text)}".split())
-            return
-        self._failed_in_a_row = 0
-        self._node[worker._actor_id] = node
-        self.ready.append(worker)
-
-    def node_alive(self, worker: Any) -> bool:
-        """Whether the node the worker ran on is alive (True if unknown)."""
-        node = self._node.get(worker._actor_id)
-        if node is None:
-            return True
-        return any(n.get("NodeID") == node and n.get("Alive") for n in self.ray.nodes())
-
-    def discard(self, worker: Any) -> None:
-        """A worker that died or is stale: ended for good, no longer a member."""
-        try:
-            self.ray.kill(worker, no_restart=True)
-        except Exception:  # noqa: BLE001 - already gone
-            pass
-        if worker in self.ready:
-            self.ready.remove(worker)
-        self._forget(worker)
-
-    def _forget(self, worker: Any) -> None:
-        self._handles.pop(worker._actor_id, None)
-
-    def leave(self) -> None:
-        """Warm workers stay (they end when idle), others are ended now."""
-        if self._keep_s:
-            return
-        for worker in list(self._handles.values()):
-            try:
-                self.ray.kill(worker, no_restart=True)
-            except Exception:  # noqa: BLE001 - already gone
-                pass
-        self._handles.clear()

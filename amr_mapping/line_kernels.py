@@ -135,7 +135,7 @@ def refine_lines_python(lines, col0, row0, resolution, points, pose, prior, prio
     degenerate_ratio times the other (the eigenvalues of the points' information), the
     result keeps the prior's position along it (solution remapping, Zhang et al. 2016): slight
     tilts of the fitted lines along a featureless corridor are not information.
-    One compiled loop on purpose (~100 lines): the residuals and the 3 x 3 normal equations
+    Long: one compiled loop on purpose (~100 lines): the residuals and the 3 x 3 normal equations
     are accumulated in place, per point, per iteration.
     """
     rows = lines.shape[1]

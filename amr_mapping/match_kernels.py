@@ -69,7 +69,7 @@ def bnb_search_python(levels, cells, wx, wy, angle_penalty, inv_two_sigma2, excl
     angle_penalty: (A,); inv_two_sigma2: cell^2 / (2 sigma^2) (0 = no translation penalty);
     exclude: int64 [a, ix, iy, angle_radius, cell_radius] (angle_radius < 0: none).
     result (float64, 5): [a, ix, iy, score, candidates scored]; score -1 if none beat min_score.
-    One function on purpose (~100 lines): the compiled search keeps its explicit stack in
+    Long: one function on purpose (~100 lines): the compiled search keeps its explicit stack in
     local arrays; split, the pieces would pass that state back and forth.
     """
     depth = levels.shape[0]
