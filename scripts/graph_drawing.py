@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections import defaultdict
 from dataclasses import dataclass, field
+from typing import Any
 
 
 @dataclass
@@ -62,15 +63,26 @@ def layered_layout(vertices: list[str], edges: list[tuple[str, str]],
                    sweeps: int = 8) -> tuple[dict[str, int], dict[str, int], set]:
     """Layer and order within the layer of each vertex, and the reversed edges.
 
-    For a left-to-right drawing. Deterministic: ties are broken by name.
+    For a left-to-right drawing (Sugiyama's steps: cycles broken, longest-path layers,
+    barycenter ordering). Deterministic: ties are broken by name.
+    """
+    reversed_edges = _back_edges(vertices, edges)
+    dag = [(b, a) if (a, b) in reversed_edges else (a, b) for a, b in edges if a != b]
+    layer = _longest_path_layers(vertices, dag)
+    return layer, _barycenter_order(vertices, dag, layer, sweeps), reversed_edges
+
+
+def _back_edges(vertices: list[str], edges: list[tuple[str, str]]) -> set[tuple[str, str]]:
+    """The edges to reverse to break the cycles.
+
+    DFS from the vertices that send most and receive least (the data's origin, e.g. a
+    simulator or a driver); its back edges.
     """
     successors: dict[str, list[str]] = defaultdict(list)
     indegree = {v: 0 for v in vertices}
     for a, b in edges:
         successors[a].append(b)
         indegree[b] += 1
-    # 1. Break cycles: DFS from the vertices that send most and receive least (the data's
-    #    origin, e.g. a simulator or a driver); back edges are reversed.
     state: dict[str, int] = {}
     reversed_edges: set[tuple[str, str]] = set()
     starts = sorted(vertices, key=lambda v: (indegree[v] - len(successors[v]), v))
@@ -90,8 +102,11 @@ def layered_layout(vertices: list[str], edges: list[tuple[str, str]],
             elif child not in state:
                 state[child] = 1
                 stack.append((child, iter(sorted(successors[child]))))
-    dag = [(b, a) if (a, b) in reversed_edges else (a, b) for a, b in edges if a != b]
-    # 2. Longest-path layers.
+    return reversed_edges
+
+
+def _longest_path_layers(vertices: list[str], dag: list[tuple[str, str]]) -> dict[str, int]:
+    """Each vertex's layer: the longest path to it from a source."""
     incoming: dict[str, list[str]] = defaultdict(list)
     for a, b in dag:
         incoming[b].append(a)
@@ -105,7 +120,12 @@ def layered_layout(vertices: list[str], edges: list[tuple[str, str]],
 
     for v in vertices:
         depth(v)
-    # 3. Barycenter ordering, sweeping left to right and back.
+    return layer
+
+
+def _barycenter_order(vertices: list[str], dag: list[tuple[str, str]], layer: dict[str, int],
+                      sweeps: int) -> dict[str, int]:
+    """Each vertex's place in its layer, sweeping left to right and back by barycenters."""
     layers: dict[int, list[str]] = defaultdict(list)
     for v in sorted(vertices):
         layers[layer[v]].append(v)
@@ -122,7 +142,7 @@ def layered_layout(vertices: list[str], edges: list[tuple[str, str]],
                 return sum(near) / len(near) if near else order[v]
             layers[k].sort(key=lambda v: (barycenter(v), v))
             order.update({v: i for i, v in enumerate(layers[k])})
-    return layer, order, reversed_edges
+    return order
 
 
 _CHAR_WIDTH_IN = 0.068   # inches per character at the label font size (Helvetica/DejaVu 9 pt)
@@ -132,19 +152,22 @@ _MARGIN_IN = 0.4
 _NODE_COLOR, _TOPIC_COLOR = "#dbe9f6", "#fdf1d6"
 
 
-def draw(graph: RosGraph, path: str, show_qos: bool = False, title: str | None = None) -> None:
-    """Write a PNG or SVG picture (by the file's suffix) of the graph with matplotlib."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.patches import Ellipse, FancyArrowPatch, FancyBboxPatch
-    from matplotlib.path import Path
+@dataclass
+class _Placement:
+    """Where each vertex goes on the page (inches) and how big it is."""
 
-    vertices = graph.vertices()
-    edges = [(a, b) for a, b, _ in graph.edges()]
-    layer, order, _ = layered_layout(vertices, edges)
-    labels = {v: v[2:] for v in vertices}
-    types = {f"t:{t}": ", ".join(ts) for t, ts in graph.topics.items()}
+    size: dict[str, tuple[float, float]]
+    position: dict[str, tuple[float, float]]
+    column_width: dict[int, float]
+    width_in: float
+    height_in: float
+    bottom_of_rows: float
+
+
+def _place(vertices: list[str], layer: dict[str, int], order: dict[str, int],
+           labels: dict[str, str], types: dict[str, str], back_edges: int,
+           title: str | None) -> _Placement:
+    """Sizes from the labels, columns by layer, rows by order, lanes below for back edges."""
     size = {}
     for v in vertices:
         chars = max(len(labels[v]), len(types.get(v, "")) * 0.85)
@@ -157,8 +180,7 @@ def draw(graph: RosGraph, path: str, show_qos: bool = False, title: str | None =
         x_of[k] = x + column_width[k] / 2
         x += column_width[k] + _LAYER_GAP_IN
     rows = max((sum(1 for v in vertices if layer[v] == k) for k in columns), default=1)
-    back_edges = [e for e in graph.edges() if layer[e[1]] <= layer[e[0]]]
-    lanes_in = 0.18 * len(back_edges)  # arrows going back run in lanes below the drawing
+    lanes_in = 0.18 * back_edges  # arrows going back run in lanes below the drawing
     width_in, height_in = x - _LAYER_GAP_IN + _MARGIN_IN, rows * _ROW_PITCH_IN + 2 * _MARGIN_IN
     height_in += lanes_in + (0.4 if title else 0.0)
     centre_y = _MARGIN_IN + lanes_in + rows * _ROW_PITCH_IN / 2
@@ -166,17 +188,44 @@ def draw(graph: RosGraph, path: str, show_qos: bool = False, title: str | None =
     for v in vertices:
         count = sum(1 for u in vertices if layer[u] == layer[v])
         position[v] = (x_of[layer[v]], centre_y + ((count - 1) / 2 - order[v]) * _ROW_PITCH_IN)
+    return _Placement(size, position, column_width, width_in, height_in,
+                      centre_y - rows * _ROW_PITCH_IN / 2)
 
-    fig = plt.figure(figsize=(max(width_in, 3.0), height_in))
+
+def draw(graph: RosGraph, path: str, show_qos: bool = False, title: str | None = None) -> None:
+    """Write a PNG or SVG picture (by the file's suffix) of the graph with matplotlib."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    vertices = graph.vertices()
+    edges = [(a, b) for a, b, _ in graph.edges()]
+    layer, order, _ = layered_layout(vertices, edges)
+    labels = {v: v[2:] for v in vertices}
+    types = {f"t:{t}": ", ".join(ts) for t, ts in graph.topics.items()}
+    back_edges = [e for e in graph.edges() if layer[e[1]] <= layer[e[0]]]
+    placed = _place(vertices, layer, order, labels, types, len(back_edges), title)
+    fig = plt.figure(figsize=(max(placed.width_in, 3.0), placed.height_in))
     ax = fig.add_axes((0, 0, 1, 1))
-    ax.set_xlim(0, max(width_in, 3.0))
-    ax.set_ylim(0, height_in)
+    ax.set_xlim(0, max(placed.width_in, 3.0))
+    ax.set_ylim(0, placed.height_in)
     ax.axis("off")
     if title:
-        ax.text(_MARGIN_IN, height_in - 0.3, title, fontsize=11, weight="bold", va="center")
+        ax.text(_MARGIN_IN, placed.height_in - 0.3, title, fontsize=11, weight="bold",
+                va="center")
+    patches = _draw_vertices(ax, vertices, placed, labels, types)
+    _draw_edges(ax, graph, layer, placed, patches, back_edges, show_qos)
+    fig.savefig(path, dpi=150)
+    plt.close(fig)
+
+
+def _draw_vertices(ax: Any, vertices: list[str], placed: _Placement, labels: dict[str, str],
+                   types: dict[str, str]) -> dict[str, Any]:
+    """Nodes as ellipses, topics as boxes with their types; the patch of each vertex."""
+    from matplotlib.patches import Ellipse, FancyBboxPatch
     patches = {}
     for v in vertices:
-        (cx, cy), (w, h) = position[v], size[v]
+        (cx, cy), (w, h) = placed.position[v], placed.size[v]
         if v.startswith("n:"):
             patch = Ellipse((cx, cy), w, h, facecolor=_NODE_COLOR, edgecolor="#2f5d8a", lw=1.2)
             ax.text(cx, cy, labels[v], ha="center", va="center", fontsize=9)
@@ -189,11 +238,18 @@ def draw(graph: RosGraph, path: str, show_qos: bool = False, title: str | None =
                     color="#555555")
         ax.add_patch(patch)
         patches[v] = patch
-    bottom_of_rows = centre_y - rows * _ROW_PITCH_IN / 2
+    return patches
+
+
+def _draw_edges(ax: Any, graph: RosGraph, layer: dict[str, int], placed: _Placement,
+                patches: dict[str, Any], back_edges: list, show_qos: bool) -> None:
+    """Arrows left to right; back edges routed through lanes below; QoS labels if asked."""
+    from matplotlib.patches import FancyArrowPatch
+    from matplotlib.path import Path
+    size, position = placed.size, placed.position
     for source, target, names in graph.edges():
         (x1, y1), (x2, y2) = position[source], position[target]
-        forward = layer[target] > layer[source]
-        if forward:
+        if layer[target] > layer[source]:
             rad = 0.0 if layer[target] - layer[source] == 1 else 0.15
             arrow = FancyArrowPatch((x1, y1), (x2, y2), patchA=patches[source],
                                     patchB=patches[target], arrowstyle="-|>",
@@ -202,9 +258,10 @@ def draw(graph: RosGraph, path: str, show_qos: bool = False, title: str | None =
             gap_x = ((x1 + size[source][0] / 2) + (x2 - size[target][0] / 2)) / 2
             label_at = (gap_x, y1 + (y2 - y1) * (gap_x - x1) / (x2 - x1) + 0.08)
         else:  # out right, down a gap to a lane below everything, back, up a gap, in left
-            lane_y = bottom_of_rows - 0.1 - 0.18 * back_edges.index((source, target, names))
-            out_x = x1 + column_width[layer[source]] / 2 + _LAYER_GAP_IN * 0.35
-            in_x = x2 - column_width[layer[target]] / 2 - _LAYER_GAP_IN * 0.35
+            lane_y = placed.bottom_of_rows - 0.1 - 0.18 * back_edges.index(
+                (source, target, names))
+            out_x = x1 + placed.column_width[layer[source]] / 2 + _LAYER_GAP_IN * 0.35
+            in_x = x2 - placed.column_width[layer[target]] / 2 - _LAYER_GAP_IN * 0.35
             route = Path([(x1 + size[source][0] / 2, y1), (out_x, y1), (out_x, lane_y),
                           (in_x, lane_y), (in_x, y2), (x2 - size[target][0] / 2, y2)])
             arrow = FancyArrowPatch(path=route, arrowstyle="-|>", mutation_scale=11, lw=1.0,
@@ -214,5 +271,3 @@ def draw(graph: RosGraph, path: str, show_qos: bool = False, title: str | None =
         qos = graph.qos.get(names) if show_qos else None
         if qos:
             ax.text(*label_at, qos, fontsize=6, color="#666666", ha="center")
-    fig.savefig(path, dpi=150)
-    plt.close(fig)
