@@ -54,8 +54,18 @@ def plot_localization(world: World | str, report: dict[str, Any], path: str | Pa
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=8,
               frameon=False)
     ax.set_title(title or world.name, fontsize=10)
+    _plot_errors(fig.add_subplot(1, 2, 2), truth, estimate, localized,
+                 report.get("localization") or {})
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    return path
 
-    err = fig.add_subplot(1, 2, 2)
+
+def _plot_errors(err: Any, truth: np.ndarray, estimate: np.ndarray, localized: np.ndarray,
+                 metrics: dict[str, Any]) -> None:
+    """Position and heading errors over time (log scale), the localized spans, the figures."""
     index = np.clip(np.searchsorted(truth[:, 0], estimate[:, 0] - 1e-6), 0, len(truth) - 1)
     position, heading = pose_errors(truth[index], estimate)
     err.semilogy(estimate[:, 0], np.maximum(position, 1e-4) * 100, color="tab:blue",
@@ -66,7 +76,6 @@ def plot_localization(world: World | str, report: dict[str, Any], path: str | Pa
                 label="10 cm / 10 deg: a localized pose this wrong is a false localization")
     for start, end in _spans(estimate[:, 0], localized):
         err.axvspan(start, end, color="tab:green", alpha=0.12, linewidth=0)
-    metrics = report.get("localization") or {}
     summary = []
     if metrics.get("time_to_localized_s") is not None:
         summary.append(f"localized after {metrics['time_to_localized_s']:.1f} s")
@@ -79,11 +88,6 @@ def plot_localization(world: World | str, report: dict[str, Any], path: str | Pa
     err.set_ylim(1e-2, 1e3)
     err.grid(True, which="both", alpha=0.3)
     err.legend(loc="upper right", fontsize=7)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    return path
 
 
 def _spans(t: np.ndarray, flags: np.ndarray) -> list[tuple[float, float]]:
