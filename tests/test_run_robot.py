@@ -92,13 +92,15 @@ def test_robot_graph_drives_the_emulated_robot_and_stops_when_scans_stop(ros, tm
 # traceback, and once the graph ran the exit code was 0. Each moment: exit code 130, no
 # traceback; a controller that had been configured sends its zero command on the way down (the
 # robot keeps its last command), and a zero is the last command the test hears; nothing at all
-# if no node existed yet. (Whether the test's subscriber has discovered a publisher created
-# a moment before is up to DDS: the node's log says it sent the zero.)
-STARTUP_MOMENTS = {"importing": lambda text, elapsed: elapsed > 0.3,
-                   "checking the options": lambda text, elapsed: elapsed > 1.5,
-                   "nodes built": lambda text, elapsed: "ROS_DOMAIN_ID=" in text,
-                   "configuring": lambda text, elapsed: "'wall_follower': configure OK" in text,
-                   "running": lambda text, elapsed: "all nodes active" in text}
+# if no node was built. The early moments are times (the script prints nothing while it imports
+# and checks; on a fast machine the checks may be over by then: the rules above still hold);
+# "running" waits until the test hears the controller (DDS discovery takes its time).
+STARTUP_MOMENTS = {"importing": lambda text, elapsed, heard: elapsed > 0.3,
+                   "checking the options": lambda text, elapsed, heard: elapsed > 1.5,
+                   "nodes built": lambda text, elapsed, heard: "ROS_DOMAIN_ID=" in text,
+                   "configuring": lambda text, elapsed, heard:
+                       "'wall_follower': configure OK" in text,
+                   "running": lambda text, elapsed, heard: "all nodes active" in text and heard}
 
 
 @pytest.mark.parametrize("moment", list(STARTUP_MOMENTS))
@@ -116,13 +118,14 @@ def test_ctrl_c_at_any_moment_of_start_up_exits_130_with_a_final_zero(ros, tmp_p
         # With the particle filter: the longest start-up (its table is built when configuring).
         process = subprocess.Popen(
             [sys.executable, str(RUN_ROBOT), "--domain-id", os.environ["ROS_DOMAIN_ID"],
-             "--cmd-vel", "stamped", "--localize", "--world", "lab02"],
+             "--cmd-vel", "stamped", "--localize", "--map", "lab02"],
             stdout=output, stderr=subprocess.STDOUT)
         started = time.monotonic()
         try:
             ready = STARTUP_MOMENTS[moment]
-            ros.spin_until(lambda: ready(log_path.read_text(), time.monotonic() - started)
-                           or process.poll() is not None, 60.0, moment)
+            ros.spin_until(lambda: ready(log_path.read_text(), time.monotonic() - started,
+                                         bool(commands)) or process.poll() is not None,
+                           60.0, moment)
             assert process.poll() is None, log_path.read_text()
             configured = "'wall_follower': configure OK" in log_path.read_text()
             process.send_signal(signal.SIGINT)
@@ -136,10 +139,8 @@ def test_ctrl_c_at_any_moment_of_start_up_exits_130_with_a_final_zero(ros, tmp_p
     assert "run_robot: interrupted" in text, text
     if configured:
         assert "[wall_follower]: shutting down: commanding zero velocity" in text, text
-    if moment == "running":
-        assert commands, f"{moment}: no command heard: {text}"
     if commands:
         last = commands[-1].twist
         assert (last.linear.x, last.angular.z) == (0.0, 0.0), f"{moment}: {text}"
-    if moment in ("importing", "checking the options"):
-        assert "ROS_DOMAIN_ID=" not in text and not commands, f"{moment}: {text}"
+    if "ROS_DOMAIN_ID=" not in text:  # stopped before any node was built: none was
+        assert not commands and "configure OK" not in text, f"{moment}: {text}"

@@ -10,7 +10,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -59,8 +58,14 @@ def test_slam_run_writes_the_map_the_report_and_the_plot(tmp_path, capsys):
     assert (tmp_path / "slam.png").read_bytes()[:4] == b"\x89PNG"
 
 
-def _sigint_when(tmp_path, ready, options=()) -> tuple[int, str]:
-    """run_sim.py --slam as a user runs it; SIGINT once ready(log text); (exit code, log)."""
+def _sigint_when(tmp_path, ready, options=(), ros=None) -> tuple[int, str]:
+    """run_sim.py --slam as a user runs it; SIGINT once ready(log text); (exit code, log).
+
+    With `ros` (the test's ROS harness), the run joins the test's domain and the harness spins
+    while it waits (ready may read what the test's subscriptions heard).
+    """
+    if ros is not None:
+        options = ["--domain-id", os.environ["ROS_DOMAIN_ID"], *options]
     log_path = tmp_path / "run.log"
     with open(log_path, "w") as log:
         process = subprocess.Popen(
@@ -69,8 +74,11 @@ def _sigint_when(tmp_path, ready, options=()) -> tuple[int, str]:
              str(tmp_path / "run.json"), *options],
             cwd=REPO, env=dict(os.environ), stdout=log, stderr=subprocess.STDOUT)
         try:
-            wait_for(lambda: ready(log_path.read_text()) or process.poll() is not None, 60.0,
-                     "the moment to interrupt")
+            moment = lambda: ready(log_path.read_text()) or process.poll() is not None  # noqa: E731
+            if ros is None:
+                wait_for(moment, 60.0, "the moment to interrupt")
+            else:
+                ros.spin_until(moment, 120.0, "the moment to interrupt")
             assert process.poll() is None, log_path.read_text()
             process.send_signal(signal.SIGINT)
             process.wait(30.0)
@@ -79,15 +87,16 @@ def _sigint_when(tmp_path, ready, options=()) -> tuple[int, str]:
     return process.returncode, log_path.read_text()
 
 
-def test_ctrl_c_mid_mapping_keeps_the_map_so_far_and_the_report(tmp_path):
-    active = []
+def test_ctrl_c_mid_mapping_keeps_the_map_so_far_and_the_report(ros, tmp_path):
+    from rosgraph_msgs.msg import Clock
 
-    def mapped_a_while(text: str) -> bool:
-        if "all nodes active" in text and not active:
-            active.append(time.monotonic())
-        return bool(active) and time.monotonic() - active[0] > 4.0
-
-    code, output = _sigint_when(tmp_path, mapped_a_while)
+    from amr_common.qos import scan_qos
+    clock = []  # the simulated time, heard on /clock: interrupted after 10 s of mapping
+    ros.node("clock_listener").create_subscription(
+        Clock, "/clock", lambda msg: clock.append(msg.clock.sec + 1e-9 * msg.clock.nanosec),
+        scan_qos())  # best effort: matches any publisher
+    code, output = _sigint_when(tmp_path, lambda text: bool(clock) and clock[-1] >= 10.0,
+                                ros=ros)
     assert code == 130, output
     assert "Traceback" not in output and "Error" not in output, output
     report = json.loads((tmp_path / "run.json").read_text())
