@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 
+from amr_common.geometry import polyline_length
 from amr_common.world import start_label
 from amr_evaluation.episode import trajectory_metrics
 
@@ -143,7 +144,7 @@ def navigation_fields(goal, summary: dict, plan, estimate: list,
         "goal_reached_time_s": summary["goal_reached_time_s"],
         "stopped_time_s": summary["stopped_time_s"],
         "final_position_error_m": summary["final_position_error_m"],
-        "path_length_m": plan.length_m if plan is not None else None,
+        "path_length_m": polyline_length(plan.points) if plan is not None else None,
         "path": plan.points.tolist() if plan is not None else [],
         "planning_error": planning_error,
     }
