@@ -91,6 +91,41 @@ def add_localization_options(parser) -> None:
                         "--pf-param beams:=90")
 
 
+# The links run_sim.py and run_robot.py can swap, each a node parameter of the same name.
+LINK_OPTIONS = {
+    "localizer": "a localizer (amr_common.interfaces.Localizer) for the particle filter "
+                 "node, e.g. examples.likelihood_mcl:LikelihoodFieldMcl",
+    "planner": "a planner (amr_common.interfaces.Planner) for the planner node, e.g. "
+               "examples.wavefront_planner:WavefrontPlanner",
+    "follower": "a path follower (amr_common.interfaces.PathFollower) for the pure pursuit "
+                "node, e.g. examples.plain_pursuit:PlainPursuit",
+}
+
+
+def add_link_options(parser, links=("localizer", "planner", "follower")) -> None:
+    """--localizer, --planner, --follower MODULE:CLASS: the user's class for that link."""
+    from amr_common.controller_loader import LINKS
+    for link in links:
+        parser.add_argument(f"--{link}", default=None, metavar="MODULE:CLASS",
+                            help=f"{LINK_OPTIONS[link]} (default {LINKS[link][1]})")
+
+
+def check_link_options(args, needs: dict[str, bool]) -> dict[str, str]:
+    """Load every --localizer / --planner / --follower class now; ValueError (one line).
+
+    `needs`: link -> whether the run starts its node (an option for a link that does not run
+    is refused). Returns {link: spec} of the given ones (the node parameters to set).
+    """
+    from amr_common.controller_loader import load_class
+    given = {link: getattr(args, link) for link in needs if getattr(args, link, None)}
+    for link, spec in given.items():
+        if not needs[link]:
+            raise ValueError(f"--{link} needs " + ("--localize or --goal" if link == "localizer"
+                                                  else "--goal"))
+        load_class(spec, link)  # ControllerSpecError: what is missing
+    return given
+
+
 def check_common_options(parser, args, script: str, wall_follower_set: dict[str, str],
                          filter_set: dict[str, str]) -> None:
     """Check dt, the Foxglove port, -p, --pf-param, the params file and the controller now.
@@ -128,7 +163,12 @@ def check_common_options(parser, args, script: str, wall_follower_set: dict[str,
             setattr(args, attribute, parse_overrides(items))
         except ControllerSpecError as exc:
             parser.error(f"{option}: {exc}")
+    localize = bool(getattr(args, "localize", False) or getattr(args, "goal", None) is not None)
     try:
+        args.links = check_link_options(args, {"localizer": localize, "planner": localize and
+                                               getattr(args, "goal", None) is not None,
+                                               "follower": getattr(args, "goal", None)
+                                               is not None})
         _check_wall_follower(args, script, wall_follower_set)
         _check_particle_filter(args, script, filter_set)
     except ValueError as exc:  # one-line messages
@@ -190,36 +230,45 @@ def _check_particle_filter(args, script: str, set_by_script: dict[str, str]) -> 
     if not (getattr(args, "localize", False) or getattr(args, "goal", None) is not None):
         raise ValueError("--pf-param needs --localize or --goal (no particle filter runs "
                          "without them)")
+    from amr_common.controller_loader import DEFAULT_LOCALIZER, link_parameters, load_class
     from amr_common.parameters import typed_values
     from amr_localization.particle_filter_node import node_parameter_problems, node_parameters
-    from amr_localization.particle_filter_params import PARAMETERS, check_parameters
+    from amr_localization.particle_filter_params import check_parameters
     _refused("--pf-param", args.pf_overrides, script, set_by_script)
     node_table = node_parameters()
+    spec = getattr(args, "links", {}).get("localizer", DEFAULT_LOCALIZER)
+    PARAMETERS = link_parameters(load_class(spec, "localizer"), node_table)
     table = {**node_table, **PARAMETERS}
     unknown = [name for name in args.pf_overrides if name not in table]
     if unknown:
-        raise ValueError(f"--pf-param {', '.join(unknown)}: no such particle filter parameter; "
-                         f"known: {', '.join(sorted(table))}")
+        raise ValueError(f"--pf-param {', '.join(unknown)}: no such parameter of the particle "
+                         f"filter node with localizer {spec}; known: {', '.join(sorted(table))}")
     args.pf_overrides, problems = typed_values(table, args.pf_overrides)
     if not problems:
         node_values = {name: default for name, (default, _) in node_table.items()}
         node_values.update({k: v for k, v in args.pf_overrides.items() if k in node_table})
         problems = node_parameter_problems(node_values)
-        try:
-            check_parameters({k: v for k, v in args.pf_overrides.items() if k in PARAMETERS})
+        try:  # the reference's own checks; another class checks when the node builds it
+            if spec == DEFAULT_LOCALIZER:
+                check_parameters({k: v for k, v in args.pf_overrides.items()
+                                  if k in PARAMETERS})
         except ValueError as exc:
             problems.append(str(exc))
     if problems:
         raise ValueError(f"--pf-param: {'; '.join(problems)}")
 
 
-def check_filter_map(world, pf_overrides: dict[str, Any]) -> None:
+def check_filter_map(world, pf_overrides: dict[str, Any], localizer: str | None = None) -> None:
     """The particle filter's checks against its map, before anything runs: ValueError (one line).
 
     A map too big for its memory budget (saying what it would need), an initial pose where the
     robot cannot be; with the filter's own parameters (--pf-param may also set its node's).
-    Milliseconds: nothing is built.
+    Milliseconds: nothing is built. Only for the project's filter (`localizer` None or it):
+    another localizer checks its map when its node builds it.
     """
+    from amr_common.controller_loader import DEFAULT_LOCALIZER
+    if localizer not in (None, DEFAULT_LOCALIZER):
+        return
     from amr_localization.particle_filter_params import PARAMETERS, check_parameters, check_world
     check_world(world, check_parameters(
         {name: value for name, value in pf_overrides.items() if name in PARAMETERS}))
@@ -320,10 +369,15 @@ def localizing_wall_follower(tuning: dict[str, Any]) -> dict[str, Any]:
 
 
 def make_particle_filter(context, *, world: str, lidar_offset_x_m: float,
-                         overrides: dict[str, Any] | None = None):
-    """The particle filter on `world`, told where the LiDAR sits (overrides win)."""
+                         overrides: dict[str, Any] | None = None, localizer: str | None = None):
+    """The particle filter node on `world`, told where the LiDAR sits (overrides win).
+
+    localizer: its `localizer` parameter (MODULE:CLASS; None: the node's default).
+    """
     from amr_localization.particle_filter_node import ParticleFilterNode
     values: dict[str, Any] = {"world": str(world), "lidar_offset_x_m": float(lidar_offset_x_m)}
+    if localizer:
+        values["localizer"] = str(localizer)
     values.update(overrides or {})
     return ParticleFilterNode(context=context, parameter_overrides=overrides_to_parameters(values))
 
@@ -338,21 +392,25 @@ def navigating_wall_follower(tuning: dict[str, Any]) -> dict[str, Any]:
 
 
 def make_navigators(context, *, world: str, goal: tuple[float, float], wall_follower,
-                    lidar_offset_x_m: float) -> list:
+                    lidar_offset_x_m: float, links: dict[str, str] | None = None) -> list:
     """The planner and the pure pursuit, after the wall follower and the particle filter.
 
     The pursuit commands like the wall follower (simulation or robot mode, dt, data_timeout,
-    /cmd_vel type and angular sign): it takes those from the wall follower node.
+    /cmd_vel type and angular sign): it takes those from the wall follower node. links: the
+    `planner` and `follower` classes (MODULE:CLASS) when not the nodes' defaults.
     """
+    links = links or {}
+    planner = {"planner": links["planner"]} if links.get("planner") else {}
+    follower = {"follower": links["follower"]} if links.get("follower") else {}
     from amr_control.pure_pursuit_node import PurePursuitNode
     from amr_planning.planner_node import PlannerNode
     same = {name: wall_follower.get_parameter(name).value
             for name in ("simulation", "dt", "data_timeout", "cmd_vel_stamped", "angular_sign")}
     return [
         PlannerNode(context=context, parameter_overrides=overrides_to_parameters(
-            {"world": str(world), "goal": [float(goal[0]), float(goal[1])]})),
+            {"world": str(world), "goal": [float(goal[0]), float(goal[1])], **planner})),
         PurePursuitNode(context=context, parameter_overrides=overrides_to_parameters(
-            {**same, "lidar_offset_x_m": float(lidar_offset_x_m)})),
+            {**same, "lidar_offset_x_m": float(lidar_offset_x_m), **follower})),
     ]
 
 
@@ -360,12 +418,14 @@ def make_robot_graph(context, *, params_file=ROBOT_PARAMS, dt: float | None = No
                      cmd_vel_stamped: bool | None = None, controller: str | None = None,
                      tuning: dict[str, Any] | None = None, localize_world: str | None = None,
                      filter_overrides: dict[str, Any] | None = None,
-                     goal: tuple[float, float] | None = None) -> list:
+                     goal: tuple[float, float] | None = None,
+                     links: dict[str, str] | None = None) -> list:
     """The real-robot graph: /odom -> amr_odometry -> /odometry, wall follower in robot mode.
 
     With `localize_world`, also the particle filter on that map (the Burger's LiDAR position),
     and the wall follower synchronizes /pose; with a `goal` too, the planner and the pure
-    pursuit, which drive once localized. Returns the lifecycle nodes in startup order.
+    pursuit, which drive once localized. links: the localizer, planner and follower classes
+    (MODULE:CLASS) when not the nodes' defaults. Returns the lifecycle nodes in startup order.
     """
     from amr_turtlebot3.odometry_node import OdometryNode
     overrides: dict[str, Any] = dict(tuning or {})
@@ -386,8 +446,9 @@ def make_robot_graph(context, *, params_file=ROBOT_PARAMS, dt: float | None = No
     from amr_common.robot import LIDAR_OFFSET_X
     particle_filter = make_particle_filter(context, world=localize_world,
                                            lidar_offset_x_m=LIDAR_OFFSET_X,
-                                           overrides=filter_overrides)
+                                           overrides=filter_overrides,
+                                           localizer=(links or {}).get("localizer"))
     navigators = [] if goal is None else make_navigators(
         context, world=localize_world, goal=goal, wall_follower=wall_follower,
-        lidar_offset_x_m=LIDAR_OFFSET_X)
+        lidar_offset_x_m=LIDAR_OFFSET_X, links=links)
     return [odometry, wall_follower, particle_filter, *navigators]
