@@ -46,6 +46,7 @@ from amr_common.map_vs_world import load_map, resolve_goal_on_map
 from amr_common.world import World
 from amr_control.pure_pursuit import scan_clearance, scan_free_ahead
 from amr_evaluation.episode import default_controller, tell_scan_geometry
+from amr_evaluation.localization_episode import localization_metrics
 from amr_sim.profiles import get_profile
 from amr_sim.simulator import Simulator
 from amr_sim.simulator_params import PARAMETERS as SIMULATOR_PARAMETERS
@@ -138,6 +139,10 @@ class NavigationResult:
     cross_track_max_m: float | None
     finish_reason: str
     invalid_commands: int = 0  # commands that were not finite numbers (the robot stopped)
+    # The pose source against the truth (amr_evaluation.localization_episode's metrics): a
+    # wrong pose declared localized (> 10 cm or 10 deg), and the error while localized.
+    false_localizations: int = 0
+    tracking_error_mean_m: float | None = None
     kidnap: list[float] | None = None  # [t, x, y, theta]
     stalled: bool = False  # localized with zero commands for stall_timeout_s before the goal
     dt: float = 0.05
@@ -247,6 +252,7 @@ def run_navigation_episode(
     events: dict[str, float | None] = {"localized": None, "reached": None, "stopped": None}
     plans, errors, plan_ms, path = 0, [], None, None
     pursued: list[tuple[float, float]] = []  # true positions while the pursuit drives
+    poses: list[tuple[float, ...]] = []  # (t, true x, y, theta, estimated x, y, theta, localized)
     was_localized = stalled = False
     idle_steps = 0  # consecutive localized zero commands before the goal
     kidnapped = kidnap is None
@@ -256,6 +262,7 @@ def run_navigation_episode(
     wall_start = time.perf_counter()
     for _ in range(n_steps):
         estimate, localized = pose_source.update(sim, z_scan, held_v, held_w)
+        poses.append((sim.time, *sim.pose, *estimate, float(localized)))
         if localized:
             if events["localized"] is None:
                 events["localized"] = sim.time
@@ -308,6 +315,9 @@ def run_navigation_episode(
     wall_time = time.perf_counter() - wall_start
 
     x, y, _ = sim.pose
+    rows = np.array(poses, dtype=float).reshape(-1, 8)
+    pose_figures = localization_metrics(rows[:, :4], rows[:, [0, 4, 5, 6, 7]],
+                                        np.zeros(len(rows)), kidnap)
     cross = distances_to_polyline(np.array(pursued), path) \
         if pursued and path is not None else None
     start_label = start if isinstance(start, str) else (
@@ -333,6 +343,8 @@ def run_navigation_episode(
         finish_reason="stopped at the goal" if events["stopped"] is not None else
         "stalled" if stalled else "duration",
         invalid_commands=sim.bad_commands,
+        false_localizations=pose_figures["false_localizations"],
+        tracking_error_mean_m=pose_figures["tracking_error_mean_m"],
         kidnap=[float(k) for k in kidnap] if kidnap is not None else None, stalled=stalled,
         dt=sim.dt, map=map_obj.name, goal_warning=goal_warning, trajectory=trajectory,
         path=path.tolist() if path is not None else [],
