@@ -46,7 +46,7 @@ if str(REPO) not in sys.path:  # run from a checkout without installing
 from amr_common.controller_loader import (  # noqa: E402
     DEFAULT_LOCALIZER,
     LINKS,
-    load_class,
+    ControllerSpecError,
     load_controller_class,
 )
 from amr_evaluation.evaluation import (  # noqa: E402
@@ -217,17 +217,18 @@ def check_links(args: argparse.Namespace, settings: dict) -> dict[str, str]:
     ControllerSpecError (one line) naming what a class lacks; EvaluationError for a link the
     episodes do not run (a planner without --goals).
     """
+    from link_options import check_links as load_links
     runs = {"localizer": bool(args.localize or (settings["goals"]
                                                  and settings["pose_source"] == "filter")),
             "planner": bool(settings["goals"]), "follower": bool(settings["goals"])}
-    given = {link: settings[link] for link in LINKS_SWAPPED if settings.get(link)}
-    for link, spec in given.items():
-        if not runs[link]:
-            raise EvaluationError(f"--{link} needs " + (
-                "--localize or --goals with the filter's pose" if link == "localizer"
-                else "--goals"))
-        load_class(spec, link)
-    return given
+    try:
+        return load_links({link: settings.get(link) for link in LINKS_SWAPPED}, runs, {
+            "localizer": "--localize or --goals with the filter's pose",
+            "planner": "--goals", "follower": "--goals"})
+    except ControllerSpecError:
+        raise
+    except ValueError as exc:
+        raise EvaluationError(str(exc)) from None
 
 
 def check_option_pairs(args: argparse.Namespace, settings: dict) -> None:

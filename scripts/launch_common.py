@@ -81,51 +81,6 @@ def make_map_publisher(context, map_source: str, *, use_sim_time: bool = False):
         {"world": str(map_source), "use_sim_time": use_sim_time}))
 
 
-def add_localization_options(parser) -> None:
-    """--localize and the particle filter's --pf-param NAME:=VALUE, shared by the run scripts."""
-    parser.add_argument("--localize", action="store_true", help="also run the particle filter "
-                        "(/pose with localized); the wall follower keeps exploring "
-                        "(stop_when_localized false) unless -p says otherwise")
-    parser.add_argument("--pf-param", action="append", default=[], metavar="NAME:=VALUE",
-                        help="particle filter parameter override (repeatable), e.g. "
-                        "--pf-param beams:=90")
-
-
-# The links run_sim.py and run_robot.py can swap, each a node parameter of the same name.
-LINK_OPTIONS = {
-    "localizer": "a localizer (amr_common.interfaces.Localizer) for the particle filter "
-                 "node, e.g. examples.likelihood_mcl:LikelihoodFieldMcl",
-    "planner": "a planner (amr_common.interfaces.Planner) for the planner node, e.g. "
-               "examples.wavefront_planner:WavefrontPlanner",
-    "follower": "a path follower (amr_common.interfaces.PathFollower) for the pure pursuit "
-                "node, e.g. examples.plain_pursuit:PlainPursuit",
-}
-
-
-def add_link_options(parser, links=("localizer", "planner", "follower")) -> None:
-    """--localizer, --planner, --follower MODULE:CLASS: the user's class for that link."""
-    from amr_common.controller_loader import LINKS
-    for link in links:
-        parser.add_argument(f"--{link}", default=None, metavar="MODULE:CLASS",
-                            help=f"{LINK_OPTIONS[link]} (default {LINKS[link][1]})")
-
-
-def check_link_options(args, needs: dict[str, bool]) -> dict[str, str]:
-    """Load every --localizer / --planner / --follower class now; ValueError (one line).
-
-    `needs`: link -> whether the run starts its node (an option for a link that does not run
-    is refused). Returns {link: spec} of the given ones (the node parameters to set).
-    """
-    from amr_common.controller_loader import load_class
-    given = {link: getattr(args, link) for link in needs if getattr(args, link, None)}
-    for link, spec in given.items():
-        if not needs[link]:
-            raise ValueError(f"--{link} needs " + ("--localize or --goal" if link == "localizer"
-                                                  else "--goal"))
-        load_class(spec, link)  # ControllerSpecError: what is missing
-    return given
-
-
 def check_common_options(parser, args, script: str, wall_follower_set: dict[str, str],
                          filter_set: dict[str, str]) -> None:
     """Check dt, the Foxglove port, -p, --pf-param, the params file and the controller now.
@@ -137,6 +92,8 @@ def check_common_options(parser, args, script: str, wall_follower_set: dict[str,
     Sets args.overrides and args.pf_overrides (typed as the nodes declare them) and
     args.controller_spec (the MODULE:CLASS the wall follower will run).
     """
+    from link_options import check_link_options, check_particle_filter
+
     from amr_common.controller_loader import ControllerSpecError, parse_overrides
     from amr_common.parameter_table import check_value
     from amr_control.wall_follower_node import node_parameters
@@ -170,7 +127,7 @@ def check_common_options(parser, args, script: str, wall_follower_set: dict[str,
                                                "follower": getattr(args, "goal", None)
                                                is not None})
         _check_wall_follower(args, script, wall_follower_set)
-        _check_particle_filter(args, script, filter_set)
+        check_particle_filter(args, script, filter_set)
     except ValueError as exc:  # one-line messages
         parser.error(str(exc))
 
@@ -221,57 +178,6 @@ def _check_wall_follower(args, script: str, set_by_script: dict[str, str]) -> No
         controller_class(values["dt"], **tuning)
     except Exception as exc:  # a user's controller may raise anything
         raise ValueError(f"controller {spec} rejects its parameters: {exc}") from None
-
-
-def _check_particle_filter(args, script: str, set_by_script: dict[str, str]) -> None:
-    """--pf-param names and values, by the filter's and its node's own checks; ValueError."""
-    if not args.pf_overrides:
-        return
-    if not (getattr(args, "localize", False) or getattr(args, "goal", None) is not None):
-        raise ValueError("--pf-param needs --localize or --goal (no particle filter runs "
-                         "without them)")
-    from amr_common.controller_loader import DEFAULT_LOCALIZER, link_parameters, load_class
-    from amr_common.parameters import typed_values
-    from amr_localization.particle_filter_node import node_parameter_problems, node_parameters
-    from amr_localization.particle_filter_params import check_parameters
-    _refused("--pf-param", args.pf_overrides, script, set_by_script)
-    node_table = node_parameters()
-    spec = getattr(args, "links", {}).get("localizer", DEFAULT_LOCALIZER)
-    PARAMETERS = link_parameters(load_class(spec, "localizer"), node_table)
-    table = {**node_table, **PARAMETERS}
-    unknown = [name for name in args.pf_overrides if name not in table]
-    if unknown:
-        raise ValueError(f"--pf-param {', '.join(unknown)}: no such parameter of the particle "
-                         f"filter node with localizer {spec}; known: {', '.join(sorted(table))}")
-    args.pf_overrides, problems = typed_values(table, args.pf_overrides)
-    if not problems:
-        node_values = {name: default for name, (default, _) in node_table.items()}
-        node_values.update({k: v for k, v in args.pf_overrides.items() if k in node_table})
-        problems = node_parameter_problems(node_values)
-        try:  # the reference's own checks; another class checks when the node builds it
-            if spec == DEFAULT_LOCALIZER:
-                check_parameters({k: v for k, v in args.pf_overrides.items()
-                                  if k in PARAMETERS})
-        except ValueError as exc:
-            problems.append(str(exc))
-    if problems:
-        raise ValueError(f"--pf-param: {'; '.join(problems)}")
-
-
-def check_filter_map(world, pf_overrides: dict[str, Any], localizer: str | None = None) -> None:
-    """The particle filter's checks against its map, before anything runs: ValueError (one line).
-
-    A map too big for its memory budget (saying what it would need), an initial pose where the
-    robot cannot be; with the filter's own parameters (--pf-param may also set its node's).
-    Milliseconds: nothing is built. Only for the project's filter (`localizer` None or it):
-    another localizer checks its map when its node builds it.
-    """
-    from amr_common.controller_loader import DEFAULT_LOCALIZER
-    if localizer not in (None, DEFAULT_LOCALIZER):
-        return
-    from amr_localization.particle_filter_params import PARAMETERS, check_parameters, check_world
-    check_world(world, check_parameters(
-        {name: value for name, value in pf_overrides.items() if name in PARAMETERS}))
 
 
 def _listen_problem(host: str, port: int) -> str | None:

@@ -57,6 +57,12 @@ from amr_common.stop_flag import StopFlag  # noqa: E402
 # Run as a script, Ctrl-C (or SIGTERM) only sets a flag from the first moment on: see main().
 _STOP = StopFlag().install() if __name__ == "__main__" else None
 
+from link_options import (  # noqa: E402
+    add_link_options,
+    add_localization_options,
+    check_filter_map,
+)
+
 from amr_common.ros_env import describe_graph_settings, isolate_local_graph  # noqa: E402
 from cli_checks import (  # noqa: E402
     OneLineArgumentParser,
@@ -72,10 +78,7 @@ from launch_common import (  # noqa: E402
     SIM_PARAMS,
     add_controller_options,
     add_foxglove_options,
-    add_link_options,
-    add_localization_options,
     check_common_options,
-    check_filter_map,
 )
 from launch_slam import add_slam_options, check_slam_options, map_prefix  # noqa: E402
 
