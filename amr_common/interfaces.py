@@ -55,7 +55,8 @@ class Localizer(Protocol):
     Built as `cls(map, seed=..., lidar_offset_x_m=..., **params)`: map an amr_common.world.World
     (the walls as segments, `bounds`, `contains(x, y)`, a raster via amr_common.map_raster);
     seed for its random numbers; lidar_offset_x_m where the LiDAR sits ahead of the robot centre
-    (m); params from `parameter_descriptions()` (ROS parameters of the particle_filter node).
+    (m); params from `parameter_descriptions()` (ROS parameters of the particle_filter node;
+    list seed and lidar_offset_x_m there too: the run scripts set them as node parameters).
     It starts with a global localization (not localized) unless its params give an initial pose.
     Call order: set_scan_geometry() first; then for every odometry twist predict(), for every
     scan correct(); the flag `localized` is read after every scan.
@@ -194,8 +195,9 @@ class PathFollower(Protocol):
     """A local controller following the planned path (link "follower"), as a Nav2 controller.
 
     Built as `cls(dt, lidar_offset_x_m=..., **params)`: dt the control period (s); params from
-    `parameter_descriptions()` (ROS parameters of the pure_pursuit node). Commands while the
-    robot is localized; the wall follower commands otherwise.
+    `parameter_descriptions()` (ROS parameters of the pure_pursuit node; list lidar_offset_x_m
+    there too: the run scripts set it). Commands while the robot is localized; the wall
+    follower commands otherwise.
     """
 
     def set_path(self, points: np.ndarray) -> None:

@@ -96,7 +96,7 @@ def slam_fields(world, profile: str, trajectory: list, estimate: list, raster, m
         index = np.clip(np.searchsorted(rows[:, 0], est[:, 0] - 1e-6), 0, len(rows) - 1)
         truth = rows[index, 1:]
         hits = RayHits(world, prof.angle_min, prof.angle_increment, prof.scan_rays,
-                       prof.range_min, min(prof.range_max, mapper.p["max_range_m"]))
+                       prof.range_min, min(prof.range_max, mapper.max_range_m))
         for x, y, theta in truth:
             hits.add(x + prof.lidar_offset_x * math.cos(theta),
                      y + prof.lidar_offset_x * math.sin(theta), theta)
