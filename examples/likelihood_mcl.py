@@ -30,11 +30,13 @@ from typing import Any
 import numpy as np
 
 from amr_common.occupancy_grid import OccupancyGrid
+from amr_common.parameter_table import at_least, checked_values, ruled, vector
 from amr_common.robot import ROBOT_RADIUS
 from amr_common.scan_returns import return_mask
 from amr_common.world import World
 
-_PARAMETERS: dict[str, tuple[Any, str]] = {
+# name: (default, description); ruled() adds what values are allowed (checked_values checks).
+_PARAMETERS = ruled({
     "seed": (0, "Seed of the random numbers"),
     "lidar_offset_x_m": (0.0, "Where the LiDAR sits ahead of the robot centre [m]"),
     "particles": (3000, "Number of particles"),
@@ -53,7 +55,8 @@ _PARAMETERS: dict[str, tuple[Any, str]] = {
     "initial_pose": ([], "Start tracking from [x, y, theta] (m, m, rad); [] = global "
                          "localization"),
     "initial_pose_sigma": ([0.1, 0.1, 0.2], "Spread around initial_pose [m, m, rad]"),
-}
+}, at_least(0.0), lidar_offset_x_m=None, particles=at_least(1), beams=at_least(1),
+    sigma_hit_m=at_least(1e-3), initial_pose=vector(0, 3), initial_pose_sigma=vector(3, low=0.0))
 
 
 class LikelihoodFieldMcl:
@@ -68,12 +71,7 @@ class LikelihoodFieldMcl:
         return dict(_PARAMETERS)
 
     def __init__(self, map: World, **params: Any) -> None:
-        unknown = sorted(set(params) - set(_PARAMETERS))
-        if unknown:
-            raise ValueError(f"LikelihoodFieldMcl: unknown parameter(s) {', '.join(unknown)}")
-        self.p = {name: default for name, (default, _) in _PARAMETERS.items()} | params
-        if int(self.p["particles"]) < 1 or int(self.p["beams"]) < 1:
-            raise ValueError("LikelihoodFieldMcl: particles and beams must be >= 1")
+        self.p = checked_values(_PARAMETERS, params, "LikelihoodFieldMcl")  # ValueError
         self._map = map
         self.rng = np.random.default_rng(int(self.p["seed"]))
         grid = OccupancyGrid.from_world(map, float(self.p["field_resolution_m"]))

@@ -23,9 +23,10 @@ from typing import Any
 
 import numpy as np
 
+from amr_common.parameter_table import above, checked_values, ruled
 from amr_common.robot import MAX_ANGULAR_SPEED, ROBOT_RADIUS
 
-_PARAMETERS: dict[str, tuple[Any, str]] = {
+_PARAMETERS = ruled({
     "speed_mps": (0.15, "Cruise speed [m/s]"),
     "lookahead_m": (0.15, "Distance of the target point along the path [m]"),
     "rotate_angle_rad": (0.8, "Turn in place while the target is more than this off the "
@@ -35,7 +36,7 @@ _PARAMETERS: dict[str, tuple[Any, str]] = {
     "goal_tolerance_m": (0.02, "Stop within this of the path's end [m]"),
     "lidar_offset_x_m": (0.0, "Where the LiDAR sits ahead of the robot centre [m] (not used: "
                               "this follower ignores the scan)"),
-}
+}, above(0.0), lidar_offset_x_m=None)
 
 
 class PlainPursuit:
@@ -50,11 +51,8 @@ class PlainPursuit:
         return dict(_PARAMETERS)
 
     def __init__(self, dt: float, **params: Any) -> None:
-        unknown = sorted(set(params) - set(_PARAMETERS))
-        if unknown:
-            raise ValueError(f"PlainPursuit: unknown parameter(s) {', '.join(unknown)}")
         self.dt = float(dt)
-        self.p = {name: default for name, (default, _) in _PARAMETERS.items()} | params
+        self.p = checked_values(_PARAMETERS, params, "PlainPursuit")  # ValueError
         self.clear_path()
 
     @property

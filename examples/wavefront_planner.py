@@ -27,14 +27,15 @@ import numpy as np
 
 from amr_common.geometry import without_repeats
 from amr_common.occupancy_grid import OccupancyGrid
+from amr_common.parameter_table import above, checked_values, ruled
 from amr_common.world import World
 
-_PARAMETERS: dict[str, tuple[Any, str]] = {
+_PARAMETERS = ruled({
     "resolution_m": (0.02, "Grid cell size [m]"),
     "clearance_m": (0.15, "A cell is free when its centre keeps this from every wall [m]"),
     "snap_m": (0.1, "A start or goal in the inflated walls joins the nearest free cell this "
                     "close [m]"),
-}
+}, above(0.0))
 _NEIGHBOURS = [(-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)]
 
 
@@ -54,10 +55,7 @@ class WavefrontPlanner:
         return dict(_PARAMETERS)
 
     def __init__(self, map: World, **params: Any) -> None:
-        unknown = sorted(set(params) - set(_PARAMETERS))
-        if unknown:
-            raise ValueError(f"WavefrontPlanner: unknown parameter(s) {', '.join(unknown)}")
-        self.p = {name: default for name, (default, _) in _PARAMETERS.items()} | params
+        self.p = checked_values(_PARAMETERS, params, "WavefrontPlanner")  # ValueError
         self.grid = OccupancyGrid.from_world(map, float(self.p["resolution_m"]))
         self.free = self.grid.clearance >= float(self.p["clearance_m"])
 

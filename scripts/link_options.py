@@ -84,8 +84,9 @@ def check_particle_filter(args, script: str, set_by_script: dict[str, str]) -> N
     table = {**node_table, **PARAMETERS}
     unknown = [name for name in args.pf_overrides if name not in table]
     if unknown:
-        raise ValueError(f"--pf-param {', '.join(unknown)}: no such parameter of the particle "
-                         f"filter node with localizer {spec}; known: {', '.join(sorted(table))}")
+        with_class = "" if spec == DEFAULT_LOCALIZER else f" with localizer {spec}"
+        raise ValueError(f"--pf-param {', '.join(unknown)}: no such particle filter parameter"
+                         f"{with_class}; known: {', '.join(sorted(table))}")
     args.pf_overrides, problems = typed_values(table, args.pf_overrides)
     if not problems:
         node_values = {name: default for name, (default, _) in node_table.items()}
