@@ -43,9 +43,10 @@ REPO = Path(__file__).resolve().parent.parent
 if str(REPO) not in sys.path:  # run from a checkout without installing
     sys.path.insert(0, str(REPO))
 
+from link_options import add_link_options  # noqa: E402
+
 from amr_common.controller_loader import (  # noqa: E402
     DEFAULT_LOCALIZER,
-    LINKS,
     ControllerSpecError,
     load_controller_class,
 )
@@ -108,13 +109,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="control period in s (default 0.05)")
     parser.add_argument("--controller", default=None, metavar="MODULE:CLASS",
                         help=f"controller class (default {DEFAULT_CONTROLLER})")
-    for link, what in (("localizer", "with --localize or --goals: the localizer "
-                                     "(amr_common.interfaces.Localizer)"),
-                       ("planner", "with --goals: the planner (amr_common.interfaces.Planner)"),
-                       ("follower", "with --goals: the path follower "
-                                    "(amr_common.interfaces.PathFollower)")):
-        parser.add_argument(f"--{link}", default=None, metavar="MODULE:CLASS",
-                            help=f"{what} class (default {LINKS[link][1]})")
+    add_link_options(parser, EVALUATE_NEEDS)
     parser.add_argument("--params-file", default=None,
                         help="ROS 2 params YAML for the controller (default, like run_sim.py: "
                         "amr_control/params/sim.yaml when it exists; 'none' for class defaults)")
@@ -170,7 +165,7 @@ def resolve_settings(args: argparse.Namespace) -> dict:
     if args.config:
         settings.update(load_config(args.config))
     for key in ("worlds", "map", "starts", "goals", "pose_source", "profiles", "seeds",
-                "duration", "dt", "controller", "params_file", "jobs", *LINKS_SWAPPED):
+                "duration", "dt", "controller", "params_file", "jobs", *EVALUATE_NEEDS):
         value = getattr(args, key)
         if value is not None:
             settings[key] = value
@@ -208,7 +203,9 @@ def resolve_settings(args: argparse.Namespace) -> dict:
     return settings
 
 
-LINKS_SWAPPED = ("localizer", "planner", "follower")  # --localizer ... (and config keys)
+# --localizer, --planner, --follower (and the config keys): what each goes with.
+EVALUATE_NEEDS = {"localizer": "--localize or --goals with the filter's pose",
+                  "planner": "--goals", "follower": "--goals"}
 
 
 def check_links(args: argparse.Namespace, settings: dict) -> dict[str, str]:
@@ -222,9 +219,8 @@ def check_links(args: argparse.Namespace, settings: dict) -> dict[str, str]:
                                                  and settings["pose_source"] == "filter")),
             "planner": bool(settings["goals"]), "follower": bool(settings["goals"])}
     try:
-        return load_links({link: settings.get(link) for link in LINKS_SWAPPED}, runs, {
-            "localizer": "--localize or --goals with the filter's pose",
-            "planner": "--goals", "follower": "--goals"})
+        return load_links({link: settings.get(link) for link in EVALUATE_NEEDS}, runs,
+                          EVALUATE_NEEDS)
     except ControllerSpecError:
         raise
     except ValueError as exc:

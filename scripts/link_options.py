@@ -19,23 +19,29 @@ def add_localization_options(parser) -> None:
                         "--pf-param beams:=90")
 
 
-# The links run_sim.py and run_robot.py can swap, each a node parameter of the same name.
+# The links the scripts can swap (in the ROS graph each is a node parameter of the same name).
 LINK_OPTIONS = {
-    "localizer": "a localizer (amr_common.interfaces.Localizer) for the particle filter "
-                 "node, e.g. examples.likelihood_mcl:LikelihoodFieldMcl",
-    "planner": "a planner (amr_common.interfaces.Planner) for the planner node, e.g. "
+    "localizer": "a localizer (amr_common.interfaces.Localizer), e.g. "
+                 "examples.likelihood_mcl:LikelihoodFieldMcl",
+    "planner": "a planner (amr_common.interfaces.Planner), e.g. "
                "examples.wavefront_planner:WavefrontPlanner",
-    "follower": "a path follower (amr_common.interfaces.PathFollower) for the pure pursuit "
-                "node, e.g. examples.plain_pursuit:PlainPursuit",
+    "follower": "a path follower (amr_common.interfaces.PathFollower), e.g. "
+                "examples.plain_pursuit:PlainPursuit",
 }
+RUN_SCRIPT_NEEDS = {"localizer": "--localize or --goal", "planner": "--goal",
+                    "follower": "--goal"}
 
 
-def add_link_options(parser, links=("localizer", "planner", "follower")) -> None:
-    """--localizer, --planner, --follower MODULE:CLASS: the user's class for that link."""
+def add_link_options(parser, needs: dict[str, str] = RUN_SCRIPT_NEEDS) -> None:
+    """--localizer, --planner, --follower MODULE:CLASS: the user's class for that link.
+
+    needs: link -> the options it goes with (said in the help).
+    """
     from amr_common.controller_loader import LINKS
-    for link in links:
+    for link, with_options in needs.items():
         parser.add_argument(f"--{link}", default=None, metavar="MODULE:CLASS",
-                            help=f"{LINK_OPTIONS[link]} (default {LINKS[link][1]})")
+                            help=f"with {with_options}: {LINK_OPTIONS[link]} (default "
+                            f"{LINKS[link][1]})")
 
 
 def check_links(given: dict[str, str | None], runs: dict[str, bool],
@@ -61,8 +67,7 @@ def check_link_options(args, needs: dict[str, bool]) -> dict[str, str]:
     is refused). Returns {link: spec} of the given ones (the node parameters to set).
     """
     return check_links({link: getattr(args, link, None) for link in needs}, needs,
-                       {"localizer": "--localize or --goal", "planner": "--goal",
-                        "follower": "--goal"})
+                       RUN_SCRIPT_NEEDS)
 
 
 def check_particle_filter(args, script: str, set_by_script: dict[str, str]) -> None:
