@@ -6,7 +6,8 @@ slam node and the mapping runs", has the why of each choice):
     .venv/bin/amr_slam --ros-args -p autostart:=true -p output_prefix:=$HOME/maps/room
     ros2 service call /slam/save_map amr_msgs/srv/SaveMap "{name: $HOME/maps/room}"
 
-Thin: messages become Mapper.update calls, results become messages.
+Thin: messages become update calls on the `mapper` parameter's class (MODULE:CLASS of
+amr_common.interfaces.Mapper, default the Mapper), results become messages.
 - In: every new /scan (best effort; a scan repeating the previous one's ranges is skipped: the
   lockstep simulator re-sends its held scan) with the odometry POSE interpolated at its stamp
   (amr_common.pose_history) from `odometry_topic` (nav_msgs/Odometry, default /odometry); a
