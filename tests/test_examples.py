@@ -125,3 +125,34 @@ def test_a_class_that_cannot_be_loaded_is_one_line_and_exit_2(capsys, script, ar
     assert code == 2
     assert len([line for line in err if not line.startswith("usage")]) == 1
     assert message in err[-1]
+
+
+@pytest.mark.parametrize("node_module, node_class, link, spec, tuning", [
+    ("amr_localization.particle_filter_node", "ParticleFilterNode", "localizer", MCL,
+     "particles"),
+    ("amr_planning.planner_node", "PlannerNode", "planner", WAVEFRONT, "clearance_m"),
+    ("amr_control.pure_pursuit_node", "PurePursuitNode", "follower", PURSUIT, "lookahead_m"),
+])
+def test_each_node_loads_its_link_from_its_parameter(ros, node_module, node_class, link,
+                                                     spec, tuning):
+    import importlib
+
+    from rclpy.parameter import Parameter
+    cls = getattr(importlib.import_module(node_module), node_class)
+    node = ros.add(cls(f"{link}_node", context=ros.context, parameter_overrides=[
+        Parameter(link, value=spec), Parameter(tuning, value=0.5 if tuning != "particles"
+                                               else 200)]))
+    assert node.get_parameter(tuning).value in (0.5, 200)  # the class's own, declared
+    assert node.trigger_configure().name == "SUCCESS"
+    wrong = ros.add(cls(f"{link}_wrong", context=ros.context, parameter_overrides=[
+        Parameter(link, value="amr_mapping.mapper:Mapper")]))
+    assert wrong.trigger_configure().name == "FAILURE"  # logged: what the class lacks
+
+
+def test_the_slam_node_refuses_a_mapper_without_the_interface(ros):
+    from rclpy.parameter import Parameter
+
+    from amr_mapping.slam_node import SlamNode
+    node = ros.add(SlamNode("slam_wrong", context=ros.context, parameter_overrides=[
+        Parameter("mapper", value=MCL)]))
+    assert node.trigger_configure().name == "FAILURE"
