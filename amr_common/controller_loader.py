@@ -1,7 +1,11 @@
-"""Load a user's controller class from "MODULE:CLASS" and parse `name:=value` overrides.
+"""Load a user's class for a link of the chain from "MODULE:CLASS"; parse `name:=value` overrides.
 
-The same spec works in the wall_follower node (`controller` parameter), run_sim.py and
-evaluate.py (`--controller`), so users can run their own `compute_commands` class anywhere.
+One loader for every link (amr_common.interfaces): the controller (wall follower), the
+localizer, the planner, the path follower and the mapper. The same spec works as a node
+parameter (`controller`, `localizer`, `planner`, `follower`, `mapper`) and in run_sim.py,
+evaluate.py and tune.py (`--controller`, `--localizer`, ...), so users can run their own class
+anywhere. A spec that cannot be loaded, or a class that lacks a member of its interface, is a
+ControllerSpecError naming what is missing.
 """
 from __future__ import annotations
 
@@ -10,32 +14,65 @@ import math
 import re
 from typing import Any
 
+from amr_common import interfaces
+
 DEFAULT_CONTROLLER = "amr_control.wall_follower:WallFollower"
+DEFAULT_LOCALIZER = "amr_localization.particle_filter:ParticleFilter"
+DEFAULT_PLANNER = "amr_planning.planner:Planner"
+DEFAULT_FOLLOWER = "amr_control.pure_pursuit:PurePursuit"
+DEFAULT_MAPPER = "amr_mapping.mapper:Mapper"
+
+# link -> (its interface, the project's class)
+LINKS: dict[str, tuple[type, str]] = {
+    "controller": (interfaces.Controller, DEFAULT_CONTROLLER),
+    "localizer": (interfaces.Localizer, DEFAULT_LOCALIZER),
+    "planner": (interfaces.Planner, DEFAULT_PLANNER),
+    "follower": (interfaces.PathFollower, DEFAULT_FOLLOWER),
+    "mapper": (interfaces.Mapper, DEFAULT_MAPPER),
+}
+_SIGNATURES = {"compute_commands": "compute_commands(z_scan, z_v, z_w)"}
 
 
 class ControllerSpecError(ValueError):
-    """The controller spec cannot be loaded; the message says why."""
+    """A class spec (any link) cannot be loaded; the message says why."""
+
+
+def load_class(spec: str, link: str = "controller") -> type:
+    """Import "package.module:ClassName" for `link` and check it has its interface's members.
+
+    ControllerSpecError (one line, naming the link and the spec) for a malformed spec, a module
+    that does not import, a missing class, or a class that lacks members of the interface.
+    """
+    interface, default = LINKS[link]
+    module_name, sep, class_name = str(spec).strip().partition(":")
+    if not sep or not module_name or not class_name:
+        raise ControllerSpecError(f"{link} '{spec}' must look like MODULE:CLASS, "
+                                  f"e.g. '{default}'")
+    try:
+        module = importlib.import_module(module_name)
+    except Exception as exc:  # ImportError, or whatever the module raises (SyntaxError, ...)
+        raise ControllerSpecError(f"{link} '{spec}': cannot import module "
+                                  f"'{module_name}': {_one_line(exc)}") from exc
+    cls = getattr(module, class_name, None)
+    if cls is None:
+        raise ControllerSpecError(f"{link} '{spec}': module '{module_name}' has no "
+                                  f"'{class_name}'")
+    missing = interfaces.missing_members(cls, interface)
+    if missing:
+        names = ", ".join(_SIGNATURES.get(name, name) for name in missing)
+        raise ControllerSpecError(f"{link} '{spec}' has no {names} (the {interface.__name__} "
+                                  f"interface, amr_common.interfaces)")
+    return cls
+
+
+def link_class(spec_or_class: Any, link: str) -> type:
+    """A class for `link`: loaded from a "MODULE:CLASS" string, or the class itself."""
+    return load_class(spec_or_class, link) if isinstance(spec_or_class, str) else spec_or_class
 
 
 def load_controller_class(spec: str) -> type:
     """Import "package.module:ClassName" and check it has compute_commands()."""
-    module_name, sep, class_name = spec.strip().partition(":")
-    if not sep or not module_name or not class_name:
-        raise ControllerSpecError(f"controller '{spec}' must look like MODULE:CLASS, "
-                                  f"e.g. '{DEFAULT_CONTROLLER}'")
-    try:
-        module = importlib.import_module(module_name)
-    except Exception as exc:  # ImportError, or whatever the module raises (SyntaxError, ...)
-        raise ControllerSpecError(f"controller '{spec}': cannot import module "
-                                  f"'{module_name}': {_one_line(exc)}") from exc
-    cls = getattr(module, class_name, None)
-    if cls is None:
-        raise ControllerSpecError(f"controller '{spec}': module '{module_name}' has no "
-                                  f"'{class_name}'")
-    if not callable(getattr(cls, "compute_commands", None)):
-        raise ControllerSpecError(f"controller '{spec}' has no compute_commands(z_scan, z_v, "
-                                  f"z_w) method")
-    return cls
+    return load_class(spec, "controller")
 
 
 def _one_line(exc: BaseException) -> str:
@@ -102,3 +139,14 @@ def described_parameters(controller_class: Any) -> dict[str, tuple[Any, str]] | 
     """
     described = getattr(controller_class, "parameter_descriptions", None)
     return dict(described()) if callable(described) else None
+
+
+def link_parameters(cls: Any, own: Any = ()) -> dict[str, tuple[Any, str]]:
+    """The tuning parameters a node declares for a loaded class: name -> (default, description).
+
+    Its `parameter_descriptions()` without the node's own names (`own`) and use_sim_time.
+    """
+    table = described_parameters(cls) or {}
+    return {name: spec for name, spec in table.items()
+            if name not in own and name != "use_sim_time"}
+

@@ -155,3 +155,25 @@ def _as_declared(name: str, value: Any, type_: int) -> tuple[Any, str | None]:
 
 __all__ = ["ParameterTable", "parameter_type", "declare_parameters", "ranged_descriptor",
            "read_parameters", "typed_values", "finite"]
+
+
+def declare_link(node: Node, link: str, own: ParameterTable) -> tuple[type | None, dict]:
+    """Declare the node's `link` parameter and its class's tuning ones; (class, tuning table).
+
+    The `link` parameter is a MODULE:CLASS (amr_common.interfaces); the tuning parameters come
+    from the class's `parameter_descriptions()`.
+
+    Read at construction so the class's parameters can be declared (and set with -p). A class
+    that cannot be loaded is logged, (None, {}) returned: configure then fails with the reason.
+    """
+    from amr_common.controller_loader import ControllerSpecError, link_parameters, load_class
+    declare_parameters(node, {link: own[link]})
+    try:
+        cls = load_class(str(node.get_parameter(link).value), link)
+    except ControllerSpecError as exc:
+        node.get_logger().error(f"{exc} (configure will fail)")
+        return None, {}
+    tuning = link_parameters(cls, own)
+    declare_parameters(node, tuning)
+    return cls, tuning
+

@@ -166,7 +166,14 @@ def _ray_directions(angle_min: float, angle_increment: float, rays: int):
 
 
 class PurePursuit:
-    """Regulated pure pursuit of a path (see the module docstring)."""
+    """Regulated pure pursuit of a path (see the module docstring).
+
+    Implements amr_common.interfaces.PathFollower.
+    """
+
+    # Instance attributes of the PathFollower interface (set by the path and control methods).
+    state: str
+    arrived: bool
 
     def __init__(self, dt: float, **params: Any) -> None:
         """dt: control period [s]; params: names of `parameter_descriptions()`."""
@@ -180,6 +187,16 @@ class PurePursuit:
     def parameter_descriptions() -> dict[str, tuple[Any, str]]:
         """Each tuning parameter: name -> (default, description with units)."""
         return dict(PARAMETERS)
+
+    @property
+    def robot_radius_m(self) -> float:
+        """Footprint radius (m) the scan clearances are computed for."""
+        return float(self.params["robot_radius_m"])
+
+    @property
+    def lidar_offset_x_m(self) -> float:
+        """Where the LiDAR sits ahead of the robot centre (m)."""
+        return float(self.params["lidar_offset_x_m"])
 
     # --- the path ------------------------------------------------------------------------
     def clear_path(self) -> None:

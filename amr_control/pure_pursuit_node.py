@@ -1,7 +1,8 @@
 """The `pure_pursuit` lifecycle node: /pose (localized) + /path (+ /scan) -> /cmd_vel.
 
-Thin: the algorithm is amr_control.pure_pursuit.PurePursuit. Handover with the wall follower
-(which commands while /pose is NOT localized):
+Thin: the algorithm is the `follower` parameter's class (MODULE:CLASS of
+amr_common.interfaces.PathFollower; default amr_control.pure_pursuit.PurePursuit). Handover with
+the wall follower (which commands while /pose is NOT localized):
 - Simulation mode (`simulation: true`, lockstep): EVERY localized /pose gets exactly one /cmd_vel
   stamped like the pose: zero until a path has come, the pursuit's command while following, zero
   again once stopped at the path's end. A non-localized /pose gets none (the wall follower
@@ -31,10 +32,12 @@ from nav_msgs.msg import Path
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import LaserScan
 
+from amr_common.controller_loader import DEFAULT_FOLLOWER
 from amr_common.geometry import polyline_length
+from amr_common.interfaces import PathFollower
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameter_table import Param, ruled
-from amr_common.parameters import declare_parameters, read_parameters
+from amr_common.parameters import declare_link, declare_parameters, read_parameters
 from amr_common.qos import LATCHED, RELIABLE_10, scan_qos
 from amr_common.ros_conversions import (
     path_points,
@@ -50,7 +53,7 @@ from amr_control.command_output import (
     command_parameter_problems,
     limit_command,
 )
-from amr_control.pure_pursuit import PurePursuit, scan_clearance, scan_free_ahead
+from amr_control.pure_pursuit import scan_clearance, scan_free_ahead
 
 _NODE_PARAMETERS: dict[str, Param] = ruled({
     "simulation": (True, "true: answer each localized /pose (lockstep with the simulator); "
@@ -59,6 +62,9 @@ _NODE_PARAMETERS: dict[str, Param] = ruled({
     **COMMAND_PARAMETERS,
     "data_timeout": (0.5, "Robot mode: command zero when the newest /pose is older than this; "
                           "a /scan older than this is not used (seconds)"),
+    "follower": (DEFAULT_FOLLOWER, "Path follower class as MODULE:CLASS implementing "
+                                   "amr_common.interfaces.PathFollower (its tuning values "
+                                   "become parameters of this node)"),
     "frame_id": ("map", "Frame of /pose and /path"),
     "pose_topic": ("/pose", "amr_msgs/PoseStamped input (the particle filter's estimate)"),
     "path_topic": ("/path", "nav_msgs/Path input (transient local, from the planner)"),
@@ -80,11 +86,12 @@ class PurePursuitNode(CommandingNode):
     def __init__(self, node_name: str = "pure_pursuit", **kwargs) -> None:
         """Declare the parameters; nothing is created before on_configure."""
         super().__init__(node_name, **kwargs)
-        declare_parameters(self, {**_NODE_PARAMETERS, **PurePursuit.parameter_descriptions()})
+        declare_parameters(self, _NODE_PARAMETERS)
+        self._follower_class, self._tuning = declare_link(self, "follower", _NODE_PARAMETERS)
         self._reset_runtime()
 
     def _reset_runtime(self) -> None:
-        self.pursuit: PurePursuit | None = None
+        self.pursuit: PathFollower | None = None
         self._output: CommandOutput | None = None
         self._subscriptions: list = []
         self._timer = None
@@ -103,14 +110,16 @@ class PurePursuitNode(CommandingNode):
         subscriptions. FAILURE with a logged reason on bad parameters.
         """
         p, problems = read_parameters(self, _NODE_PARAMETERS)
-        tuning, tuning_problems = read_parameters(self, PurePursuit.parameter_descriptions())
+        tuning, tuning_problems = read_parameters(self, self._tuning)
         problems += tuning_problems
+        if self._follower_class is None:
+            problems.append(f"follower '{p['follower']}' cannot be loaded (see the error above)")
         if not problems:
             problems = command_parameter_problems(p)
         if not problems:
             try:
-                pursuit = PurePursuit(p["dt"], **tuning)
-            except (TypeError, ValueError) as exc:  # its checks of several parameters
+                pursuit = self._follower_class(p["dt"], **tuning)
+            except Exception as exc:  # its checks of several parameters; a user's class: any
                 problems.append(str(exc))
         if problems:
             self.get_logger().error("configure failed: " + "; ".join(problems))
@@ -129,10 +138,7 @@ class PurePursuitNode(CommandingNode):
             self.create_subscription(Path, p["path_topic"], self._on_path, LATCHED),
             self.create_subscription(LaserScan, p["scan_topic"], self._on_scan, scan_qos(10))]
         mode = "simulation (lockstep)" if self.simulation else f"robot (timer every {self.dt} s)"
-        self.get_logger().info(f"configured: {mode}, lookahead "
-                               f"{pursuit.params['min_lookahead_m']}-"
-                               f"{pursuit.params['max_lookahead_m']} m, up to "
-                               f"{pursuit.params['max_linear_speed_mps']} m/s")
+        self.get_logger().info(f"configured: {mode}, follower {p['follower']}")
         return TransitionCallbackReturn.SUCCESS
 
     def release(self) -> None:
@@ -188,8 +194,8 @@ class PurePursuitNode(CommandingNode):
                     message.range_max)
         if len(message.ranges) == 0 or not all(math.isfinite(v) for v in geometry):
             return None, None
-        p = self.pursuit.params
-        scan = (scan_ranges(message), *geometry, p["lidar_offset_x_m"], p["robot_radius_m"])
+        scan = (scan_ranges(message), *geometry, self.pursuit.lidar_offset_x_m,
+                self.pursuit.robot_radius_m)
         return scan_clearance(*scan), scan_free_ahead(*scan)
 
     def _on_pose(self, message) -> None:
@@ -287,12 +293,10 @@ class PurePursuitNode(CommandingNode):
             self.get_logger().info("stopped at the end of the path")
         elif state == "off_path":
             self.get_logger().warning(
-                f"farther than {self.pursuit.params['max_path_deviation_m']} m from the path: "
-                f"commanding zero until back on it or a new path comes")
+                "too far from the path: commanding zero until back on it or a new path comes")
         elif state == "blocked":  # (range noise may let it creep on and halt again)
             self.get_logger().warning(
-                f"something the map lacks is in the way (/scan): halted "
-                f"{self.pursuit.params['obstacle_stop_distance_m']} m short of it, waiting",
+                "something the map lacks is in the way (/scan): halted short of it, waiting",
                 throttle_duration_sec=10.0)
 
 

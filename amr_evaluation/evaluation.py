@@ -20,6 +20,9 @@ from typing import Any, Callable, Mapping, Sequence
 
 from amr_common.controller_loader import (
     DEFAULT_CONTROLLER,
+    DEFAULT_FOLLOWER,
+    DEFAULT_LOCALIZER,
+    DEFAULT_PLANNER,
     ControllerSpecError,
     load_controller_class,
     parse_overrides,
@@ -65,6 +68,10 @@ class EpisodeSpec:
     goal: str | None = None  # a named goal or "x,y": a navigation episode
     pose_source: str = "filter"  # of a navigation episode: "filter" or "truth"
     map: str | None = None  # the filter's and the planner's map (None: the world)
+    # The links' classes (MODULE:CLASS, amr_common.interfaces) of a navigation episode.
+    localizer: str = DEFAULT_LOCALIZER
+    planner: str = DEFAULT_PLANNER
+    follower: str = DEFAULT_FOLLOWER
 
     def __post_init__(self) -> None:
         if isinstance(self.params, Mapping):
@@ -107,7 +114,8 @@ def expand_grid(worlds: str | Sequence[str], starts: str | Sequence[str] = "all"
                 params: Mapping[str, Any] | None = None,
                 goals: str | Sequence[str] | None = None,
                 pose_source: str = "filter", map: str | None = None,
-                warnings: list[str] | None = None) -> list[EpisodeSpec]:
+                warnings: list[str] | None = None,
+                links: Mapping[str, str] | None = None) -> list[EpisodeSpec]:
     """Every combination of world x start [x goal] x profile x seed, in that nesting order.
 
     `worlds` "all" means every bundled world; `starts` "all" means every named start of each world.
@@ -119,7 +127,7 @@ def expand_grid(worlds: str | Sequence[str], starts: str | Sequence[str] = "all"
     `map`: the map of the filter and the planner while the simulator drives in the
     world (amr_common.map_vs_world; one world only): the goals are checked against it, and
     what the map and the world disagree on (a start the map lacks, a goal the world blocks) is
-    appended to `warnings`.
+    appended to `warnings`. `links`: {"localizer" | "planner" | "follower": MODULE:CLASS}.
     """
     from amr_common.world import World, WorldError, bundled_worlds
     from amr_sim.profiles import get_profile
@@ -182,7 +190,7 @@ def expand_grid(worlds: str | Sequence[str], starts: str | Sequence[str] = "all"
                               f"{pose_source!r}")
     specs = [EpisodeSpec(world=w, start=s, profile=p, seed=seed, duration=duration, dt=dt,
                          controller=controller, params=dict(params or {}), goal=g,
-                         pose_source=pose_source, map=map)
+                         pose_source=pose_source, map=map, **dict(links or {}))
              for w in world_names for s in loaded[w] for g in world_goals[w]
              for p in profile_names for seed in seed_list]
     if len(specs) > MAX_EPISODES:
@@ -276,7 +284,8 @@ def run_one(spec: EpisodeSpec, trajectory: bool = True) -> EpisodeOutcome:
                 spec.world, spec.start, spec.goal, profile=spec.profile, seed=spec.seed,
                 duration=spec.duration, dt=spec.dt, pose_source=spec.pose_source,
                 wall_follower=controller_class(spec.dt, **params),
-                record_trajectory=trajectory, map=spec.map)
+                record_trajectory=trajectory, map=spec.map, localizer=spec.localizer,
+                planner_class=spec.planner, follower=spec.follower)
         else:
             result = run_episode(spec.world, spec.start, profile=spec.profile, seed=spec.seed,
                                  duration=spec.duration, dt=spec.dt,

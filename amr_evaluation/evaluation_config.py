@@ -17,7 +17,8 @@ from amr_common.controller_loader import described_parameters
 from amr_common.parameter_table import finite
 
 CONFIG_KEYS = ("worlds", "map", "starts", "goals", "pose_source", "profiles", "seeds", "duration",
-               "dt", "controller", "params_file", "params", "jobs")
+               "dt", "controller", "params_file", "params", "jobs", "localizer", "planner",
+               "follower")
 POSE_SOURCES = ("filter", "truth")
 MAX_EPISODES = 10_000
 
@@ -173,9 +174,10 @@ def load_config(path: str | os.PathLike) -> dict[str, Any]:
             parse_start_list(config["starts"])
         except EvaluationError as exc:
             raise EvaluationError(f"{path}: 'starts': {exc}") from None
-    if "controller" in config and not isinstance(config["controller"], str):
-        raise EvaluationError(f"{path}: 'controller' must be MODULE:CLASS, got "
-                              f"{config['controller']!r}")
+    for key in ("controller", "localizer", "planner", "follower"):
+        if key in config and not isinstance(config[key], str):
+            raise EvaluationError(f"{path}: '{key}' must be MODULE:CLASS, got "
+                                  f"{config[key]!r}")
     for key in ("duration", "dt"):
         if key in config and (isinstance(config[key], bool)
                               or not isinstance(config[key], (int, float))):

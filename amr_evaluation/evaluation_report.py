@@ -33,8 +33,8 @@ RESULT_COLUMNS = ("world", "start", "profile", "seed", "sim_time_s", "collisions
 NAVIGATION_COLUMNS = ("world", "start", "goal", "profile", "seed", "sim_time_s", "collisions",
                       "min_clearance_m", "distance_m", "goal_reached", "localized_time_s",
                       "goal_reached_time_s", "stopped_time_s", "final_position_error_m",
-                      "path_length_m", "plans", "stalled", "invalid_commands", "wall_time_s",
-                      "error")
+                      "path_length_m", "plans", "stalled", "invalid_commands",
+                      "false_localizations", "tracking_error_mean_m", "wall_time_s", "error")
 _SPEC_COLUMNS = {"world", "start", "goal", "profile", "seed", "wall_time_s", "error"}
 
 

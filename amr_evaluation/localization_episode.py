@@ -36,11 +36,11 @@ from typing import Any
 
 import numpy as np
 
+from amr_common.controller_loader import DEFAULT_LOCALIZER, link_class
 from amr_common.geometry import wrap_angles
 from amr_common.map_vs_world import load_map
 from amr_common.world import World
 from amr_evaluation.episode import default_controller, tell_scan_geometry
-from amr_localization.particle_filter import ParticleFilter
 from amr_sim.profiles import SensorProfile, get_profile
 from amr_sim.simulator import Simulator
 
@@ -123,13 +123,15 @@ def run_localization_episode(world: World | str, start=None,
                              kidnap: tuple[float, float, float, float] | None = None,
                              filter_params: dict[str, Any] | None = None, controller=None,
                              stop_when_localized: bool = False, record: bool = True,
-                             map: World | str | None = None) -> LocalizationResult:
+                             map: World | str | None = None,
+                             localizer: str | type = DEFAULT_LOCALIZER) -> LocalizationResult:
     """Run the wall follower with the particle filter for `duration` simulated seconds.
 
     kidnap (t, x, y, theta): teleport the robot at simulated time t (Simulator.teleport).
-    filter_params: ParticleFilter parameters (seed and lidar_offset_x_m default to the episode's
-    seed and the profile's LiDAR position). map: the filter's map (None: the world; see the
-    module docstring).
+    localizer: the class (or its MODULE:CLASS) of amr_common.interfaces.Localizer, default the
+    ParticleFilter. filter_params: its parameters (seed and lidar_offset_x_m default to the
+    episode's seed and the profile's LiDAR position). map: the filter's map (None: the world;
+    see the module docstring).
     """
     world_obj = world if isinstance(world, World) else World.load(world)
     map_obj = load_map(map, world_obj)
@@ -140,7 +142,7 @@ def run_localization_episode(world: World | str, start=None,
     geometry = sim.scan_geometry
     tell_scan_geometry(controller, geometry)
     params = {"seed": seed, "lidar_offset_x_m": prof.lidar_offset_x, **(filter_params or {})}
-    pf = ParticleFilter(map_obj, **params)
+    pf = link_class(localizer, "localizer")(map_obj, **params)
     tell_scan_geometry(pf, geometry, with_rays=True)
 
     n_steps = int(round(float(duration) / sim.dt))
@@ -150,7 +152,7 @@ def run_localization_episode(world: World | str, start=None,
     truth[0] = (0.0, *sim.pose)
     estimate[0] = (0.0, *pf.estimate, 0.0)
     distances[0] = 0.0
-    particles_max = pf.particle_count
+    particles_max = len(pf.particles)
     snapshot: list[list[float]] = []
     odom_period = prof.odom_period
     next_odom = 0.0
@@ -186,12 +188,12 @@ def run_localization_episode(world: World | str, start=None,
             tell_scan_geometry(pf, geometry, with_rays=True)
         pf.correct(z_scan, new_scan=new_scan)
         filter_time += time.perf_counter() - started
-        particles_max = max(particles_max, pf.particle_count)
+        particles_max = max(particles_max, len(pf.particles))
         truth[k] = (sim.time, *sim.pose)
         estimate[k] = (sim.time, *pf.estimate, float(pf.localized))
         distances[k] = sim.distance
         if record and not snapshot and pf.localized:
-            snapshot = pf.particles[::max(1, pf.particle_count // 500)].tolist()
+            snapshot = np.asarray(pf.particles)[::max(1, len(pf.particles) // 500)].tolist()
     wall_time = time.perf_counter() - wall_start
 
     start_label = start if isinstance(start, str) else (
@@ -203,7 +205,7 @@ def run_localization_episode(world: World | str, start=None,
         seed=int(seed), steps=sim.steps, sim_time_s=sim.time, wall_time_s=wall_time,
         filter_wall_time_s=filter_time, collisions=sim.collisions, distance_m=sim.distance,
         global_searches=pf.global_searches, particles_max=particles_max,
-        particles_final=pf.particle_count, kidnap=list(kidnap) if kidnap else None,
+        particles_final=len(pf.particles), kidnap=list(kidnap) if kidnap else None,
         start_pose=[float(c) for c in sim.start],
         trajectory=truth.tolist() if record else [],
         estimate=estimate.tolist() if record else [],

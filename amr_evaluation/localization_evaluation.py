@@ -35,6 +35,7 @@ class LocalizationSpec:
     controller: str = "amr_control.wall_follower:WallFollower"
     controller_params: tuple[tuple[str, Any], ...] = ()
     map: str | None = None  # the filter's map (None: the world)
+    localizer: str = "amr_localization.particle_filter:ParticleFilter"  # MODULE:CLASS
 
     @property
     def label(self) -> str:
@@ -88,7 +89,8 @@ def run_one(spec: LocalizationSpec) -> LocalizationOutcome:
                                           kidnap=spec.kidnap,
                                           filter_params=dict(spec.filter_params),
                                           controller=controller_class(0.05, **params),
-                                          record=False, map=spec.map)
+                                          record=False, map=spec.map,
+                                          localizer=spec.localizer)
         return LocalizationOutcome(spec, result=result,
                                    wall_time_s=time.perf_counter() - started)
     except Exception as exc:  # one broken episode must not lose the others
@@ -241,9 +243,11 @@ def evaluate_main(specs, settings: dict[str, Any], args, out: Path, executor=Non
     controller_params = tuple(sorted(settings["params"].items()))
     local = [LocalizationSpec(s.world, s.start, s.profile, s.seed, s.duration,
                               kidnap_pose(s.world, s.start, kidnap_at) if kidnap_at else None,
-                              filter_params, settings["controller"], controller_params, s.map)
+                              filter_params, settings["controller"], controller_params, s.map,
+                              s.localizer)
              for s in specs]
-    print(f"evaluate: {len(local)} localization episodes of {settings['duration']:g} s"
+    print(f"evaluate: {len(local)} localization episodes of {settings['duration']:g} s, "
+          f"localizer {local[0].localizer if local else '-'}"
           + (f", kidnapped at {kidnap_at:g} s" if kidnap_at else "")
           + (f", the filter on map {settings['map']}" if settings.get("map") else ""),
           flush=True)
@@ -259,6 +263,7 @@ def evaluate_main(specs, settings: dict[str, Any], args, out: Path, executor=Non
     summary = summarize(outcomes)
     summary["wall_time_s"] = round(time.monotonic() - started, 1)
     summary["map"] = settings.get("map")  # the filter's map; None: each world's own
+    summary["localizer"] = local[0].localizer if local else None
     rows = [outcome_row(o) for o in outcomes]
     out.mkdir(parents=True, exist_ok=True)
     (out / "results.json").write_text(json.dumps({"summary": summary, "episodes": rows},

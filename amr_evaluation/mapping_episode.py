@@ -169,7 +169,7 @@ def run_mapping_episode(world: World | str, start=None, profile: str | SensorPro
                          "loop_closure": bool(loop_closure), **(mapper_params or {})})
     odometry = DriftingOdometry(drift, seed)
     hits = RayHits(world_obj, prof.angle_min, prof.angle_increment, prof.scan_rays,
-                   prof.range_min, min(prof.range_max, mapper.p["max_range_m"]))
+                   prof.range_min, min(prof.range_max, mapper.max_range_m))
     frame = sim.start if world_frame else (0.0, 0.0, 0.0)
     run = _explore(sim, controller, mapper, odometry, hits, duration, frame)
     raster = mapper.occupancy_raster()

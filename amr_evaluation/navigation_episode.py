@@ -35,11 +35,18 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from amr_common.controller_loader import (
+    DEFAULT_FOLLOWER,
+    DEFAULT_LOCALIZER,
+    DEFAULT_PLANNER,
+    link_class,
+)
+from amr_common.geometry import polyline_length
 from amr_common.map_vs_world import load_map, resolve_goal_on_map
 from amr_common.world import World
-from amr_control.pure_pursuit import PurePursuit, scan_clearance, scan_free_ahead
+from amr_control.pure_pursuit import scan_clearance, scan_free_ahead
 from amr_evaluation.episode import default_controller, tell_scan_geometry
-from amr_planning.planner import Planner, PlanningError
+from amr_evaluation.localization_episode import localization_metrics
 from amr_sim.profiles import get_profile
 from amr_sim.simulator import Simulator
 from amr_sim.simulator_params import PARAMETERS as SIMULATOR_PARAMETERS
@@ -68,18 +75,21 @@ class GroundTruthPose:
 
 
 class ParticleFilterPose:
-    """The particle filter (amr_localization) as the pose source, fed as its node feeds it.
+    """A localizer (default the particle filter) as the pose source, fed as its node feeds it.
 
     Every step: predict with the odometry twist over dt; a new scan (the turtlebot3 profile
     refreshes it every 0.2 s) is weighed. The first measurement is weighed at once.
     """
 
-    def __init__(self, world: World, sim: Simulator, seed: int = 0, **filter_params) -> None:
-        """A filter on `world` for the profile of `sim` (its LiDAR position and scan)."""
-        from amr_localization.particle_filter import ParticleFilter  # the heavy part: lazily
+    def __init__(self, world: World, sim: Simulator, seed: int = 0,
+                 localizer: str | type = DEFAULT_LOCALIZER, **filter_params) -> None:
+        """A localizer on `world` for the profile of `sim` (its LiDAR position and scan).
+
+        localizer: an amr_common.interfaces.Localizer class, or its MODULE:CLASS.
+        """
         prof = sim.profile
         params = {"seed": seed, "lidar_offset_x_m": prof.lidar_offset_x, **filter_params}
-        self.filter = ParticleFilter(world, **params)
+        self.filter = link_class(localizer, "localizer")(world, **params)
         self._geometry = sim.scan_geometry
         tell_scan_geometry(self.filter, self._geometry, with_rays=True)
         self._scan_time: float | None = None
@@ -129,6 +139,10 @@ class NavigationResult:
     cross_track_max_m: float | None
     finish_reason: str
     invalid_commands: int = 0  # commands that were not finite numbers (the robot stopped)
+    # The pose source against the truth (amr_evaluation.localization_episode's metrics): a
+    # wrong pose declared localized (> 10 cm or 10 deg), and the error while localized.
+    false_localizations: int = 0
+    tracking_error_mean_m: float | None = None
     kidnap: list[float] | None = None  # [t, x, y, theta]
     stalled: bool = False  # localized with zero commands for stall_timeout_s before the goal
     dt: float = 0.05
@@ -179,12 +193,13 @@ def distances_to_polyline(points: np.ndarray, path: np.ndarray) -> np.ndarray:
 
 
 def make_pose_source(kind: Any, world: World, sim: Simulator, seed: int,
-                     filter_params: dict | None = None):
-    """The pose source named by `kind` ("truth", "filter") or `kind` itself (an object)."""
+                     filter_params: dict | None = None,
+                     localizer: str | type = DEFAULT_LOCALIZER):
+    """The pose source named by `kind` ("truth", "filter": `localizer`) or `kind` itself."""
     if kind == "truth":
         return GroundTruthPose()
     if kind == "filter":
-        return ParticleFilterPose(world, sim, seed, **(filter_params or {}))
+        return ParticleFilterPose(world, sim, seed, localizer, **(filter_params or {}))
     if isinstance(kind, str) or not callable(getattr(kind, "update", None)):
         raise ValueError(f"pose_source must be 'truth', 'filter' or an object with update(), "
                          f"got {kind!r}")
@@ -195,10 +210,12 @@ def run_navigation_episode(
         world: World | str, start=None, goal=None, profile: str = "ideal", seed: int = 0,
         duration: float = 300.0, dt: float = 0.05, pose_source: Any = "truth",
         filter_params: dict | None = None, kidnap: Sequence[float] | None = None,
-        planner: Planner | None = None, planner_params: dict | None = None,
+        planner: Any = None, planner_params: dict | None = None,
         pursuit_params: dict | None = None, wall_follower: Any = None,
         goal_tolerance: float = GOAL_TOLERANCE_M, stall_timeout_s: float = 30.0,
-        record_trajectory: bool = True, map: World | str | None = None) -> NavigationResult:
+        record_trajectory: bool = True, map: World | str | None = None,
+        localizer: str | type = DEFAULT_LOCALIZER, planner_class: str | type = DEFAULT_PLANNER,
+        follower: str | type = DEFAULT_FOLLOWER) -> NavigationResult:
     """Drive from `start` to `goal` and measure it; see the module docstring.
 
     start: a name, (x, y, theta) or None (the first start); goal: a name, "x,y", (x, y) or None
@@ -207,6 +224,8 @@ def run_navigation_episode(
     (t, x, y, theta): the robot is teleported at simulated time t (the filter must notice and
     relocalize). Stalled: localized and commanded zero for stall_timeout_s before reaching the
     goal (the episode then ends) - also when something the map lacks blocks the way.
+    localizer, planner_class, follower: the classes (or their MODULE:CLASS) of the links
+    (amr_common.interfaces), default the project's; the episode uses only interface members.
     """
     duration = float(duration)
     if not (math.isfinite(duration) and duration >= 0.0):
@@ -217,11 +236,12 @@ def run_navigation_episode(
     prof = get_profile(profile)
     sim = Simulator(world_obj, start=start, dt=dt, profile=prof, seed=seed)
     source_name = pose_source if isinstance(pose_source, str) else type(pose_source).__name__
-    pose_source = make_pose_source(pose_source, map_obj, sim, seed, filter_params)
-    planner = planner if planner is not None else Planner(map_obj, **(planner_params or {}))
+    pose_source = make_pose_source(pose_source, map_obj, sim, seed, filter_params, localizer)
+    if planner is None:
+        planner = link_class(planner_class, "planner")(map_obj, **(planner_params or {}))
     params = {"lidar_offset_x_m": prof.lidar_offset_x, **(pursuit_params or {})}
-    pursuit = PurePursuit(sim.dt, **params)
-    radius = pursuit.params["robot_radius_m"]
+    pursuit = link_class(follower, "follower")(sim.dt, **params)
+    radius = pursuit.robot_radius_m
     if wall_follower is None:
         wall_follower = default_controller(sim.dt, prof)
     geometry = sim.scan_geometry
@@ -232,6 +252,7 @@ def run_navigation_episode(
     events: dict[str, float | None] = {"localized": None, "reached": None, "stopped": None}
     plans, errors, plan_ms, path = 0, [], None, None
     pursued: list[tuple[float, float]] = []  # true positions while the pursuit drives
+    poses: list[tuple[float, ...]] = []  # (t, true x, y, theta, estimated x, y, theta, localized)
     was_localized = stalled = False
     idle_steps = 0  # consecutive localized zero commands before the goal
     kidnapped = kidnap is None
@@ -241,16 +262,18 @@ def run_navigation_episode(
     wall_start = time.perf_counter()
     for _ in range(n_steps):
         estimate, localized = pose_source.update(sim, z_scan, held_v, held_w)
+        poses.append((sim.time, *sim.pose, *estimate, float(localized)))
         if localized:
             if events["localized"] is None:
                 events["localized"] = sim.time
             if not was_localized:  # first localization or relocalized: (re)plan from here
                 plans += 1
+                began = time.perf_counter()
                 try:
-                    plan = planner.plan(estimate[:2], goal_xy)
-                    pursuit.set_path(plan.points)
-                    path, plan_ms = plan, plan.total_time_s * 1e3
-                except PlanningError as exc:
+                    path = np.asarray(planner.plan(estimate[:2], goal_xy).points, dtype=float)
+                    plan_ms = (time.perf_counter() - began) * 1e3
+                    pursuit.set_path(path)
+                except ValueError as exc:  # PlanningError: no path
                     errors.append(f"t={sim.time:.2f} s: {exc}")
                     pursuit.clear_path()
             scan = (z_scan, geometry[0], geometry[1], geometry[3], geometry[4],
@@ -292,7 +315,10 @@ def run_navigation_episode(
     wall_time = time.perf_counter() - wall_start
 
     x, y, _ = sim.pose
-    cross = distances_to_polyline(np.array(pursued), path.points) \
+    rows = np.array(poses, dtype=float).reshape(-1, 8)
+    pose_figures = localization_metrics(rows[:, :4], rows[:, [0, 4, 5, 6, 7]],
+                                        np.zeros(len(rows)), kidnap)
+    cross = distances_to_polyline(np.array(pursued), path) \
         if pursued and path is not None else None
     start_label = start if isinstance(start, str) else (
         next(iter(world_obj.starts)) if start is None and world_obj.starts
@@ -305,8 +331,9 @@ def run_navigation_episode(
         real_time_factor=sim.time / wall_time if wall_time > 0 else None,
         localized_time_s=events["localized"], goal_reached_time_s=events["reached"],
         stopped_time_s=events["stopped"],
-        path_length_m=path.length_m if path is not None else None,
-        path_min_clearance_m=path.min_clearance_m if path is not None else None,
+        path_length_m=polyline_length(path) if path is not None else None,
+        path_min_clearance_m=float(map_obj.clearances(path).min()) if path is not None
+        else None,
         distance_m=sim.distance,
         final_position_error_m=math.hypot(x - goal_xy[0], y - goal_xy[1]),
         min_clearance_m=sim.min_clearance, collisions=sim.collisions, plans=plans,
@@ -316,9 +343,11 @@ def run_navigation_episode(
         finish_reason="stopped at the goal" if events["stopped"] is not None else
         "stalled" if stalled else "duration",
         invalid_commands=sim.bad_commands,
+        false_localizations=pose_figures["false_localizations"],
+        tracking_error_mean_m=pose_figures["tracking_error_mean_m"],
         kidnap=[float(k) for k in kidnap] if kidnap is not None else None, stalled=stalled,
         dt=sim.dt, map=map_obj.name, goal_warning=goal_warning, trajectory=trajectory,
-        path=path.points.tolist() if path is not None else [],
+        path=path.tolist() if path is not None else [],
         collision_points=[[float(px), float(py)] for px, py in sim.collision_points],
         effects=sim.effects.as_dict() if sim.effects else None)
 

@@ -38,6 +38,7 @@ from amr_localization.localization_check import (
 )
 from amr_localization.motion_model import MotionNoise, sample_motion
 from amr_localization.particle_filter_params import (
+    PARAMETERS,
     WALL_SLACK_M,
     check_parameters,
     check_world,
@@ -57,7 +58,14 @@ class ParticleFilter(FilterSearches):
     """Particles (N, 3) [x, y, theta] with weights; see the module docstring for the cycle.
 
     The exhaustive searches and what they decide: FilterSearches (filter_searches).
+    Implements amr_common.interfaces.Localizer.
     """
+
+    # Instance attributes of the Localizer interface (set in __init__ and the filter cycle).
+    estimate: tuple[float, float, float]
+    covariance: np.ndarray
+    particles: np.ndarray
+    global_searches: int
 
     def __init__(self, world: World | str, **params: Any) -> None:
         self.world = world if isinstance(world, World) else World.load(world)
@@ -104,6 +112,29 @@ class ParticleFilter(FilterSearches):
             self.initialize_pose(p["initial_pose"], p["initial_pose_sigma"])
         else:
             self.initialize_global()
+
+    @staticmethod
+    def parameter_descriptions() -> dict[str, Any]:
+        """Each parameter: name -> (default, description, rule) (the node declares them)."""
+        return dict(PARAMETERS)
+
+    @property
+    def map(self) -> World:
+        """The World it localizes on."""
+        return self.world
+
+    @property
+    def lidar_offset_x_m(self) -> float:
+        """Where the LiDAR sits ahead of the robot centre (m)."""
+        return float(self.params["lidar_offset_x_m"])
+
+    def describe(self) -> str:
+        """One line for logs: the start, particles, beams and the expected-range table."""
+        t, p = self.table, self.params
+        mode = "tracking from initial_pose" if p["initial_pose"] else "global localization"
+        return (f"{mode}, {self.particle_count} particles, {p['beams']} beams, expected-range "
+                f"table {100 * t.resolution:g} cm x {t.angles} directions, "
+                f"{t.nbytes / 1e6:.1f} MB, LiDAR at x = {p['lidar_offset_x_m']} m")
 
     # --- (re-)initialization ---------------------------------------------------------------
     def initialize_global(self) -> None:

@@ -4,7 +4,9 @@ Outputs /pose (amr_msgs/PoseStamped with `localized`), /amcl_pose, /particles an
 /tf, on the world map of the simulator (one loader); reads the LiDAR position from /tf_static
 (localization_tf.py).
 
-Thin: messages become ParticleFilter.predict / correct calls and results become messages.
+Thin: messages become predict / correct calls on the localizer (parameter `localizer`,
+MODULE:CLASS of amr_common.interfaces.Localizer; default the ParticleFilter) and results become
+messages; its tuning values (`parameter_descriptions()`) are parameters of this node.
 - Every /odometry message moves the particles by its twist over the time since the previous one
   (so between the turtlebot3's 5 Hz scans the pose is predicted from odometry).
 - Every approximately synchronized (/odometry, /scan) pair is answered with exactly one /pose,
@@ -39,10 +41,12 @@ from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import LaserScan
 
 from amr_common import message_filters
+from amr_common.controller_loader import DEFAULT_LOCALIZER
+from amr_common.interfaces import Localizer
 from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameter_table import Param, at_least, between, check_values, ruled
-from amr_common.parameters import declare_parameters, read_parameters
+from amr_common.parameters import declare_link, declare_parameters, read_parameters
 from amr_common.qos import RELIABLE_10, scan_qos
 from amr_common.ros_conversions import (
     pose_from_message,
@@ -51,15 +55,15 @@ from amr_common.ros_conversions import (
     yaw_to_quaternion,
 )
 from amr_common.scan_returns import return_mask
-from amr_common.world import World, WorldError
+from amr_common.world import World
 from amr_localization.localization_tf import LocalizationTf
-from amr_localization.particle_filter import ParticleFilter
-from amr_localization.particle_filter_params import PARAMETERS as FILTER_PARAMETERS
-from amr_localization.particle_filter_params import check_parameters
 
 _NODE_PARAMETERS: dict[str, Param] = ruled({
     "world": ("lab02", "Bundled world name or path to a world .yaml / course map .json / Nav2 "
                        "map .yaml (the simulator's loader)"),
+    "localizer": (DEFAULT_LOCALIZER, "Localizer class as MODULE:CLASS implementing "
+                                     "amr_common.interfaces.Localizer (its tuning values "
+                                     "become parameters of this node)"),
     "queue_size": (10, "Synchronizer queue size per input"),
     "slop": (0.15, "Synchronizer slop in seconds (lockstep stamps are equal; the real robot's "
                    "/odometry and /scan differ by up to half an odometry period)"),
@@ -87,7 +91,6 @@ _NODE_PARAMETERS: dict[str, Param] = ruled({
     "initialpose_topic": ("/initialpose", "geometry_msgs/PoseWithCovarianceStamped input"),
 }, at_least(0.0), min_valid_share=between(0.0, 1.0), queue_size=at_least(1),
     particles_published=at_least(1))
-_ARRAYS = {"initial_pose", "initial_pose_sigma"}
 
 
 def node_parameters() -> dict[str, tuple[Any, str]]:
@@ -116,7 +119,7 @@ class ParticleFilterNode(GuardedLifecycleNode):
         super().__init__(node_name, **kwargs)
         # Numbers take ints for doubles (-p slop:=1), checked in on_configure.
         declare_parameters(self, _NODE_PARAMETERS)
-        declare_parameters(self, FILTER_PARAMETERS)
+        self._localizer_class, self._tuning = declare_link(self, "localizer", _NODE_PARAMETERS)
         # Run scripts append callables here: each is called with (stamp_ns, (x, y, theta),
         # localized, node) after every /pose (in-process observation without a subscription).
         self.on_pose: list = []
@@ -124,7 +127,7 @@ class ParticleFilterNode(GuardedLifecycleNode):
 
     # --- lifecycle -------------------------------------------------------------------------
     def _reset_runtime(self) -> None:
-        self.filter: ParticleFilter | None = None
+        self.filter: Localizer | None = None
         self._outputs: dict[str, Any] = {}
         self._subscribers: list = []
         self._initialpose_subscription = None
@@ -145,25 +148,20 @@ class ParticleFilterNode(GuardedLifecycleNode):
         logged) for bad parameters or a missing/malformed world file.
         """
         node, problems = read_parameters(self, _NODE_PARAMETERS)
-        filter_values, filter_problems = read_parameters(self, FILTER_PARAMETERS)
+        filter_params, filter_problems = read_parameters(self, self._tuning)
         problems += filter_problems
-        filter_params: dict[str, Any] = {}
-        if not filter_problems:
-            try:
-                filter_params = check_parameters(
-                    {name: list(value) if name in _ARRAYS else value
-                     for name, value in filter_values.items()})
-            except ValueError as exc:
-                problems.append(str(exc))
+        if self._localizer_class is None:
+            problems.append(f"localizer '{node['localizer']}' cannot be loaded (see the error "
+                            "above)")
         if problems:
             self.get_logger().error("configure failed: " + "; ".join(problems))
             return TransitionCallbackReturn.FAILURE
         try:
             world = World.load(node["world"])
-            params = {k: v for k, v in filter_params.items()}
-            params["initial_pose"] = list(params["initial_pose"] or [])
-            self.filter = ParticleFilter(world, **params)
-        except (WorldError, ValueError) as exc:
+            self.filter = self._localizer_class(world, **{
+                name: list(value) if isinstance(value, (tuple, list)) or hasattr(value, "tolist")
+                else value for name, value in filter_params.items()})
+        except Exception as exc:  # WorldError, bad values; a user's class may raise anything
             self.get_logger().error(f"configure failed: {exc}")
             self._reset_runtime()
             return TransitionCallbackReturn.FAILURE
@@ -196,14 +194,8 @@ class ParticleFilterNode(GuardedLifecycleNode):
         if node["publish_tf"]:
             self._tf = LocalizationTf(self, {name: node[name] for name in (
                 "map_frame", "odom_frame", "base_frame", "scan_frame")}, self._on_lidar_offset)
-        f = self.filter
-        mode = "tracking from initial_pose" if filter_params["initial_pose"] else \
-            "global localization"
-        self.get_logger().info(
-            f"configured: world '{world.name}' ({world.source}), {mode}, {f.particle_count} "
-            f"particles, {filter_params['beams']} beams, expected-range table "
-            f"{100 * f.table.resolution:g} cm x {f.table.angles} directions, "
-            f"{f.table.nbytes / 1e6:.1f} MB, LiDAR at x = {filter_params['lidar_offset_x_m']} m")
+        self.get_logger().info(f"configured: world '{world.name}' ({world.source}), "
+                               f"{node['localizer']}: {self.filter.describe()}")
         return TransitionCallbackReturn.SUCCESS
 
     def release(self) -> None:
@@ -277,7 +269,7 @@ class ParticleFilterNode(GuardedLifecycleNode):
 
     def _on_lidar_offset(self, offset_m: float) -> None:
         """Use the LiDAR position /tf_static gives (the parameter is the fallback)."""
-        if self.filter is None or offset_m == self.filter.params["lidar_offset_x_m"]:
+        if self.filter is None or offset_m == self.filter.lidar_offset_x_m:
             return
         self.filter.set_lidar_offset(offset_m)
         self.get_logger().info(f"LiDAR at x = {offset_m:+.3f} m from /tf_static "
@@ -381,7 +373,7 @@ class ParticleFilterNode(GuardedLifecycleNode):
     def _on_initial_pose(self, message: PoseWithCovarianceStamped) -> None:
         """Re-initialize around a 2D pose estimate (sigmas from its covariance when usable).
 
-        Sigmas wider than the map are clamped to it (ParticleFilter.bounded_sigma); a pose or
+        Sigmas wider than the map are clamped to it (the filter's bounded_sigma); a pose or
         covariance that is not finite, in another frame, or where the robot cannot be (on a
         wall, outside the map) is ignored with a logged reason: the filter keeps its state.
         Zero or negative variances mean "not given": initial_pose_sigma is used.

@@ -64,7 +64,10 @@ class MappingEstimate:
 
 
 class Mapper:
-    """Online graph SLAM (see the module docstring); parameters: mapper_params.PARAMETERS."""
+    """Online graph SLAM (see the module docstring); parameters: mapper_params.PARAMETERS.
+
+    Implements amr_common.interfaces.Mapper.
+    """
 
     def __init__(self, params: dict[str, Any] | None = None) -> None:
         self.p = p = check_parameters(params)
@@ -294,6 +297,16 @@ class Mapper:
                 self._drawn_global[k] = pose
 
     # ------------------------------------------------------------------ outputs
+    @property
+    def lidar_offset_x_m(self) -> float:
+        """Where the LiDAR sits ahead of the robot centre (m)."""
+        return float(self.p["lidar_offset_x_m"])
+
+    @property
+    def max_range_m(self) -> float:
+        """Readings beyond this are not mapped (m)."""
+        return float(self.p["max_range_m"])
+
     @property
     def pose(self) -> tuple[float, float, float]:
         """The latest pose estimate (x, y, theta) of base_footprint in the map frame."""

@@ -6,7 +6,8 @@ slam node and the mapping runs", has the why of each choice):
     .venv/bin/amr_slam --ros-args -p autostart:=true -p output_prefix:=$HOME/maps/room
     ros2 service call /slam/save_map amr_msgs/srv/SaveMap "{name: $HOME/maps/room}"
 
-Thin: messages become Mapper.update calls, results become messages.
+Thin: messages become update calls on the `mapper` parameter's class (MODULE:CLASS of
+amr_common.interfaces.Mapper, default the Mapper), results become messages.
 - In: every new /scan (best effort; a scan repeating the previous one's ranges is skipped: the
   lockstep simulator re-sends its held scan) with the odometry POSE interpolated at its stamp
   (amr_common.pose_history) from `odometry_topic` (nav_msgs/Odometry, default /odometry); a
@@ -37,18 +38,16 @@ from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import LaserScan
 
 from amr_common.geometry import compose
+from amr_common.interfaces import Mapper, MappingEstimate
 from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.map_file import write_map
 from amr_common.map_messages import occupancy_grid
 from amr_common.map_odom_tf import MapOdomTf
 from amr_common.node_runner import run_lifecycle_node
-from amr_common.parameters import declare_parameters, read_parameters
+from amr_common.parameters import declare_link, declare_parameters, read_parameters
 from amr_common.pose_history import LATER, OLDER, PoseHistory
 from amr_common.qos import LATCHED, RELIABLE_10, scan_qos
 from amr_common.ros_conversions import pose_from_message, time_to_nanoseconds, yaw_to_quaternion
-from amr_mapping.mapper import Mapper, MappingEstimate
-from amr_mapping.mapper_params import PARAMETERS as MAPPER_PARAMETERS
-from amr_mapping.mapper_params import check_parameters
 from amr_mapping.slam_node_params import NODE_PARAMETERS as _NODE_PARAMETERS
 from amr_mapping.slam_node_params import node_parameter_problems
 
@@ -72,7 +71,8 @@ class SlamNode(GuardedLifecycleNode):
         super().__init__(node_name, **kwargs)
         # Numbers take ints for doubles (-p map_update_interval_s:=2), checked in on_configure.
         declare_parameters(self, _NODE_PARAMETERS)
-        declare_parameters(self, MAPPER_PARAMETERS)
+        # The `mapper` class (amr_common.interfaces.Mapper) and its parameters.
+        self._mapper_class, self._tuning = declare_link(self, "mapper", _NODE_PARAMETERS)
         # Run scripts append callables: each is called with (stamp_ns, MappingEstimate, node)
         # after every mapped scan (in-process observation without a subscription).
         self.on_estimate: list = []
@@ -114,14 +114,17 @@ class SlamNode(GuardedLifecycleNode):
         cannot be written.
         """
         node, problems = read_parameters(self, _NODE_PARAMETERS)
-        values, mapper_problems = read_parameters(self, MAPPER_PARAMETERS)
+        values, mapper_problems = read_parameters(self, self._tuning)
         problems += mapper_problems
+        if self._mapper_class is None:
+            problems.append(f"mapper '{node['mapper']}' cannot be loaded (see the error above)")
         if not problems:
             problems += node_parameter_problems(node)
-        if not mapper_problems:
+        if not problems:
             try:
-                self._mapper_params = check_parameters(values)
-            except ValueError as exc:
+                self.mapper = self._mapper_class(values)
+                self._mapper_params = values
+            except Exception as exc:  # its checks (ValueError); a user's class may raise any
                 problems.append(str(exc))
         if problems:
             self.get_logger().error("configure failed: " + "; ".join(problems))
@@ -130,7 +133,6 @@ class SlamNode(GuardedLifecycleNode):
         from amr_msgs.srv import SaveMap
         self.node_params = node
         self._start = tuple(float(v) for v in node["map_start_pose"])
-        self.mapper = Mapper(self._mapper_params)
         self._history = PoseHistory(_ODOMETRY_HISTORY_S, node["max_odometry_gap_s"])
         self._stop_log_forwarding = self.forward_python_logging("amr_mapping")
         self._pose_message = PoseStamped()
@@ -277,16 +279,16 @@ class SlamNode(GuardedLifecycleNode):
 
     def _on_lidar_offset(self, offset_m: float) -> None:
         """Use the LiDAR position /tf_static gives, if no scan was mapped yet."""
-        if self.mapper is None or offset_m == self.mapper.p["lidar_offset_x_m"]:
+        if self.mapper is None or offset_m == self.mapper.lidar_offset_x_m:
             return
         if self.mapped_scans:
             self.get_logger().warning(
                 f"/tf_static places the LiDAR at x = {offset_m:+.3f} m after mapping started: "
-                f"keeping x = {self.mapper.p['lidar_offset_x_m']:+.3f} m (the map's scans "
+                f"keeping x = {self.mapper.lidar_offset_x_m:+.3f} m (the map's scans "
                 "must agree)", throttle_duration_sec=10.0)
             return
         self._mapper_params = {**self._mapper_params, "lidar_offset_x_m": offset_m}
-        self.mapper = Mapper(self._mapper_params)
+        self.mapper = self._mapper_class(self._mapper_params)
         self.get_logger().info(f"LiDAR at x = {offset_m:+.3f} m from /tf_static "
                                f"({self.node_params['base_frame']} -> "
                                f"{self.node_params['scan_frame']})")

@@ -9,9 +9,13 @@ import os
 from pathlib import Path
 from typing import Any
 
+from amr_common.controller_loader import DEFAULT_MAPPER
 from amr_common.parameter_table import finite
 
 NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
+    "mapper": (DEFAULT_MAPPER, "Mapper class as MODULE:CLASS implementing "
+                               "amr_common.interfaces.Mapper (its tuning values become "
+                               "parameters of this node)"),
     "scan_topic": ("/scan", "sensor_msgs/LaserScan input (subscribed best effort)"),
     "odometry_topic": ("/odometry", "nav_msgs/Odometry input whose POSE is used: the "
                                     "project's /odometry (simulator, amr_odometry) or a "

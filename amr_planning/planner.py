@@ -112,7 +112,10 @@ def check_parameters(overrides: dict[str, Any]) -> dict[str, Any]:
 
 
 class Planner:
-    """Plans paths on one world; the grid and its costs are built once, in the constructor."""
+    """Plans paths on one world; the grid and its costs are built once, in the constructor.
+
+    Implements amr_common.interfaces.Planner (plan() returns a Plan: its points and figures).
+    """
 
     def __init__(self, world: World, grid: OccupancyGrid | None = None, **params: Any) -> None:
         """Build the grid costs of `world`.
@@ -145,6 +148,12 @@ class Planner:
     def parameter_descriptions() -> dict[str, tuple[Any, str]]:
         """Each tuning parameter: name -> (default, description with units)."""
         return dict(PARAMETERS)
+
+    def describe(self) -> str:
+        """One line for logs: the grid, the search and the inflation."""
+        grid = self.grid
+        return (f"{grid.width} x {grid.height} cells of {grid.resolution} m, "
+                f"{self.params['algorithm']}, walls inflated by {self.inflation_radius:.3f} m")
 
     def warm_up(self) -> None:
         """Run every compiled kernel once on tiny inputs.

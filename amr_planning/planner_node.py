@@ -10,33 +10,40 @@
   stops on the loss; the wall follower explores until the filter relocalizes).
 - A goal inside a wall, too close to one or unreachable, or no goal at all: a clear logged error
   and an EMPTY path (the pursuit then commands zero), never a crash.
-The path is stamped with the /pose it was planned from. The algorithm is
-amr_planning.planner.Planner; its tuning values are parameters of this node.
+The path is stamped with the /pose it was planned from. The algorithm is the `planner`
+parameter's class (MODULE:CLASS of amr_common.interfaces.Planner; default
+amr_planning.planner.Planner); its tuning values are parameters of this node.
 """
 from __future__ import annotations
 
 import math
 import sys
+import time
 from typing import Any
 
 from geometry_msgs.msg import PoseStamped as GoalPoseStamped
 from nav_msgs.msg import Path
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 
+from amr_common.controller_loader import DEFAULT_PLANNER
+from amr_common.geometry import polyline_length
+from amr_common.interfaces import Planner
 from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameter_table import Param, ruled, vector
-from amr_common.parameters import declare_parameters, read_parameters
+from amr_common.parameters import declare_link, declare_parameters, read_parameters
 from amr_common.qos import LATCHED, RELIABLE_10
 from amr_common.ros_conversions import path_message
 from amr_common.world import World
-from amr_planning.planner import Planner, PlanningError
 
 _NODE_PARAMETERS: dict[str, Param] = ruled({
     "world": ("lab02", "Bundled world name or path to a world .yaml / course map .json / Nav2 "
                        "map .yaml (the simulator's and the particle filter's map)"),
     "goal": ([], "Goal [x, y] in metres; [] = goal_name, else the world's default goal"),
     "goal_name": ("", "A named goal of the world (used when `goal` is [])"),
+    "planner": (DEFAULT_PLANNER, "Planner class as MODULE:CLASS implementing "
+                                 "amr_common.interfaces.Planner (its tuning values become "
+                                 "parameters of this node)"),
     "replan_on_relocalization": (True, "Plan again from the pose when /pose becomes localized "
                                        "after localization was lost"),
     "frame_id": ("map", "Frame of /pose, /goal_pose and /path"),
@@ -59,11 +66,13 @@ class PlannerNode(GuardedLifecycleNode):
     def __init__(self, node_name: str = "planner", **kwargs) -> None:
         """Declare the parameters; nothing is built before on_configure."""
         super().__init__(node_name, **kwargs)
-        declare_parameters(self, {**_NODE_PARAMETERS, **Planner.parameter_descriptions()})
+        declare_parameters(self, _NODE_PARAMETERS)
+        self._planner_class, self._tuning = declare_link(self, "planner", _NODE_PARAMETERS)
         self._reset_runtime()
 
     def _reset_runtime(self) -> None:
         self.planner: Planner | None = None
+        self.planner_map: World | None = None
         self.goal: tuple[float, float] | None = None
         self.last_plan = None
         self.last_error: str | None = None  # why the newest planning gave no path (run scripts)
@@ -84,14 +93,18 @@ class PlannerNode(GuardedLifecycleNode):
         """
         self._reset_runtime()
         p, problems = read_parameters(self, _NODE_PARAMETERS)
-        tuning, tuning_problems = read_parameters(self, Planner.parameter_descriptions())
+        tuning, tuning_problems = read_parameters(self, self._tuning)
+        if self._planner_class is None:
+            tuning_problems.append(f"planner '{p['planner']}' cannot be loaded (see the error "
+                                   "above)")
         if problems + tuning_problems:
             self.get_logger().error("configure failed: " + "; ".join(problems + tuning_problems))
             return TransitionCallbackReturn.FAILURE
         try:
             world = World.load(p["world"])
             self.goal = _configured_goal(world, p["goal"], p["goal_name"])
-            self.planner = Planner(world, **tuning)
+            self.planner = self._planner_class(world, **tuning)
+            self.planner_map = world
             self.planner.warm_up()
         except Exception as exc:  # WorldError, bad values: user errors, reported
             self.get_logger().error(f"configure failed: {exc}")
@@ -104,13 +117,10 @@ class PlannerNode(GuardedLifecycleNode):
             self.create_subscription(PoseStamped, p["pose_topic"], self._on_pose, RELIABLE_10),
             self.create_subscription(GoalPoseStamped, p["goal_pose_topic"], self._on_goal_pose,
                                      RELIABLE_10)]
-        grid = self.planner.grid
         goal = "none (waiting for /goal_pose)" if self.goal is None else \
             f"({self.goal[0]:.3f}, {self.goal[1]:.3f})"
-        self.get_logger().info(
-            f"configured: world '{world.name}', {grid.width} x {grid.height} cells of "
-            f"{grid.resolution} m, {self.planner.params['algorithm']}, walls inflated by "
-            f"{self.planner.inflation_radius:.3f} m, goal {goal}")
+        self.get_logger().info(f"configured: world '{world.name}', {p['planner']}: "
+                               f"{self.planner.describe()}, goal {goal}")
         return TransitionCallbackReturn.SUCCESS
 
     def release(self) -> None:
@@ -170,21 +180,24 @@ class PlannerNode(GuardedLifecycleNode):
             self._fail("no goal: set the `goal` or `goal_name` parameter, give the world a "
                        "goal, or send /goal_pose")
             return
+        began = time.perf_counter()
         try:
             plan = self.planner.plan(start, self.goal)
-        except PlanningError as exc:
+        except ValueError as exc:  # PlanningError: no path, the message says why
             self._fail(str(exc), "no path: ")
             return
         except Exception as exc:  # a bug must not take the node (and the loop) down
             self._fail(f"planning failed: {exc!r}")
             return
+        elapsed_ms = (time.perf_counter() - began) * 1e3
         self.last_plan, self.last_error = plan, None
+        points = plan.points
         self.get_logger().info(
             f"path from ({start[0]:.3f}, {start[1]:.3f}) to ({self.goal[0]:.3f}, "
-            f"{self.goal[1]:.3f}): {len(plan.points)} poses, {plan.length_m:.2f} m, min "
-            f"clearance {plan.min_clearance_m:.3f} m, planned in {plan.total_time_s * 1e3:.1f} "
-            f"ms ({plan.algorithm}: {plan.search_time_s * 1e3:.2f} ms, {plan.expanded} cells)")
-        self._publish(plan.points)
+            f"{self.goal[1]:.3f}): {len(points)} poses, {polyline_length(points):.2f} m, min "
+            f"clearance {float(self.planner_map.clearances(points).min()):.3f} m, planned in "
+            f"{elapsed_ms:.1f} ms")
+        self._publish(points)
 
     def _fail(self, reason: str, prefix: str = "") -> None:
         """Log why there is no path, keep it in last_error and publish an empty path."""

@@ -23,6 +23,8 @@ Examples:
       --profiles ideal,turtlebot3 --seeds 0-2 --duration 300   # navigation to named goals
   .venv/bin/python scripts/evaluate.py --worlds evaluations/worlds/lab02_box.yaml --map lab02 \
       --goals inner_far --profiles turtlebot3 --seeds 0-4 --duration 200  # a box the map lacks
+  .venv/bin/python scripts/evaluate.py --worlds lab02 --goals all --seeds 0-2 --duration 200 \
+      --localizer examples.likelihood_mcl:LikelihoodFieldMcl --out out/mine   # your own link
   .venv/bin/python scripts/evaluate.py --slam --worlds all --profiles turtlebot3 --seeds 0-4 \
       --starts south_west,outer,south,south_east --duration 300   # SLAM: mapping figures
 Options given on the command line override the same keys of --config.
@@ -41,7 +43,13 @@ REPO = Path(__file__).resolve().parent.parent
 if str(REPO) not in sys.path:  # run from a checkout without installing
     sys.path.insert(0, str(REPO))
 
-from amr_common.controller_loader import load_controller_class  # noqa: E402
+from link_options import add_link_options  # noqa: E402
+
+from amr_common.controller_loader import (  # noqa: E402
+    DEFAULT_LOCALIZER,
+    ControllerSpecError,
+    load_controller_class,
+)
 from amr_evaluation.evaluation import (  # noqa: E402
     DEFAULT_CONTROLLER,
     EvaluationError,
@@ -101,6 +109,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="control period in s (default 0.05)")
     parser.add_argument("--controller", default=None, metavar="MODULE:CLASS",
                         help=f"controller class (default {DEFAULT_CONTROLLER})")
+    add_link_options(parser, EVALUATE_NEEDS)
     parser.add_argument("--params-file", default=None,
                         help="ROS 2 params YAML for the controller (default, like run_sim.py: "
                         "amr_control/params/sim.yaml when it exists; 'none' for class defaults)")
@@ -156,7 +165,7 @@ def resolve_settings(args: argparse.Namespace) -> dict:
     if args.config:
         settings.update(load_config(args.config))
     for key in ("worlds", "map", "starts", "goals", "pose_source", "profiles", "seeds",
-                "duration", "dt", "controller", "params_file", "jobs"):
+                "duration", "dt", "controller", "params_file", "jobs", *EVALUATE_NEEDS):
         value = getattr(args, key)
         if value is not None:
             settings[key] = value
@@ -190,7 +199,32 @@ def resolve_settings(args: argparse.Namespace) -> dict:
         timeout = episode_time_limit(duration) if math.isfinite(duration) else 0.0
     settings["episode_timeout"] = timeout
     check_option_pairs(args, settings)
+    settings["links"] = check_links(args, settings)
     return settings
+
+
+# --localizer, --planner, --follower (and the config keys): what each goes with.
+EVALUATE_NEEDS = {"localizer": "--localize or --goals with the filter's pose",
+                  "planner": "--goals", "follower": "--goals"}
+
+
+def check_links(args: argparse.Namespace, settings: dict) -> dict[str, str]:
+    """The --localizer / --planner / --follower classes, loaded now: {link: MODULE:CLASS}.
+
+    ControllerSpecError (one line) naming what a class lacks; EvaluationError for a link the
+    episodes do not run (a planner without --goals).
+    """
+    from link_options import check_links as load_links
+    runs = {"localizer": bool(args.localize or (settings["goals"]
+                                                 and settings["pose_source"] == "filter")),
+            "planner": bool(settings["goals"]), "follower": bool(settings["goals"])}
+    try:
+        return load_links({link: settings.get(link) for link in EVALUATE_NEEDS}, runs,
+                          EVALUATE_NEEDS)
+    except ControllerSpecError:
+        raise
+    except ValueError as exc:
+        raise EvaluationError(str(exc)) from None
 
 
 def check_option_pairs(args: argparse.Namespace, settings: dict) -> None:
@@ -236,7 +270,9 @@ def check_localization_options(args: argparse.Namespace, settings: dict, specs) 
                                       "next one)")
     from amr_localization.particle_filter_params import check_parameters
     try:
-        check_parameters(parse_overrides(args.pf_param))
+        overrides = parse_overrides(args.pf_param)
+        if settings.get("links", {}).get("localizer", DEFAULT_LOCALIZER) == DEFAULT_LOCALIZER:
+            check_parameters(overrides)  # another class checks them when an episode builds it
     except ValueError as exc:
         raise EvaluationError(f"--pf-param: {exc}") from None
 
@@ -252,7 +288,8 @@ def check_filter_maps(specs, overrides: dict, localize: bool = False) -> None:
     from amr_common.world import World
     from amr_localization.particle_filter_params import check_parameters, check_world
     maps = [(spec.map, spec.world) for spec in specs  # the filter runs on the map, if one
-            if localize or (spec.goal is not None and spec.pose_source == "filter")]
+            if (localize or (spec.goal is not None and spec.pose_source == "filter"))
+            and spec.localizer == DEFAULT_LOCALIZER]  # another class checks its map itself
     if not maps:
         return
     values = check_parameters(overrides)
@@ -270,7 +307,7 @@ def episode_specs(settings: dict) -> list:
                         settings["seeds"], duration=settings["duration"], dt=settings["dt"],
                         controller=settings["controller"], params=settings["params"],
                         goals=settings["goals"], pose_source=settings["pose_source"],
-                        map=settings["map"], warnings=warnings)
+                        map=settings["map"], warnings=warnings, links=settings.get("links"))
     check_controller(settings["controller"], settings["params"], settings["dt"])
     for warning in warnings:  # the map and the world disagree: allowed, said
         print(f"evaluate: warning: {warning}", file=sys.stderr)
@@ -396,7 +433,7 @@ def run_and_report(args, settings: dict, specs, executor, out: Path, started) ->
 
     meta = {"started_utc": started.isoformat(timespec="seconds"), "wall_time_s": round(wall, 2),
             "jobs": executor.workers(len(specs)), "executor": executor.describe(),
-            "controller": settings["controller"],
+            "controller": settings["controller"], "links": settings["links"],
             "params": settings["params"], "params_file": settings["params_file"],
             "duration_s": settings["duration"], "dt_s": settings["dt"],
             "episode_timeout_s": settings["episode_timeout"],

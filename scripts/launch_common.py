@@ -81,16 +81,6 @@ def make_map_publisher(context, map_source: str, *, use_sim_time: bool = False):
         {"world": str(map_source), "use_sim_time": use_sim_time}))
 
 
-def add_localization_options(parser) -> None:
-    """--localize and the particle filter's --pf-param NAME:=VALUE, shared by the run scripts."""
-    parser.add_argument("--localize", action="store_true", help="also run the particle filter "
-                        "(/pose with localized); the wall follower keeps exploring "
-                        "(stop_when_localized false) unless -p says otherwise")
-    parser.add_argument("--pf-param", action="append", default=[], metavar="NAME:=VALUE",
-                        help="particle filter parameter override (repeatable), e.g. "
-                        "--pf-param beams:=90")
-
-
 def check_common_options(parser, args, script: str, wall_follower_set: dict[str, str],
                          filter_set: dict[str, str]) -> None:
     """Check dt, the Foxglove port, -p, --pf-param, the params file and the controller now.
@@ -102,6 +92,8 @@ def check_common_options(parser, args, script: str, wall_follower_set: dict[str,
     Sets args.overrides and args.pf_overrides (typed as the nodes declare them) and
     args.controller_spec (the MODULE:CLASS the wall follower will run).
     """
+    from link_options import check_link_options, check_particle_filter
+
     from amr_common.controller_loader import ControllerSpecError, parse_overrides
     from amr_common.parameter_table import check_value
     from amr_control.wall_follower_node import node_parameters
@@ -128,9 +120,14 @@ def check_common_options(parser, args, script: str, wall_follower_set: dict[str,
             setattr(args, attribute, parse_overrides(items))
         except ControllerSpecError as exc:
             parser.error(f"{option}: {exc}")
+    localize = bool(getattr(args, "localize", False) or getattr(args, "goal", None) is not None)
     try:
+        args.links = check_link_options(args, {"localizer": localize, "planner": localize and
+                                               getattr(args, "goal", None) is not None,
+                                               "follower": getattr(args, "goal", None)
+                                               is not None})
         _check_wall_follower(args, script, wall_follower_set)
-        _check_particle_filter(args, script, filter_set)
+        check_particle_filter(args, script, filter_set)
     except ValueError as exc:  # one-line messages
         parser.error(str(exc))
 
@@ -181,48 +178,6 @@ def _check_wall_follower(args, script: str, set_by_script: dict[str, str]) -> No
         controller_class(values["dt"], **tuning)
     except Exception as exc:  # a user's controller may raise anything
         raise ValueError(f"controller {spec} rejects its parameters: {exc}") from None
-
-
-def _check_particle_filter(args, script: str, set_by_script: dict[str, str]) -> None:
-    """--pf-param names and values, by the filter's and its node's own checks; ValueError."""
-    if not args.pf_overrides:
-        return
-    if not (getattr(args, "localize", False) or getattr(args, "goal", None) is not None):
-        raise ValueError("--pf-param needs --localize or --goal (no particle filter runs "
-                         "without them)")
-    from amr_common.parameters import typed_values
-    from amr_localization.particle_filter_node import node_parameter_problems, node_parameters
-    from amr_localization.particle_filter_params import PARAMETERS, check_parameters
-    _refused("--pf-param", args.pf_overrides, script, set_by_script)
-    node_table = node_parameters()
-    table = {**node_table, **PARAMETERS}
-    unknown = [name for name in args.pf_overrides if name not in table]
-    if unknown:
-        raise ValueError(f"--pf-param {', '.join(unknown)}: no such particle filter parameter; "
-                         f"known: {', '.join(sorted(table))}")
-    args.pf_overrides, problems = typed_values(table, args.pf_overrides)
-    if not problems:
-        node_values = {name: default for name, (default, _) in node_table.items()}
-        node_values.update({k: v for k, v in args.pf_overrides.items() if k in node_table})
-        problems = node_parameter_problems(node_values)
-        try:
-            check_parameters({k: v for k, v in args.pf_overrides.items() if k in PARAMETERS})
-        except ValueError as exc:
-            problems.append(str(exc))
-    if problems:
-        raise ValueError(f"--pf-param: {'; '.join(problems)}")
-
-
-def check_filter_map(world, pf_overrides: dict[str, Any]) -> None:
-    """The particle filter's checks against its map, before anything runs: ValueError (one line).
-
-    A map too big for its memory budget (saying what it would need), an initial pose where the
-    robot cannot be; with the filter's own parameters (--pf-param may also set its node's).
-    Milliseconds: nothing is built.
-    """
-    from amr_localization.particle_filter_params import PARAMETERS, check_parameters, check_world
-    check_world(world, check_parameters(
-        {name: value for name, value in pf_overrides.items() if name in PARAMETERS}))
 
 
 def _listen_problem(host: str, port: int) -> str | None:
@@ -320,10 +275,15 @@ def localizing_wall_follower(tuning: dict[str, Any]) -> dict[str, Any]:
 
 
 def make_particle_filter(context, *, world: str, lidar_offset_x_m: float,
-                         overrides: dict[str, Any] | None = None):
-    """The particle filter on `world`, told where the LiDAR sits (overrides win)."""
+                         overrides: dict[str, Any] | None = None, localizer: str | None = None):
+    """The particle filter node on `world`, told where the LiDAR sits (overrides win).
+
+    localizer: its `localizer` parameter (MODULE:CLASS; None: the node's default).
+    """
     from amr_localization.particle_filter_node import ParticleFilterNode
     values: dict[str, Any] = {"world": str(world), "lidar_offset_x_m": float(lidar_offset_x_m)}
+    if localizer:
+        values["localizer"] = str(localizer)
     values.update(overrides or {})
     return ParticleFilterNode(context=context, parameter_overrides=overrides_to_parameters(values))
 
@@ -338,21 +298,25 @@ def navigating_wall_follower(tuning: dict[str, Any]) -> dict[str, Any]:
 
 
 def make_navigators(context, *, world: str, goal: tuple[float, float], wall_follower,
-                    lidar_offset_x_m: float) -> list:
+                    lidar_offset_x_m: float, links: dict[str, str] | None = None) -> list:
     """The planner and the pure pursuit, after the wall follower and the particle filter.
 
     The pursuit commands like the wall follower (simulation or robot mode, dt, data_timeout,
-    /cmd_vel type and angular sign): it takes those from the wall follower node.
+    /cmd_vel type and angular sign): it takes those from the wall follower node. links: the
+    `planner` and `follower` classes (MODULE:CLASS) when not the nodes' defaults.
     """
+    links = links or {}
+    planner = {"planner": links["planner"]} if links.get("planner") else {}
+    follower = {"follower": links["follower"]} if links.get("follower") else {}
     from amr_control.pure_pursuit_node import PurePursuitNode
     from amr_planning.planner_node import PlannerNode
     same = {name: wall_follower.get_parameter(name).value
             for name in ("simulation", "dt", "data_timeout", "cmd_vel_stamped", "angular_sign")}
     return [
         PlannerNode(context=context, parameter_overrides=overrides_to_parameters(
-            {"world": str(world), "goal": [float(goal[0]), float(goal[1])]})),
+            {"world": str(world), "goal": [float(goal[0]), float(goal[1])], **planner})),
         PurePursuitNode(context=context, parameter_overrides=overrides_to_parameters(
-            {**same, "lidar_offset_x_m": float(lidar_offset_x_m)})),
+            {**same, "lidar_offset_x_m": float(lidar_offset_x_m), **follower})),
     ]
 
 
@@ -360,12 +324,14 @@ def make_robot_graph(context, *, params_file=ROBOT_PARAMS, dt: float | None = No
                      cmd_vel_stamped: bool | None = None, controller: str | None = None,
                      tuning: dict[str, Any] | None = None, localize_world: str | None = None,
                      filter_overrides: dict[str, Any] | None = None,
-                     goal: tuple[float, float] | None = None) -> list:
+                     goal: tuple[float, float] | None = None,
+                     links: dict[str, str] | None = None) -> list:
     """The real-robot graph: /odom -> amr_odometry -> /odometry, wall follower in robot mode.
 
     With `localize_world`, also the particle filter on that map (the Burger's LiDAR position),
     and the wall follower synchronizes /pose; with a `goal` too, the planner and the pure
-    pursuit, which drive once localized. Returns the lifecycle nodes in startup order.
+    pursuit, which drive once localized. links: the localizer, planner and follower classes
+    (MODULE:CLASS) when not the nodes' defaults. Returns the lifecycle nodes in startup order.
     """
     from amr_turtlebot3.odometry_node import OdometryNode
     overrides: dict[str, Any] = dict(tuning or {})
@@ -386,8 +352,9 @@ def make_robot_graph(context, *, params_file=ROBOT_PARAMS, dt: float | None = No
     from amr_common.robot import LIDAR_OFFSET_X
     particle_filter = make_particle_filter(context, world=localize_world,
                                            lidar_offset_x_m=LIDAR_OFFSET_X,
-                                           overrides=filter_overrides)
+                                           overrides=filter_overrides,
+                                           localizer=(links or {}).get("localizer"))
     navigators = [] if goal is None else make_navigators(
         context, world=localize_world, goal=goal, wall_follower=wall_follower,
-        lidar_offset_x_m=LIDAR_OFFSET_X)
+        lidar_offset_x_m=LIDAR_OFFSET_X, links=links)
     return [odometry, wall_follower, particle_filter, *navigators]

@@ -4,6 +4,7 @@
     --map-out DIR           ... and writes DIR/map.yaml + DIR/map.pgm (Nav2 map files) at the
                             end, on Ctrl-C too
     --slam-param NAME:=VALUE  a slam node / Mapper parameter (repeatable)
+    --mapper MODULE:CLASS   the slam node's mapper (amr_common.interfaces.Mapper)
     --no-controller         no controller runs: drive with scripts/teleop.py (alias --teleop)
 
 --slam with --localize or --goal is refused: the particle filter and the planner need the map
@@ -28,6 +29,9 @@ def add_slam_options(parser, script: str) -> None:
     parser.add_argument("--slam-param", action="append", default=[], metavar="NAME:=VALUE",
                         help="slam node or Mapper parameter override (repeatable), e.g. "
                         "--slam-param loop_closure:=false")
+    parser.add_argument("--mapper", default=None, metavar="MODULE:CLASS", help="with --slam: "
+                        "a mapper (amr_common.interfaces.Mapper) for the slam node (default "
+                        "amr_mapping.mapper:Mapper)")
     parser.add_argument("--no-controller", "--teleop", dest="no_controller",
                         action="store_true", help="start no controller: drive the robot with "
                         "scripts/teleop.py" + (" (needs --realtime: lockstep advances on the "
@@ -44,7 +48,8 @@ def check_slam_options(args, script: str, set_by_script: dict[str, str]) -> None
     args.slam_overrides = {}
     if not args.slam:
         for option, given in (("--map-out", args.map_out is not None),
-                              ("--slam-param", bool(args.slam_param))):
+                              ("--slam-param", bool(args.slam_param)),
+                              ("--mapper", getattr(args, "mapper", None) is not None)):
             if given:
                 raise ValueError(f"{option} needs --slam")
         return
@@ -61,19 +66,36 @@ def check_slam_options(args, script: str, set_by_script: dict[str, str]) -> None
         for suffix in (".yaml", ".pgm"):
             check_output_file(folder / f"{MAP_NAME}{suffix}", "--map-out")
         args.map_out = folder
-    args.slam_overrides = slam_overrides(args.slam_param, set_by_script)
+    args.slam_overrides = slam_overrides(args.slam_param, set_by_script,
+                                         getattr(args, "mapper", None))
 
 
-def slam_overrides(items: list[str], set_by_script: dict[str, str]) -> dict[str, Any]:
-    """--slam-param NAME:=VALUE items, typed and checked by the node's and the Mapper's checks."""
-    from amr_common.controller_loader import ControllerSpecError, parse_overrides
+def slam_overrides(items: list[str], set_by_script: dict[str, str],
+                   mapper: str | None = None) -> dict[str, Any]:
+    """--slam-param NAME:=VALUE items, typed and checked by the node's and the Mapper's checks.
+
+    mapper: --mapper's MODULE:CLASS (loaded now: ValueError naming what is missing); its
+    parameters are the ones --slam-param takes, and it becomes the node's `mapper` parameter.
+    """
+    from amr_common.controller_loader import (
+        DEFAULT_MAPPER,
+        ControllerSpecError,
+        link_parameters,
+        load_class,
+        parse_overrides,
+    )
     from amr_common.parameters import typed_values
-    from amr_mapping.mapper_params import PARAMETERS, check_parameters
+    from amr_mapping.mapper_params import check_parameters
     from amr_mapping.slam_node_params import NODE_PARAMETERS, node_parameter_problems
     try:
         overrides = parse_overrides(items)
+        PARAMETERS = link_parameters(load_class(mapper or DEFAULT_MAPPER, "mapper"),
+                                     NODE_PARAMETERS)
     except ControllerSpecError as exc:
-        raise ValueError(f"--slam-param: {exc}") from None
+        raise ValueError(str(exc) if mapper and str(exc).startswith("mapper") else
+                         f"--slam-param: {exc}") from None
+    if "mapper" in overrides:
+        raise ValueError("--slam-param mapper: give the class with --mapper MODULE:CLASS")
     for name in overrides:
         if name in set_by_script:
             raise ValueError(f"--slam-param {name}: the script sets it {set_by_script[name]}")
@@ -87,13 +109,14 @@ def slam_overrides(items: list[str], set_by_script: dict[str, str]) -> dict[str,
         node = {name: default for name, (default, _) in NODE_PARAMETERS.items()}
         node.update({k: v for k, v in overrides.items() if k in NODE_PARAMETERS})
         problems = node_parameter_problems(node)
-        try:
-            check_parameters({k: v for k, v in overrides.items() if k in PARAMETERS})
+        try:  # the reference's own checks; another class checks when the node builds it
+            if mapper in (None, DEFAULT_MAPPER):
+                check_parameters({k: v for k, v in overrides.items() if k in PARAMETERS})
         except ValueError as exc:
             problems.append(str(exc))
     if problems:
         raise ValueError(f"--slam-param: {'; '.join(problems)}")
-    return overrides
+    return {**overrides, "mapper": mapper} if mapper else overrides
 
 
 def map_prefix(map_out: Path | None, label: str | None = None) -> str:

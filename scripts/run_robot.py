@@ -34,6 +34,12 @@ from amr_common.stop_flag import StopFlag  # noqa: E402
 # Run as a script, Ctrl-C (or SIGTERM) only sets a flag from the first moment on: see main().
 _STOP = StopFlag().install() if __name__ == "__main__" else None
 
+from link_options import (  # noqa: E402
+    add_link_options,
+    add_localization_options,
+    check_filter_map,
+)
+
 from amr_common.ros_env import describe_graph_settings, environment_domain_id  # noqa: E402
 from cli_checks import (  # noqa: E402
     OneLineArgumentParser,
@@ -45,9 +51,7 @@ from launch_common import (  # noqa: E402
     ROBOT_PARAMS,
     add_controller_options,
     add_foxglove_options,
-    add_localization_options,
     check_common_options,
-    check_filter_map,
     make_robot_graph,
     make_viewer_nodes,
 )
@@ -86,6 +90,7 @@ def parse_args(argv=None) -> argparse.Namespace:
                         "the particle filter's and the planner's map")
     add_foxglove_options(parser)
     add_localization_options(parser)
+    add_link_options(parser)
     parser.add_argument("--world", default=None, metavar="MAP", help="deprecated: the old name "
                         "of --map (there is no simulated world on the robot)")
     parser.add_argument("--goal", default=None, help="navigate to X,Y (metres, negative numbers "
@@ -122,7 +127,7 @@ def parse_args(argv=None) -> argparse.Namespace:
             if args.goal is not None:
                 args.goal = world.resolve_goal(args.goal)
             if args.localize:  # the particle filter runs on `world`
-                check_filter_map(world, args.pf_overrides)
+                check_filter_map(world, args.pf_overrides, args.links.get("localizer"))
         except ValueError as exc:  # WorldError, a map too big for the filter
             parser.error(str(exc))
     return args
@@ -165,7 +170,8 @@ def _run(args: argparse.Namespace, stop: StopFlag) -> int:
                              cmd_vel_stamped=stamped, controller=args.controller,
                              tuning=args.overrides,
                              localize_world=args.map if args.localize else None,
-                             filter_overrides=args.pf_overrides, goal=args.goal)
+                             filter_overrides=args.pf_overrides, goal=args.goal,
+                             links=args.links)
     if args.no_controller:  # the user drives (scripts/teleop.py)
         without_controller(nodes)
     if args.slam:

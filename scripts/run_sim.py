@@ -27,6 +27,10 @@ Examples:
   .venv/bin/python scripts/run_sim.py --world maze_deadends --localize --kidnap 25,1.4,1,0
   .venv/bin/python scripts/run_sim.py --world lab02 --goal inner_far --plot out/nav.png
   .venv/bin/python scripts/run_sim.py --world lab02 --goal -1.0,0.6 --kidnap 40,0.2,1,3.14
+  .venv/bin/python scripts/run_sim.py --world lab02 --goal inner_far \
+      --localizer examples.likelihood_mcl:LikelihoodFieldMcl \
+      --planner examples.wavefront_planner:WavefrontPlanner \
+      --follower examples.plain_pursuit:PlainPursuit          # bring your own algorithm
   .venv/bin/python scripts/run_sim.py --profile turtlebot3 --slam --map-out maps/lab02 \
       --duration 300 --plot out/slam.png                  # map it: maps/lab02/map.yaml + .pgm
   .venv/bin/python scripts/run_sim.py --profile turtlebot3 --realtime --slam --teleop \
@@ -53,6 +57,12 @@ from amr_common.stop_flag import StopFlag  # noqa: E402
 # Run as a script, Ctrl-C (or SIGTERM) only sets a flag from the first moment on: see main().
 _STOP = StopFlag().install() if __name__ == "__main__" else None
 
+from link_options import (  # noqa: E402
+    add_link_options,
+    add_localization_options,
+    check_filter_map,
+)
+
 from amr_common.ros_env import describe_graph_settings, isolate_local_graph  # noqa: E402
 from cli_checks import (  # noqa: E402
     OneLineArgumentParser,
@@ -68,9 +78,7 @@ from launch_common import (  # noqa: E402
     SIM_PARAMS,
     add_controller_options,
     add_foxglove_options,
-    add_localization_options,
     check_common_options,
-    check_filter_map,
 )
 from launch_slam import add_slam_options, check_slam_options, map_prefix  # noqa: E402
 
@@ -121,6 +129,7 @@ def parse_args(argv=None) -> argparse.Namespace:
                         help="the simulator synchronizes /cmd_vel with /pose from a "
                         "localization node of yours (--localize starts the project's)")
     add_localization_options(parser)
+    add_link_options(parser)
     add_slam_options(parser, "run_sim")
     parser.add_argument("--kidnap", default=None, metavar="T,X,Y,THETA",
                         help="teleport the robot at simulated time T (s) to (X, Y, THETA): "
@@ -243,7 +252,7 @@ def _prepare(args):
             args.goal, goal_warning = resolve_goal_on_map(args.goal, map_world, world)
             warnings.append(goal_warning)
         if args.localize or args.goal is not None:  # the particle filter runs on the map
-            check_filter_map(map_world, args.pf_overrides)
+            check_filter_map(map_world, args.pf_overrides, args.links.get("localizer"))
         starts = [next(iter(world.starts)) if s is None else s for s in starts]
         outputs = _check_outputs(args, [start_label(s) for s in starts])
     except ValueError as exc:  # WorldError, a bad domain id or output path, a map too big

@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 
+from amr_common.geometry import polyline_length
 from amr_common.world import start_label
 from amr_evaluation.episode import trajectory_metrics
 
@@ -95,7 +96,7 @@ def slam_fields(world, profile: str, trajectory: list, estimate: list, raster, m
         index = np.clip(np.searchsorted(rows[:, 0], est[:, 0] - 1e-6), 0, len(rows) - 1)
         truth = rows[index, 1:]
         hits = RayHits(world, prof.angle_min, prof.angle_increment, prof.scan_rays,
-                       prof.range_min, min(prof.range_max, mapper.p["max_range_m"]))
+                       prof.range_min, min(prof.range_max, mapper.max_range_m))
         for x, y, theta in truth:
             hits.add(x + prof.lidar_offset_x * math.cos(theta),
                      y + prof.lidar_offset_x * math.sin(theta), theta)
@@ -143,7 +144,7 @@ def navigation_fields(goal, summary: dict, plan, estimate: list,
         "goal_reached_time_s": summary["goal_reached_time_s"],
         "stopped_time_s": summary["stopped_time_s"],
         "final_position_error_m": summary["final_position_error_m"],
-        "path_length_m": plan.length_m if plan is not None else None,
+        "path_length_m": polyline_length(plan.points) if plan is not None else None,
         "path": plan.points.tolist() if plan is not None else [],
         "planning_error": planning_error,
     }

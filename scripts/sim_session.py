@@ -127,12 +127,13 @@ class SimSession:
         if args.controller:
             tuning["controller"] = args.controller
         filter_overrides = getattr(args, "pf_overrides", {})
+        links = getattr(args, "links", {})  # --localizer, --planner, --follower
         if self.rehearsal:
             self.control_nodes = make_robot_graph(
                 self.context, params_file=args.params_file or ROBOT_PARAMS, dt=args.dt,
                 tuning=tuning, localize_world=map_source if localize else None,
                 filter_overrides=filter_overrides,
-                goal=args.goal if self.navigating else None)
+                goal=args.goal if self.navigating else None, links=links)
             if getattr(args, "no_controller", False):  # the user drives (teleop.py)
                 from launch_slam import without_controller
                 without_controller(self.control_nodes)
@@ -155,11 +156,12 @@ class SimSession:
                 lidar_offset_x = get_profile(args.profile).lidar_offset_x
                 self.control_nodes.append(make_particle_filter(
                     self.context, world=map_source, lidar_offset_x_m=lidar_offset_x,
-                    overrides=filter_overrides))
+                    overrides=filter_overrides, localizer=links.get("localizer")))
             if self.navigating:
                 self.control_nodes += make_navigators(
                     self.context, world=map_source, goal=args.goal,
-                    wall_follower=self.control_nodes[0], lidar_offset_x_m=lidar_offset_x)
+                    wall_follower=self.control_nodes[0], lidar_offset_x_m=lidar_offset_x,
+                    links=links)
         self.slam_node = None
         if slam:
             self._add_slam_node(map_prefix)

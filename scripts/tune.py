@@ -5,6 +5,7 @@ Each trial (one parameter set) runs every episode of the set headless and is sco
 objective; trials run in parallel on a Ray cluster, by default a local Ray instance on this
 machine (127.0.0.1). The episode set takes evaluate.py's options (--worlds, --starts, --profiles,
 --randomize, --seeds, --duration, --dt, --controller, --params-file, -p, --config, --jobs,
+--goals with --localizer, --planner, --follower (your own links, amr_common.interfaces),
 --episode-timeout: an episode that hangs or ends its process is a bad episode of its trial; with
 --randomize every seed is a robot with its own reality-gap effects, so the default objective
 keeps the parameters that hold on all of them). Writes to --out:

@@ -3,7 +3,8 @@
 Algorithm packages sit beside each other (never importing one another); the evaluation harness
 and the scripts sit above them. amr_tools (whole programs: Foxglove bridge, map publisher, MCAP
 recorder, introspection) imports only the shared layer, like an algorithm, and nothing below the
-scripts imports it.
+scripts imports it. examples/ (a student's links) sits on top like the scripts: it imports only
+the shared layer (a replacement needs nothing else), and nothing of the project imports it.
 """
 from __future__ import annotations
 
@@ -20,6 +21,7 @@ ALGORITHM_PACKAGES = ["amr_sim", "amr_control", "amr_turtlebot3", "amr_localizat
                       "amr_planning", "amr_mapping"]
 HARNESS = "amr_evaluation"
 TOOLS = "amr_tools"
+EXAMPLES = "examples"  # course-style links: on top like the scripts, on the shared layer only
 
 
 def imported_amr_packages(package: str) -> dict[str, set[str]]:
@@ -33,7 +35,8 @@ def imported_amr_packages(package: str) -> dict[str, set[str]]:
                 names.update(alias.name.split(".")[0] for alias in node.names)
             elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
                 names.add(node.module.split(".")[0])
-        found[str(path.relative_to(REPO))] = {n for n in names if n.startswith("amr_")}
+        found[str(path.relative_to(REPO))] = {n for n in names
+                                              if n.startswith("amr_") or n == EXAMPLES}
     return found
 
 
@@ -71,3 +74,14 @@ def test_simulator_node_loads_no_controller_code():
             "bad = [m for m in sys.modules if m.startswith('amr_control')]; "
             "assert not bad, bad")
     subprocess.run([sys.executable, "-c", code], check=True, cwd=REPO, timeout=120)
+
+
+def test_examples_import_only_the_shared_layer():
+    for module, names in imported_amr_packages(EXAMPLES).items():
+        assert names <= {SHARED, EXAMPLES}, f"{module} imports {sorted(names - {SHARED})}"
+
+
+@pytest.mark.parametrize("package", [SHARED, *ALGORITHM_PACKAGES, HARNESS, TOOLS, "scripts"])
+def test_nothing_of_the_project_imports_the_examples(package):
+    for module, names in imported_amr_packages(package).items():
+        assert EXAMPLES not in names, f"{module} imports {EXAMPLES}"
