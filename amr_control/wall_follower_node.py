@@ -39,6 +39,7 @@ from amr_common.controller_loader import (
     load_controller_class,
 )
 from amr_common.lifecycle_node import GuardedLifecycleNode
+from amr_common.navigation_behaviour import Handover
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameter_table import Param, at_least, check_values, ruled
 from amr_common.parameters import declare_parameters, read_parameters
@@ -164,6 +165,7 @@ class WallFollowerNode(CommandingNode):
         self._synchronizer = None
         self._timer = None
         self._latest: tuple | None = None  # (z_scan, z_v, z_w, arrival Time) in robot mode
+        self._handover = Handover()
         self._in_charge = True  # of the robot: see the module docstring (handover)
         self._latest_in_charge = True  # robot mode: the newest set's verdict
         self._scan_geometry: tuple | None = None
@@ -279,7 +281,12 @@ class WallFollowerNode(CommandingNode):
     def _on_synchronized(self, odometry: Odometry, scan: LaserScan, pose=None) -> None:
         if not self.is_active:
             return
-        in_charge = pose is None or not pose.localized or not self.stop_when_localized
+        # Who commands is the Handover's rule (shared with the headless episodes); the
+        # controller computes on every set either way, so its perception stays current.
+        if pose is not None:
+            self._handover.update(pose.localized)
+        in_charge = pose is None or not self.stop_when_localized or \
+            self._handover.explorer_in_charge
         measurement = self._measurement(odometry, scan)
         if self.simulation:
             self._hand_over(in_charge)

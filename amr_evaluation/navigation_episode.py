@@ -36,15 +36,40 @@ from typing import Any, Sequence
 import numpy as np
 
 from amr_common.map_vs_world import load_map, resolve_goal_on_map
+from amr_common.navigation_behaviour import (
+    GoalCheck,
+    Handover,
+    KidnapSchedule,
+    OdometryClock,
+    OdometryHold,
+    ScanNovelty,
+    as_sent_pose,
+    as_sent_ranges,
+    stamp_ns,
+)
 from amr_common.world import World
 from amr_control.pure_pursuit import PurePursuit, scan_clearance, scan_free_ahead
-from amr_evaluation.episode import default_controller, tell_scan_geometry
+from amr_evaluation.episode import as_commanded, default_controller, tell_scan_geometry
 from amr_planning.planner import Planner, PlanningError
 from amr_sim.profiles import get_profile
 from amr_sim.simulator import Simulator
 from amr_sim.simulator_params import PARAMETERS as SIMULATOR_PARAMETERS
 
 GOAL_TOLERANCE_M = SIMULATOR_PARAMETERS["goal_tolerance"][0]
+GOAL_REST_TIME_S = SIMULATOR_PARAMETERS["goal_rest_time"][0]
+
+
+def _pursue(pursuit: PurePursuit, pose, z_scan, geometry, prof, radius: float):
+    """The pure pursuit node's command for a localized pose (amr_control.pure_pursuit_node).
+
+    The scan's obstacles only once it has a path; the command clipped to the Burger's limits.
+    """
+    obstacles = (None, None)
+    if pursuit.path is not None:
+        scan = (z_scan, geometry[0], geometry[1], geometry[3], geometry[4],
+                prof.lidar_offset_x, radius)
+        obstacles = (scan_clearance(*scan), scan_free_ahead(*scan))
+    return as_commanded(pursuit.compute_commands(*pose, *obstacles))
 
 
 class GroundTruthPose:
@@ -70,8 +95,10 @@ class GroundTruthPose:
 class ParticleFilterPose:
     """The particle filter (amr_localization) as the pose source, fed as its node feeds it.
 
-    Every step: predict with the odometry twist over dt; a new scan (the turtlebot3 profile
-    refreshes it every 0.2 s) is weighed. The first measurement is weighed at once.
+    Every measurement: predict with the odometry twist over the time since the previous one
+    (OdometryClock, on the stamps the node would see), then correct with the scan, which counts
+    as new when its readings differ from the previous scan's (ScanNovelty): the rules of
+    amr_common.navigation_behaviour, shared with the particle filter node.
     """
 
     def __init__(self, world: World, sim: Simulator, seed: int = 0, **filter_params) -> None:
@@ -82,20 +109,18 @@ class ParticleFilterPose:
         self.filter = ParticleFilter(world, **params)
         self._geometry = sim.scan_geometry
         tell_scan_geometry(self.filter, self._geometry, with_rays=True)
-        self._scan_time: float | None = None
-        self._time = sim.time
+        self._clock = OdometryClock()
+        self._novelty = ScanNovelty()
 
     def update(self, sim: Simulator, z_scan, z_v: float, z_w: float):
         """((x, y, theta), localized) after taking in the newest measurement."""
-        if sim.time > self._time:
-            self.filter.predict(z_v, z_w, sim.time - self._time)
-            self._time = sim.time
-        if sim.scan_time != self._scan_time:
-            if sim.scan_geometry is not self._geometry:  # the LDS-02: every scan
-                self._geometry = sim.scan_geometry
-                tell_scan_geometry(self.filter, self._geometry, with_rays=True)
-            self.filter.correct(z_scan, force=self._scan_time is None)
-            self._scan_time = sim.scan_time
+        dt, _ = self._clock.advance(stamp_ns(sim.time))
+        if dt is not None:
+            self.filter.predict(float(z_v), float(z_w), dt)
+        if sim.scan_geometry is not self._geometry:  # the LDS-02: every scan
+            self._geometry = sim.scan_geometry
+            tell_scan_geometry(self.filter, self._geometry, with_rays=True)
+        self.filter.correct(z_scan, new_scan=self._novelty.is_new(z_scan))
         return tuple(self.filter.estimate), bool(self.filter.localized)
 
 
@@ -197,7 +222,8 @@ def run_navigation_episode(
         filter_params: dict | None = None, kidnap: Sequence[float] | None = None,
         planner: Planner | None = None, planner_params: dict | None = None,
         pursuit_params: dict | None = None, wall_follower: Any = None,
-        goal_tolerance: float = GOAL_TOLERANCE_M, stall_timeout_s: float = 30.0,
+        goal_tolerance: float = GOAL_TOLERANCE_M, goal_rest_time: float = GOAL_REST_TIME_S,
+        stall_timeout_s: float = 30.0,
         record_trajectory: bool = True, map: World | str | None = None) -> NavigationResult:
     """Drive from `start` to `goal` and measure it; see the module docstring.
 
@@ -229,69 +255,68 @@ def run_navigation_episode(
 
     n_steps = int(round(duration / sim.dt))
     trajectory = [[0.0, *sim.pose]] if record_trajectory else []
-    events: dict[str, float | None] = {"localized": None, "reached": None, "stopped": None}
+    localized_time = None
     plans, errors, plan_ms, path = 0, [], None, None
     pursued: list[tuple[float, float]] = []  # true positions while the pursuit drives
-    was_localized = stalled = False
+    stalled = False
     idle_steps = 0  # consecutive localized zero commands before the goal
-    kidnapped = kidnap is None
-    next_odom = 0.0
+    # The rules the nodes follow (amr_common.navigation_behaviour).
+    handover = Handover()
+    goal_check = GoalCheck(goal_xy, goal_tolerance, goal_rest_time)
+    kidnapping = KidnapSchedule(kidnap)
     z_scan, z_v, z_w = sim.measure()
-    held_v, held_w = z_v, z_w
+    z_scan = as_sent_ranges(z_scan)
+    odometry = OdometryHold(prof.odom_period, z_v, z_w)
     wall_start = time.perf_counter()
     for _ in range(n_steps):
-        estimate, localized = pose_source.update(sim, z_scan, held_v, held_w)
-        if localized:
-            if events["localized"] is None:
-                events["localized"] = sim.time
-            if not was_localized:  # first localization or relocalized: (re)plan from here
-                plans += 1
-                try:
-                    plan = planner.plan(estimate[:2], goal_xy)
-                    pursuit.set_path(plan.points)
-                    path, plan_ms = plan, plan.total_time_s * 1e3
-                except PlanningError as exc:
-                    errors.append(f"t={sim.time:.2f} s: {exc}")
-                    pursuit.clear_path()
-            scan = (z_scan, geometry[0], geometry[1], geometry[3], geometry[4],
-                    prof.lidar_offset_x, radius)
-            v, w = pursuit.compute_commands(*estimate, scan_clearance(*scan),
-                                            scan_free_ahead(*scan))
+        estimate, localized = pose_source.update(sim, z_scan, *odometry.twist)
+        event = handover.update(localized)
+        if localized and localized_time is None:
+            localized_time = sim.time
+        if event == "lost":
+            pursuit.clear_path()  # the wall follower takes over; replan when relocalized
+        # The wall follower computes on every measurement (as its node), commands while in charge.
+        explore = as_commanded(wall_follower.compute_commands(z_scan, *odometry.twist))
+        if handover.explorer_in_charge:
+            v, w = explore
+        else:
+            v, w = _pursue(pursuit, as_sent_pose(estimate), z_scan, geometry, prof, radius)
             if pursuit.state in ("track", "rotate"):
                 pursued.append(sim.pose[:2])
-        else:
-            if was_localized:
-                pursuit.clear_path()  # the wall follower takes over; replan when relocalized
-            v, w = wall_follower.compute_commands(z_scan, held_v, held_w)
-        was_localized = localized
-        x, y, _ = sim.pose
-        if localized and events["reached"] is None and \
-                math.hypot(x - goal_xy[0], y - goal_xy[1]) <= goal_tolerance:
-            events["reached"] = sim.time
-        if localized and pursuit.arrived:
-            events["stopped"] = sim.time
-            break
+        if handover.plans(event):
+            # After the pursuit answered this pose: in the graph the planner's /path arrives
+            # after the /pose it was planned from has reached the pursuit (a zero command).
+            plans += 1
+            try:
+                plan = planner.plan(estimate[:2], goal_xy)
+                pursuit.set_path(plan.points)
+                path, plan_ms = plan, plan.total_time_s * 1e3
+            except PlanningError as exc:
+                errors.append(f"t={sim.time:.2f} s: {exc}")
+                pursuit.clear_path()
         idle_steps = idle_steps + 1 if localized and (v, w) == (0.0, 0.0) else 0
         if idle_steps * sim.dt >= stall_timeout_s:
             stalled = True
             break
-        if not kidnapped and sim.time >= kidnap[0] - 1e-9:
-            sim.teleport(kidnap[1:])
-            kidnapped = True
+        teleport = kidnapping.due(sim.time)
+        if teleport is not None:
+            sim.teleport(teleport)
         z_scan, z_v, z_w = sim.step(v, w)
+        z_scan = as_sent_ranges(z_scan)
+        if record_trajectory:
+            trajectory.append([sim.time, *sim.pose])
+        if goal_check.update(sim.time, sim.pose, localized, (v, w) == (0.0, 0.0), sim.dt):
+            break
         if sim.scan_geometry is not geometry:  # the LDS-02: every scan
             geometry = sim.scan_geometry
             tell_scan_geometry(wall_follower, geometry)
-        if prof.odom_period is None or sim.time >= next_odom - 1e-9:
-            held_v, held_w = z_v, z_w  # the real robot's twist only changes with each /odom
-            if prof.odom_period is not None:
-                while next_odom <= sim.time + 1e-9:
-                    next_odom += prof.odom_period
-        if record_trajectory:
-            trajectory.append([sim.time, *sim.pose])
+        odometry.update(sim.time, z_v, z_w)
     wall_time = time.perf_counter() - wall_start
 
     x, y, _ = sim.pose
+    over = goal_check.reached_time is not None and goal_check.rest_since is not None and \
+        sim.time - goal_check.rest_since >= goal_check.rest_time - 1e-9
+    stopped_time = goal_check.rest_since if over else None
     cross = distances_to_polyline(np.array(pursued), path.points) \
         if pursued and path is not None else None
     start_label = start if isinstance(start, str) else (
@@ -303,8 +328,8 @@ def run_navigation_episode(
         sim_time_s=sim.time,
         wall_time_s=wall_time,
         real_time_factor=sim.time / wall_time if wall_time > 0 else None,
-        localized_time_s=events["localized"], goal_reached_time_s=events["reached"],
-        stopped_time_s=events["stopped"],
+        localized_time_s=localized_time, goal_reached_time_s=goal_check.reached_time,
+        stopped_time_s=stopped_time,
         path_length_m=path.length_m if path is not None else None,
         path_min_clearance_m=path.min_clearance_m if path is not None else None,
         distance_m=sim.distance,
@@ -313,7 +338,7 @@ def run_navigation_episode(
         planning_errors=errors, plan_time_ms=plan_ms,
         cross_track_mean_m=float(cross.mean()) if cross is not None else None,
         cross_track_max_m=float(cross.max()) if cross is not None else None,
-        finish_reason="stopped at the goal" if events["stopped"] is not None else
+        finish_reason="stopped at the goal" if stopped_time is not None else
         "stalled" if stalled else "duration",
         invalid_commands=sim.bad_commands,
         kidnap=[float(k) for k in kidnap] if kidnap is not None else None, stalled=stalled,
