@@ -6,14 +6,17 @@ issue 12.
     result = run_navigation_episode("lab02", "outer", goal="inner_far")
     print(result.summary())
 
-Each step, as the nodes do it: the pose source turns the measurement into a pose estimate and a
-`localized` flag (the particle filter's /pose). Not localized: the wall follower commands.
-Localized: on the first localized step (and again after each loss of localization) the planner
-plans from the estimate to the goal, then the pure pursuit commands - a zero command until it has
-a path, zero again once it stopped at the path's end. The simulator counts the goal as reached
-when the TRUE position is within goal_tolerance while localized (as the course simulator), and
-the episode runs on until the pursuit has stopped the robot, so the final position error is
-measured where the robot rests.
+Each step, as the nodes do it, by the same rules (amr_common.navigation_behaviour): the pose
+source turns the measurement into a pose estimate and a `localized` flag (the particle filter's
+/pose). The wall follower computes on every measurement and commands while not localized
+(Handover). Localized: on the first localized step (and again after each loss of localization)
+the planner plans from the estimate to the goal; the path reaches the pursuit after that pose
+(as /path does in the graph), so the pursuit answers it with zero, then follows, and commands
+zero once stopped at the path's end. The goal counts as reached when the TRUE position is within
+goal_tolerance while localized, and the episode ends once the robot has then rested
+goal_rest_time (GoalCheck, as the simulator node), so the final position error is measured where
+the robot rests. tests/test_headless_is_the_ros_graph.py checks the trajectory is the ROS
+lockstep graph's.
 
 Pose sources (`pose_source`): "filter" (the particle filter of amr_localization, as the ROS
 graph runs it: predicted with every odometry twist, corrected with every new scan), "truth"
@@ -140,7 +143,7 @@ class NavigationResult:
     pose_source: str
     localized_time_s: float | None  # first localized step
     goal_reached_time_s: float | None  # true position within goal_tolerance while localized
-    stopped_time_s: float | None  # the pursuit stopped at the path's end
+    stopped_time_s: float | None  # the robot came to rest at the goal (GoalCheck.rest_since)
     path_length_m: float | None  # the last planned path
     path_min_clearance_m: float | None  # its smallest distance to a wall (robot centre)
     distance_m: float  # driven
