@@ -115,26 +115,32 @@ class OdometryClock:
 
 
 class OdometryHold:
-    """The odometry twist a controller sees: the real robot's only changes with each /odom.
+    """What a controller sees of the odometry: the real robot's only changes with each /odom.
 
-    period None: a new twist every step (the lockstep /odometry); else one every `period`
-    seconds of simulated time, held in between.
+    period None: new values every step (the lockstep /odometry); else once every `period`
+    seconds of simulated time, held in between. The values are the twist (v, w), optionally
+    followed by more (an odometry pose).
     """
 
-    def __init__(self, period: float | None, v: float, w: float) -> None:
+    def __init__(self, period: float | None, *values) -> None:
         self.period = period
-        self.twist = (v, w)
+        self.held = tuple(values)
         self._next = 0.0
 
-    def update(self, time: float, v: float, w: float) -> tuple[float, float]:
-        """The twist to use after a step that measured (v, w) at simulated `time`."""
+    @property
+    def twist(self) -> tuple[float, float]:
+        """The held (v, w)."""
+        return self.held[0], self.held[1]
+
+    def update(self, time: float, *values) -> tuple:
+        """The values to use after a step that measured `values` at simulated `time`."""
         if self.period is None:
-            self.twist = (v, w)
+            self.held = tuple(values)
         elif time >= self._next - 1e-9:
-            self.twist = (v, w)
+            self.held = tuple(values)
             while self._next <= time + 1e-9:
                 self._next += self.period
-        return self.twist
+        return self.held
 
 
 # --- who commands ---------------------------------------------------------------------------

@@ -70,6 +70,10 @@ def test_odometry_hold_changes_the_twist_only_with_each_odom_message():
     assert seen == pytest.approx([0.01, 0.02, 0.02, 0.04, 0.04])  # held 0.1 s
     every_step = OdometryHold(None, 0.0, 0.0)
     assert every_step.update(0.05, 0.1, 0.2) == (0.1, 0.2)
+    with_pose = OdometryHold(0.1, 0.0, 0.0, (0.0, 0.0, 0.0))  # the mapping episode's pose too
+    with_pose.update(0.05, 0.1, 0.0, (0.005, 0.0, 0.0))
+    assert with_pose.update(0.1, 0.1, 0.0, (0.01, 0.0, 0.0))[2] == (0.01, 0.0, 0.0)
+    assert with_pose.update(0.15, 0.2, 0.0, (0.02, 0.0, 0.0)) == (0.1, 0.0, (0.01, 0.0, 0.0))
 
 
 def test_kidnapping_happens_once_from_its_time_on():
