@@ -11,6 +11,7 @@ trajectories). No rclpy here: each rule is unit-tested without ROS.
 - `ScanNovelty`: what counts as a new scan (readings that differ from the previous scan's).
 - `OdometryClock`: the time over which an odometry twist moves the pose (stamps, gaps, jumps).
 - `OdometryHold`: the odometry twist a controller sees between two /odom messages.
+- `timer_action`: what a commanding node does with missing or stale data (robot mode).
 - `Handover`: who commands (the explorer until localized, then the path follower) and when to
   (re)plan: on the first localization and after each relocalization.
 - `GoalCheck`: the goal reached (true position within tolerance while localized) and the run
@@ -144,6 +145,20 @@ class OdometryHold:
 
 
 # --- who commands ---------------------------------------------------------------------------
+
+def timer_action(age_s: float | None, timeout_s: float, in_charge: bool) -> str:
+    """What a commanding node does on its robot-mode timer with its newest data.
+
+    "zero" when there is none or it is older than timeout_s (a robot never keeps moving on
+    stale data, whoever commanded it), "silent" when fresh data says another node commands,
+    else "compute". The lockstep graph and the headless episodes never see stale data: each
+    step waits for its measurement.
+    """
+    if age_s is None or age_s > timeout_s:
+        return "zero"
+    return "compute" if in_charge else "silent"
+
+
 
 class Handover:
     """Who commands, and when to plan: the explorer until localized, then the path follower.

@@ -32,7 +32,7 @@ from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import LaserScan
 
 from amr_common.geometry import polyline_length
-from amr_common.navigation_behaviour import Handover
+from amr_common.navigation_behaviour import Handover, timer_action
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameter_table import Param, ruled
 from amr_common.parameters import declare_parameters, read_parameters
@@ -260,7 +260,7 @@ class PurePursuitNode(CommandingNode):
         pose, _, arrival = self._latest
         now = self.get_clock().now()
         age = (now - arrival).nanoseconds * 1e-9
-        if age > self.data_timeout:
+        if timer_action(age, self.data_timeout, in_charge=True) == "zero":
             self.get_logger().warning(f"newest /pose {age:.2f} s old (data_timeout "
                                       f"{self.data_timeout} s): commanding zero",
                                       throttle_duration_sec=2.0)

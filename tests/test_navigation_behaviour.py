@@ -18,6 +18,7 @@ from amr_common.navigation_behaviour import (
     as_sent_scan_geometry,
     limit_command,
     stamp_ns,
+    timer_action,
 )
 
 
@@ -96,3 +97,10 @@ def test_what_crosses_a_topic():
     assert stamp_ns(0.15000000000000002) == 150_000_000
     assert limit_command(1.0, -9.0) == (0.22, -2.84)
     assert limit_command(math.nan, 0.1) == (0.0, 0.0)
+
+
+def test_stale_or_missing_data_means_zero_whoever_commands():
+    assert timer_action(None, 0.5, in_charge=True) == "zero"
+    assert timer_action(0.6, 0.5, in_charge=False) == "zero", "a stale 'not in charge' too"
+    assert timer_action(0.5, 0.5, in_charge=False) == "silent"
+    assert timer_action(0.1, 0.5, in_charge=True) == "compute"
