@@ -78,12 +78,12 @@ class ScanNovelty:
     def __init__(self) -> None:
         self._last: bytes | None = None
 
-    def is_new(self, ranges) -> bool:
-        """True (and remembered) if the ranges differ from the previous scan's."""
-        raw = np.ascontiguousarray(ranges, dtype=np.float32).tobytes()
-        if raw == self._last:
+    def is_new(self, ranges, geometry: tuple = ()) -> bool:
+        """True (and remembered) if the ranges (or the scan geometry) differ from the previous."""
+        key = np.ascontiguousarray(ranges, dtype=np.float32).tobytes() + repr(geometry).encode()
+        if key == self._last:
             return False
-        self._last = raw
+        self._last = key
         return True
 
 

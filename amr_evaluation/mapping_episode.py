@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from amr_common.geometry import compose, inverse
-from amr_common.navigation_behaviour import OdometryHold
+from amr_common.navigation_behaviour import OdometryHold, ScanNovelty
 from amr_common.world import World
 from amr_evaluation.episode import default_controller
 from amr_evaluation.mapping_metrics import RayHits, mapping_figures, trajectory_errors
@@ -225,7 +225,8 @@ def _explore(sim: Simulator, controller, mapper, odometry: DriftingOdometry, hit
     n_steps = int(round(float(duration) / sim.dt))
     z_scan, z_v, z_w = sim.measure()
     held = OdometryHold(prof.odom_period, z_v, z_w, odometry.step(sim.odometry_pose, sim.dt))
-    scan_time = sim.scan_time
+    novelty = ScanNovelty()  # a new scan as the slam node counts it (skip_repeated_scans)
+    novelty.is_new(z_scan, sim.scan_geometry[:2])
 
     def feed(ranges: np.ndarray, stamp: float) -> None:
         started = time.perf_counter()
@@ -245,9 +246,8 @@ def _explore(sim: Simulator, controller, mapper, odometry: DriftingOdometry, hit
         v, w = controller.compute_commands(z_scan, *held.twist)
         z_scan, z_v, z_w = sim.step(v, w)
         held.update(sim.time, z_v, z_w, odometry.step(sim.odometry_pose, sim.dt))
-        if sim.scan_time != scan_time:
-            scan_time = sim.scan_time
-            feed(z_scan, scan_time)
+        if novelty.is_new(z_scan, sim.scan_geometry[:2]):
+            feed(z_scan, sim.scan_time)
     run.wall_time = time.perf_counter() - wall_start
     run.cpu_time = time.process_time() - cpu_start
     return run

@@ -104,3 +104,10 @@ def test_stale_or_missing_data_means_zero_whoever_commands():
     assert timer_action(0.6, 0.5, in_charge=False) == "zero", "a stale 'not in charge' too"
     assert timer_action(0.5, 0.5, in_charge=False) == "silent"
     assert timer_action(0.1, 0.5, in_charge=True) == "compute"
+
+
+def test_a_scan_with_another_geometry_is_new():
+    novelty = ScanNovelty()
+    assert novelty.is_new([1.0, 2.0], (0.0, 0.5))
+    assert not novelty.is_new([1.0, 2.0], (0.0, 0.5))
+    assert novelty.is_new([1.0, 2.0], (0.1, 0.5)), "the LDS-02's angles change per scan"
