@@ -18,9 +18,8 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import LaserScan
 
 from amr_common import geometry
-
-_NS_PER_S = 1_000_000_000
-
+from amr_common.navigation_behaviour import NS_PER_S as _NS_PER_S
+from amr_common.navigation_behaviour import stamp_ns
 
 # --- time ---------------------------------------------------------------------------------
 
@@ -33,7 +32,7 @@ def seconds_to_time(seconds: float, stamp: Time | None = None) -> Time:
     """
     if not math.isfinite(seconds):
         raise ValueError(f"cannot convert non-finite time {seconds!r} to a stamp")
-    sec, nanosec = divmod(round(seconds * _NS_PER_S), _NS_PER_S)
+    sec, nanosec = divmod(stamp_ns(seconds), _NS_PER_S)  # the headless episodes' stamps too
     if stamp is None:
         return Time(sec=int(sec), nanosec=int(nanosec))
     stamp.sec, stamp.nanosec = int(sec), int(nanosec)

@@ -6,7 +6,6 @@ that start and stop commanding (CommandingNode, a GuardedLifecycleNode).
 """
 from __future__ import annotations
 
-import math
 from typing import Any
 
 from geometry_msgs.msg import Twist, TwistStamped
@@ -14,9 +13,9 @@ from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackRet
 from rclpy.publisher import Publisher
 
 from amr_common.lifecycle_node import GuardedLifecycleNode
+from amr_common.navigation_behaviour import limit_command  # noqa: F401  (the nodes' import)
 from amr_common.parameter_table import above
 from amr_common.qos import RELIABLE_10
-from amr_common.robot import MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED
 
 # The parameters every commanding node declares alike (the nodes add their own, e.g. what
 # data_timeout applies to).
@@ -35,14 +34,6 @@ def command_parameter_problems(p: dict[str, Any]) -> list[str]:
     if p["angular_sign"] not in (1, -1):
         return [f"angular_sign must be 1 or -1 (got {p['angular_sign']})"]
     return []
-
-
-def limit_command(v: float, w: float) -> tuple[float, float]:
-    """(v, w) clipped to the Burger's limits; (0, 0) if either is not finite."""
-    if not (math.isfinite(v) and math.isfinite(w)):
-        return 0.0, 0.0
-    return (min(max(v, -MAX_LINEAR_SPEED), MAX_LINEAR_SPEED),
-            min(max(w, -MAX_ANGULAR_SPEED), MAX_ANGULAR_SPEED))
 
 
 class CommandOutput:

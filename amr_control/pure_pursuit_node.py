@@ -35,6 +35,7 @@ from sensor_msgs.msg import LaserScan
 from amr_common.controller_loader import DEFAULT_FOLLOWER
 from amr_common.geometry import polyline_length
 from amr_common.interfaces import PathFollower
+from amr_common.navigation_behaviour import Handover, timer_action
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameter_table import Param, ruled
 from amr_common.parameters import declare_link, declare_parameters, read_parameters
@@ -95,7 +96,7 @@ class PurePursuitNode(CommandingNode):
         self._output: CommandOutput | None = None
         self._subscriptions: list = []
         self._timer = None
-        self._localized = False
+        self._handover = Handover()  # who commands: the shared rule (navigation_behaviour)
         self._latest = None  # robot mode: (pose, stamp ns, arrival Time) of the newest /pose
         self._newest_stamp_ns: int | None = None  # newest /pose stamp (see _in_order)
         self._last_stamp = None  # ... as a message stamp: the zero on the way down carries it
@@ -202,11 +203,10 @@ class PurePursuitNode(CommandingNode):
         if not self.is_active or self.pursuit is None:
             return
         stamp_ns = time_to_nanoseconds(message.header.stamp)
+        if self._handover.update(message.localized) == "lost":
+            self._lose_localization(message.header.stamp, stamp_ns)
         if not message.localized:
-            if self._localized:
-                self._lose_localization(message.header.stamp, stamp_ns)
             return
-        self._localized = True
         try:
             pose = pose_from_message(message.pose)
         except ValueError as exc:
@@ -249,7 +249,6 @@ class PurePursuitNode(CommandingNode):
         return False
 
     def _lose_localization(self, stamp, stamp_ns: int) -> None:
-        self._localized = False
         self._latest = None
         self.get_logger().warning("localization lost: stopping; the wall follower takes over "
                                   "until the planner replans from the relocalized pose")
@@ -261,12 +260,13 @@ class PurePursuitNode(CommandingNode):
             self._output.publish(0.0, 0.0, self.get_clock().now().to_msg())
 
     def _on_timer(self) -> None:
-        if not self.is_active or self._latest is None or not self._localized:
+        if not self.is_active or self._latest is None or \
+                self._handover.explorer_in_charge:
             return  # not localized: the wall follower commands
         pose, _, arrival = self._latest
         now = self.get_clock().now()
         age = (now - arrival).nanoseconds * 1e-9
-        if age > self.data_timeout:
+        if timer_action(age, self.data_timeout, in_charge=True) == "zero":
             self.get_logger().warning(f"newest /pose {age:.2f} s old (data_timeout "
                                       f"{self.data_timeout} s): commanding zero",
                                       throttle_duration_sec=2.0)

@@ -39,6 +39,7 @@ from amr_common.controller_loader import (
     load_controller_class,
 )
 from amr_common.lifecycle_node import GuardedLifecycleNode
+from amr_common.navigation_behaviour import Handover, timer_action
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameter_table import Param, at_least, check_values, ruled
 from amr_common.parameters import declare_parameters, read_parameters
@@ -164,6 +165,7 @@ class WallFollowerNode(CommandingNode):
         self._synchronizer = None
         self._timer = None
         self._latest: tuple | None = None  # (z_scan, z_v, z_w, arrival Time) in robot mode
+        self._handover = Handover()
         self._in_charge = True  # of the robot: see the module docstring (handover)
         self._latest_in_charge = True  # robot mode: the newest set's verdict
         self._scan_geometry: tuple | None = None
@@ -279,7 +281,12 @@ class WallFollowerNode(CommandingNode):
     def _on_synchronized(self, odometry: Odometry, scan: LaserScan, pose=None) -> None:
         if not self.is_active:
             return
-        in_charge = pose is None or not pose.localized or not self.stop_when_localized
+        # Who commands is the Handover's rule (shared with the headless episodes); the
+        # controller computes on every set either way, so its perception stays current.
+        if pose is not None:
+            self._handover.update(pose.localized)
+        in_charge = pose is None or not self.stop_when_localized or \
+            self._handover.explorer_in_charge
         measurement = self._measurement(odometry, scan)
         if self.simulation:
             self._hand_over(in_charge)
@@ -339,22 +346,20 @@ class WallFollowerNode(CommandingNode):
         if not self.is_active:
             return
         now = self.get_clock().now()
-        fresh = self._latest is not None and \
-            (now - self._latest[3]).nanoseconds * 1e-9 <= self.data_timeout
-        if fresh and not self._latest_in_charge:
+        age = None if self._latest is None else (now - self._latest[3]).nanoseconds * 1e-9
+        action = timer_action(age, self.data_timeout, self._latest_in_charge)
+        if action == "silent":
             self._compute(*self._latest[:3])  # keeps the controller's perception current
             if self._hand_over(False):
                 self._publish(0.0, 0.0, now.to_msg())  # the robot keeps its last command
             return
-        if fresh:
-            self._hand_over(True)
-        if not fresh:
-            age = "no data yet" if self._latest is None else \
-                f"newest data {(now - self._latest[3]).nanoseconds * 1e-9:.2f} s old"
-            self.get_logger().warning(f"{age} (data_timeout {self.data_timeout} s): commanding "
-                                      f"zero", throttle_duration_sec=2.0)
+        if action == "zero":
+            newest = "no data yet" if age is None else f"newest data {age:.2f} s old"
+            self.get_logger().warning(f"{newest} (data_timeout {self.data_timeout} s): "
+                                      f"commanding zero", throttle_duration_sec=2.0)
             self._publish(0.0, 0.0, now.to_msg())
             return
+        self._hand_over(True)
         v, w = self._compute(*self._latest[:3])
         self._publish(v, w, now.to_msg())
 

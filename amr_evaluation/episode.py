@@ -41,6 +41,12 @@ import numpy as np
 from amr_common.controller_loader import described_parameters
 from amr_common.coverage_grid import GridTooLargeError
 from amr_common.geometry import wrap_angles
+from amr_common.navigation_behaviour import (
+    OdometryHold,
+    as_sent_ranges,
+    as_sent_scan_geometry,
+    limit_command,
+)
 from amr_common.world import WORLDS_DIR, World
 from amr_sim.profiles import SensorProfile, get_profile
 from amr_sim.simulator import Simulator
@@ -126,11 +132,29 @@ def tell_scan_geometry(target: Any, geometry: tuple, with_rays: bool = False) ->
     (with_rays) also the ray count.
     """
     if callable(getattr(target, "set_scan_geometry", None)):
-        angle_min, increment, rays, range_min, range_max = geometry
+        # As the nodes read it from a LaserScan (float32 fields).
+        angle_min, increment, rays, range_min, range_max = as_sent_scan_geometry(*geometry)
         if with_rays:
             target.set_scan_geometry(angle_min, increment, rays, range_min, range_max)
         else:
             target.set_scan_geometry(angle_min, increment, range_min, range_max)
+
+
+def as_commanded(out: Any) -> tuple[Any, Any]:
+    """A controller's (v, w) as the node sends it: clipped to the Burger's limits.
+
+    Not finite: passed on as is (the simulator stops the robot and counts it in
+    invalid_commands; the node sends zero). Not a pair: TypeError.
+    """
+    try:
+        v, w = out
+    except (TypeError, ValueError):
+        raise TypeError(f"compute_commands must return (v, w), got {out!r}") from None
+    try:
+        finite = math.isfinite(v) and math.isfinite(w)
+    except TypeError:
+        finite = False
+    return limit_command(v, w) if finite else (v, w)
 
 
 def run_episode(world: World | str, start=None, profile: str | SensorProfile = "ideal",
@@ -160,31 +184,23 @@ def run_episode(world: World | str, start=None, profile: str | SensorProfile = "
     positions[0] = (x, y)
     trajectory = [[0.0, x, y, th]] if record_trajectory else []
     wall_err_sq, wall_err_n = 0.0, 0
-    odom_period = prof.odom_period
-    next_odom = 0.0
 
     z_scan, z_v, z_w = sim.measure()
-    held_v, held_w = z_v, z_w
+    z_scan = as_sent_ranges(z_scan)  # what the node reads: a LaserScan's float32 ranges
+    odometry = OdometryHold(prof.odom_period, z_v, z_w)
     wall_start = time.perf_counter()
     for k in range(1, n_steps + 1):
-        out = controller.compute_commands(z_scan, held_v, held_w)
-        try:
-            v, w = out
-        except (TypeError, ValueError):
-            raise TypeError(f"compute_commands must return (v, w), got {out!r}") from None
+        v, w = as_commanded(controller.compute_commands(z_scan, *odometry.twist))
         err = getattr(controller, "wall_distance_error", None)
         if isinstance(err, (int, float)) and math.isfinite(err):
             wall_err_sq += float(err) ** 2
             wall_err_n += 1
         z_scan, z_v, z_w = sim.step(v, w)
+        z_scan = as_sent_ranges(z_scan)
         if sim.scan_geometry is not geometry:  # the LDS-02: every scan
             geometry = sim.scan_geometry
             tell_scan_geometry(controller, geometry)
-        if odom_period is None or sim.time >= next_odom - 1e-9:
-            held_v, held_w = z_v, z_w  # the real robot's twist only changes with each /odom
-            if odom_period is not None:
-                while next_odom <= sim.time + 1e-9:
-                    next_odom += odom_period
+        odometry.update(sim.time, z_v, z_w)
         x, y, th = sim.pose
         positions[k] = (x, y)
         if record_trajectory:

@@ -8,8 +8,10 @@ as the ROS nodes, with the figures that say whether the filter can be trusted.
     print(result.time_to_localized_s, result.false_localizations, result.tracking_error_mean_m)
 
 Timing as amr_evaluation.episode: `ideal` is the course's lockstep (a new scan every step);
-`turtlebot3` runs the controller and the filter every dt on the newest odometry twist, the filter
-weighing each NEW scan (every 0.2 s). The wall follower keeps exploring once localized
+`turtlebot3` runs the controller and the filter every dt on the newest odometry twist. The filter
+is fed as its node feeds it (navigation_episode.ParticleFilterPose: a scan is new when its
+readings differ from the previous one's), so the run is the ROS lockstep graph's
+(tests/test_headless_is_the_ros_graph.py). The wall follower keeps exploring once localized
 (stop_when_localized false, as in run_sim.py --localize); with stop_when_localized true it
 commands zero from then on (no planner here).
 
@@ -36,11 +38,18 @@ from typing import Any
 
 import numpy as np
 
-from amr_common.controller_loader import DEFAULT_LOCALIZER, link_class
+from amr_common.controller_loader import DEFAULT_LOCALIZER
 from amr_common.geometry import wrap_angles
 from amr_common.map_vs_world import load_map
+from amr_common.navigation_behaviour import (
+    Handover,
+    KidnapSchedule,
+    OdometryHold,
+    as_sent_ranges,
+)
 from amr_common.world import World
-from amr_evaluation.episode import default_controller, tell_scan_geometry
+from amr_evaluation.episode import as_commanded, default_controller, tell_scan_geometry
+from amr_evaluation.pose_sources import ParticleFilterPose
 from amr_sim.profiles import SensorProfile, get_profile
 from amr_sim.simulator import Simulator
 
@@ -141,52 +150,44 @@ def run_localization_episode(world: World | str, start=None,
         controller = default_controller(sim.dt, prof)
     geometry = sim.scan_geometry
     tell_scan_geometry(controller, geometry)
-    params = {"seed": seed, "lidar_offset_x_m": prof.lidar_offset_x, **(filter_params or {})}
-    pf = link_class(localizer, "localizer")(map_obj, **params)
-    tell_scan_geometry(pf, geometry, with_rays=True)
+    source = ParticleFilterPose(map_obj, sim, seed, localizer, **(filter_params or {}))
+    pf = source.filter
 
     n_steps = int(round(float(duration) / sim.dt))
     truth = np.empty((n_steps + 1, 4))
     estimate = np.empty((n_steps + 1, 5))
     distances = np.empty(n_steps + 1)
     truth[0] = (0.0, *sim.pose)
-    estimate[0] = (0.0, *pf.estimate, 0.0)
     distances[0] = 0.0
     particles_max = len(pf.particles)
     snapshot: list[list[float]] = []
-    odom_period = prof.odom_period
-    next_odom = 0.0
-    kidnapped = kidnap is None
-
+    # The rules the nodes follow (amr_common.navigation_behaviour); the filter is fed as its
+    # node feeds it (ParticleFilterPose), the wall follower computes on every measurement.
+    handover = Handover()
+    kidnapping = KidnapSchedule(kidnap)
     z_scan, z_v, z_w = sim.measure()
-    held_v, held_w = z_v, z_w
-    scan_time = sim.scan_time
-    pf.correct(z_scan, force=True)
-    filter_time = 0.0
+    z_scan = as_sent_ranges(z_scan)
+    odometry = OdometryHold(prof.odom_period, z_v, z_w)
+    started = time.perf_counter()
+    estimate[0] = (0.0, *source.update(sim, z_scan, *odometry.twist)[0], float(pf.localized))
+    filter_time = time.perf_counter() - started
     wall_start = time.perf_counter()
     for k in range(1, n_steps + 1):
-        if stop_when_localized and pf.localized:
+        handover.update(pf.localized)
+        v, w = as_commanded(controller.compute_commands(z_scan, *odometry.twist))
+        if stop_when_localized and not handover.explorer_in_charge:
             v, w = 0.0, 0.0
-        else:
-            v, w = controller.compute_commands(z_scan, held_v, held_w)
-        if not kidnapped and sim.time >= kidnap[0] - 1e-9:
-            sim.teleport(kidnap[1:])
-            kidnapped = True
+        teleport = kidnapping.due(sim.time)
+        if teleport is not None:
+            sim.teleport(teleport)
         z_scan, z_v, z_w = sim.step(v, w)
-        if odom_period is None or sim.time >= next_odom - 1e-9:
-            held_v, held_w = z_v, z_w
-            if odom_period is not None:
-                while next_odom <= sim.time + 1e-9:
-                    next_odom += odom_period
-        started = time.perf_counter()
-        pf.predict(held_v, held_w, sim.dt)
-        new_scan = sim.scan_time != scan_time
-        scan_time = sim.scan_time
+        z_scan = as_sent_ranges(z_scan)
+        odometry.update(sim.time, z_v, z_w)
         if sim.scan_geometry is not geometry:  # the LDS-02: every scan
             geometry = sim.scan_geometry
             tell_scan_geometry(controller, geometry)
-            tell_scan_geometry(pf, geometry, with_rays=True)
-        pf.correct(z_scan, new_scan=new_scan)
+        started = time.perf_counter()
+        source.update(sim, z_scan, *odometry.twist)
         filter_time += time.perf_counter() - started
         particles_max = max(particles_max, len(pf.particles))
         truth[k] = (sim.time, *sim.pose)

@@ -57,7 +57,7 @@ class RecordedFilterPose:
     def update(self, sim, z_scan, z_v: float, z_w: float):
         """((x, y, theta), localized) of the filter after the newest measurement."""
         if self._source is None:  # built on the first step: it needs the simulator's profile
-            from amr_evaluation.navigation_episode import ParticleFilterPose
+            from amr_evaluation.pose_sources import ParticleFilterPose
             self._source = ParticleFilterPose(self._map_world, sim, self._seed, **self._params)
         pose, localized = self._source.update(sim, z_scan, z_v, z_w)
         self.rows.append([sim.time, *pose, float(localized)])

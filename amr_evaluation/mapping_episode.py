@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from amr_common.geometry import compose, inverse
+from amr_common.navigation_behaviour import OdometryHold, ScanNovelty
 from amr_common.world import World
 from amr_evaluation.episode import default_controller
 from amr_evaluation.mapping_metrics import RayHits, mapping_figures, trajectory_errors
@@ -222,38 +223,31 @@ def _explore(sim: Simulator, controller, mapper, odometry: DriftingOdometry, hit
     prof = sim.profile
     run = _Recording()
     n_steps = int(round(float(duration) / sim.dt))
-    next_odom = 0.0
     z_scan, z_v, z_w = sim.measure()
-    held_v, held_w = z_v, z_w
-    held_odom = odometry.step(sim.odometry_pose, sim.dt)
-    scan_time = sim.scan_time
+    held = OdometryHold(prof.odom_period, z_v, z_w, odometry.step(sim.odometry_pose, sim.dt))
+    novelty = ScanNovelty()  # a new scan as the slam node counts it (skip_repeated_scans)
+    novelty.is_new(z_scan, sim.scan_geometry[:2])
 
     def feed(ranges: np.ndarray, stamp: float) -> None:
         started = time.perf_counter()
         result = mapper.update(Scan(ranges, prof.angle_min, prof.angle_increment,
                                     prof.range_min, prof.range_max),
-                               compose(frame, held_odom), stamp)
+                               compose(frame, held.held[2]), stamp)
         run.slam_time += time.perf_counter() - started
         if not result.status.startswith("rejected"):
             run.truth.append(sim.pose)
             run.estimate.append((stamp, *result.pose))
-            run.odometry.append(held_odom)
+            run.odometry.append(held.held[2])
             hits.add(*sim.lidar_position, sim.pose[2])
 
     wall_start, cpu_start = time.perf_counter(), time.process_time()
     feed(z_scan, 0.0)
     for _ in range(n_steps):
-        v, w = controller.compute_commands(z_scan, held_v, held_w)
+        v, w = controller.compute_commands(z_scan, *held.twist)
         z_scan, z_v, z_w = sim.step(v, w)
-        odom_now = odometry.step(sim.odometry_pose, sim.dt)
-        if prof.odom_period is None or sim.time >= next_odom - 1e-9:
-            held_v, held_w, held_odom = z_v, z_w, odom_now
-            if prof.odom_period is not None:
-                while next_odom <= sim.time + 1e-9:
-                    next_odom += prof.odom_period
-        if sim.scan_time != scan_time:
-            scan_time = sim.scan_time
-            feed(z_scan, scan_time)
+        held.update(sim.time, z_v, z_w, odometry.step(sim.odometry_pose, sim.dt))
+        if novelty.is_new(z_scan, sim.scan_geometry[:2]):
+            feed(z_scan, sim.scan_time)
     run.wall_time = time.perf_counter() - wall_start
     run.cpu_time = time.process_time() - cpu_start
     return run

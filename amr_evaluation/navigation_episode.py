@@ -6,14 +6,17 @@ issue 12.
     result = run_navigation_episode("lab02", "outer", goal="inner_far")
     print(result.summary())
 
-Each step, as the nodes do it: the pose source turns the measurement into a pose estimate and a
-`localized` flag (the particle filter's /pose). Not localized: the wall follower commands.
-Localized: on the first localized step (and again after each loss of localization) the planner
-plans from the estimate to the goal, then the pure pursuit commands - a zero command until it has
-a path, zero again once it stopped at the path's end. The simulator counts the goal as reached
-when the TRUE position is within goal_tolerance while localized (as the course simulator), and
-the episode runs on until the pursuit has stopped the robot, so the final position error is
-measured where the robot rests.
+Each step, as the nodes do it, by the same rules (amr_common.navigation_behaviour): the pose
+source turns the measurement into a pose estimate and a `localized` flag (the particle filter's
+/pose). The wall follower computes on every measurement and commands while not localized
+(Handover). Localized: on the first localized step (and again after each loss of localization)
+the planner plans from the estimate to the goal; the path reaches the pursuit after that pose
+(as /path does in the graph), so the pursuit answers it with zero, then follows, and commands
+zero once stopped at the path's end. The goal counts as reached when the TRUE position is within
+goal_tolerance while localized, and the episode ends once the robot has then rested
+goal_rest_time (GoalCheck, as the simulator node), so the final position error is measured where
+the robot rests. tests/test_headless_is_the_ros_graph.py checks the trajectory is the ROS
+lockstep graph's.
 
 Pose sources (`pose_source`): "filter" (the particle filter of amr_localization, as the ROS
 graph runs it: predicted with every odometry twist, corrected with every new scan), "truth"
@@ -42,71 +45,40 @@ from amr_common.controller_loader import (
     link_class,
 )
 from amr_common.geometry import polyline_length
+from amr_common.interfaces import PathFollower
 from amr_common.map_vs_world import load_map, resolve_goal_on_map
+from amr_common.navigation_behaviour import (
+    GoalCheck,
+    Handover,
+    KidnapSchedule,
+    OdometryHold,
+    as_sent_pose,
+    as_sent_ranges,
+)
 from amr_common.world import World
 from amr_control.pure_pursuit import scan_clearance, scan_free_ahead
-from amr_evaluation.episode import default_controller, tell_scan_geometry
+from amr_evaluation.episode import as_commanded, default_controller, tell_scan_geometry
 from amr_evaluation.localization_episode import localization_metrics
+from amr_evaluation.pose_sources import make_pose_source
 from amr_sim.profiles import get_profile
 from amr_sim.simulator import Simulator
 from amr_sim.simulator_params import PARAMETERS as SIMULATOR_PARAMETERS
 
 GOAL_TOLERANCE_M = SIMULATOR_PARAMETERS["goal_tolerance"][0]
+GOAL_REST_TIME_S = SIMULATOR_PARAMETERS["goal_rest_time"][0]
 
 
-class GroundTruthPose:
-    """The simulator's true pose as the estimate.
+def _pursue(pursuit: PathFollower, pose, z_scan, geometry, prof, radius: float):
+    """The pure pursuit node's command for a localized pose (amr_control.pure_pursuit_node).
 
-    Localized from `localized_after_s` on (the wall follower explores before that), lost again
-    during [lost_from_s, lost_until_s).
+    The scan's obstacles only once it has a path; the command clipped to the Burger's limits.
     """
-
-    def __init__(self, localized_after_s: float = 0.0, lost_from_s: float | None = None,
-                 lost_until_s: float | None = None) -> None:
-        """Times in simulated seconds."""
-        self.localized_after_s = localized_after_s
-        self.lost = (lost_from_s, lost_until_s)
-
-    def update(self, sim: Simulator, z_scan, z_v: float, z_w: float):
-        """((x, y, theta), localized) for the newest measurement."""
-        t = sim.time
-        lost = self.lost[0] is not None and self.lost[0] <= t < (self.lost[1] or math.inf)
-        return sim.pose, t >= self.localized_after_s - 1e-9 and not lost
-
-
-class ParticleFilterPose:
-    """A localizer (default the particle filter) as the pose source, fed as its node feeds it.
-
-    Every step: predict with the odometry twist over dt; a new scan (the turtlebot3 profile
-    refreshes it every 0.2 s) is weighed. The first measurement is weighed at once.
-    """
-
-    def __init__(self, world: World, sim: Simulator, seed: int = 0,
-                 localizer: str | type = DEFAULT_LOCALIZER, **filter_params) -> None:
-        """A localizer on `world` for the profile of `sim` (its LiDAR position and scan).
-
-        localizer: an amr_common.interfaces.Localizer class, or its MODULE:CLASS.
-        """
-        prof = sim.profile
-        params = {"seed": seed, "lidar_offset_x_m": prof.lidar_offset_x, **filter_params}
-        self.filter = link_class(localizer, "localizer")(world, **params)
-        self._geometry = sim.scan_geometry
-        tell_scan_geometry(self.filter, self._geometry, with_rays=True)
-        self._scan_time: float | None = None
-        self._time = sim.time
-
-    def update(self, sim: Simulator, z_scan, z_v: float, z_w: float):
-        """((x, y, theta), localized) after taking in the newest measurement."""
-        if sim.time > self._time:
-            self.filter.predict(z_v, z_w, sim.time - self._time)
-            self._time = sim.time
-        if sim.scan_time != self._scan_time:
-            if sim.scan_geometry is not self._geometry:  # the LDS-02: every scan
-                self._geometry = sim.scan_geometry
-                tell_scan_geometry(self.filter, self._geometry, with_rays=True)
-            self.filter.correct(z_scan, force=self._scan_time is None)
-            self._scan_time = sim.scan_time
-        return tuple(self.filter.estimate), bool(self.filter.localized)
+    obstacles = (None, None)
+    if pursuit.path is not None:
+        scan = (z_scan, geometry[0], geometry[1], geometry[3], geometry[4],
+                prof.lidar_offset_x, radius)
+        obstacles = (scan_clearance(*scan), scan_free_ahead(*scan))
+    return as_commanded(pursuit.compute_commands(*pose, *obstacles))
 
 
 @dataclass
@@ -125,7 +97,7 @@ class NavigationResult:
     pose_source: str
     localized_time_s: float | None  # first localized step
     goal_reached_time_s: float | None  # true position within goal_tolerance while localized
-    stopped_time_s: float | None  # the pursuit stopped at the path's end
+    stopped_time_s: float | None  # the robot came to rest at the goal (GoalCheck.rest_since)
     path_length_m: float | None  # the last planned path
     path_min_clearance_m: float | None  # its smallest distance to a wall (robot centre)
     distance_m: float  # driven
@@ -192,27 +164,14 @@ def distances_to_polyline(points: np.ndarray, path: np.ndarray) -> np.ndarray:
     return out
 
 
-def make_pose_source(kind: Any, world: World, sim: Simulator, seed: int,
-                     filter_params: dict | None = None,
-                     localizer: str | type = DEFAULT_LOCALIZER):
-    """The pose source named by `kind` ("truth", "filter": `localizer`) or `kind` itself."""
-    if kind == "truth":
-        return GroundTruthPose()
-    if kind == "filter":
-        return ParticleFilterPose(world, sim, seed, localizer, **(filter_params or {}))
-    if isinstance(kind, str) or not callable(getattr(kind, "update", None)):
-        raise ValueError(f"pose_source must be 'truth', 'filter' or an object with update(), "
-                         f"got {kind!r}")
-    return kind
-
-
 def run_navigation_episode(
         world: World | str, start=None, goal=None, profile: str = "ideal", seed: int = 0,
         duration: float = 300.0, dt: float = 0.05, pose_source: Any = "truth",
         filter_params: dict | None = None, kidnap: Sequence[float] | None = None,
         planner: Any = None, planner_params: dict | None = None,
         pursuit_params: dict | None = None, wall_follower: Any = None,
-        goal_tolerance: float = GOAL_TOLERANCE_M, stall_timeout_s: float = 30.0,
+        goal_tolerance: float = GOAL_TOLERANCE_M, goal_rest_time: float = GOAL_REST_TIME_S,
+        stall_timeout_s: float = 30.0,
         record_trajectory: bool = True, map: World | str | None = None,
         localizer: str | type = DEFAULT_LOCALIZER, planner_class: str | type = DEFAULT_PLANNER,
         follower: str | type = DEFAULT_FOLLOWER) -> NavigationResult:
@@ -249,75 +208,74 @@ def run_navigation_episode(
 
     n_steps = int(round(duration / sim.dt))
     trajectory = [[0.0, *sim.pose]] if record_trajectory else []
-    events: dict[str, float | None] = {"localized": None, "reached": None, "stopped": None}
+    localized_time = None
     plans, errors, plan_ms, path = 0, [], None, None
     pursued: list[tuple[float, float]] = []  # true positions while the pursuit drives
     poses: list[tuple[float, ...]] = []  # (t, true x, y, theta, estimated x, y, theta, localized)
-    was_localized = stalled = False
+    stalled = False
     idle_steps = 0  # consecutive localized zero commands before the goal
-    kidnapped = kidnap is None
-    next_odom = 0.0
+    # The rules the nodes follow (amr_common.navigation_behaviour).
+    handover = Handover()
+    goal_check = GoalCheck(goal_xy, goal_tolerance, goal_rest_time)
+    kidnapping = KidnapSchedule(kidnap)
     z_scan, z_v, z_w = sim.measure()
-    held_v, held_w = z_v, z_w
+    z_scan = as_sent_ranges(z_scan)
+    odometry = OdometryHold(prof.odom_period, z_v, z_w)
     wall_start = time.perf_counter()
     for _ in range(n_steps):
-        estimate, localized = pose_source.update(sim, z_scan, held_v, held_w)
+        estimate, localized = pose_source.update(sim, z_scan, *odometry.twist)
         poses.append((sim.time, *sim.pose, *estimate, float(localized)))
-        if localized:
-            if events["localized"] is None:
-                events["localized"] = sim.time
-            if not was_localized:  # first localization or relocalized: (re)plan from here
-                plans += 1
-                began = time.perf_counter()
-                try:
-                    path = np.asarray(planner.plan(estimate[:2], goal_xy).points, dtype=float)
-                    plan_ms = (time.perf_counter() - began) * 1e3
-                    pursuit.set_path(path)
-                except ValueError as exc:  # PlanningError: no path
-                    errors.append(f"t={sim.time:.2f} s: {exc}")
-                    pursuit.clear_path()
-            scan = (z_scan, geometry[0], geometry[1], geometry[3], geometry[4],
-                    prof.lidar_offset_x, radius)
-            v, w = pursuit.compute_commands(*estimate, scan_clearance(*scan),
-                                            scan_free_ahead(*scan))
+        event = handover.update(localized)
+        if localized and localized_time is None:
+            localized_time = sim.time
+        if event == "lost":
+            pursuit.clear_path()  # the wall follower takes over; replan when relocalized
+        # The wall follower computes on every measurement (as its node), commands while in charge.
+        explore = as_commanded(wall_follower.compute_commands(z_scan, *odometry.twist))
+        if handover.explorer_in_charge:
+            v, w = explore
+        else:
+            v, w = _pursue(pursuit, as_sent_pose(estimate), z_scan, geometry, prof, radius)
             if pursuit.state in ("track", "rotate"):
                 pursued.append(sim.pose[:2])
-        else:
-            if was_localized:
-                pursuit.clear_path()  # the wall follower takes over; replan when relocalized
-            v, w = wall_follower.compute_commands(z_scan, held_v, held_w)
-        was_localized = localized
-        x, y, _ = sim.pose
-        if localized and events["reached"] is None and \
-                math.hypot(x - goal_xy[0], y - goal_xy[1]) <= goal_tolerance:
-            events["reached"] = sim.time
-        if localized and pursuit.arrived:
-            events["stopped"] = sim.time
-            break
+        if handover.plans(event):
+            # After the pursuit answered this pose: in the graph the planner's /path arrives
+            # after the /pose it was planned from has reached the pursuit (a zero command).
+            plans += 1
+            began = time.perf_counter()
+            try:
+                path = np.asarray(planner.plan(estimate[:2], goal_xy).points, dtype=float)
+                plan_ms = (time.perf_counter() - began) * 1e3
+                pursuit.set_path(path)
+            except ValueError as exc:  # PlanningError (the interface's): no path
+                errors.append(f"t={sim.time:.2f} s: {exc}")
+                pursuit.clear_path()
         idle_steps = idle_steps + 1 if localized and (v, w) == (0.0, 0.0) else 0
         if idle_steps * sim.dt >= stall_timeout_s:
             stalled = True
             break
-        if not kidnapped and sim.time >= kidnap[0] - 1e-9:
-            sim.teleport(kidnap[1:])
-            kidnapped = True
+        teleport = kidnapping.due(sim.time)
+        if teleport is not None:
+            sim.teleport(teleport)
         z_scan, z_v, z_w = sim.step(v, w)
+        z_scan = as_sent_ranges(z_scan)
+        if record_trajectory:
+            trajectory.append([sim.time, *sim.pose])
+        if goal_check.update(sim.time, sim.pose, localized, (v, w) == (0.0, 0.0), sim.dt):
+            break
         if sim.scan_geometry is not geometry:  # the LDS-02: every scan
             geometry = sim.scan_geometry
             tell_scan_geometry(wall_follower, geometry)
-        if prof.odom_period is None or sim.time >= next_odom - 1e-9:
-            held_v, held_w = z_v, z_w  # the real robot's twist only changes with each /odom
-            if prof.odom_period is not None:
-                while next_odom <= sim.time + 1e-9:
-                    next_odom += prof.odom_period
-        if record_trajectory:
-            trajectory.append([sim.time, *sim.pose])
+        odometry.update(sim.time, z_v, z_w)
     wall_time = time.perf_counter() - wall_start
 
     x, y, _ = sim.pose
     rows = np.array(poses, dtype=float).reshape(-1, 8)
     pose_figures = localization_metrics(rows[:, :4], rows[:, [0, 4, 5, 6, 7]],
                                         np.zeros(len(rows)), kidnap)
+    over = goal_check.reached_time is not None and goal_check.rest_since is not None and \
+        sim.time - goal_check.rest_since >= goal_check.rest_time - 1e-9
+    stopped_time = goal_check.rest_since if over else None
     cross = distances_to_polyline(np.array(pursued), path) \
         if pursued and path is not None else None
     start_label = start if isinstance(start, str) else (
@@ -329,8 +287,8 @@ def run_navigation_episode(
         sim_time_s=sim.time,
         wall_time_s=wall_time,
         real_time_factor=sim.time / wall_time if wall_time > 0 else None,
-        localized_time_s=events["localized"], goal_reached_time_s=events["reached"],
-        stopped_time_s=events["stopped"],
+        localized_time_s=localized_time, goal_reached_time_s=goal_check.reached_time,
+        stopped_time_s=stopped_time,
         path_length_m=polyline_length(path) if path is not None else None,
         path_min_clearance_m=float(map_obj.clearances(path).min()) if path is not None
         else None,
@@ -340,7 +298,7 @@ def run_navigation_episode(
         planning_errors=errors, plan_time_ms=plan_ms,
         cross_track_mean_m=float(cross.mean()) if cross is not None else None,
         cross_track_max_m=float(cross.max()) if cross is not None else None,
-        finish_reason="stopped at the goal" if events["stopped"] is not None else
+        finish_reason="stopped at the goal" if stopped_time is not None else
         "stalled" if stalled else "duration",
         invalid_commands=sim.bad_commands,
         false_localizations=pose_figures["false_localizations"],
@@ -352,6 +310,5 @@ def run_navigation_episode(
         effects=sim.effects.as_dict() if sim.effects else None)
 
 
-__all__ = ["run_navigation_episode", "NavigationResult", "GroundTruthPose",
-           "ParticleFilterPose", "make_pose_source",
-           "distances_to_polyline", "GOAL_TOLERANCE_M"]
+__all__ = ["run_navigation_episode", "NavigationResult", "distances_to_polyline",
+           "GOAL_TOLERANCE_M"]

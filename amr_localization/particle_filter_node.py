@@ -44,6 +44,7 @@ from amr_common import message_filters
 from amr_common.controller_loader import DEFAULT_LOCALIZER
 from amr_common.interfaces import Localizer
 from amr_common.lifecycle_node import GuardedLifecycleNode
+from amr_common.navigation_behaviour import OdometryClock, ScanNovelty
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameter_table import Param, at_least, between, check_values, ruled
 from amr_common.parameters import declare_link, declare_parameters, read_parameters
@@ -132,8 +133,8 @@ class ParticleFilterNode(GuardedLifecycleNode):
         self._subscribers: list = []
         self._initialpose_subscription = None
         self._synchronizer = None
-        self._last_odometry_ns: int | None = None
-        self._last_ranges: bytes | None = None
+        self._odometry_clock = OdometryClock()
+        self._scan_novelty = ScanNovelty()
         self._last_scan_ns: int | None = None  # newest usable scan
         self._last_particles_ns: int | None = None
         self._scan_key: tuple | None = None
@@ -167,6 +168,7 @@ class ParticleFilterNode(GuardedLifecycleNode):
             return TransitionCallbackReturn.FAILURE
         from amr_msgs.msg import PoseStamped
         self.node_params = node
+        self._odometry_clock = OdometryClock(node["max_odometry_gap_s"])
         self._pose_message = PoseStamped()
         self._pose_message.header.frame_id = node["map_frame"]
         self._outputs = {
@@ -223,26 +225,20 @@ class ParticleFilterNode(GuardedLifecycleNode):
             self.get_logger().warning("odometry twist is not finite: ignored",
                                       throttle_duration_sec=2.0)
             return
-        last, self._last_odometry_ns = self._last_odometry_ns, stamp
-        if last is None:
-            return
-        dt = (stamp - last) * 1e-9
-        if dt <= 0.0:
-            # A late message is skipped; a jump back beyond max_odometry_gap_s (time reset, or
-            # the previous stamp was bogus, e.g. far in the future) restarts from this stamp,
-            # so one bad stamp never stops the integration for good.
-            jumped = -dt > self.node_params["max_odometry_gap_s"]
+        # The stamp rules (late, jumped back, gap) are OdometryClock's, shared with the
+        # headless episodes.
+        dt, why = self._odometry_clock.advance(stamp)
+        if why in ("back", "jumped back"):
             self.get_logger().warning(
-                f"odometry stamp went back or repeated ({dt:+.3f} s): not integrated"
-                + ("; integrating from this stamp on" if jumped else ""),
+                "odometry stamp went back or repeated: not integrated"
+                + ("; integrating from this stamp on" if why == "jumped back" else ""),
                 throttle_duration_sec=2.0)
-            self._last_odometry_ns = stamp if jumped else last
-            return
-        if dt > self.node_params["max_odometry_gap_s"]:
-            self.get_logger().warning(f"{dt:.2f} s without odometry: the motion in the gap is "
-                                      "lost", throttle_duration_sec=2.0)
-            return
-        self.filter.predict(float(v), float(w), dt)
+        elif why == "gap":
+            self.get_logger().warning(f"more than {self.node_params['max_odometry_gap_s']} s "
+                                      "without odometry: the motion in the gap is lost",
+                                      throttle_duration_sec=2.0)
+        if dt is not None:
+            self.filter.predict(float(v), float(w), dt)
 
     def _on_pair(self, odometry: Odometry, scan: LaserScan) -> None:
         if not self.is_active:
@@ -250,10 +246,8 @@ class ParticleFilterNode(GuardedLifecycleNode):
         stamp_ns = time_to_nanoseconds(scan.header.stamp)
         ranges = self._usable_ranges(scan)
         if ranges is not None:
-            raw = ranges.tobytes()
-            new_scan = raw != self._last_ranges  # not the held one again
+            new_scan = self._scan_novelty.is_new(ranges)  # not the held one again
             if new_scan:
-                self._last_ranges = raw
                 self._last_scan_ns = stamp_ns
             try:
                 if self.filter.correct(ranges, new_scan=new_scan):

@@ -43,6 +43,7 @@ from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.map_file import write_map
 from amr_common.map_messages import occupancy_grid
 from amr_common.map_odom_tf import MapOdomTf
+from amr_common.navigation_behaviour import ScanNovelty
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameters import declare_link, declare_parameters, read_parameters
 from amr_common.pose_history import LATER, OLDER, PoseHistory
@@ -94,7 +95,7 @@ class SlamNode(GuardedLifecycleNode):
         self._history: PoseHistory | None = None
         # Scans waiting for the odometry of their stamp (it may come after them).
         self._pending: deque[tuple[int, LaserScan]] = deque()
-        self._last_scan_key: tuple | None = None
+        self._scan_novelty = ScanNovelty()  # the rule the mapping episode follows too
         self._last_scan_stamp = None  # header stamp of the newest mapped scan
         self._last_tf_ns: int | None = None
         self._start = (0.0, 0.0, 0.0)
@@ -199,10 +200,9 @@ class SlamNode(GuardedLifecycleNode):
         """Map a new scan once the odometry reaches its stamp (now, or with a later message)."""
         if not self.is_active:
             return
-        key = (bytes(scan.ranges), scan.angle_min, scan.angle_increment)
-        if self.node_params["skip_repeated_scans"] and key == self._last_scan_key:
+        new = self._scan_novelty.is_new(scan.ranges, (scan.angle_min, scan.angle_increment))
+        if self.node_params["skip_repeated_scans"] and not new:
             return
-        self._last_scan_key = key
         if len(self._pending) == _MAX_WAITING_SCANS:
             newest = self._history.newest_stamp
             self._warn("no_odometry", f"scan at t={self._pending[0][0] * 1e-9:.3f} s skipped: "

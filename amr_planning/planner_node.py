@@ -29,6 +29,7 @@ from amr_common.controller_loader import DEFAULT_PLANNER
 from amr_common.geometry import polyline_length
 from amr_common.interfaces import Planner
 from amr_common.lifecycle_node import GuardedLifecycleNode
+from amr_common.navigation_behaviour import Handover
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameter_table import Param, ruled, vector
 from amr_common.parameters import declare_link, declare_parameters, read_parameters
@@ -78,7 +79,7 @@ class PlannerNode(GuardedLifecycleNode):
         self.last_error: str | None = None  # why the newest planning gave no path (run scripts)
         self._path_publisher = None
         self._subscriptions: list = []
-        self._localized = False
+        self._handover = Handover()
         self._pose = None  # (x, y) of the newest localized /pose
         self._pose_stamp = None
         self._plan_pending = True  # plan on the next localized /pose
@@ -111,6 +112,7 @@ class PlannerNode(GuardedLifecycleNode):
             self._reset_runtime()
             return TransitionCallbackReturn.FAILURE
         self.params = p
+        self._handover = Handover(bool(p["replan_on_relocalization"]))
         from amr_msgs.msg import PoseStamped
         self._path_publisher = self.create_lifecycle_publisher(Path, p["path_topic"], LATCHED)
         self._subscriptions = [
@@ -138,16 +140,15 @@ class PlannerNode(GuardedLifecycleNode):
     def _on_pose(self, message) -> None:
         if not self.is_active:
             return
-        if not message.localized:
-            if self._localized and self.params["replan_on_relocalization"]:
-                self._plan_pending = True
-            self._localized = False
-            return
         x, y = message.pose.position.x, message.pose.position.y  # the heading is not needed
-        if not (math.isfinite(x) and math.isfinite(y)):
+        if message.localized and not (math.isfinite(x) and math.isfinite(y)):
             self.get_logger().warning("/pose ignored: not finite", throttle_duration_sec=2.0)
             return
-        self._localized = True
+        # When to plan is the Handover's rule (shared with the headless episodes).
+        if self._handover.plans(self._handover.update(message.localized)):
+            self._plan_pending = True
+        if not message.localized:
+            return
         self._pose, self._pose_stamp = (x, y), message.header.stamp
         if self._plan_pending:
             self._plan_pending = False
@@ -167,7 +168,7 @@ class PlannerNode(GuardedLifecycleNode):
             return
         self.goal = (float(x), float(y))
         self.get_logger().info(f"new goal ({x:.3f}, {y:.3f})")
-        if self._localized and self._pose is not None:
+        if self._handover.localized and self._pose is not None:
             self._plan()
         else:
             self._plan_pending = True

@@ -31,6 +31,7 @@ from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 
 from amr_common.geometry import angle_difference
 from amr_common.lifecycle_node import GuardedLifecycleNode
+from amr_common.navigation_behaviour import GoalCheck, KidnapSchedule
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameters import declare_parameters, read_parameters
 from amr_common.qos import RELIABLE_10
@@ -67,8 +68,7 @@ class SimulatorNode(GuardedLifecycleNode):
         self.goal: tuple[float, float] | None = None
         self.localized = False
         self.localization_error: tuple[float, float] | None = None  # (m, rad)
-        self.goal_reached_time: float | None = None  # simulated s
-        self._rest_since: float | None = None  # simulated s the zero commands began
+        self._goal_check: GoalCheck | None = None
         self._outputs: SimulatorOutputs | None = None
         self._inputs: list = []
         self._filters: list = []
@@ -78,7 +78,7 @@ class SimulatorNode(GuardedLifecycleNode):
         self._wall_time = 0.0
         self._command = (0.0, 0.0)
         self._command_received: float | None = None  # monotonic time of the newest command
-        self._kidnapped = False
+        self._kidnap = KidnapSchedule(None)
 
     def _read_parameters(self) -> dict[str, Any]:
         """Parameter values, checked; raises ValueError naming every bad one."""
@@ -118,6 +118,8 @@ class SimulatorNode(GuardedLifecycleNode):
         self.params = p
         self.realtime = p["mode"] == "realtime"
         self.goal = p["goal"] if p["goal"] is not None else world.goal
+        self._goal_check = GoalCheck(self.goal, p["goal_tolerance"], p["goal_rest_time"])
+        self._kidnap = KidnapSchedule(p["kidnap"])
         profile = self.simulator.profile
         # Lockstep keeps the course's protocol (/odometry with the encoder twist, every step) in
         # both profiles: a pose-only /odom would need the estimator, which publishes nothing for
@@ -254,13 +256,12 @@ class SimulatorNode(GuardedLifecycleNode):
     # --- stepping and publishing -----------------------------------------------------------
     def _advance(self, v: float, w: float) -> None:
         simulator = self.simulator
-        kidnap = self.params["kidnap"]
-        if kidnap is not None and not self._kidnapped and simulator.time >= kidnap[0] - 1e-9:
-            simulator.teleport(kidnap[1:])
-            self._kidnapped = True
+        kidnap = self._kidnap.due(simulator.time)
+        if kidnap is not None:
+            simulator.teleport(kidnap)
             self.get_logger().warning(
-                f"kidnapped at t={simulator.time:.2f} s to ({kidnap[1]:.2f}, {kidnap[2]:.2f}, "
-                f"{kidnap[3]:.2f})")
+                f"kidnapped at t={simulator.time:.2f} s to ({kidnap[0]:.2f}, {kidnap[1]:.2f}, "
+                f"{kidnap[2]:.2f})")
         pose_before = simulator.pose
         try:
             z_scan, z_v, z_w = simulator.step(v, w)
@@ -311,28 +312,21 @@ class SimulatorNode(GuardedLifecycleNode):
         else:
             self.get_logger().info(text, throttle_duration_sec=1.0)
 
-    def _check_goal(self, pose: tuple, resting: bool) -> bool:
-        """Note the goal as reached and say whether the run is over.
+    @property
+    def goal_reached_time(self) -> float | None:
+        """Simulated time the goal was reached (amr_common.navigation_behaviour.GoalCheck)."""
+        return None if self._goal_check is None else self._goal_check.reached_time
 
-        Reached: true position within tolerance while localized. Over: the robot has rested
-        goal_rest_time since.
-        """
-        now = self.simulator.time
-        if self.goal_reached_time is None:
-            if self.goal is None or not self.localized or math.hypot(
-                    pose[0] - self.goal[0], pose[1] - self.goal[1]) > \
-                    self.params["goal_tolerance"]:
-                return False
-            self.goal_reached_time = now
+    def _check_goal(self, pose: tuple, resting: bool) -> bool:
+        """Note the goal as reached and say whether the run is over (GoalCheck's rule)."""
+        check, now = self._goal_check, self.simulator.time
+        was_reached = check.reached_time is not None
+        done = check.update(now, pose, self.localized, resting, self.simulator.dt)
+        if not was_reached and check.reached_time is not None:
             self.get_logger().warning(
                 f"Congratulations, you reached the goal! (t = {now:.2f} s; the run ends once "
                 f"the robot has rested {self.params['goal_rest_time']:g} s)")
-        if not resting:
-            self._rest_since = None
-        elif self._rest_since is None:
-            self._rest_since = now - self.simulator.dt  # the zero command began this step
-        rest = 0.0 if self._rest_since is None else now - self._rest_since
-        return rest >= self.params["goal_rest_time"] - 1e-9
+        return done
 
     def finish(self, reason: str) -> None:
         """Stop stepping (commands are ignored from now on) and log the statistics."""
@@ -362,7 +356,8 @@ class SimulatorNode(GuardedLifecycleNode):
             "configured": True, "finished": self.finished, "reason": self.finish_reason,
             "goal_reached": self.goal_reached_time is not None,
             "goal_reached_time_s": self.goal_reached_time,
-            "stopped_time_s": self._rest_since if self.finish_reason == "goal reached" else None,
+            "stopped_time_s": self._goal_check.rest_since
+            if self.finish_reason == "goal reached" else None,
             "world": simulator.world.name, "start": list(self._start_pose),
             "profile": simulator.profile.name,
             "mode": self.params["mode"], "steps": int(simulator.steps),

@@ -115,7 +115,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--duration", type=float, default=600.0,
                         help="simulated seconds to run (default 600)")
     parser.add_argument("--dt", type=float, default=0.05)
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=int, default=0, help="seed of the simulator's noise "
+                        "and of the particle filter (as the headless episodes; --pf-param "
+                        "seed:=N wins)")
     parser.add_argument("--realtime", action="store_true",
                         help="advance on a wall-clock timer instead of lockstep")
     add_controller_options(parser, None, "wall follower ROS params YAML (default "

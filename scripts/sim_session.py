@@ -154,9 +154,11 @@ class SimSession:
             if localize:
                 from amr_sim.profiles import get_profile
                 lidar_offset_x = get_profile(args.profile).lidar_offset_x
+                # The filter draws from --seed, as the headless episodes' filter does.
                 self.control_nodes.append(make_particle_filter(
                     self.context, world=map_source, lidar_offset_x_m=lidar_offset_x,
-                    overrides=filter_overrides, localizer=links.get("localizer")))
+                    overrides={"seed": args.seed, **filter_overrides},
+                    localizer=links.get("localizer")))
             if self.navigating:
                 self.control_nodes += make_navigators(
                     self.context, world=map_source, goal=args.goal,

@@ -26,7 +26,8 @@ from amr_evaluation.localization_episode import (
     FALSE_POSITION_M,
     run_localization_episode,
 )
-from amr_evaluation.navigation_episode import ParticleFilterPose, run_navigation_episode
+from amr_evaluation.navigation_episode import run_navigation_episode
+from amr_evaluation.pose_sources import ParticleFilterPose
 
 REPO = Path(__file__).resolve().parent.parent
 BOX = str(REPO / "evaluations" / "worlds" / "lab02_box.yaml")

@@ -171,7 +171,7 @@ def test_robot_mode_zero_on_stale_pose_and_silence_after_losing_localization(ros
     graph.send_pose(1.5)
     ros.spin_until(lambda: command(graph.commands[-1]) != (0.0, 0.0), 5.0, "driving again")
     graph.send_pose(1.6, localized=False)  # lost: one zero, then the wall follower's turn
-    ros.spin_until(lambda: not node._localized, 5.0, "the loss")
+    ros.spin_until(lambda: not node._handover.localized, 5.0, "the loss")
     ros.spin_for(0.2)
     assert command(graph.commands[-1]) == (0.0, 0.0)
     count = len(graph.commands)
@@ -304,7 +304,7 @@ def test_a_path_stamped_in_the_future_is_forgotten_when_localization_is_lost(ros
     graph.send_pose(0.05)
     ros.spin_until(lambda: len(graph.commands) == 1, 5.0, "the answer")
     graph.send_pose(0.10, localized=False)
-    ros.spin_until(lambda: not node._localized, 5.0, "the loss")
+    ros.spin_until(lambda: not node._handover.localized, 5.0, "the loss")
     assert node.pursuit.path is None, "a stale path is not followed after relocalization"
 
 

@@ -165,29 +165,6 @@ def test_gui_runs_headless(tmp_path, monkeypatch):
     assert json.loads(report.read_text())["steps"] == 60
 
 
-@pytest.mark.parametrize("profile", ["ideal", "turtlebot3"])
-def test_ros_lockstep_path_and_headless_episode_drive_the_same_trajectory(tmp_path, profile):
-    """evaluate.py's headless episodes stand for the ROS graph.
-
-    Same core, same controller, told the same LiDAR position (the Burger's is 32 mm behind the
-    centre).
-    """
-    import numpy as np
-
-    from amr_evaluation.episode import run_episode
-
-    report_path = tmp_path / "ros.json"
-    run_sim.main(["--world", "lab02", "--start", "inner", "--duration", "30", "--seed", "3",
-                  "--profile", profile, "--report", str(report_path)])
-    over_ros = np.array(json.loads(report_path.read_text())["trajectory"])
-    headless = np.array(run_episode("lab02", "inner", profile=profile, seed=3,
-                                    duration=30.0).trajectory)
-    assert over_ros.shape == headless.shape == (601, 4)
-    # LaserScan carries float32 ranges: the only difference between the two paths.
-    assert np.abs(over_ros[:, 1:3] - headless[:, 1:3]).max() < 1e-5
-    assert np.abs(over_ros[-1, 1:3] - over_ros[0, 1:3]).max() > 0.5  # it did drive
-
-
 def test_report_gives_the_time_of_the_first_collision(tmp_path):
     report_path = tmp_path / "crash.json"
     # lab02 outer: (1.0, -1.0) heading north, the outer wall at y = 1.2: the robot's edge

@@ -1,0 +1,89 @@
+"""Pose sources of the headless navigation episodes: the truth, or a localizer fed as its node.
+
+GroundTruthPose (the simulator's pose, optionally localized late or lost for a while) and
+ParticleFilterPose (a localizer, default the particle filter, fed by the rules of
+amr_common.navigation_behaviour shared with the particle filter node); make_pose_source
+builds one by name.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from amr_common.controller_loader import DEFAULT_LOCALIZER, link_class
+from amr_common.navigation_behaviour import OdometryClock, ScanNovelty, stamp_ns
+from amr_common.world import World
+from amr_evaluation.episode import tell_scan_geometry
+from amr_sim.simulator import Simulator
+
+
+class GroundTruthPose:
+    """The simulator's true pose as the estimate.
+
+    Localized from `localized_after_s` on (the wall follower explores before that), lost again
+    during [lost_from_s, lost_until_s).
+    """
+
+    def __init__(self, localized_after_s: float = 0.0, lost_from_s: float | None = None,
+                 lost_until_s: float | None = None) -> None:
+        """Times in simulated seconds."""
+        self.localized_after_s = localized_after_s
+        self.lost = (lost_from_s, lost_until_s)
+
+    def update(self, sim: Simulator, z_scan, z_v: float, z_w: float):
+        """((x, y, theta), localized) for the newest measurement."""
+        t = sim.time
+        lost = self.lost[0] is not None and self.lost[0] <= t < (self.lost[1] or math.inf)
+        return sim.pose, t >= self.localized_after_s - 1e-9 and not lost
+
+
+class ParticleFilterPose:
+    """A localizer (default the particle filter) as the pose source, fed as its node feeds it.
+
+    Every measurement: predict with the odometry twist over the time since the previous one
+    (OdometryClock, on the stamps the node would see), then correct with the scan, which counts
+    as new when its readings differ from the previous scan's (ScanNovelty): the rules of
+    amr_common.navigation_behaviour, shared with the particle filter node.
+    """
+
+    def __init__(self, world: World, sim: Simulator, seed: int = 0,
+                 localizer: str | type = DEFAULT_LOCALIZER, **filter_params) -> None:
+        """A localizer on `world` for the profile of `sim` (its LiDAR position and scan).
+
+        localizer: an amr_common.interfaces.Localizer class, or its MODULE:CLASS.
+        """
+        prof = sim.profile
+        params = {"seed": seed, "lidar_offset_x_m": prof.lidar_offset_x, **filter_params}
+        self.filter = link_class(localizer, "localizer")(world, **params)
+        self._geometry = sim.scan_geometry
+        tell_scan_geometry(self.filter, self._geometry, with_rays=True)
+        self._clock = OdometryClock()
+        self._novelty = ScanNovelty()
+
+    def update(self, sim: Simulator, z_scan, z_v: float, z_w: float):
+        """((x, y, theta), localized) after taking in the newest measurement."""
+        dt, _ = self._clock.advance(stamp_ns(sim.time))
+        if dt is not None:
+            self.filter.predict(float(z_v), float(z_w), dt)
+        if sim.scan_geometry is not self._geometry:  # the LDS-02: every scan
+            self._geometry = sim.scan_geometry
+            tell_scan_geometry(self.filter, self._geometry, with_rays=True)
+        self.filter.correct(z_scan, new_scan=self._novelty.is_new(z_scan))
+        return tuple(self.filter.estimate), bool(self.filter.localized)
+
+
+def make_pose_source(kind: Any, world: World, sim: Simulator, seed: int,
+                     filter_params: dict | None = None,
+                     localizer: str | type = DEFAULT_LOCALIZER):
+    """The pose source named by `kind` ("truth", "filter": `localizer`) or `kind` itself."""
+    if kind == "truth":
+        return GroundTruthPose()
+    if kind == "filter":
+        return ParticleFilterPose(world, sim, seed, localizer, **(filter_params or {}))
+    if isinstance(kind, str) or not callable(getattr(kind, "update", None)):
+        raise ValueError(f"pose_source must be 'truth', 'filter' or an object with update(), "
+                         f"got {kind!r}")
+    return kind
+
+
+__all__ = ["GroundTruthPose", "ParticleFilterPose", "make_pose_source"]
