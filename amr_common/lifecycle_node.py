@@ -22,6 +22,8 @@ in on_activate/on_deactivate/on_cleanup/on_shutdown, as with rclpy's LifecycleNo
 """
 from __future__ import annotations
 
+import math
+import time
 from typing import Callable
 
 from lifecycle_msgs.msg import Transition
@@ -58,6 +60,24 @@ class GuardedLifecycleNode(LifecycleNode):
             service.callback = self._on_change_state_request
         self._log_forwardings: list[Callable[[], None]] = []
         self._active = False
+        self._last_logged: dict[str, float] = {}  # warn_every: kind -> monotonic time
+
+    def warn_every(self, kind: str, text: str, period_s: float = 2.0,
+                   error: bool = False) -> bool:
+        """Log `text` (a warning, or an error) unless one of this `kind` was logged < period_s ago.
+
+        rclpy's throttle_duration_sec keys on the call site: a helper that logs every kind from
+        one line would let one kind silence the others. True if it was logged.
+        """
+        now = time.monotonic()
+        if now - self._last_logged.get(kind, -math.inf) < period_s:
+            return False
+        self._last_logged[kind] = now
+        if error:  # (rclpy refuses two severities from one call site)
+            self.get_logger().error(text)
+        else:
+            self.get_logger().warning(text)
+        return True
 
     # --- the shared lifecycle shape ----------------------------------------------------------
     @property

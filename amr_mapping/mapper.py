@@ -344,8 +344,8 @@ class Mapper:
         stats["local_map_cells"] = int(self._local.counts.size)
         stats["distance_m"] = self._distance
         for name, times in self._times.items():
-            stats[f"{name}_ms"] = _summary([wall for wall, _ in times])
-            stats[f"{name}_cpu_ms"] = _summary([cpu for _, cpu in times])
+            stats[f"{name}_ms"] = timing_summary([wall for wall, _ in times])
+            stats[f"{name}_cpu_ms"] = timing_summary([cpu for _, cpu in times])
         return stats
 
 
@@ -357,7 +357,8 @@ def _elapsed(started: tuple[float, float]) -> tuple[float, float]:
     return 1e3 * (time.perf_counter() - started[0]), 1e3 * (time.thread_time() - started[1])
 
 
-def _summary(values: list[float]) -> dict[str, float]:
+def timing_summary(values: list[float]) -> dict[str, float]:
+    """count, median, p90, max and total of a list of timings (zeros when empty)."""
     if not values:
         return {"count": 0, "median": 0.0, "p90": 0.0, "max": 0.0, "total": 0.0}
     array = np.asarray(values)
@@ -366,4 +367,4 @@ def _summary(values: list[float]) -> dict[str, float]:
             "total": float(array.sum())}
 
 
-__all__ = ["Mapper", "MappingEstimate"]
+__all__ = ["Mapper", "MappingEstimate", "timing_summary"]

@@ -32,7 +32,6 @@ from collections import deque
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from nav_msgs.msg import OccupancyGrid, Odometry
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import LaserScan
@@ -40,7 +39,6 @@ from sensor_msgs.msg import LaserScan
 from amr_common.geometry import compose
 from amr_common.interfaces import Mapper, MappingEstimate
 from amr_common.lifecycle_node import GuardedLifecycleNode
-from amr_common.map_file import write_map
 from amr_common.map_messages import occupancy_grid
 from amr_common.map_odom_tf import MapOdomTf
 from amr_common.navigation_behaviour import ScanNovelty
@@ -49,11 +47,12 @@ from amr_common.parameters import declare_link, declare_parameters, read_paramet
 from amr_common.pose_history import LATER, OLDER, PoseHistory
 from amr_common.qos import LATCHED, RELIABLE_10, scan_qos
 from amr_common.ros_conversions import pose_from_message, time_to_nanoseconds, yaw_to_quaternion
+from amr_mapping.mapper import timing_summary
+from amr_mapping.slam_map_files import read_save_request, write_slam_map
 from amr_mapping.slam_node_params import NODE_PARAMETERS as _NODE_PARAMETERS
 from amr_mapping.slam_node_params import node_parameter_problems
 
 _ODOMETRY_HISTORY_S = 5.0  # how far back a scan's stamp may lie behind the newest odometry
-_WARNING_PERIOD_S = 2.0
 _MAX_WAITING_SCANS = 10  # 2 s of 5 Hz scans
 
 
@@ -77,7 +76,6 @@ class SlamNode(GuardedLifecycleNode):
         # Run scripts append callables: each is called with (stamp_ns, MappingEstimate, node)
         # after every mapped scan (in-process observation without a subscription).
         self.on_estimate: list = []
-        self._warned: dict[str, float] = {}
         self.saved_maps: list[Path] = []  # every map file written, kept after shutdown
         self._reset_runtime()
 
@@ -150,7 +148,8 @@ class SlamNode(GuardedLifecycleNode):
         self._tf = MapOdomTf(self, {name: node[name] for name in (
             "map_frame", "odom_frame", "base_frame", "scan_frame")}, self._on_lidar_offset)
         self._service = self.create_service(SaveMap, "~/save_map", self._on_save_request)
-        self._timer = self.create_timer(node["map_update_interval_s"], self._on_map_timer)
+        self._timer = self.create_timer(node["map_update_interval_s"],
+                                        lambda: self.is_active and self._publish_map())
         p = self._mapper_params
         self.get_logger().info(
             f"configured: {100 * p['resolution_m']:g} cm cells, loop closure "
@@ -205,9 +204,10 @@ class SlamNode(GuardedLifecycleNode):
             return
         if len(self._pending) == _MAX_WAITING_SCANS:
             newest = self._history.newest_stamp
-            self._warn("no_odometry", f"scan at t={self._pending[0][0] * 1e-9:.3f} s skipped: "
-                       f"no odometry reached its stamp (newest odometry: "
-                       f"{'none' if newest is None else f't={newest * 1e-9:.3f} s'})")
+            self.warn_every("no_odometry",
+                            f"scan at t={self._pending[0][0] * 1e-9:.3f} s skipped: no "
+                            f"odometry reached its stamp (newest odometry: "
+                            f"{'none' if newest is None else f't={newest * 1e-9:.3f} s'})")
             self._pending.popleft()
         self._pending.append((time_to_nanoseconds(scan.header.stamp), scan))
         self._map_pending()
@@ -220,13 +220,13 @@ class SlamNode(GuardedLifecycleNode):
         try:
             pose = pose_from_message(message.pose.pose)
         except ValueError as exc:
-            self._warn("odometry", f"odometry pose ignored: {exc}")
+            self.warn_every("odometry", f"odometry pose ignored: {exc}")
             return
         refused = self._history.add(stamp_ns, pose)
         if refused is not None:
-            self._warn("odometry", f"odometry at t={stamp_ns * 1e-9:.3f} s ignored: "
-                       + ("its pose is not finite" if refused == "non_finite" else
-                          "its stamp is not after the previous one"))
+            self.warn_every("odometry", f"odometry at t={stamp_ns * 1e-9:.3f} s ignored: "
+                            + ("its pose is not finite" if refused == "non_finite" else
+                               "its stamp is not after the previous one"))
             return
         self._map_pending()
         self._publish_tf_between_scans(message.header.stamp, stamp_ns)
@@ -242,10 +242,10 @@ class SlamNode(GuardedLifecycleNode):
             if odom == OLDER and not self.mapped_scans:
                 continue  # a scan from before the odometry started (amr_odometry skips its first)
             if isinstance(odom, str):
-                self._warn("no_odometry", f"scan at t={stamp_ns * 1e-9:.3f} s skipped: "
-                           + ("it is older than the odometry kept" if odom == "older" else
-                              f"no odometry within {self.node_params['max_odometry_gap_s']} s "
-                              "around its stamp"))
+                self.warn_every("no_odometry", f"scan at t={stamp_ns * 1e-9:.3f} s skipped: "
+                                + ("it is older than the odometry kept" if odom == "older" else
+                                   f"no odometry within "
+                                   f"{self.node_params['max_odometry_gap_s']} s around its stamp"))
                 continue
             started = time.perf_counter()
             self._map_scan(scan, stamp_ns, odom)
@@ -258,7 +258,7 @@ class SlamNode(GuardedLifecycleNode):
             # odometry by the start pose puts the map where map_start_pose says.
             estimate = self.mapper.update(scan, compose(self._start, odom), stamp_ns * 1e-9)
         except Exception as exc:  # never take the executor down
-            self._warn("mapper", f"mapping a scan failed: {exc!r}", error=True)
+            self.warn_every("mapper", f"mapping a scan failed: {exc!r}", error=True)
             return
         if estimate.status.startswith("rejected") or \
                 not all(math.isfinite(v) for v in estimate.pose):
@@ -275,7 +275,8 @@ class SlamNode(GuardedLifecycleNode):
             try:
                 hook(stamp_ns, estimate, self)
             except Exception as exc:  # an observer must not stop the mapping
-                self._warn("hook", f"on_estimate hook {hook!r} failed: {exc!r}", error=True)
+                self.warn_every("hook", f"on_estimate hook {hook!r} failed: {exc!r}",
+                                error=True)
 
     def _on_lidar_offset(self, offset_m: float) -> None:
         """Use the LiDAR position /tf_static gives, if no scan was mapped yet."""
@@ -319,10 +320,6 @@ class SlamNode(GuardedLifecycleNode):
         self._tf.publish(self.map_to_odom, stamp)
         self._last_tf_ns = stamp_ns
 
-    def _on_map_timer(self) -> None:
-        if self.is_active:
-            self._publish_map()
-
     def _publish_map(self) -> None:
         """/map if it changed since the last one (and anything was mapped)."""
         if self.mapper is None or self.mapped_scans == 0 or \
@@ -334,7 +331,7 @@ class SlamNode(GuardedLifecycleNode):
             message = occupancy_grid(raster.values, raster.resolution, raster.origin,
                                      self.node_params["map_frame"], self._last_scan_stamp)
         except Exception as exc:  # never take the executor down
-            self._warn("map", f"building /map failed: {exc!r}", error=True)
+            self.warn_every("map", f"building /map failed: {exc!r}", error=True)
             return
         self._outputs["map"].publish(message)
         self._published_version = self._map_version
@@ -345,35 +342,23 @@ class SlamNode(GuardedLifecycleNode):
         """Write the map so far as PREFIX.yaml + PREFIX.pgm (png); the YAML's path.
 
         ValueError (MapFileError included) with the reason when nothing was mapped yet or the
-        files cannot be written. The YAML also names the start pose (`starts: slam_start`), so
-        the map can be a run's --world as it is.
+        files cannot be written (amr_mapping.slam_map_files.write_slam_map).
         """
         if self.mapper is None or self.mapped_scans == 0:
             raise ValueError("nothing to save: no scan has been mapped yet")
-        raster = self.mapper.occupancy_raster()
-        stats = self.mapper.statistics()
-        yaml_path, _ = write_map(raster, Path(prefix).expanduser(),
-                                 image_format or self.node_params["image_format"], extras={
-                                     "name": Path(prefix).name or "slam_map",
-                                     "description": f"built by amr_slam from "
-                                                    f"{self.mapped_scans} scans, "
-                                                    f"{stats['keyframes']} keyframes, "
-                                                    f"{stats['loop_closures']} loop closures",
-                                     "starts": {"slam_start": list(self._start)}})
+        yaml_path = write_slam_map(self.mapper, prefix,
+                                   image_format or self.node_params["image_format"],
+                                   self._start, self.mapped_scans)
         self._saved_version = self._map_version
         self.saved_maps.append(yaml_path)
         return yaml_path
 
     def _on_save_request(self, request, response):
         """~/save_map: the map so far to request.name (or output_prefix); never raises."""
-        prefix = request.name.strip() or self.node_params.get("output_prefix", "")
-        image_format = request.image_format.strip().lower() or None
-        response.success = False
-        if not prefix:
-            response.message = "no name given and the output_prefix parameter is empty"
-        elif image_format not in (None, "pgm", "png"):
-            response.message = f"image_format must be pgm or png (got {image_format!r})"
-        else:
+        prefix, image_format, problem = read_save_request(
+            request, self.node_params.get("output_prefix", ""))
+        response.success, response.message = False, problem or ""
+        if problem is None:
             try:
                 response.message = str(self.save_map(prefix, image_format))
                 response.success = True
@@ -403,28 +388,8 @@ class SlamNode(GuardedLifecycleNode):
 
     # --- figures ---------------------------------------------------------------------------
     def timings(self) -> dict[str, dict[str, float]]:
-        """Wall-clock ms (count, median, max) of the mapped scans' work and of the /map builds."""
-        def summary(values: list[float]) -> dict[str, float]:
-            if not values:
-                return {"count": 0, "median": 0.0, "max": 0.0}
-            return {"count": len(values), "median": float(np.median(values)),
-                    "max": float(max(values))}
-        return {"scan_ms": summary(self.scan_ms), "map_ms": summary(self.map_ms)}
-
-    def _warn(self, key: str, text: str, error: bool = False) -> None:
-        """Log at most one message of kind `key` per _WARNING_PERIOD_S.
-
-        rclpy's throttle keys on the call site (this one line): it would count every kind
-        together.
-        """
-        now = time.monotonic()
-        if now - self._warned.get(key, -math.inf) < _WARNING_PERIOD_S:
-            return
-        self._warned[key] = now
-        if error:  # (rclpy refuses two severities from one call site)
-            self.get_logger().error(text)
-        else:
-            self.get_logger().warning(text)
+        """Wall-clock ms (count, median, max, ...) of the mapped scans' work and /map builds."""
+        return {"scan_ms": timing_summary(self.scan_ms), "map_ms": timing_summary(self.map_ms)}
 
 
 def main(args: list[str] | None = None) -> int:

@@ -156,6 +156,28 @@ def test_a_raising_transition_callback_is_logged_and_answered_error(ros):
     assert node._state_machine.current_state[1] == "unconfigured"  # on_error recovered
 
 
+def test_warn_every_throttles_each_kind_on_its_own(ros, monkeypatch):
+    # rclpy's throttle keys on the call site: one helper logging every kind let a frequent
+    # kind (a bad scan) silence a rare one (odometry ignored).
+    node = ros.add(GuardedLifecycleNode("warning", context=ros.context))
+    logged = []
+
+    class Logger:
+        def warning(self, text):
+            logged.append(("warning", text))
+
+        def error(self, text):
+            logged.append(("error", text))
+
+    monkeypatch.setattr(node, "get_logger", lambda: Logger())
+    assert node.warn_every("scan", "bad scan 1") and not node.warn_every("scan", "bad scan 2")
+    assert node.warn_every("odometry", "odometry ignored", error=True)
+    assert not node.warn_every("scan", "bad scan 3", period_s=60.0)
+    assert node.warn_every("scan", "bad scan 4", period_s=0.0)
+    assert logged == [("warning", "bad scan 1"), ("error", "odometry ignored"),
+                      ("warning", "bad scan 4")]
+
+
 def test_is_active_follows_the_transitions_and_cleanup_and_shutdown_release(ros):
     class Recording(GuardedLifecycleNode):
         released = 0
