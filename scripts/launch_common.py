@@ -265,6 +265,26 @@ def make_wall_follower(context, *, params_file, overrides: dict[str, Any]):
                             parameter_overrides=overrides_to_parameters(dict(overrides)))
 
 
+def simulated_robot_parameters(tuning: dict, params_file, profile_name: str) -> dict:
+    """The simulated robot's values for the controller (where its LiDAR sits), unless set.
+
+    Only those neither the -p overrides nor the params file set (the rehearsal's
+    turtlebot3.yaml sets them itself).
+    """
+    from amr_common.controller_loader import DEFAULT_CONTROLLER, load_controller_class
+    from amr_evaluation.episode import robot_parameters
+    from amr_evaluation.evaluation import load_ros_params_file
+    from amr_sim.profiles import get_profile
+    try:
+        in_file = load_ros_params_file(params_file)
+        controller_class = load_controller_class(
+            tuning.get("controller", in_file.get("controller", DEFAULT_CONTROLLER)))
+    except Exception:  # a bad file or class: the node reports it when it configures
+        return {}
+    defaults = robot_parameters(controller_class, get_profile(profile_name))
+    return {k: v for k, v in defaults.items() if k not in in_file and k not in tuning}
+
+
 def localizing_wall_follower(tuning: dict[str, Any]) -> dict[str, Any]:
     """Wall follower overrides for a graph with the particle filter.
 

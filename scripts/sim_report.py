@@ -192,3 +192,18 @@ def navigation_line(report: dict) -> str:
             f"{report['collisions']}, min clearance {report['min_clearance_m'] * 100:.1f} "
             f"cm; {report['sim_time_s']:.1f} s simulated in {report['wall_time_s']:.1f} s "
             f"({f'{factor}x' if factor else 'n/a'} real time)")
+
+
+def run_line(report: dict) -> str:
+    """The terminal's line of a run without a goal: where, how long, how fast, how safe."""
+    laps = report["laps"]
+    factor = report["real_time_factor"]
+    return (f"run_sim: {world_label(report)} / {report['start']} / {report['profile']} "
+            f"({report['mode']}): {report['sim_time_s']:.1f} s simulated in "
+            f"{report['wall_time_s']:.1f} s ({f'{factor}x' if factor else 'n/a'} real time), "
+            f"{report['steps']} steps, collisions {report['collisions']}, min clearance "
+            f"{report['min_clearance_m'] * 100:.1f} cm, distance {report['distance_m']:.1f} m,"
+            + (" explored n/a" if report["explored_fraction"] is None else
+               f" explored {report['explored_fraction'] * 100:.0f}%")
+            + (f", laps {laps}" if laps else "") + localization_line(report)
+            + slam_line(report))

@@ -22,14 +22,12 @@ import rclpy
 from rclpy.signals import SignalHandlerOptions
 from sim_report import (
     localization_fields,
-    localization_line,
     navigation_fields,
     navigation_line,
     report_before_start,
+    run_line,
     run_report,
     slam_fields,
-    slam_line,
-    world_label,
 )
 
 from amr_common.lifecycle_manager import LifecycleManager, LifecycleStartupError
@@ -48,29 +46,30 @@ from launch_common import (
     make_wall_follower,
     navigating_wall_follower,
     overrides_to_parameters,
+    simulated_robot_parameters,
 )
 
 STALL_TIMEOUT_S = 10.0  # lockstep: no step for this long (wall clock) means the loop broke
 
 
-def _robot_parameters(tuning: dict, params_file, profile_name: str) -> dict:
-    """The simulated robot's values for the controller (where its LiDAR sits), unless set.
-
-    Only those neither the -p overrides nor the params file set (the rehearsal's
-    turtlebot3.yaml sets them itself).
-    """
-    from amr_common.controller_loader import DEFAULT_CONTROLLER, load_controller_class
-    from amr_evaluation.episode import robot_parameters
-    from amr_evaluation.evaluation import load_ros_params_file
-    from amr_sim.profiles import get_profile
-    try:
-        in_file = load_ros_params_file(params_file)
-        controller_class = load_controller_class(
-            tuning.get("controller", in_file.get("controller", DEFAULT_CONTROLLER)))
-    except Exception:  # a bad file or class: the node reports it when it configures
-        return {}
-    defaults = robot_parameters(controller_class, get_profile(profile_name))
-    return {k: v for k, v in defaults.items() if k not in in_file and k not in tuning}
+def _simulator_values(args, start: str, own_map: bool, localize: bool, slam: bool) -> dict:
+    """The simulator node's parameters from run_sim's options."""
+    sim_values = {"world": args.world, "start": start,
+                  "profile": args.profile, "dt": args.dt, "seed": args.seed,
+                  "mode": "realtime" if args.realtime else "lockstep",
+                  "enable_localization": args.enable_localization or localize,
+                  # Viewers get a whole TF tree: the particle filter sends map -> odom when
+                  # it runs; without it (or a user's own localization node) the truth does.
+                  "map_to_odom_from_truth": not (args.enable_localization or localize
+                                                 or slam),
+                  "publish_map": not own_map}  # the map publisher below sends the map
+    if slam:  # the slam node's /map: the map being built, not the world
+        sim_values["publish_map"] = False
+    if args.goal:
+        sim_values["goal"] = list(args.goal)
+    if getattr(args, "kidnap", None):
+        sim_values["kidnap"] = list(args.kidnap)
+    return sim_values
 
 
 class SimSession:
@@ -105,65 +104,11 @@ class SimSession:
         self.navigating = getattr(args, "goal", None) is not None
         localize = getattr(args, "localize", False) or self.navigating
         slam = getattr(args, "slam", False)
-        sim_values = {"world": args.world, "start": start_label(self.start),
-                      "profile": args.profile, "dt": args.dt, "seed": args.seed,
-                      "mode": "realtime" if args.realtime else "lockstep",
-                      "enable_localization": args.enable_localization or localize,
-                      # Viewers get a whole TF tree: the particle filter sends map -> odom when
-                      # it runs; without it (or a user's own localization node) the truth does.
-                      "map_to_odom_from_truth": not (args.enable_localization or localize
-                                                     or slam),
-                      "publish_map": not own_map}  # the map publisher below sends the map
-        if slam:  # the slam node's /map: the map being built, not the world
-            sim_values["publish_map"] = False
-        if args.goal:
-            sim_values["goal"] = list(args.goal)
-        if getattr(args, "kidnap", None):
-            sim_values["kidnap"] = list(args.kidnap)
+        sim_values = _simulator_values(args, start_label(self.start), own_map, localize, slam)
         self.simulator_node = SimulatorNode(
             context=self.context, parameter_overrides=overrides_to_parameters(sim_values))
 
-        tuning = dict(args.overrides)
-        if args.controller:
-            tuning["controller"] = args.controller
-        filter_overrides = getattr(args, "pf_overrides", {})
-        links = getattr(args, "links", {})  # --localizer, --planner, --follower
-        if self.rehearsal:
-            self.control_nodes = make_robot_graph(
-                self.context, params_file=args.params_file or ROBOT_PARAMS, dt=args.dt,
-                tuning=tuning, localize_world=map_source if localize else None,
-                filter_overrides=filter_overrides,
-                goal=args.goal if self.navigating else None, links=links)
-            if getattr(args, "no_controller", False):  # the user drives (teleop.py)
-                from launch_slam import without_controller
-                without_controller(self.control_nodes)
-        else:
-            base = {"simulation": True, "dt": args.dt}
-            if args.enable_localization:  # a localization node of the user's
-                base["enable_localization"] = True
-            # (Not False otherwise: the graphs with the filter below synchronize /pose.)
-            if self.navigating:
-                base = navigating_wall_follower(base)
-            elif localize:
-                base = localizing_wall_follower(base)
-            tuning = {**base, **tuning}  # -p wins
-            params_file = args.params_file or SIM_PARAMS
-            tuning = {**_robot_parameters(tuning, params_file, args.profile), **tuning}
-            self.control_nodes = [make_wall_follower(
-                self.context, params_file=params_file, overrides=tuning)]
-            if localize:
-                from amr_sim.profiles import get_profile
-                lidar_offset_x = get_profile(args.profile).lidar_offset_x
-                # The filter draws from --seed, as the headless episodes' filter does.
-                self.control_nodes.append(make_particle_filter(
-                    self.context, world=map_source, lidar_offset_x_m=lidar_offset_x,
-                    overrides={"seed": args.seed, **filter_overrides},
-                    localizer=links.get("localizer")))
-            if self.navigating:
-                self.control_nodes += make_navigators(
-                    self.context, world=map_source, goal=args.goal,
-                    wall_follower=self.control_nodes[0], lidar_offset_x_m=lidar_offset_x,
-                    links=links)
+        self.control_nodes = self._make_control_nodes(map_source, localize)
         self.slam_node = None
         if slam:
             self._add_slam_node(map_prefix)
@@ -191,6 +136,55 @@ class SimSession:
         self.wall_errors: list[float] = []
         self.view = None
         self.recorder = None
+
+    def _make_control_nodes(self, map_source: str, localize: bool) -> list:
+        """The wall follower, with the filter, planner and pursuit when they run.
+
+        In a rehearsal the robot's graph (params/turtlebot3.yaml), else the simulation's.
+        """
+        args = self.args
+        tuning = dict(args.overrides)
+        if args.controller:
+            tuning["controller"] = args.controller
+        filter_overrides = getattr(args, "pf_overrides", {})
+        links = getattr(args, "links", {})  # --localizer, --planner, --follower
+        if self.rehearsal:
+            control_nodes = make_robot_graph(
+                self.context, params_file=args.params_file or ROBOT_PARAMS, dt=args.dt,
+                tuning=tuning, localize_world=map_source if localize else None,
+                filter_overrides=filter_overrides,
+                goal=args.goal if self.navigating else None, links=links)
+            if getattr(args, "no_controller", False):  # the user drives (teleop.py)
+                from launch_slam import without_controller
+                without_controller(control_nodes)
+        else:
+            base = {"simulation": True, "dt": args.dt}
+            if args.enable_localization:  # a localization node of the user's
+                base["enable_localization"] = True
+            # (Not False otherwise: the graphs with the filter below synchronize /pose.)
+            if self.navigating:
+                base = navigating_wall_follower(base)
+            elif localize:
+                base = localizing_wall_follower(base)
+            tuning = {**base, **tuning}  # -p wins
+            params_file = args.params_file or SIM_PARAMS
+            tuning = {**simulated_robot_parameters(tuning, params_file, args.profile), **tuning}
+            control_nodes = [make_wall_follower(
+                self.context, params_file=params_file, overrides=tuning)]
+            if localize:
+                from amr_sim.profiles import get_profile
+                lidar_offset_x = get_profile(args.profile).lidar_offset_x
+                # The filter draws from --seed, as the headless episodes' filter does.
+                control_nodes.append(make_particle_filter(
+                    self.context, world=map_source, lidar_offset_x_m=lidar_offset_x,
+                    overrides={"seed": args.seed, **filter_overrides},
+                    localizer=links.get("localizer")))
+            if self.navigating:
+                control_nodes += make_navigators(
+                    self.context, world=map_source, goal=args.goal,
+                    wall_follower=control_nodes[0], lidar_offset_x_m=lidar_offset_x,
+                    links=links)
+        return control_nodes
 
     def _add_slam_node(self, map_prefix: str) -> None:
         """The slam node, mapping in the world's frame (its start pose), saving to map_prefix."""
@@ -370,20 +364,7 @@ class SimSession:
 
     def summary_line(self, report: dict) -> str:
         """One line for the terminal: where, how long, how fast, how safe."""
-        if self.navigating:
-            return navigation_line(report)
-        laps = report["laps"]
-        factor = report["real_time_factor"]
-        return (f"run_sim: {world_label(report)} / {report['start']} / {report['profile']} "
-                f"({report['mode']}): {report['sim_time_s']:.1f} s simulated in "
-                f"{report['wall_time_s']:.1f} s ({f'{factor}x' if factor else 'n/a'} real "
-                f"time), "
-                f"{report['steps']} steps, collisions {report['collisions']}, min clearance "
-                f"{report['min_clearance_m'] * 100:.1f} cm, distance {report['distance_m']:.1f} m,"
-                + (" explored n/a" if report["explored_fraction"] is None else
-                   f" explored {report['explored_fraction'] * 100:.0f}%")
-                + (f", laps {laps}" if laps else "") + localization_line(report)
-                + slam_line(report))
+        return navigation_line(report) if self.navigating else run_line(report)
 
     def close(self) -> None:
         """Shut the graph down (controllers first: their zero command goes out), close files."""
