@@ -93,7 +93,8 @@ SLAM_SET = {"lidar_offset_x_m": FILTER_SET["lidar_offset_x_m"], "output_prefix":
             "map_start_pose": "from --start (the map is built in the world's frame)"}
 
 
-def parse_args(argv=None) -> argparse.Namespace:
+def _parser() -> OneLineArgumentParser:
+    """run_sim's options (checked by parse_args)."""
     parser = OneLineArgumentParser(description=__doc__.split("\n\n")[0],
                                    formatter_class=argparse.RawDescriptionHelpFormatter,
                                    epilog=__doc__.split("\n\n", 1)[1])
@@ -147,6 +148,12 @@ def parse_args(argv=None) -> argparse.Namespace:
     add_foxglove_options(parser)
     add_domain_id_option(parser, "ROS_DOMAIN_ID, 0-232 (default: $ROS_DOMAIN_ID if set and not "
                          "0, else a free one)")
+    return parser
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    """The options, checked: one line and exit code 2 for a mistake, before anything runs."""
+    parser = _parser()
     args = parser.parse_args(join_negative_values(argv, ["--start", "--goal", "--kidnap"]))
     if not (math.isfinite(args.duration) and args.duration > 0):
         parser.error("--duration must be > 0")
@@ -172,6 +179,12 @@ def parse_args(argv=None) -> argparse.Namespace:
     if args.no_controller and args.goal is not None:
         parser.error("--no-controller and --goal exclude each other: the pure pursuit drives "
                      "to the goal")
+    _check_start_outputs_kidnap(parser, args)
+    return args
+
+
+def _check_start_outputs_kidnap(parser, args) -> None:
+    """--start parsed, --plot and --record file names, --kidnap within the run."""
     from amr_common.world import parse_start
     try:
         if args.start != "all":
@@ -193,7 +206,6 @@ def parse_args(argv=None) -> argparse.Namespace:
         if args.kidnap[0] >= args.duration:
             parser.error(f"--kidnap at {args.kidnap[0]:g} s comes after the run ends "
                          f"(--duration {args.duration:g} s)")
-    return args
 
 
 def _check_simulator_options(parser, args) -> None:
