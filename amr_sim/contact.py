@@ -9,11 +9,39 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pymunk
 
+from amr_common import robot
 from amr_common.jit import jit
 from amr_common.raycast import segment_offset
 
 ALLOWED_PENETRATION = 0.0005  # m: resting contact depth, below collision_slop so it is stable
+ROBOT_TYPE, WALL_TYPE = 1, 2  # pymunk collision types
+
+
+def wall_space(segments: np.ndarray, pose: tuple[float, float, float]
+               ) -> tuple[pymunk.Space, pymunk.Body, pymunk.Circle]:
+    """A pymunk space of the walls (frictionless segments) and the robot's disc at `pose`.
+
+    (space, body, shape): keep all three (pymunk's shapes hold weak references to bodies).
+    """
+    space = pymunk.Space()
+    space.collision_slop = 1e-3  # the default 0.1 assumes pixels; units here are metres
+    space.damping = 1.0
+    for x1, y1, x2, y2 in segments:
+        wall = pymunk.Segment(space.static_body, (x1, y1), (x2, y2), 0.0)
+        wall.collision_type = WALL_TYPE
+        wall.friction = 0.0
+        space.add(wall)
+    body = pymunk.Body(robot.MASS, pymunk.moment_for_circle(robot.MASS, 0.0, robot.ROBOT_RADIUS))
+    body.position = pose[:2]
+    body.angle = pose[2]
+    shape = pymunk.Circle(body, robot.ROBOT_RADIUS)
+    shape.collision_type = ROBOT_TYPE
+    shape.friction = 0.0
+    shape.elasticity = 0.0
+    space.add(body, shape)
+    return space, body, shape
 
 
 def constrain_velocity_python(segments, px, py, vx, vy, h, radius, allowed_penetration):

@@ -35,15 +35,19 @@ from amr_common.geometry import wrap_angle
 from amr_common.raycast import nearest_wall
 from amr_common.robot import COMMAND_CLIP  # |v|, |w| beyond this are absurd
 from amr_common.world import World
-from amr_sim.contact import ALLOWED_PENETRATION, constrain_velocity
+from amr_sim.contact import (
+    ALLOWED_PENETRATION,
+    ROBOT_TYPE,
+    WALL_TYPE,
+    constrain_velocity,
+    wall_space,
+)
 from amr_sim.lidar import Lidar
 from amr_sim.profiles import SensorProfile, get_profile
 from amr_sim.reality import RealRobot
 
 log = logging.getLogger("amr_sim.simulator")
 
-_ROBOT_TYPE = 1
-_WALL_TYPE = 2
 _ROBOT_RADIUS = robot.ROBOT_RADIUS
 _WARN_INTERVAL = 5.0  # s of wall time between repeated bad-command warnings
 
@@ -64,24 +68,8 @@ class Simulator:
         self._start = (x, y, theta)
         self._segments = self._world.segments
 
-        space = pymunk.Space()
-        space.collision_slop = 1e-3  # the default 0.1 assumes pixels; units here are metres
-        space.damping = 1.0
-        for x1, y1, x2, y2 in self._segments:
-            wall = pymunk.Segment(space.static_body, (x1, y1), (x2, y2), 0.0)
-            wall.collision_type = _WALL_TYPE
-            wall.friction = 0.0
-            space.add(wall)
-        body = pymunk.Body(robot.MASS,
-                           pymunk.moment_for_circle(robot.MASS, 0.0, robot.ROBOT_RADIUS))
-        body.position = (x, y)
-        body.angle = theta
-        shape = pymunk.Circle(body, robot.ROBOT_RADIUS)
-        shape.collision_type = _ROBOT_TYPE
-        shape.friction = 0.0
-        shape.elasticity = 0.0
-        space.add(body, shape)
-        space.on_collision(_ROBOT_TYPE, _WALL_TYPE, begin=self._on_begin,
+        space, body, shape = wall_space(self._segments, (x, y, theta))
+        space.on_collision(ROBOT_TYPE, WALL_TYPE, begin=self._on_begin,
                            separate=self._on_separate)
         self._space, self._body, self._shape = space, body, shape  # shapes hold weak body refs
 
@@ -127,24 +115,8 @@ class Simulator:
 
     def step(self, v: float, w: float) -> tuple[np.ndarray, float, float]:
         """Advance one dt with the command (v m/s, w rad/s); return (z_scan, z_v, z_w)."""
-        if not (type(v) is float and type(w) is float and -COMMAND_CLIP < v < COMMAND_CLIP
-                and -COMMAND_CLIP < w < COMMAND_CLIP):  # NaN fails the comparisons
-            v, w = self._clean_command(v, w)
-        p = self._profile
-        if self._quantum:  # turtlebot3_node sends int(v * 100): truncation toward zero
-            v = math.trunc(v * self._quantum) / self._quantum
-            w = math.trunc(w * self._quantum) / self._quantum
-        dt = self._dt
-        if self._real is not None:  # latency, firmware clamps, motors, wheel errors, slip
-            ds, dth = self._real.drive.step(v, w, self._steps * dt, dt)
-            v, w = ds / dt, dth / dt
-        else:
-            if p.clamp_commands:
-                v = min(max(v, -p.max_linear), p.max_linear)
-                w = min(max(w, -p.max_angular), p.max_angular)
-            v, w = robot.saturate(v, w)  # wheel-speed limit: one factor on both wheels
-        self._command = (v, w)
-
+        v, w = self._command = self._executed(v, w)
+        p, dt = self._profile, self._dt
         x0, y0, th0 = self._x, self._y, self._theta
         chord_v = robot.arc_displacement(th0, v * robot.sinc_half(w * dt), w * dt)  # exact arc
         vx, vy = constrain_velocity(self._segments, x0, y0, *chord_v, dt, _ROBOT_RADIUS,
@@ -195,6 +167,23 @@ class Simulator:
             while self._next_scan_time <= now + 1e-9:
                 self._next_scan_time += p.scan_period
         return self._scan, self._z_v, self._z_w
+
+    def _executed(self, v: float, w: float) -> tuple[float, float]:
+        """The twist the robot executes this step for the command (v, w)."""
+        if not (type(v) is float and type(w) is float and -COMMAND_CLIP < v < COMMAND_CLIP
+                and -COMMAND_CLIP < w < COMMAND_CLIP):  # NaN fails the comparisons
+            v, w = self._clean_command(v, w)
+        p, dt = self._profile, self._dt
+        if self._quantum:  # turtlebot3_node sends int(v * 100): truncation toward zero
+            v = math.trunc(v * self._quantum) / self._quantum
+            w = math.trunc(w * self._quantum) / self._quantum
+        if self._real is not None:  # latency, firmware clamps, motors, wheel errors, slip
+            ds, dth = self._real.drive.step(v, w, self._steps * dt, dt)
+            return ds / dt, dth / dt
+        if p.clamp_commands:
+            v = min(max(v, -p.max_linear), p.max_linear)
+            w = min(max(w, -p.max_angular), p.max_angular)
+        return robot.saturate(v, w)  # wheel-speed limit: one factor on both wheels
 
     def teleport(self, pose) -> None:
         """Teleport the robot to `pose` (x, y, theta), as if kidnapped.
