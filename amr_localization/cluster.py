@@ -85,8 +85,8 @@ def cluster_python(particles, weights, radius, angle, members, stats):
     The histogram is an array over the particles' extent while that has at most
     _DENSE_BINS_PER_PARTICLE bins per particle, else a sort of the particles' bin keys: its
     size never grows with how far apart the particles are.
-    Long: one compiled kernel (~80 lines): extent, histogram, dominant bin, flood of its
-    neighbours and the weighted moments share the local arrays; split, they would be passed
+    Long: one compiled kernel (~80 lines): extent, histogram, heaviest bin, two gathers around
+    its mean and the weighted moments share the local arrays; split, they would be passed
     between kernels at every call.
     """
     n = particles.shape[0]
