@@ -39,7 +39,7 @@ import numpy as np
 from amr_common.geometry import wrap_angles
 from amr_common.map_vs_world import load_map
 from amr_common.world import World
-from amr_evaluation.episode import default_controller, tell_scan_geometry
+from amr_evaluation.episode import default_controller, filter_parameters, tell_scan_geometry
 from amr_localization.particle_filter import ParticleFilter
 from amr_sim.profiles import SensorProfile, get_profile
 from amr_sim.simulator import Simulator
@@ -127,9 +127,9 @@ def run_localization_episode(world: World | str, start=None,
     """Run the wall follower with the particle filter for `duration` simulated seconds.
 
     kidnap (t, x, y, theta): teleport the robot at simulated time t (Simulator.teleport).
-    filter_params: ParticleFilter parameters (seed and lidar_offset_x_m default to the episode's
-    seed and the profile's LiDAR position). map: the filter's map (None: the world; see the
-    module docstring).
+    filter_params: ParticleFilter parameters (seed defaults to the episode's, lidar_offset_x_m,
+    lidar_model and deskew to the profile's: episode.filter_parameters). map: the filter's map
+    (None: the world; see the module docstring).
     """
     world_obj = world if isinstance(world, World) else World.load(world)
     map_obj = load_map(map, world_obj)
@@ -139,7 +139,7 @@ def run_localization_episode(world: World | str, start=None,
         controller = default_controller(sim.dt, prof)
     geometry = sim.scan_geometry
     tell_scan_geometry(controller, geometry)
-    params = {"seed": seed, "lidar_offset_x_m": prof.lidar_offset_x, **(filter_params or {})}
+    params = {"seed": seed, **filter_parameters(prof), **(filter_params or {})}
     pf = ParticleFilter(map_obj, **params)
     tell_scan_geometry(pf, geometry, with_rays=True)
 
@@ -184,7 +184,7 @@ def run_localization_episode(world: World | str, start=None,
             geometry = sim.scan_geometry
             tell_scan_geometry(controller, geometry)
             tell_scan_geometry(pf, geometry, with_rays=True)
-        pf.correct(z_scan, new_scan=new_scan)
+        pf.correct(z_scan, new_scan=new_scan, age_s=sim.time - sim.scan_time)
         filter_time += time.perf_counter() - started
         particles_max = max(particles_max, pf.particle_count)
         truth[k] = (sim.time, *sim.pose)

@@ -38,7 +38,7 @@ import numpy as np
 from amr_common.map_vs_world import load_map, resolve_goal_on_map
 from amr_common.world import World
 from amr_control.pure_pursuit import PurePursuit, scan_clearance, scan_free_ahead
-from amr_evaluation.episode import default_controller, tell_scan_geometry
+from amr_evaluation.episode import default_controller, filter_parameters, tell_scan_geometry
 from amr_planning.planner import Planner, PlanningError
 from amr_sim.profiles import get_profile
 from amr_sim.simulator import Simulator
@@ -78,7 +78,7 @@ class ParticleFilterPose:
         """A filter on `world` for the profile of `sim` (its LiDAR position and scan)."""
         from amr_localization.particle_filter import ParticleFilter  # the heavy part: lazily
         prof = sim.profile
-        params = {"seed": seed, "lidar_offset_x_m": prof.lidar_offset_x, **filter_params}
+        params = {"seed": seed, **filter_parameters(prof), **filter_params}
         self.filter = ParticleFilter(world, **params)
         self._geometry = sim.scan_geometry
         tell_scan_geometry(self.filter, self._geometry, with_rays=True)
@@ -94,7 +94,8 @@ class ParticleFilterPose:
             if sim.scan_geometry is not self._geometry:  # the LDS-02: every scan
                 self._geometry = sim.scan_geometry
                 tell_scan_geometry(self.filter, self._geometry, with_rays=True)
-            self.filter.correct(z_scan, force=self._scan_time is None)
+            self.filter.correct(z_scan, force=self._scan_time is None,
+                                age_s=sim.time - sim.scan_time)
             self._scan_time = sim.scan_time
         return tuple(self.filter.estimate), bool(self.filter.localized)
 

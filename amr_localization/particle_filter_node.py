@@ -268,8 +268,11 @@ class ParticleFilterNode(GuardedLifecycleNode):
             if new_scan:
                 self._last_ranges = raw
                 self._last_scan_ns = stamp_ns
+            # The scan's age at the newest odometry the filter predicted to (for de-skewing).
+            age_s = 0.0 if self._last_odometry_ns is None else \
+                (self._last_odometry_ns - stamp_ns) * 1e-9
             try:
-                if self.filter.correct(ranges, new_scan=new_scan):
+                if self.filter.correct(ranges, new_scan=new_scan, age_s=age_s):
                     self._last_scan_ns = stamp_ns
                     self._publish_amcl_pose(scan.header.stamp)
             except Exception as exc:  # never take the executor down

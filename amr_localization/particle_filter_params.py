@@ -16,6 +16,7 @@ from typing import Any
 from amr_common.parameter_table import finite, table_values
 from amr_common.robot import ROBOT_RADIUS
 from amr_common.world import World
+from amr_localization.range_sensor import MODEL_NAMES
 from amr_localization.table_memory import MemoryPlan, choose_table
 
 # A particle's centre may be this much closer to a wall than the robot radius before it counts
@@ -40,7 +41,18 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     "tracking_particles": (2000, "Particles drawn around an initial pose (/initialpose, "
                                  "initial_pose)."),
     "beams": (60, "Beams of each scan weighed per particle, evenly spread over the rays."),
-    "sigma_hit_m": (0.03, "Standard deviation of a beam's range around the expected range [m]."),
+    "lidar_model": ("auto", "The range sensor (range_sensor.py): 'LDS-01' or 'LDS-02' (each "
+                            "reading's tolerance and sigma grow with the range by the "
+                            "datasheet's bands; a missing return is unknown; the rays are "
+                            "de-skewed), 'exact' (the simulator's clean profiles: the fixed "
+                            "tolerance and sigma), 'auto' (LDS-02 if the scan's range_max is "
+                            "beyond 10 m, else LDS-01)."),
+    "deskew": (True, "Move each ray to the LiDAR's pose now with the odometry (rays measured "
+                     "clockwise over the revolution before the stamp, as the LDS drivers stamp "
+                     "them); false for scans taken at one instant (a simulated scanner without "
+                     "skew). Not used by the 'exact' model."),
+    "sigma_hit_m": (0.03, "Standard deviation of a beam's range around the expected range [m] "
+                          "(the nearest readings' with an LDS model)."),
     "z_random": (0.05, "Weight of the uniform part of a beam's likelihood: a beam that misses "
                        "costs log(z_random), whatever the miss (robust to clutter)."),
     "table_resolution_m": (0.02, "Cell size of the expected-range table [m] (the finest: "
@@ -78,7 +90,8 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     "cluster_min_share": (0.9, "Localized needs the dominant cluster to carry this share of the "
                                "weight."),
     "match_tolerance_m": (0.03, "A ray matches when reading and exact expectation at the "
-                                "estimate differ by at most this [m]."),
+                                "estimate differ by at most this [m] (plus the datasheet's "
+                                "error at the reading's range with an LDS model)."),
     "localize_match_fraction": (0.97, "Localized needs this share of ALL rays to match ..."),
     "localize_updates": (10, "... at this many consecutive measurement updates."),
     "ambiguity_match_fraction": (0.9, "Localized needs that no pose elsewhere (> 15 cm or "
@@ -102,6 +115,8 @@ _FRACTIONS = {"z_random", "seed_uniform_share", "resample_ess_fraction", "search
               "cluster_min_share", "inject_share", "ambiguity_match_fraction",
               "localize_match_fraction", "keep_match_fraction", "reinit_match_fraction"}
 _VECTORS = {"initial_pose", "initial_pose_sigma"}
+_CHOICES = {"lidar_model": MODEL_NAMES}
+_FLAGS = {"deskew"}
 # Bounds beyond which a value costs absurd memory or time (or is meaningless): name -> (low, high)
 _RANGES = {"max_particles": (1, MAX_PARTICLES), "min_particles": (1, MAX_PARTICLES),
            "tracking_particles": (1, MAX_PARTICLES), "beams": (1, 4096),
@@ -123,6 +138,14 @@ def check_parameters(overrides: dict[str, Any] | None = None) -> dict[str, Any]:
     problems = []
     for name, value in values.items():
         if name in _VECTORS:
+            continue
+        if name in _CHOICES:
+            if value not in _CHOICES[name]:
+                problems.append(f"{name} must be one of {list(_CHOICES[name])} (got {value!r})")
+            continue
+        if name in _FLAGS:
+            if not isinstance(value, bool):
+                problems.append(f"{name} must be true or false (got {value!r})")
             continue
         if not finite(value):
             problems.append(f"{name} must be a finite number (got {value!r})")

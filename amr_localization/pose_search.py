@@ -32,6 +32,8 @@ def score_poses_python(centres, headings, table, rows, angles, x0, y0, resolutio
                        max_misses, out):
     """out[c, h] = beams matched by the robot centred at centres[c] with heading h * 2 pi / H.
 
+    tolerance_mm: per beam (a real LiDAR's readings are looser far away: range_sensor).
+
     A pose is dropped (scored by what it matched so far) after more than max_misses misses:
     most poses are wrong, and their misses come early because beam_bins is in an interleaved
     order (see PoseSearch). A coarse ranking: no sub-cell correction (beam_model's would cost
@@ -66,7 +68,7 @@ def score_poses_python(centres, headings, table, rows, angles, x0, y0, resolutio
                 if z < 0:
                     hit = r < range_min_mm or r > range_max_mm
                 else:
-                    hit = abs(z - r) <= tolerance_mm
+                    hit = abs(z - r) <= tolerance_mm[b]
                 if hit:
                     matched += 1
                 else:
@@ -96,7 +98,7 @@ def score_poses_numpy(centres, headings, table, rows, angles, x0, y0, resolution
         k = ((h * (angles / headings) + 0.5) + beam_bins).astype(np.int64) % angles
         r = table[rows[lj * nx + li][:, None], k[None, :]].astype(np.int32)
         hit = np.where(z_mm[None, :] < 0, (r < range_min_mm) | (r > range_max_mm),
-                       np.abs(z_mm[None, :] - r) <= tolerance_mm)
+                       np.abs(z_mm[None, :] - r) <= tolerance_mm[None, :])
         misses = np.cumsum(~hit, axis=1)
         out[:, h] = np.where(misses[:, -1] > max_misses,
                              np.sum(hit & (misses <= max_misses), axis=1), hit.sum(axis=1))
@@ -150,13 +152,19 @@ class PoseSearch:
         self._limits_mm = (0, 0)  # the scan's valid range limits (mm), set per search
 
     def _score_into(self, centres: np.ndarray, beam_bins: np.ndarray, z_mm: np.ndarray,
-                    max_misses: int, out: np.ndarray) -> None:
+                    tolerance_mm: np.ndarray, max_misses: int, out: np.ndarray) -> None:
         """Scores of the poses at `centres` x every heading into out (beams in that order)."""
         table, limits_mm = self.table, self._limits_mm
         score_poses(np.ascontiguousarray(centres), self.headings, table.ranges, table.rows,
                     table.angles, table.x0, table.y0, table.resolution, table.nx,
                     self.lidar_offset, np.ascontiguousarray(beam_bins), np.ascontiguousarray(z_mm),
-                    self.tolerance_mm, limits_mm[0], limits_mm[1], max_misses, out)
+                    np.ascontiguousarray(tolerance_mm, dtype=np.int64), limits_mm[0],
+                    limits_mm[1], max_misses, out)
+
+    def _tolerances_mm(self, beams: ScanBeams) -> np.ndarray:
+        """Per weighed beam: the search's tolerance (mm), widened as the beams say."""
+        tolerance = np.full(beams.count, self.tolerance_mm, dtype=np.int64)
+        return tolerance if beams.search_extra_mm is None else tolerance + beams.search_extra_mm
 
     def _best(self, count: int, beams: ScanBeams, z_mm: np.ndarray) -> tuple[np.ndarray, ...]:
         """The `count` best grid poses: (scores, flat indices cell * headings + heading).
@@ -168,13 +176,14 @@ class PoseSearch:
         # refined with every ray), and half the lookups of 60 beams.
         keep = np.arange(0, len(beam_bins), max(1, -(-len(beam_bins) // SEARCH_BEAMS)))
         beam_bins, z_mm = beam_bins[keep], z_mm[keep]
+        tolerance_mm = self._tolerances_mm(beams)[keep]
         order = interleaved_order(len(beam_bins))
         self.scored_beams = len(beam_bins)
         best = _TopScores(count)
         for first in range(0, len(self.cells), _CHUNK_CELLS):
             centres = self.centres[first:first + _CHUNK_CELLS]
             out = self._scores[:len(centres)]
-            self._score_into(centres, beam_bins[order], z_mm[order],
+            self._score_into(centres, beam_bins[order], z_mm[order], tolerance_mm[order],
                              int(self.miss_share * len(beam_bins)), out)
             best.add(out.ravel(), first * self.headings)
         return best.scores, best.flat
@@ -215,7 +224,8 @@ class PoseSearch:
             centres = self.centres[near]
             scores = np.empty((len(centres), self.headings), dtype=np.int32)
             order = interleaved_order(len(beam_bins))
-            self._score_into(centres, beam_bins[order], z_mm[order], len(beam_bins), scores)
+            self._score_into(centres, beam_bins[order], z_mm[order],
+                             self._tolerances_mm(beams)[order], len(beam_bins), scores)
             headings = np.arange(self.headings) * self.step[1]
             off = np.abs(wrap_angles(headings - pose[2]))
             scores[:, off > angle] = -1

@@ -304,10 +304,16 @@ def localizing_wall_follower(tuning: dict[str, Any]) -> dict[str, Any]:
 
 
 def make_particle_filter(context, *, world: str, lidar_offset_x_m: float,
-                         overrides: dict[str, Any] | None = None):
-    """The particle filter on `world`, told where the LiDAR sits (overrides win)."""
+                         overrides: dict[str, Any] | None = None,
+                         sensor: dict[str, Any] | None = None):
+    """The particle filter on `world`, told where the LiDAR sits (overrides win).
+
+    sensor: lidar_model and deskew of a simulated profile (amr_evaluation.episode.
+    filter_parameters); the robot's are the defaults (auto, de-skewed).
+    """
     from amr_localization.particle_filter_node import ParticleFilterNode
-    values: dict[str, Any] = {"world": str(world), "lidar_offset_x_m": float(lidar_offset_x_m)}
+    values: dict[str, Any] = {"world": str(world), **(sensor or {}),
+                              "lidar_offset_x_m": float(lidar_offset_x_m)}
     values.update(overrides or {})
     return ParticleFilterNode(context=context, parameter_overrides=overrides_to_parameters(values))
 

@@ -140,11 +140,13 @@ class SimSession:
             self.control_nodes = [make_wall_follower(
                 self.context, params_file=params_file, overrides=tuning)]
             if localize:
+                from amr_evaluation.episode import filter_parameters
                 from amr_sim.profiles import get_profile
-                lidar_offset_x = get_profile(args.profile).lidar_offset_x
+                sensor = filter_parameters(get_profile(args.profile))
+                lidar_offset_x = sensor.pop("lidar_offset_x_m")
                 self.control_nodes.append(make_particle_filter(
                     self.context, world=map_source, lidar_offset_x_m=lidar_offset_x,
-                    overrides=filter_overrides))
+                    overrides=filter_overrides, sensor=sensor))
             if self.navigating:
                 self.control_nodes += make_navigators(
                     self.context, world=map_source, goal=args.goal,
