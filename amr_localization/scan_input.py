@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from amr_common.scan_returns import return_mask
 from amr_localization.range_sensor import RangeSensor
 from amr_localization.scan_beams import BeamReadings, ScanBeams
 from amr_localization.scan_deskew import MotionHistory, deskew
@@ -33,12 +34,6 @@ class TakenScan:
         return self.beams.split(self.beams.readings_mm(self.ranges), self.scales)
 
 
-def has_return(ranges: np.ndarray, range_min: float, range_max: float) -> np.ndarray:
-    """(rays,) bool: readings with a return (not NaN, inf, 0.0 or outside the limits)."""
-    with np.errstate(invalid="ignore"):
-        return (ranges >= range_min) & (ranges <= range_max) & (ranges > 0.0)
-
-
 def take_scan(ranges: np.ndarray, age_s: float, sensor: RangeSensor, beams: ScanBeams,
               nominal_angles: np.ndarray, limits: tuple[float, float], history: MotionHistory,
               lidar_offset: float, table_angles: int) -> TakenScan:
@@ -50,7 +45,7 @@ def take_scan(ranges: np.ndarray, age_s: float, sensor: RangeSensor, beams: Scan
     angles = None
     ages = sensor.ray_ages(nominal_angles, age_s)
     if ages is not None:
-        angles, ranges = deskew(nominal_angles, ranges, has_return(ranges, *limits), ages,
+        angles, ranges = deskew(nominal_angles, ranges, return_mask(ranges, *limits), ages,
                                 history, lidar_offset)
     tolerances = sensor.tolerances(ranges)
     uniform = sensor.spread_free and sensor.map_uncertainty_m == 0.0
@@ -60,4 +55,4 @@ def take_scan(ranges: np.ndarray, age_s: float, sensor: RangeSensor, beams: Scan
                      None if uniform else sensor.sigma_scales(ranges))
 
 
-__all__ = ["TakenScan", "take_scan", "has_return"]
+__all__ = ["TakenScan", "take_scan"]
