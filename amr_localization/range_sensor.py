@@ -135,10 +135,4 @@ class RangeSensor:
         return f"{self.name} (tolerance {tolerances}; {skew})"
 
 
-def is_model_name(value: object) -> bool:
-    """True if `value` names a model of MODEL_NAMES."""
-    return isinstance(value, str) and value in MODEL_NAMES
-
-
-__all__ = ["RangeSensor", "lidar_model_for", "MODEL_NAMES", "EXACT", "AUTO", "SCALE_ONE",
-           "is_model_name"]
+__all__ = ["RangeSensor", "lidar_model_for", "MODEL_NAMES", "EXACT", "AUTO", "SCALE_ONE"]

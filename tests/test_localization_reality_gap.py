@@ -13,7 +13,6 @@ import math
 import numpy as np
 import pytest
 
-from amr_common.geometry import compose
 from amr_common.lidar_models import LDS01, LDS02
 from amr_common.map_file import world_as_map
 from amr_common.map_raster import FREE, OCCUPIED, Raster, boundary_segments, likely_wall_segments
@@ -244,17 +243,9 @@ def test_the_filter_localizes_on_a_slam_map_of_the_world():
     from amr_evaluation.mapping_episode import run_mapping_episode
     from amr_mapping.mapper import Mapper
     world = World.load("lab02")
-    start = world.starts["inner"]
-
-    class WorldFrame(Mapper):
-        """The map frame = the world frame: the odometry starts at the start pose."""
-
-        def update(self, scan, odom_pose, stamp):
-            return super().update(scan, compose(start, tuple(odom_pose)), stamp)
-
-    mapper = WorldFrame({"lidar_offset_x_m": -0.032})
+    mapper = Mapper({"lidar_offset_x_m": -0.032})
     run_mapping_episode(world, "inner", profile="turtlebot3", seed=0, duration=100.0,
-                        mapper=mapper)
+                        mapper=mapper, world_frame=True)
     slam_map = World.from_raster(mapper.occupancy_raster(), name="lab02_slam")
     result = run_localization_episode(world, "inner", profile="turtlebot3", seed=2,
                                       duration=20.0, record=False, map=slam_map)
