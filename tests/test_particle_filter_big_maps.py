@@ -237,8 +237,19 @@ def test_searches_carry_their_poses_by_the_odometry_since_their_scan():
         assert np.allclose(carried, (x, y, math.remainder(theta, 2 * math.pi)), atol=1e-9)
 
 
+@pytest.mark.parametrize("profile, must_localize", [("turtlebot3", True),
+                                                     ("turtlebot3_real", False)])
 def test_no_filter_call_searches_more_than_a_slice_and_the_floor_still_localizes(tmp_path,
-                                                                               monkeypatch):
+                                                                               monkeypatch,
+                                                                               profile,
+                                                                               must_localize):
+    """Each call scores at most a slice, also with a real LiDAR (LDS-01 tolerances, de-skew).
+
+    Its searches finish calls after their scan and judge it with that scan's rays, ranges and
+    tolerances. There the floor's repeated offices may stay rivals (in 30 s several explain
+    99-100 % of the rays within the datasheet's tolerances, as before the searches were sliced):
+    undecided is allowed, wrong never.
+    """
     from amr_evaluation.localization_episode import run_localization_episode
     from amr_localization.pose_search import SLICE_CELLS, PoseSearch
     world = _building(tmp_path, 12)
@@ -255,10 +266,11 @@ def test_no_filter_call_searches_more_than_a_slice_and_the_floor_still_localizes
 
     monkeypatch.setattr(PoseSearch, "_score_into", counting_score_into)
     monkeypatch.setattr(ParticleFilter, "correct", counting_correct)
-    result = run_localization_episode(world, "corridor_west", profile="turtlebot3", seed=0,
+    result = run_localization_episode(world, "corridor_west", profile=profile, seed=0,
                                       duration=30.0, record=False,
                                       filter_params={"max_memory_mb": 50})
     assert max(scored) <= SLICE_CELLS, f"a call scored {max(scored)} positions"
     assert sum(scored) > 3 * SLICE_CELLS  # the seed's and the check's searches, sliced
     assert result.false_localizations == 0, result.summary()
-    assert result.time_to_localized_s is not None, result.summary()
+    if must_localize:
+        assert result.time_to_localized_s is not None, result.summary()
