@@ -139,7 +139,8 @@ def run_localization_episode(world: World | str, start=None,
         controller = default_controller(sim.dt, prof)
     geometry = sim.scan_geometry
     tell_scan_geometry(controller, geometry)
-    params = {"seed": seed, **filter_parameters(prof), **(filter_params or {})}
+    params = {"seed": seed, **filter_parameters(prof, map_obj is world_obj),
+              **(filter_params or {})}
     pf = ParticleFilter(map_obj, **params)
     tell_scan_geometry(pf, geometry, with_rays=True)
 

@@ -78,7 +78,7 @@ class ParticleFilterPose:
         """A filter on `world` for the profile of `sim` (its LiDAR position and scan)."""
         from amr_localization.particle_filter import ParticleFilter  # the heavy part: lazily
         prof = sim.profile
-        params = {"seed": seed, **filter_parameters(prof), **filter_params}
+        params = {"seed": seed, **filter_parameters(prof, world is sim.world), **filter_params}
         self.filter = ParticleFilter(world, **params)
         self._geometry = sim.scan_geometry
         tell_scan_geometry(self.filter, self._geometry, with_rays=True)

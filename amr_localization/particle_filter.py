@@ -78,8 +78,9 @@ class ParticleFilter(FilterSearches):
         if self.plan.reduced:
             log.info("%s: a big map: expected-range table of %s to stay within max_memory_mb "
                      "%g", self.world.source, self.plan.describe(), p["max_memory_mb"])
-        raster = self.world.raster
-        # Where the LiDAR sees walls: a map's walls inside its occupied cells (module docstring).
+        # Where the LiDAR sees walls: a map's walls inside its occupied cells (module docstring),
+        # or on its free edges for a world the simulator built from this map (map_walls).
+        raster = None if p["map_walls"] == "edges" else self.world.raster
         self.walls = self.world.segments if raster is None else likely_wall_segments(raster)
         self._map_cell = None if raster is None else raster.resolution
         self.table = expected_range_table(self.world, self.plan.resolution, self.plan.angles,

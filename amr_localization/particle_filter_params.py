@@ -40,6 +40,7 @@ WALL_SLACK_M = 0.02
 # localize the mazes.
 MAX_PARTICLES = 200_000
 
+MAP_WALLS = ("likely", "edges")  # where a map's walls are: map_walls
 # name: (default, description). The defaults localize in both simulator profiles.
 _TABLE: dict[str, tuple[Any, str]] = {
     "lidar_offset_x_m": (0.0, "Forward position of the LiDAR relative to the robot centre [m] "
@@ -67,6 +68,13 @@ _TABLE: dict[str, tuple[Any, str]] = {
                      "clockwise over the revolution before the stamp, as the LDS drivers stamp "
                      "them); false for scans taken at one instant (a simulated scanner without "
                      "skew). Not used by the 'exact' model."),
+    "map_walls": ("likely", "Where a map's walls are (a Nav2 or SLAM map; a polygon world's are "
+                            "its own): 'likely' inside the occupied cells (the middle of a "
+                            "two-cell band, as SLAM marks a wall, else the first cell's centre), "
+                            "known to half a cell: a map of a real room; 'edges' on the free "
+                            "cells' edges, where the simulator puts the walls of a world built "
+                            "from this map (the run scripts set it when the simulated world is "
+                            "the filter's map)."),
     "sigma_hit_m": (0.03, "Standard deviation of a beam's range around the expected range [m] "
                           "(the nearest readings' with an LDS model)."),
     "z_random": (0.05, "Weight of the uniform part of a beam's likelihood: a beam that misses "
@@ -129,6 +137,7 @@ _FRACTIONS = ("seed_uniform_share", "resample_ess_fraction", "search_ess_fractio
 # being meaningless); checks of several parameters: check_parameters.
 PARAMETERS: dict[str, Param] = ruled(
     _TABLE, at_least(0.0), lidar_offset_x_m=None, lidar_model=one_of(*MODEL_NAMES),
+    map_walls=one_of(*MAP_WALLS),
     initial_pose=vector(0, 3), initial_pose_sigma=vector(3, low=0.0),
     seed=at_least(0), beams=between(1, 4096), table_angles=between(8, 4096),
     localize_updates=at_least(1), lost_updates=at_least(1), reinit_updates=at_least(1),

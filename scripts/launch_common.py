@@ -324,7 +324,7 @@ def make_particle_filter(context, *, world: str, lidar_offset_x_m: float,
                          sensor: dict[str, Any] | None = None):
     """The particle filter on `world`, told where the LiDAR sits (overrides win).
 
-    sensor: lidar_model and deskew of a simulated profile (amr_evaluation.episode.
+    sensor: lidar_model, deskew and map_walls of a simulated run (amr_evaluation.episode.
     filter_parameters); the robot's are the defaults (auto, de-skewed).
     """
     from amr_localization.particle_filter_node import ParticleFilterNode

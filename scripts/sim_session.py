@@ -153,7 +153,7 @@ class SimSession:
             if localize:
                 from amr_evaluation.episode import filter_parameters
                 from amr_sim.profiles import get_profile
-                sensor = filter_parameters(get_profile(args.profile))
+                sensor = filter_parameters(get_profile(args.profile), map_is_world=not own_map)
                 lidar_offset_x = sensor.pop("lidar_offset_x_m")
                 self.control_nodes.append(make_particle_filter(
                     self.context, world=map_source, lidar_offset_x_m=lidar_offset_x,

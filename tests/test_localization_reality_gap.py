@@ -66,9 +66,35 @@ def test_tolerances_and_sigmas_follow_the_datasheet_bands():
 
 def test_bad_sensor_parameters_are_refused():
     with pytest.raises(ValueError) as error:
-        check_parameters({"lidar_model": "LDS-03", "deskew": "yes"})
+        check_parameters({"lidar_model": "LDS-03", "deskew": "yes", "map_walls": "inside"})
     assert "lidar_model must be one of" in str(error.value)
     assert "deskew must be true or false" in str(error.value)
+    assert "map_walls must be one of ['likely', 'edges']" in str(error.value)
+    assert check_parameters({"lidar_model": "lds-02", "map_walls": "EDGES"})["lidar_model"] \
+        == "LDS-02"
+
+
+def test_a_map_world_simulated_from_its_own_map_has_its_walls_on_the_free_edges(tmp_path):
+    """The simulator builds a map world's walls on its free cells' edges (boundary_segments).
+
+    The filter expecting them inside the occupied cells (a real room's map) never localized on
+    lab02 converted at 2 cm and driven as the world (test_map_world_episodes); the episodes
+    tell it (map_walls 'edges') when the simulated world is its own map.
+    """
+    from amr_common.map_file import world_as_map, write_map
+    from amr_common.map_raster import boundary_segments
+    from amr_evaluation.episode import filter_parameters
+    from amr_localization.particle_filter import ParticleFilter
+    from amr_sim.profiles import get_profile
+    raster, extras = world_as_map(World.load("lab02"), 0.02)
+    map_world = World.load(str(write_map(raster, tmp_path / "lab02", extras=extras)[0]))
+    profile = get_profile("turtlebot3")
+    assert filter_parameters(profile, map_is_world=True)["map_walls"] == "edges"
+    assert filter_parameters(profile)["map_walls"] == "likely"
+    edges = ParticleFilter(map_world, map_walls="edges", max_particles=500)
+    assert np.array_equal(edges.walls, boundary_segments(map_world.raster))
+    likely = ParticleFilter(map_world, max_particles=500)
+    assert likely.walls.shape != edges.walls.shape or not np.allclose(likely.walls, edges.walls)
 
 
 def test_a_missing_return_is_unknown_for_a_real_scanner_but_a_miss_for_the_exact_model():
