@@ -91,12 +91,15 @@ class Localizer(Protocol):
         """
         ...
 
-    def correct(self, ranges: np.ndarray, force: bool = False, new_scan: bool = True) -> bool:
+    def correct(self, ranges: np.ndarray, force: bool = False, new_scan: bool = True,
+                age_s: float = 0.0) -> bool:
         """Weigh the belief with a scan's ranges (m, the geometry's ray count); True if updated.
 
         Called for every scan (the lockstep simulator repeats the newest one between sensor
         updates: new_scan False then). force: update even if the robot has not moved.
-        ValueError for a scan of the wrong length.
+        age_s: how long before the newest predict() the scan was stamped (s, >= 0; a
+        localizer may use it to de-skew the scan, or ignore it). ValueError for a scan of the
+        wrong length.
         """
         ...
 

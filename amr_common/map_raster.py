@@ -80,6 +80,68 @@ def boundary_segments(raster: Raster) -> np.ndarray:
     return np.ascontiguousarray(np.vstack([horizontal, vertical]), dtype=np.float64)
 
 
+def likely_wall_segments(raster: Raster) -> np.ndarray:
+    """(N, 4) segments where the map's walls most likely are: inside the occupied cells.
+
+    A map marks the cells a wall passes through (world_to_map) or that rays hit (SLAM), so the
+    wall lies inside its occupied cells, not on their free-side edges (boundary_segments, up to
+    a cell into the free space: what a robot must not enter, not what a LiDAR measures). Each
+    free/non-free edge is moved into the non-free side: to the middle of a band of exactly two
+    occupied cells (SLAM marks both cells around a wall: the wall is between them), else to the
+    first cell's centre (a converted map's one-cell walls, solid blocks, unknown cells).
+    Segments are extended at their ends by as much, so a corner of the free space stays closed
+    to rays, except at a wall's tip (free on both sides beyond it), where they stop at the cell
+    centre.
+    """
+    free = np.zeros((raster.values.shape[0] + 2, raster.values.shape[1] + 2), dtype=bool)
+    free[1:-1, 1:-1] = raster.free
+    occupied = np.zeros_like(free)
+    occupied[1:-1, 1:-1] = raster.values == OCCUPIED
+    res, (x0, y0) = raster.resolution, raster.origin
+    parts = []
+    for along_x in (True, False):  # edges on horizontal grid lines, then on vertical ones
+        f, o = (free, occupied) if along_x else (free.T, occupied.T)
+        for free_below in (True, False):
+            for line, start, stop in _moved_edges(f, o, free_below):
+                if along_x:
+                    parts.append(np.column_stack([x0 + start * res, y0 + line * res,
+                                                  x0 + stop * res, y0 + line * res]))
+                else:
+                    parts.append(np.column_stack([x0 + line * res, y0 + start * res,
+                                                  x0 + line * res, y0 + stop * res]))
+    return np.ascontiguousarray(np.vstack(parts), dtype=np.float64)
+
+
+def _moved_edges(free: np.ndarray, occupied: np.ndarray, free_below: bool):
+    """(line, start, stop) in cells of the edges between padded rows i and i + 1, moved.
+
+    Edges with the free cell below (free_below) or above, moved into the non-free side (see
+    likely_wall_segments); yields one array triple per depth (half a cell, one cell).
+    """
+    low, high = free[:-1], free[1:]
+    free_side, wall_side = (low, high) if free_below else (high, low)
+    edge = free_side & ~wall_side
+    step = 1 if free_below else -1
+    first_wall = np.arange(edge.shape[0]) + (1 if free_below else 0)  # padded row of the cell
+
+    def occupied_at(k: int) -> np.ndarray:  # the k-th non-free cell beyond each edge
+        rows = first_wall + step * k
+        inside = (rows >= 0) & (rows < occupied.shape[0])
+        out = np.zeros_like(edge)
+        out[inside] = occupied[rows[inside]]
+        return out
+
+    two = occupied_at(0) & occupied_at(1) & ~occupied_at(2)
+    for mask, depth in ((edge & ~two, 0.5), (edge & two, 1.0)):
+        line, first, end = _runs(mask[:, 1:-1])
+        rows, before, after = line.astype(np.intp), first.astype(np.intp), end.astype(np.intp) + 1
+        # Beyond an end (padded columns `before` and `after`): free on both sides = a wall's tip.
+        tip_before = free_side[rows, before] & wall_side[rows, before]
+        tip_after = free_side[rows, after] & wall_side[rows, after]
+        yield (line + step * depth, first - np.where(tip_before, -depth, depth),
+               end + np.where(tip_after, -depth, depth))
+
+
 def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(row, first, end) of each maximal run of True along the rows of a 2D bool array."""
     padded = np.zeros((mask.shape[0], mask.shape[1] + 2), dtype=np.int8)
@@ -97,4 +159,5 @@ def points_in_polygon(polygon: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.n
     return inside_polygon_points(polygon, points).reshape(x.shape)
 
 
-__all__ = ["FREE", "OCCUPIED", "UNKNOWN", "Raster", "boundary_segments", "points_in_polygon"]
+__all__ = ["FREE", "OCCUPIED", "UNKNOWN", "Raster", "boundary_segments", "likely_wall_segments",
+           "points_in_polygon"]

@@ -100,6 +100,11 @@ class OdometryClock:
         self.max_gap_s = float(max_gap_s)
         self._last_ns: int | None = None
 
+    @property
+    def last_ns(self) -> int | None:
+        """The stamp the clock stands at: the newest odometry integrated to (None: none yet)."""
+        return self._last_ns
+
     def advance(self, stamp: int) -> tuple[float | None, str]:
         """(dt to integrate or None, why): "ok", "first", "back", "jumped back", "gap"."""
         last, self._last_ns = self._last_ns, stamp

@@ -125,6 +125,24 @@ def robot_parameters(controller_class: Any, profile: SensorProfile) -> dict[str,
     return {"lidar_offset_x_m": profile.lidar_offset_x} if "lidar_offset_x_m" in names else {}
 
 
+def filter_parameters(profile: SensorProfile, map_is_world: bool = False) -> dict[str, Any]:
+    """What the simulated robot fixes for the particle filter: its LiDAR and how it scans.
+
+    The LiDAR's position; the sensor model (`exact` for the clean profiles, the datasheet's
+    LDS-01 or LDS-02 with the reality gap) and whether the scans are skewed (de-skew only
+    what the simulator skews); where a map's walls are: on its free cells' edges when the
+    simulated world is the filter's own map (map_is_world: the simulator puts them there),
+    else inside the occupied cells, as in a real room. The run scripts apply these unless the
+    user set them.
+    """
+    model = profile.lidar_model
+    effects = profile.effects
+    return {"lidar_offset_x_m": profile.lidar_offset_x,
+            "lidar_model": "exact" if model is None else model.name,
+            "deskew": bool(effects is not None and effects.scan_skew),
+            "map_walls": "edges" if map_is_world else "likely"}
+
+
 def tell_scan_geometry(target: Any, geometry: tuple, with_rays: bool = False) -> None:
     """target.set_scan_geometry(...) with a Simulator.scan_geometry, if target has it.
 

@@ -138,9 +138,9 @@ def run_localization_episode(world: World | str, start=None,
 
     kidnap (t, x, y, theta): teleport the robot at simulated time t (Simulator.teleport).
     localizer: the class (or its MODULE:CLASS) of amr_common.interfaces.Localizer, default the
-    ParticleFilter. filter_params: its parameters (seed and lidar_offset_x_m default to the
-    episode's seed and the profile's LiDAR position). map: the filter's map (None: the world;
-    see the module docstring).
+    ParticleFilter. filter_params: its parameters (seed defaults to the episode's; the LiDAR's
+    position, lidar_model, deskew and map_walls to the profile's: episode.filter_parameters,
+    those the class takes). map: the filter's map (None: the world; see the module docstring).
     """
     world_obj = world if isinstance(world, World) else World.load(world)
     map_obj = load_map(map, world_obj)

@@ -10,10 +10,10 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from amr_common.controller_loader import DEFAULT_LOCALIZER, link_class
+from amr_common.controller_loader import DEFAULT_LOCALIZER, described_parameters, link_class
 from amr_common.navigation_behaviour import OdometryClock, ScanNovelty, stamp_ns
 from amr_common.world import World
-from amr_evaluation.episode import tell_scan_geometry
+from amr_evaluation.episode import filter_parameters, tell_scan_geometry
 from amr_sim.simulator import Simulator
 
 
@@ -52,9 +52,14 @@ class ParticleFilterPose:
 
         localizer: an amr_common.interfaces.Localizer class, or its MODULE:CLASS.
         """
-        prof = sim.profile
-        params = {"seed": seed, "lidar_offset_x_m": prof.lidar_offset_x, **filter_params}
-        self.filter = link_class(localizer, "localizer")(world, **params)
+        cls = link_class(localizer, "localizer")
+        # The simulated LiDAR (position, model, skew, where the map's walls are), as far as
+        # the class takes them: a user's localizer may know only its position.
+        takes = described_parameters(cls) or {}
+        sensor = {name: value for name, value in
+                  filter_parameters(sim.profile, world is sim.world).items()
+                  if name in takes or name == "lidar_offset_x_m"}
+        self.filter = cls(world, **{"seed": seed, **sensor, **filter_params})
         self._geometry = sim.scan_geometry
         tell_scan_geometry(self.filter, self._geometry, with_rays=True)
         self._clock = OdometryClock()
@@ -68,7 +73,8 @@ class ParticleFilterPose:
         if sim.scan_geometry is not self._geometry:  # the LDS-02: every scan
             self._geometry = sim.scan_geometry
             tell_scan_geometry(self.filter, self._geometry, with_rays=True)
-        self.filter.correct(z_scan, new_scan=self._novelty.is_new(z_scan))
+        self.filter.correct(z_scan, new_scan=self._novelty.is_new(z_scan),
+                            age_s=sim.time - sim.scan_time)
         return tuple(self.filter.estimate), bool(self.filter.localized)
 
 

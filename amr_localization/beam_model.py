@@ -4,6 +4,9 @@ For each particle and each weighed beam, the expected range is one table lookup 
 cell, the beam's world direction) and the beam's log-likelihood one lookup in a table of
 log((1 - z_random) * exp(-d^2 / (2 sigma^2)) + z_random) over the integer difference d in mm, so a
 beam costs a handful of integer operations. A perfect beam scores 0, a missed one log(z_random).
+A beam whose sigma is wider than sigma_hit (range_sensor: a real LiDAR's error grows with the
+range) reads the same table at d times sigma_hit / its sigma (a fixed-point scale per beam: 1
+for every beam of the exact model, whose numbers stay what they were).
 Readings without a return (NaN, 0.0, inf or outside [range_min, range_max]) score 0 where the
 table also expects no return inside the sensor's limits, and log(z_random) otherwise.
 A particle whose centre is not where the robot can be (outside the free space, or closer than
@@ -44,6 +47,7 @@ UNITS_PER_NAT = 1_000_000  # log-likelihoods are summed as integer micro-nats
 _AHEAD = 2  # particles ahead whose table row is prefetched
 _LINE = 32  # uint16 ranges per 64-byte cache line
 SUB_CELL_FROM_M = 0.025  # tables with coarser cells get the sub-cell correction
+_SHIFT = 16  # a beam's difference times its sigma scale (range_sensor.SCALE_ONE = 1 << 16)
 
 
 def log_likelihood_table(sigma_m: float, z_random: float) -> np.ndarray:
@@ -94,7 +98,7 @@ def log_likelihoods_python(particles, count, table, rows, angles, x0, y0, resolu
         starts[p] = rows[int(lj) * nx + int(li)] * angles
         offsets[p, 0] = (li - int(li) - 0.5) * resolution * 1000.0
         offsets[p, 1] = (lj - int(lj) - 0.5) * resolution * 1000.0
-    valid_whole, valid_fraction, valid_mm, invalid_whole, invalid_fraction = beams
+    valid_whole, valid_fraction, valid_mm, invalid_whole, invalid_fraction, valid_scale = beams
     last = lut.shape[0] - 1
     miss = lut[last]
     for p in range(count):
@@ -112,7 +116,7 @@ def log_likelihoods_python(particles, count, table, rows, angles, x0, y0, resolu
             for b in range(valid_whole.shape[0]):
                 k = k0 + valid_whole[b] + (1 if valid_fraction[b] >= carry else 0)
                 k = k - angles if k >= angles else k
-                d = abs(valid_mm[b] - np.int32(table[start + k]))
+                d = (abs(valid_mm[b] - np.int32(table[start + k])) * valid_scale[b]) >> _SHIFT
                 total += lut[d if d < last else last]
             for b in range(invalid_whole.shape[0]):
                 k = k0 + invalid_whole[b] + (1 if invalid_fraction[b] >= carry else 0)
@@ -127,7 +131,7 @@ def log_likelihoods_python(particles, count, table, rows, angles, x0, y0, resolu
                 k = k - angles if k >= angles else k
                 r = np.int32(table[start + k]) - np.int32(round(ox * bin_cos[k]
                                                                 + oy * bin_sin[k]))
-                d = abs(valid_mm[b] - r)
+                d = (abs(valid_mm[b] - r) * valid_scale[b]) >> _SHIFT
                 total += lut[d if d < last else last]
             for b in range(invalid_whole.shape[0]):
                 k = k0 + invalid_whole[b] + (1 if invalid_fraction[b] >= carry else 0)
@@ -171,8 +175,9 @@ def log_likelihoods_numpy(particles, count, table, rows, angles, x0, y0, resolut
             return r
         return r - np.round(ox * bin_cos[k] + oy * bin_sin[k]).astype(np.int32)
 
-    valid_whole, valid_fraction, valid_mm, invalid_whole, invalid_fraction = beams
-    d = np.abs(valid_mm[None, :] - expected(valid_whole, valid_fraction))
+    valid_whole, valid_fraction, valid_mm, invalid_whole, invalid_fraction, valid_scale = beams
+    d = (np.abs(valid_mm[None, :] - expected(valid_whole, valid_fraction)).astype(np.int64)
+         * valid_scale[None, :]) >> _SHIFT
     total = lut[np.minimum(d, lut.shape[0] - 1)].sum(axis=1)
     if invalid_whole.size:
         r = expected(invalid_whole, invalid_fraction)

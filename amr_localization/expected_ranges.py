@@ -216,8 +216,15 @@ def _blocks(grid: OccupancyGrid, cells: np.ndarray) -> tuple[np.ndarray, ...]:
 
 
 def build_expected_range_table(world: World, resolution: float = 0.02, angles: int = 360,
-                               min_clearance: float = MIN_CLEARANCE_M) -> ExpectedRangeTable:
-    """Build the table (uncached); see expected_range_table() for the cached one."""
+                               min_clearance: float = MIN_CLEARANCE_M,
+                               segments: np.ndarray | None = None) -> ExpectedRangeTable:
+    """Build the table (uncached); see expected_range_table() for the cached one.
+
+    segments: the walls the rays hit (default the world's; a map world's likely walls, see
+    amr_common.map_raster.likely_wall_segments); the grid stays the world's.
+    """
+    segments = world.segments if segments is None else np.ascontiguousarray(
+        segments, dtype=np.float64)
     if not (isinstance(angles, int) and 8 <= angles <= 4096):
         raise ValueError(f"table angles must be an integer in [8, 4096], got {angles!r}")
     if not (math.isfinite(resolution) and resolution > 0.0):
@@ -231,23 +238,26 @@ def build_expected_range_table(world: World, resolution: float = 0.02, angles: i
     ranges = np.zeros((cells.size + 1, angles), dtype=np.uint16)
     cells, starts, centres, reach = _blocks(grid, cells)
     fill = _fill_kernel if HAVE_NUMBA else _fill_numpy
-    fill(world.segments, grid.origin[0], grid.origin[1], grid.resolution, grid.width, cells,
+    fill(segments, grid.origin[0], grid.origin[1], grid.resolution, grid.width, cells,
          starts, centres, reach, rows, base_cos, base_sin, ranges)
     return ExpectedRangeTable(grid, angles, rows, ranges)
 
 
-def expected_range_table(world: World, resolution: float = 0.02,
-                         angles: int = 360) -> ExpectedRangeTable:
-    """The table for `world`, built on first use and cached in this process.
+def expected_range_table(world: World, resolution: float = 0.02, angles: int = 360,
+                         segments: np.ndarray | None = None) -> ExpectedRangeTable:
+    """The table for `world` (rays hitting `segments`, default its walls), cached.
 
-    Keyed by the world file, its walls, the resolution and the number of angles.
+    Built on first use and cached in this process, keyed by the world file, the walls, the
+    resolution and the number of angles.
     """
-    key = (world.source, world.segments.tobytes(), float(resolution), int(angles))
+    walls = world.segments if segments is None else np.ascontiguousarray(segments,
+                                                                          dtype=np.float64)
+    key = (world.source, walls.tobytes(), float(resolution), int(angles))
     with _CACHE_LOCK:
         table = _CACHE.get(key)
     if table is not None:
         return table
-    table = build_expected_range_table(world, resolution, angles)
+    table = build_expected_range_table(world, resolution, angles, segments=walls)
     with _CACHE_LOCK:
         if len(_CACHE) >= _CACHE_SIZE:
             _CACHE.pop(next(iter(_CACHE)))

@@ -27,6 +27,7 @@ from amr_common.robot import ROBOT_RADIUS
 from amr_localization.ambiguity import TRACK_ANGLE_RAD, TRACK_DISTANCE_M
 from amr_localization.particle_sets import gaussian_poses, sample_free_poses
 from amr_localization.pose_search import Alternative, SearchJob, close_poses
+from amr_localization.scan_input import TakenScan
 
 SEED, CHECK, DOUBT = "seed", "check", "doubt"  # what the filter does with a finished search
 
@@ -41,7 +42,7 @@ class PendingSearch:
 
     kind: str
     job: SearchJob
-    ranges: np.ndarray  # the scan searched (a copy)
+    scan: TakenScan  # the scan searched (de-skewed, its tolerances and beams: scan_input)
     estimate: tuple[float, float, float]  # the filter's estimate at that scan
     # Odometry since that scan: (dx, dy, dtheta) in the frame of a robot pose at that scan.
     motion: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
@@ -84,8 +85,9 @@ class PendingSearch:
 class FilterSearches:
     """ParticleFilter's exhaustive searches: started, resumed a slice per call, then used.
 
-    Works on the filter's attributes (params, beams, search, matcher, guard, check, particles,
-    weights, estimate, rng, world, table, _pending) and its _set_particles.
+    Works on the filter's attributes (params, _scan: the scan taken for the update under way,
+    search, matcher, guard, check, particles, weights, estimate, rng, world, table, _pending)
+    and its _set_particles.
     """
 
     def _run_search(self, kind: str | None, ranges: np.ndarray) -> str | None:
@@ -93,12 +95,13 @@ class FilterSearches:
 
         Returns None while it goes on; once done, what using it decided (_finish_search).
         """
-        if kind is not None:
-            z_mm, p = self.beams.readings_mm(ranges), self.params
+        if kind is not None:  # `ranges` are those of the scan taken (self._scan)
+            scan, p = self._scan, self.params
+            z_mm = scan.beams.readings_mm(ranges)
             seeded = int(round(p["max_particles"] * (1.0 - p["seed_uniform_share"])))
-            job = self.search.start(seeded, self.beams, z_mm) if kind == SEED else \
-                self.search.start_alternatives(self.beams, z_mm)
-            self._pending = PendingSearch(kind, job, np.array(ranges), tuple(self.estimate))
+            job = self.search.start(seeded, scan.beams, z_mm) if kind == SEED else \
+                self.search.start_alternatives(scan.beams, z_mm)
+            self._pending = PendingSearch(kind, job, scan, tuple(self.estimate))
         if not self._pending.advance():
             return None
         return self._finish_search()
@@ -146,8 +149,11 @@ class FilterSearches:
         if pending.kind == SEED:
             self._seed(pending)
             return ""
+        scan = pending.scan
+        self.matcher.set_ray_angles(scan.angles)  # refined on the searched scan's rays
         found = self.search.alternatives(pending.job, pending.estimate, self.matcher,
-                                         pending.ranges, self.params["match_tolerance_m"])
+                                         scan.ranges, scan.tolerances)
+        self.matcher.set_ray_angles(self._scan.angles)
         self.last_alternatives = pending.carry_alternatives(found)
         rivals = self.guard.unresolved(self.last_alternatives)
         if rivals:
@@ -167,17 +173,19 @@ class FilterSearches:
 
     def _alternatives(self, ranges: np.ndarray) -> list:
         """The best poses away from the estimate for this scan, searched at once."""
-        job = self.search.start_alternatives(self.beams, self.beams.readings_mm(ranges))
+        scan = self._scan
+        job = self.search.start_alternatives(scan.beams, scan.beams.readings_mm(ranges))
         self.last_alternatives = self.search.alternatives(
-            job.finish(), self.estimate, self.matcher, ranges, self.params["match_tolerance_m"])
+            job.finish(), self.estimate, self.matcher, ranges, scan.tolerances)
         return self.last_alternatives
 
     def _searcher(self, ranges: np.ndarray):
         """best_near(pose) of PoseSearch for this scan, over a rival track's neighbourhood."""
-        z_mm = self.beams.readings_mm(ranges)
+        scan = self._scan
+        z_mm = scan.beams.readings_mm(ranges)
         return lambda pose: self.search.best_near(
-            pose, TRACK_DISTANCE_M, TRACK_ANGLE_RAD, self.beams, z_mm, self.matcher, ranges,
-            self.params["match_tolerance_m"])
+            pose, TRACK_DISTANCE_M, TRACK_ANGLE_RAD, scan.beams, z_mm, self.matcher, ranges,
+            scan.tolerances)
 
     def _inject(self, poses) -> None:
         """Replace a share of the particles by Gaussians around `poses` (equal weights)."""

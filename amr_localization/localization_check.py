@@ -35,26 +35,33 @@ from amr_localization.cluster import Cluster, dominant_cluster, weighted_pose_me
 from amr_localization.particle_filter_params import PARAMETERS
 
 
-def _count_matches(expected, ranges, range_min, range_max, tolerance):
-    """Count the rays where reading and expectation agree.
+def _match_share(expected, ranges, range_min, range_max, tolerances, missing_unknown):
+    """Share of the judged rays where reading and expectation agree.
 
-    Rays where reading and expectation agree within tolerance, or both have no return
-    (expected: NaN = no return; readings: NaN, inf, 0.0 or outside the limits).
+    A ray agrees when reading and expectation are within its tolerance, or both have no return
+    (expected: NaN = no return; readings: NaN, inf, 0.0 or outside the limits). A missing
+    reading where a return is expected is a mismatch, or with missing_unknown (a real scanner
+    drops rays) not judged at all. 0 if no ray is judged.
     """
     matches = 0
+    judged = 0
     for i in range(ranges.shape[0]):
         r = ranges[i]
         valid = is_return(r, range_min, range_max)
         e = expected[i]
         if valid:
-            if e == e and abs(r - e) <= tolerance:
+            judged += 1
+            if e == e and abs(r - e) <= tolerances[i]:
                 matches += 1
         elif e != e:
+            judged += 1
             matches += 1
-    return matches
+        elif not missing_unknown:
+            judged += 1
+    return matches / judged if judged > 0 else 0.0
 
 
-count_matches = jit(_count_matches)
+match_share = jit(_match_share)
 
 
 class ScanMatcher:
@@ -62,28 +69,42 @@ class ScanMatcher:
 
     def __init__(self, segments: np.ndarray, angle_min: float, angle_increment: float,
                  rays: int, range_min: float, range_max: float, lidar_offset: float,
-                 allowed: Callable[[float, float], bool] | None = None) -> None:
+                 allowed: Callable[[float, float], bool] | None = None,
+                 missing_unknown: bool = False) -> None:
         """Rays and limits of the scan, LiDAR position, where the robot can be.
 
         `allowed(x, y)`: False where the robot centre cannot be (a pose there explains
-        nothing: match fraction 0).
+        nothing: match fraction 0). missing_unknown: a missing return where the map has a wall
+        is not judged (range_sensor: real scanners drop rays), else a mismatch.
         """
-        angles = angle_min + angle_increment * np.arange(rays)
+        self.angles = angle_min + angle_increment * np.arange(rays)
         self.segments = np.ascontiguousarray(segments, dtype=np.float64)
-        self.base_cos, self.base_sin = np.cos(angles), np.sin(angles)
+        self.base_cos, self.base_sin = np.cos(self.angles), np.sin(self.angles)
+        self._nominal = (self.base_cos, self.base_sin)
         self.range_min, self.range_max = float(range_min), float(range_max)
         self.lidar_offset = float(lidar_offset)
         self.rays = int(rays)
         self.allowed = allowed
+        self.missing_unknown = bool(missing_unknown)
         self._expected = np.empty(rays)
         self._zeros = np.zeros(rays)
 
+    def set_ray_angles(self, angles: np.ndarray | None) -> None:
+        """Where this scan's rays point (rad, de-skewed: scan_deskew), or None for the nominal.
+
+        Every match_fraction call until the next one casts the rays at these angles.
+        """
+        if angles is None:
+            self.base_cos, self.base_sin = self._nominal
+        else:
+            self.base_cos, self.base_sin = np.cos(angles), np.sin(angles)
+
     def match_fraction(self, pose: tuple[float, float, float], ranges: np.ndarray,
-                       tolerance: float) -> float:
+                       tolerance) -> float:
         """Share of rays where reading and expectation agree.
 
-        Within `tolerance` (m), or where both have no return. Readings: NaN, inf, 0.0 or outside
-        the limits = no return.
+        Within `tolerance` (m: one number, or one per ray), or where both have no return.
+        Readings: NaN, inf, 0.0 or outside the limits = no return (see _match_share).
         """
         if self.allowed is not None and not self.allowed(pose[0], pose[1]):
             return 0.0
@@ -92,9 +113,10 @@ class ScanMatcher:
         oy = y + self.lidar_offset * math.sin(theta)
         scan_into(self.segments, ox, oy, theta, self.base_cos, self.base_sin, self.range_min,
                   self.range_max, math.nan, self._zeros, self._expected)
-        matches = count_matches(self._expected, np.asarray(ranges, dtype=np.float64),
-                                self.range_min, self.range_max, float(tolerance))
-        return matches / max(self.rays, 1)
+        tolerances = np.broadcast_to(np.asarray(tolerance, dtype=np.float64), (self.rays,))
+        return float(match_share(self._expected, np.asarray(ranges, dtype=np.float64),
+                                 self.range_min, self.range_max,
+                                 np.ascontiguousarray(tolerances), self.missing_unknown))
 
 
 def _default(name: str):

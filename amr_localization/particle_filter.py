@@ -4,17 +4,23 @@
     pf.set_scan_geometry(angle_min=0.0, angle_increment=2 * pi / 360, rays=360,
                          range_min=0.12, range_max=3.5)
     pf.predict(v, w, dt)          # every odometry twist
-    pf.correct(ranges)            # every NEW scan (weighed when the robot moved enough)
+    pf.correct(ranges, age_s=0.0) # every NEW scan (weighed when the robot moved enough);
+                                  # age_s: how long before the last predict() it was stamped
     pf.estimate, pf.localized, pf.covariance
 
 Global localization (uniform over the free space, all headings) is the default; an initial pose
-tracks from there. Predict: motion_model. Correct: beam model on the expected-range table
+tracks from there. Predict: motion_model. Correct: the scan de-skewed with the odometry of the
+last second (scan_deskew; `lidar_model` and `deskew`: range_sensor, which also sizes each
+reading's tolerance and sigma), beam model on the expected-range table
 (beam_model, expected_ranges, scan_beams; weights flattened while searching: weighting),
 low-variance resampling when the effective sample size drops, with a KLD-sized particle count
 (resampling). Particles are drawn by particle_sets. The localized flag: localization_check,
 with the exhaustive pose search (pose_search) and the rival tracks (ambiguity). The exhaustive
 searches (a global search's first scan, the check before declaring) are scored a slice per
 correct() call, so none blocks for long on a big map (filter_searches).
+On a map world (a Nav2 map, a SLAM map) the expected ranges come from the walls where the map
+most likely has them (amr_common.map_raster.likely_wall_segments: inside the occupied cells, not
+on their free edges), known to half a cell (range_sensor).
 """
 from __future__ import annotations
 
@@ -24,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from amr_common.map_raster import likely_wall_segments
 from amr_common.robot import arc_step
 from amr_common.world import World
 from amr_localization.ambiguity import AmbiguityGuard
@@ -46,8 +53,11 @@ from amr_localization.particle_filter_params import (
 )
 from amr_localization.particle_sets import gaussian_poses, sample_free_poses
 from amr_localization.pose_search import PoseSearch, refine
+from amr_localization.range_sensor import RangeSensor
 from amr_localization.resampling import KldResampler, effective_sample_size
 from amr_localization.scan_beams import ScanBeams
+from amr_localization.scan_deskew import MotionHistory
+from amr_localization.scan_input import TakenScan, take_scan
 from amr_localization.table_memory import search_stride
 from amr_localization.weighting import updated_weights
 
@@ -76,7 +86,13 @@ class ParticleFilter(FilterSearches):
         if self.plan.reduced:
             log.info("%s: a big map: expected-range table of %s to stay within max_memory_mb "
                      "%g", self.world.source, self.plan.describe(), p["max_memory_mb"])
-        self.table = expected_range_table(self.world, self.plan.resolution, self.plan.angles)
+        # Where the LiDAR sees walls: a map's walls inside its occupied cells (module docstring),
+        # or on its free edges for a world the simulator built from this map (map_walls).
+        raster = None if p["map_walls"] == "edges" else self.world.raster
+        self.walls = self.world.segments if raster is None else likely_wall_segments(raster)
+        self._map_cell = None if raster is None else raster.resolution
+        self.table = expected_range_table(self.world, self.plan.resolution, self.plan.angles,
+                                          segments=self.walls)
         self._robot_ok = self.table.robot_cells(slack=WALL_SLACK_M)
         self.model = BeamModel(self.table, self._robot_ok, p["lidar_offset_x_m"],
                                p["sigma_hit_m"], p["z_random"])
@@ -91,6 +107,9 @@ class ParticleFilter(FilterSearches):
                                       p["max_particles"])
         self.matcher: ScanMatcher | None = None
         self.beams: ScanBeams | None = None
+        self.sensor: RangeSensor | None = None
+        self.history = MotionHistory()
+        self._scan: TakenScan | None = None  # the scan of the update under way
         self.search = PoseSearch(self.table, self._robot_ok, p["lidar_offset_x_m"],
                                  stride=search_stride(self.table.resolution))
         self.guard = AmbiguityGuard(p["ambiguity_match_fraction"], p["localize_match_fraction"])
@@ -213,13 +232,18 @@ class ParticleFilter(FilterSearches):
         Where the scan's rays point (rad, counter-clockwise from angle_min), how many there
         are and the valid range limits (m). Call again whenever they change.
         """
+        sensor = RangeSensor.from_parameters(self.params, range_max, self._map_cell)
+        sensing_max = sensor.sensing_max(range_max)
         self.beams = ScanBeams.from_geometry(angle_min, angle_increment, rays, range_min,
-                                             range_max, self.params["beams"], self.table.angles)
+                                             sensing_max, self.params["beams"],
+                                             self.table.angles)
+        self.sensor = sensor
         self._pending = None  # a search of a scan of the old geometry (a seed starts again)
         self._scan_geometry = (angle_min, angle_increment, rays, range_min, range_max)
-        self.matcher = ScanMatcher(self.world.segments, angle_min, angle_increment, rays,
-                                   range_min, range_max, self.params["lidar_offset_x_m"],
-                                   allowed=self.robot_can_be_at)
+        self.matcher = ScanMatcher(self.walls, angle_min, angle_increment, rays,
+                                   range_min, sensing_max, self.params["lidar_offset_x_m"],
+                                   allowed=self.robot_can_be_at,
+                                   missing_unknown=sensor.missing_is_unknown)
 
     def set_lidar_offset(self, offset_m: float) -> None:
         """Place the LiDAR `offset_m` metres ahead of the robot centre (behind if negative).
@@ -257,6 +281,7 @@ class ParticleFilter(FilterSearches):
         if not (math.isfinite(v) and math.isfinite(w) and math.isfinite(dt)) or dt <= 0.0:
             return
         sample_motion(self.particles, len(self.particles), v, w, dt, self.noise, self.rng)
+        self.history.add(v, w, dt)
         # The estimate follows the same twist until the next measurement update.
         x, y, theta = arc_step(*self.estimate, v * dt, w * dt)
         self.estimate = (x, y, math.atan2(math.sin(theta), math.cos(theta)))
@@ -281,20 +306,29 @@ class ParticleFilter(FilterSearches):
         return new_scan and (distance >= p["update_min_distance_m"]
                              or angle >= p["update_min_angle_rad"])
 
-    def correct(self, ranges: np.ndarray, force: bool = False, new_scan: bool = True) -> bool:
+    def correct(self, ranges: np.ndarray, force: bool = False, new_scan: bool = True,
+                age_s: float = 0.0) -> bool:
         """Weigh the particles with a scan, resample, re-check the localized flag.
 
         Weigh the particles with the scan (if update_due(new_scan) or force), resample,
-        re-check the localized flag. Returns True if a measurement update happened.
+        re-check the localized flag. age_s: how long before the last predict() the scan was
+        stamped (the revolution's end; for de-skewing). Returns True if a measurement update
+        happened.
         """
         if self.matcher is None:
             raise RuntimeError("set_scan_geometry() before correct()")
         ranges = np.asarray(ranges, dtype=np.float64)
         if ranges.shape != (self.matcher.rays,):
             raise ValueError(f"scan has {ranges.size} rays, the scan geometry {self.matcher.rays}")
+        age_s = float(age_s) if math.isfinite(age_s) else 0.0
+        taken = False
         if self._seed_pending:
-            if self._run_search(SEED if self._pending is None else None, ranges) is None:
-                return False  # the particles wait for the search of the global search's scan
+            if self._pending is None:  # the global search's first scan: search it
+                ranges, taken = self._take_scan(ranges, age_s), True
+                if self._run_search(SEED, ranges) is None:
+                    return False  # the particles wait for the search of that scan
+            elif self._run_search(None, ranges) is None:
+                return False
         else:
             if self._pending is not None:  # a search of an earlier scan: its next slice
                 event = self._run_search(None, ranges)
@@ -302,12 +336,14 @@ class ParticleFilter(FilterSearches):
                     self.events.append((event, self.total_updates))
             if not (force or self.update_due(new_scan)):
                 return False
+        if not taken:
+            ranges = self._take_scan(ranges, age_s)
         self._weigh(ranges)
         self._since_update = [0.0, 0.0, 0.0]
         self.updates += 1
         self.total_updates += 1
         self._estimate_from_cluster()
-        tolerance = self.params["match_tolerance_m"]
+        tolerance = self._scan.tolerances
         self.match_fraction = self.matcher.match_fraction(self.estimate, ranges, tolerance)
         if not self.localized and self.cluster_share >= self.params["cluster_min_share"] and \
                 0.9 * self.params["localize_match_fraction"] <= self.match_fraction \
@@ -326,8 +362,8 @@ class ParticleFilter(FilterSearches):
             self._run_search(DOUBT, ranges)
         if not self.localized and self.guard.tracks:
             winner = self.guard.observe(self.estimate, self.match_fraction, self.matcher, ranges,
-                                        self.params["match_tolerance_m"], self.particles,
-                                        self.weights, self._searcher(ranges))
+                                        tolerance, self.particles, self.weights,
+                                        self._searcher(ranges))
             if winner is not None:
                 self._move_to(winner.pose)
                 self.events.append(("switch", self.total_updates))
@@ -347,6 +383,15 @@ class ParticleFilter(FilterSearches):
             self._resample()
         return True
 
+    def _take_scan(self, ranges: np.ndarray, age_s: float) -> np.ndarray:
+        """Take this scan for the update (scan_input); returns its de-skewed ranges."""
+        m = self.matcher
+        self._scan = take_scan(ranges, age_s, self.sensor, self.beams, m.angles,
+                               (m.range_min, m.range_max), self.history,
+                               self.params["lidar_offset_x_m"], self.table.angles)
+        m.set_ray_angles(self._scan.angles)
+        return self._scan.ranges
+
     def _move_to(self, pose) -> None:
         """Move every particle to a rival that explains the scans better.
 
@@ -361,9 +406,8 @@ class ParticleFilter(FilterSearches):
         self.estimate = tuple(float(v) for v in pose)
 
     def _weigh(self, ranges: np.ndarray) -> None:
-        beams = self.beams
-        scores = self.model.scores(self.particles, beams.split(beams.readings_mm(ranges)),
-                                   beams.limits_mm)
+        scores = self.model.scores(self.particles, self._scan.readings(),
+                                   self._scan.beams.limits_mm)
         weights = updated_weights(self.weights, scores, None if self.localized
                                   else self.params["search_ess_fraction"])
         if weights is None:  # every particle inside a wall or off the map

@@ -249,8 +249,11 @@ class ParticleFilterNode(GuardedLifecycleNode):
             new_scan = self._scan_novelty.is_new(ranges)  # not the held one again
             if new_scan:
                 self._last_scan_ns = stamp_ns
+            # The scan's age at the newest odometry the filter predicted to (for de-skewing).
+            newest = self._odometry_clock.last_ns
+            age_s = 0.0 if newest is None else (newest - stamp_ns) * 1e-9
             try:
-                if self.filter.correct(ranges, new_scan=new_scan):
+                if self.filter.correct(ranges, new_scan=new_scan, age_s=age_s):
                     self._last_scan_ns = stamp_ns
                     self._publish_amcl_pose(scan.header.stamp)
             except Exception as exc:  # never take the executor down

@@ -19,12 +19,14 @@ from amr_common.parameter_table import (
     at_least,
     between,
     check_values,
+    one_of,
     ruled,
     table_values,
     vector,
 )
 from amr_common.robot import ROBOT_RADIUS
 from amr_common.world import World
+from amr_localization.range_sensor import MODEL_NAMES
 from amr_localization.table_memory import MemoryPlan, choose_table
 
 # A particle's centre may be this much closer to a wall than the robot radius before it counts
@@ -38,6 +40,7 @@ WALL_SLACK_M = 0.02
 # localize the mazes.
 MAX_PARTICLES = 200_000
 
+MAP_WALLS = ("likely", "edges")  # where a map's walls are: map_walls
 # name: (default, description). The defaults localize in both simulator profiles.
 _TABLE: dict[str, tuple[Any, str]] = {
     "lidar_offset_x_m": (0.0, "Forward position of the LiDAR relative to the robot centre [m] "
@@ -55,7 +58,25 @@ _TABLE: dict[str, tuple[Any, str]] = {
     "tracking_particles": (2000, "Particles drawn around an initial pose (/initialpose, "
                                  "initial_pose)."),
     "beams": (60, "Beams of each scan weighed per particle, evenly spread over the rays."),
-    "sigma_hit_m": (0.03, "Standard deviation of a beam's range around the expected range [m]."),
+    "lidar_model": ("auto", "The range sensor (range_sensor.py): 'LDS-01' or 'LDS-02' (each "
+                            "reading's tolerance and sigma grow with the range by the "
+                            "datasheet's bands; a missing return is unknown; the rays are "
+                            "de-skewed), 'exact' (the simulator's clean profiles: the fixed "
+                            "tolerance and sigma), 'auto' (LDS-02 if the scan's range_max is "
+                            "beyond 10 m, else LDS-01)."),
+    "deskew": (True, "Move each ray to the LiDAR's pose now with the odometry (rays measured "
+                     "clockwise over the revolution before the stamp, as the LDS drivers stamp "
+                     "them); false for scans taken at one instant (a simulated scanner without "
+                     "skew). Not used by the 'exact' model."),
+    "map_walls": ("likely", "Where a map's walls are (a Nav2 or SLAM map; a polygon world's are "
+                            "its own): 'likely' inside the occupied cells (the middle of a "
+                            "two-cell band, as SLAM marks a wall, else the first cell's centre), "
+                            "known to half a cell: a map of a real room; 'edges' on the free "
+                            "cells' edges, where the simulator puts the walls of a world built "
+                            "from this map (the run scripts set it when the simulated world is "
+                            "the filter's map)."),
+    "sigma_hit_m": (0.03, "Standard deviation of a beam's range around the expected range [m] "
+                          "(the nearest readings' with an LDS model)."),
     "z_random": (0.05, "Weight of the uniform part of a beam's likelihood: a beam that misses "
                        "costs log(z_random), whatever the miss (robust to clutter)."),
     "table_resolution_m": (0.02, "Cell size of the expected-range table [m] (the finest: "
@@ -93,7 +114,8 @@ _TABLE: dict[str, tuple[Any, str]] = {
     "cluster_min_share": (0.9, "Localized needs the dominant cluster to carry this share of the "
                                "weight."),
     "match_tolerance_m": (0.03, "A ray matches when reading and exact expectation at the "
-                                "estimate differ by at most this [m]."),
+                                "estimate differ by at most this [m] (plus the datasheet's "
+                                "error at the reading's range with an LDS model)."),
     "localize_match_fraction": (0.97, "Localized needs this share of ALL rays to match ..."),
     "localize_updates": (10, "... at this many consecutive measurement updates."),
     "ambiguity_match_fraction": (0.9, "Localized needs that no pose elsewhere (> 15 cm or "
@@ -114,7 +136,8 @@ _FRACTIONS = ("seed_uniform_share", "resample_ess_fraction", "search_ess_fractio
 # Numbers >= 0 but for these. The bounds keep a value from costing absurd memory or time (or
 # being meaningless); checks of several parameters: check_parameters.
 PARAMETERS: dict[str, Param] = ruled(
-    _TABLE, at_least(0.0), lidar_offset_x_m=None,
+    _TABLE, at_least(0.0), lidar_offset_x_m=None, lidar_model=one_of(*MODEL_NAMES),
+    map_walls=one_of(*MAP_WALLS),
     initial_pose=vector(0, 3), initial_pose_sigma=vector(3, low=0.0),
     seed=at_least(0), beams=between(1, 4096), table_angles=between(8, 4096),
     localize_updates=at_least(1), lost_updates=at_least(1), reinit_updates=at_least(1),

@@ -39,6 +39,8 @@ def score_poses_python(centres, headings, table, rows, angles, x0, y0, resolutio
                        max_misses, out):
     """out[c, h] = beams matched by the robot centred at centres[c] with heading h * 2 pi / H.
 
+    tolerance_mm: per beam (a real LiDAR's readings are looser far away: range_sensor).
+
     A pose is dropped (scored by what it matched so far) after more than max_misses misses:
     most poses are wrong, and their misses come early because beam_bins is in an interleaved
     order (see PoseSearch). A coarse ranking: no sub-cell correction (beam_model's would cost
@@ -73,7 +75,7 @@ def score_poses_python(centres, headings, table, rows, angles, x0, y0, resolutio
                 if z < 0:
                     hit = r < range_min_mm or r > range_max_mm
                 else:
-                    hit = abs(z - r) <= tolerance_mm
+                    hit = abs(z - r) <= tolerance_mm[b]
                 if hit:
                     matched += 1
                 else:
@@ -103,7 +105,7 @@ def score_poses_numpy(centres, headings, table, rows, angles, x0, y0, resolution
         k = ((h * (angles / headings) + 0.5) + beam_bins).astype(np.int64) % angles
         r = table[rows[lj * nx + li][:, None], k[None, :]].astype(np.int32)
         hit = np.where(z_mm[None, :] < 0, (r < range_min_mm) | (r > range_max_mm),
-                       np.abs(z_mm[None, :] - r) <= tolerance_mm)
+                       np.abs(z_mm[None, :] - r) <= tolerance_mm[None, :])
         misses = np.cumsum(~hit, axis=1)
         out[:, h] = np.where(misses[:, -1] > max_misses,
                              np.sum(hit & (misses <= max_misses), axis=1), hit.sum(axis=1))
@@ -157,13 +159,20 @@ class PoseSearch:
                                 dtype=np.int32)
 
     def _score_into(self, centres: np.ndarray, beam_bins: np.ndarray, z_mm: np.ndarray,
-                    max_misses: int, out: np.ndarray, limits_mm: tuple[int, int]) -> None:
+                    tolerance_mm: np.ndarray, max_misses: int, out: np.ndarray,
+                    limits_mm: tuple[int, int]) -> None:
         """Scores of the poses at `centres` x every heading into out (beams in that order)."""
         table = self.table
         score_poses(np.ascontiguousarray(centres), self.headings, table.ranges, table.rows,
                     table.angles, table.x0, table.y0, table.resolution, table.nx,
                     self.lidar_offset, np.ascontiguousarray(beam_bins), np.ascontiguousarray(z_mm),
-                    self.tolerance_mm, limits_mm[0], limits_mm[1], max_misses, out)
+                    np.ascontiguousarray(tolerance_mm, dtype=np.int64), limits_mm[0],
+                    limits_mm[1], max_misses, out)
+
+    def _tolerances_mm(self, beams: ScanBeams) -> np.ndarray:
+        """Per weighed beam: the search's tolerance (mm), widened as the beams say."""
+        tolerance = np.full(beams.count, self.tolerance_mm, dtype=np.int64)
+        return tolerance if beams.search_extra_mm is None else tolerance + beams.search_extra_mm
 
     def start(self, count: int, beams: ScanBeams, z_mm: np.ndarray) -> "SearchJob":
         """A search of every grid pose for this scan, keeping the `count` best: nothing scored yet.
@@ -207,7 +216,8 @@ class PoseSearch:
             centres = self.centres[near]
             scores = np.empty((len(centres), self.headings), dtype=np.int32)
             order = interleaved_order(len(beam_bins))
-            self._score_into(centres, beam_bins[order], z_mm[order], len(beam_bins), scores,
+            self._score_into(centres, beam_bins[order], z_mm[order],
+                             self._tolerances_mm(beams)[order], len(beam_bins), scores,
                              beams.limits_mm)
             headings = np.arange(self.headings) * self.step[1]
             off = np.abs(wrap_angles(headings - pose[2]))
@@ -278,6 +288,7 @@ class SearchJob:
         self.scored_beams = len(keep)
         self._bins = np.ascontiguousarray(beam_bins[keep][order])
         self._z_mm = np.ascontiguousarray(np.asarray(z_mm)[keep][order])
+        self._tolerance_mm = np.ascontiguousarray(search._tolerances_mm(beams)[keep][order])
         self._max_misses = int(search.miss_share * len(keep))
         self._limits_mm = beams.limits_mm
         self._best = _TopScores(count)
@@ -295,8 +306,8 @@ class SearchJob:
             first = self._next
             centres = search.centres[first:first + _CHUNK_CELLS]
             out = search._scores[:len(centres)]
-            search._score_into(centres, self._bins, self._z_mm, self._max_misses, out,
-                               self._limits_mm)
+            search._score_into(centres, self._bins, self._z_mm, self._tolerance_mm,
+                               self._max_misses, out, self._limits_mm)
             self._best.add(out.ravel(), first * search.headings)
             self._next = first + len(centres)
         return self.done

@@ -4,18 +4,23 @@ From the scan's geometry (angle_min, angle_increment, ray count, range limits) a
 beams wanted: the rays used (evenly spread), each one's direction relative to the robot's heading
 in bins of the expected-range table (whole part and fraction: the common scans' beams fall on
 whole bins, which the kernels exploit), and the conversion of a scan's readings to the integer
-millimetres the kernels compare with the table. No rclpy import.
+millimetres the kernels compare with the table. A de-skewed scan (scan_deskew) moves each ray's
+direction: `turned` gives the same beams at those directions. Each valid beam carries its
+sigma scale (range_sensor: the beam model's sigma grows with the range) and the pose search's
+extra tolerance (`search_extra_mm`). No rclpy import.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import NamedTuple
 
 import numpy as np
 
 from amr_common.jit import jit
 from amr_common.scan_returns import is_return
+from amr_localization.expected_ranges import NO_RANGE_MM
+from amr_localization.range_sensor import SCALE_ONE
 
 _WHOLE_BIN = 1e-9  # a direction this close to a whole table bin is that bin
 
@@ -52,6 +57,17 @@ class BeamReadings(NamedTuple):
     valid_mm: np.ndarray  # int32 readings (mm)
     invalid_whole: np.ndarray  # int64: the beams without a return (NaN, inf, 0.0, out of limits)
     invalid_fraction: np.ndarray
+    # int64 per beam with a return: sigma_hit / the beam's sigma in fixed point (1 << 16 = 1)
+    valid_scale: np.ndarray
+
+
+def _table_bins(angles: np.ndarray, table_angles: int) -> tuple[np.ndarray, ...]:
+    """(bins, whole, fraction) of directions `angles` (rad) in a table of table_angles bins."""
+    bins = np.remainder(angles * (table_angles / (2.0 * math.pi)), table_angles)
+    nearest = np.round(bins)
+    bins = np.where(np.abs(bins - nearest) < _WHOLE_BIN, nearest, bins) % table_angles
+    whole = np.floor(bins).astype(np.int64)
+    return bins, whole, bins - whole
 
 
 @dataclass(frozen=True)
@@ -64,6 +80,8 @@ class ScanBeams:
     fraction: np.ndarray  # float64 bins - whole, 0 for beams on a whole bin
     range_min: float  # m
     range_max: float  # m
+    # int32 per weighed beam: the pose search's tolerance beyond its own (wider readings), or None
+    search_extra_mm: np.ndarray | None = None
 
     @classmethod
     def from_geometry(cls, angle_min: float, angle_increment: float, rays: int,
@@ -79,12 +97,21 @@ class ScanBeams:
             raise ValueError(f"unusable scan limits: range_min {range_min}, range_max {range_max}")
         used = np.unique(np.round(np.linspace(0, rays, min(beams, rays), endpoint=False))
                          .astype(np.int64))
-        angles = angle_min + angle_increment * used
-        bins = np.remainder(angles * (table_angles / (2.0 * math.pi)), table_angles)
-        nearest = np.round(bins)
-        bins = np.where(np.abs(bins - nearest) < _WHOLE_BIN, nearest, bins) % table_angles
-        whole = np.floor(bins).astype(np.int64)
-        return cls(used, bins, whole, bins - whole, float(range_min), float(range_max))
+        bins, whole, fraction = _table_bins(angle_min + angle_increment * used, table_angles)
+        return cls(used, bins, whole, fraction, float(range_min), float(range_max))
+
+    def turned(self, angles: np.ndarray | None, table_angles: int,
+               search_extra_mm: np.ndarray | None = None) -> "ScanBeams":
+        """The same beams pointing at angles[rays] (every ray's angle, rad; None: as they are).
+
+        search_extra_mm: every ray's extra pose-search tolerance (the weighed beams' kept).
+        """
+        extra = None if search_extra_mm is None else \
+            np.ascontiguousarray(search_extra_mm[self.rays], dtype=np.int32)
+        if angles is None:
+            return replace(self, search_extra_mm=extra)
+        bins, whole, fraction = _table_bins(np.asarray(angles)[self.rays], table_angles)
+        return replace(self, bins=bins, whole=whole, fraction=fraction, search_extra_mm=extra)
 
     @property
     def count(self) -> int:
@@ -98,17 +125,27 @@ class ScanBeams:
 
     @property
     def limits_mm(self) -> tuple[int, int]:
-        """The valid range limits in whole mm (a table range outside them means no return)."""
-        return int(math.ceil(self.range_min * 1000.0)), int(self.range_max * 1000.0)
+        """The valid range limits in whole mm (a table range outside them means no return).
+
+        Below the table's NO_RANGE_MM (a ray that hits nothing), whatever range_max says (the
+        LD08 driver publishes 100 m).
+        """
+        return int(math.ceil(self.range_min * 1000.0)), min(int(self.range_max * 1000.0),
+                                                             NO_RANGE_MM - 1)
 
     def readings_mm(self, ranges: np.ndarray) -> np.ndarray:
         """The weighed beams' readings as int32 mm, -1 for no return (beam_model)."""
         return reading_to_mm(ranges[self.rays], self.range_min, self.range_max)
 
-    def split(self, z_mm: np.ndarray) -> BeamReadings:
-        """The beams with a return and those without one, for the kernels' two loops."""
+    def split(self, z_mm: np.ndarray, scales: np.ndarray | None = None) -> BeamReadings:
+        """The beams with a return and those without one, for the kernels' two loops.
+
+        scales: every ray's sigma scale (range_sensor.RangeSensor.sigma_scales), default 1.
+        """
         valid = z_mm >= 0
         keep = np.ascontiguousarray
+        scale = np.full(int(np.count_nonzero(valid)), SCALE_ONE, dtype=np.int64) \
+            if scales is None else keep(scales[self.rays][valid], dtype=np.int64)
         return BeamReadings(keep(self.whole[valid]), keep(self.fraction[valid]),
                             keep(z_mm[valid]), keep(self.whole[~valid]),
-                            keep(self.fraction[~valid]))
+                            keep(self.fraction[~valid]), scale)

@@ -14,9 +14,10 @@ import math
 import numpy as np
 
 from amr_common.jit import HAVE_NUMBA, jit
+from amr_common.lidar_models import LidarModel
 from amr_common.raycast import cast_rays_kernel, cast_rays_numpy
 from amr_sim.effects import Effects
-from amr_sim.profiles import LidarModel, SensorProfile
+from amr_sim.profiles import SensorProfile
 
 TWO_PI = 2.0 * math.pi
 # params layout of the kernels (one float array: fewer arguments, cheaper numba dispatch)

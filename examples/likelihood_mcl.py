@@ -167,8 +167,12 @@ class LikelihoodFieldMcl:
         self._moved[0] += abs(v) * dt
         self._moved[1] += abs(w) * dt
 
-    def correct(self, ranges, force: bool = False, new_scan: bool = True) -> bool:
-        """Weigh the particles with the scan (likelihood field), resample if needed."""
+    def correct(self, ranges, force: bool = False, new_scan: bool = True,
+                age_s: float = 0.0) -> bool:
+        """Weigh the particles with the scan (likelihood field), resample if needed.
+
+        age_s (how old the scan is) is not used: this filter does not de-skew.
+        """
         if self.beam_index is None:
             raise RuntimeError("set_scan_geometry() before correct()")
         ranges = np.asarray(ranges, dtype=float)

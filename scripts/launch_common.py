@@ -295,13 +295,21 @@ def localizing_wall_follower(tuning: dict[str, Any]) -> dict[str, Any]:
 
 
 def make_particle_filter(context, *, world: str, lidar_offset_x_m: float,
-                         overrides: dict[str, Any] | None = None, localizer: str | None = None):
+                         overrides: dict[str, Any] | None = None, localizer: str | None = None,
+                         sensor: dict[str, Any] | None = None):
     """The particle filter node on `world`, told where the LiDAR sits (overrides win).
 
     localizer: its `localizer` parameter (MODULE:CLASS; None: the node's default).
+    sensor: lidar_model, deskew and map_walls of a simulated run (amr_evaluation.episode.
+    filter_parameters), those the localizer takes; the robot's are the defaults (auto,
+    de-skewed).
     """
+    from amr_common.controller_loader import DEFAULT_LOCALIZER, described_parameters, load_class
     from amr_localization.particle_filter_node import ParticleFilterNode
-    values: dict[str, Any] = {"world": str(world), "lidar_offset_x_m": float(lidar_offset_x_m)}
+    takes = described_parameters(load_class(localizer or DEFAULT_LOCALIZER, "localizer")) or {}
+    values: dict[str, Any] = {"world": str(world), **{
+        name: value for name, value in (sensor or {}).items() if name in takes},
+        "lidar_offset_x_m": float(lidar_offset_x_m)}
     if localizer:
         values["localizer"] = str(localizer)
     values.update(overrides or {})

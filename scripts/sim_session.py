@@ -172,13 +172,16 @@ class SimSession:
             control_nodes = [make_wall_follower(
                 self.context, params_file=params_file, overrides=tuning)]
             if localize:
+                from amr_evaluation.episode import filter_parameters
                 from amr_sim.profiles import get_profile
-                lidar_offset_x = get_profile(args.profile).lidar_offset_x
+                sensor = filter_parameters(get_profile(args.profile),
+                                           map_is_world=self.map_world is self.world)
+                lidar_offset_x = sensor.pop("lidar_offset_x_m")
                 # The filter draws from --seed, as the headless episodes' filter does.
                 control_nodes.append(make_particle_filter(
                     self.context, world=map_source, lidar_offset_x_m=lidar_offset_x,
                     overrides={"seed": args.seed, **filter_overrides},
-                    localizer=links.get("localizer")))
+                    localizer=links.get("localizer"), sensor=sensor))
             if self.navigating:
                 control_nodes += make_navigators(
                     self.context, world=map_source, goal=args.goal,

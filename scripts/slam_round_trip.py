@@ -39,8 +39,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--duration", type=number_argument(float, 0.0, above=True),
                         default=300.0, help="simulated seconds of navigation (default 300)")
     parser.add_argument("--pf-param", action="append", default=[], metavar="NAME:=VALUE",
-                        help="particle filter parameter (replaces the round trip's defaults, "
-                        "amr_evaluation.map_round_trip.MAP_FILTER_PARAMS)")
+                        help="particle filter parameter (default: the filter's own "
+                        "defaults, as on the world)")
     parser.add_argument("--jobs", "-j", type=number_argument(int, 1), default=None,
                         help="worker processes (default: all cores)")
     parser.add_argument("--out", default="out/round_trip", help="maps and results.json here")
@@ -54,11 +54,9 @@ def parse_args(argv=None) -> argparse.Namespace:
             World.load(world)
         args.seeds = parse_seeds(args.seeds)
         args.out = check_output_folder(args.out, "--out")
-        args.filter_params = None
-        if args.pf_param:
-            from amr_evaluation.map_round_trip import MAP_FILTER_PARAMS
+        args.filter_params = parse_overrides(args.pf_param)
+        if args.filter_params:
             from amr_localization.particle_filter_params import check_parameters
-            args.filter_params = {**MAP_FILTER_PARAMS, **parse_overrides(args.pf_param)}
             check_parameters(args.filter_params)
     except (ValueError, WorldError, ControllerSpecError) as exc:
         parser.error(str(exc))
@@ -67,15 +65,10 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    from amr_evaluation.map_round_trip import (
-        MAP_FILTER_PARAMS,
-        round_trip_line,
-        round_trip_summary,
-        run_round_trips,
-    )
-    params = args.filter_params or MAP_FILTER_PARAMS
-    print(f"slam_round_trip: {len(args.worlds) * len(args.seeds)} episodes, filter {params}",
-          flush=True)
+    from amr_evaluation.map_round_trip import round_trip_line, round_trip_summary, run_round_trips
+    params = args.filter_params
+    print(f"slam_round_trip: {len(args.worlds) * len(args.seeds)} episodes, filter "
+          f"{params or 'defaults'}", flush=True)
     rows = run_round_trips(args.worlds, args.seeds, args.out, args.jobs, args.map_duration,
                            args.duration, params,
                            progress=lambda done, total, row: print(

@@ -10,6 +10,7 @@ import math
 import numpy as np
 import pytest
 
+from amr_common.lidar_models import LDS01
 from amr_common.robot import ROBOT_RADIUS
 from amr_common.world import World
 from amr_localization import beam_model, motion_model, pose_search, resampling
@@ -24,6 +25,7 @@ from amr_localization.motion_model import MotionNoise, sample_motion
 from amr_localization.particle_filter import ParticleFilter
 from amr_localization.particle_filter_params import check_parameters
 from amr_localization.particle_sets import sample_free_poses
+from amr_localization.range_sensor import RangeSensor
 from amr_localization.scan_beams import ScanBeams, reading_to_mm
 from amr_sim.lidar import Lidar
 
@@ -152,7 +154,7 @@ def test_expected_range_table_is_the_simulators_lidar_at_cell_centres():
 # --- measurement model ----------------------------------------------------------------------
 
 def _scores(world, poses, scan_pose, kernel, lidar_offset=0.0, rays=240, angle_min=0.0,
-            sub_cell=False, resolution=0.02):
+            sub_cell=False, resolution=0.02, sensor=None):
     table = expected_range_table(world, resolution)
     model = beam_model.BeamModel(table, table.robot_cells(slack=0.02), lidar_offset, 0.03, 0.05,
                                  sub_cell=sub_cell)
@@ -162,7 +164,8 @@ def _scores(world, poses, scan_pose, kernel, lidar_offset=0.0, rays=240, angle_m
     x, y, theta = scan_pose
     ranges = lidar.scan(x + lidar_offset * math.cos(theta), y + lidar_offset * math.sin(theta),
                         theta)
-    return model.scores(np.asarray(poses, float), beams.split(beams.readings_mm(ranges)),
+    scales = None if sensor is None else sensor.sigma_scales(ranges)
+    return model.scores(np.asarray(poses, float), beams.split(beams.readings_mm(ranges), scales),
                         beams.limits_mm, kernel)
 
 
@@ -181,9 +184,11 @@ def test_beam_model_ranks_the_true_pose_above_rotated_poses_on_a_symmetric_corri
     assert twin_scores[1] < twin_scores[0] - 20.0
 
 
-@pytest.mark.parametrize("sub_cell", [False, True])
+@pytest.mark.parametrize("sub_cell, sensor", [(False, None), (True, None),
+                                              (False, RangeSensor(LDS01, 0.03, 0.03, 0.01))])
 @pytest.mark.parametrize("rays, angle_min", [(240, 0.0), (230, -3.1)])  # whole / fractional bins
-def test_beam_model_paths_agree_and_walls_get_no_weight(rays, angle_min, sub_cell):
+def test_beam_model_paths_agree_and_walls_get_no_weight(rays, angle_min, sub_cell, sensor):
+    """The compiled kernel and its twins, with sigma_hit for every beam or the LDS-01's sigmas."""
     world = World.load("lab02")
     rng = np.random.default_rng(6)
     poses = np.column_stack([rng.uniform(-1.3, 1.3, 3000), rng.uniform(-1.3, 1.3, 3000),
@@ -193,7 +198,7 @@ def test_beam_model_paths_agree_and_walls_get_no_weight(rays, angle_min, sub_cel
     poses[2] = (math.nan, 0.0, 0.0)
     poses[3] = (1.0, -1.0, math.pi / 2)  # the scan's own pose
     scores = {kernel: _scores(world, poses, (1.0, -1.0, math.pi / 2), kernel, lidar_offset=-0.032,
-                              rays=rays, angle_min=angle_min, sub_cell=sub_cell)
+                              rays=rays, angle_min=angle_min, sub_cell=sub_cell, sensor=sensor)
               for kernel in (beam_model.log_likelihoods_kernel, beam_model.log_likelihoods_python,
                              beam_model.log_likelihoods_numpy)}
     jit = scores[beam_model.log_likelihoods_kernel]
@@ -243,12 +248,14 @@ def test_pose_scores_paths_agree():
     ranges = lidar.scan(1.8, 0.2, math.pi)
     beams = ScanBeams.from_geometry(0.0, 2 * math.pi / 240, 240, 0.016, 8.0, 60, table.angles)
     z_mm = beams.readings_mm(ranges)
+    tolerance_mm = 60 + 10 * (np.arange(beams.count) % 5)  # per beam (range_sensor)
     outputs = []
     for kernel in (pose_search.score_poses_kernel, pose_search.score_poses_numpy,
                    pose_search.score_poses_python):
         out = np.empty((len(search.cells), 36), dtype=np.int32)
         kernel(search.centres, 36, table.ranges, table.rows, table.angles, table.x0, table.y0,
-               table.resolution, table.nx, -0.032, beams.bins, z_mm, 60, 16, 8000, 15, out)
+               table.resolution, table.nx, -0.032, beams.bins, z_mm, tolerance_mm, 16, 8000, 15,
+               out)
         outputs.append(out)
     assert np.array_equal(outputs[0], outputs[2])
     assert np.array_equal(outputs[0], outputs[1])
@@ -350,7 +357,7 @@ def test_adaptive_count_shrinks_when_tracking():
     world = World.load("lab02")
     pose = world.starts["inner"]
     pf = ParticleFilter(world, initial_pose=list(pose), min_particles=200,
-                        tracking_particles=3000)
+                        tracking_particles=3000, lidar_model="exact")  # the course's scan
     assert pf.particle_count == 3000
     pf.set_scan_geometry(0.0, 2 * math.pi / 240, 240, 0.016, 8.0)
     lidar = Lidar(world.segments, 240, 0.0, 2 * math.pi / 240, 0.016, 8.0, math.nan)

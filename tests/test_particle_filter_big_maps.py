@@ -107,7 +107,7 @@ def test_a_filter_on_the_coarse_table_tracks_a_standing_robot_within_a_cell(tmp_
     world = _building(tmp_path, 12)
     pose = world.starts["corridor_crossing"]
     pf = ParticleFilter(world, initial_pose=list(pose), max_memory_mb=50,
-                        initial_pose_sigma=[0.05, 0.05, 0.05])
+                        initial_pose_sigma=[0.05, 0.05, 0.05], lidar_model="exact")
     assert (pf.table.resolution, pf.table.angles) == (0.04, 180) and pf.model.sub_cell
     pf.set_scan_geometry(0.0, 2 * math.pi / 360, 360, 0.12, 3.5)
     scan = Lidar(world.segments, 360, 0.0, 2 * math.pi / 360, 0.12, 3.5, 0.0).scan(*pose)
@@ -138,11 +138,12 @@ def test_the_pose_search_of_a_coarse_table_finds_the_exact_twin_in_corridor_loop
     world = World.load("corridor_loop")
     pose = (0.456, 2.201, -math.pi)
     pf = ParticleFilter(world, initial_pose=list(pose), table_resolution_m=0.04,
-                        table_angles=180)
+                        table_angles=180, lidar_model="exact")
     pf.set_scan_geometry(0.0, 2 * math.pi / 240, 240, 0.016, 8.0)
     scan = Lidar(world.segments, 240, 0.0, 2 * math.pi / 240, 0.016, 8.0, math.nan).scan(*pose)
     xmin, ymin, xmax, ymax = world.bounds
     twin = (xmin + xmax - pose[0], ymin + ymax - pose[1])
+    scan = pf._take_scan(scan, 0.0)  # this scan's beams and tolerances, as correct() takes it
     rivals = [a for a in pf._alternatives(scan) if a.match_fraction >= 0.9]
     assert any(math.hypot(a.pose[0] - twin[0], a.pose[1] - twin[1]) < 0.05 for a in rivals), \
         [(a.pose, a.match_fraction) for a in pf.last_alternatives]
@@ -236,8 +237,19 @@ def test_searches_carry_their_poses_by_the_odometry_since_their_scan():
         assert np.allclose(carried, (x, y, math.remainder(theta, 2 * math.pi)), atol=1e-9)
 
 
+@pytest.mark.parametrize("profile, must_localize", [("turtlebot3", True),
+                                                     ("turtlebot3_real", False)])
 def test_no_filter_call_searches_more_than_a_slice_and_the_floor_still_localizes(tmp_path,
-                                                                               monkeypatch):
+                                                                               monkeypatch,
+                                                                               profile,
+                                                                               must_localize):
+    """Each call scores at most a slice, also with a real LiDAR (LDS-01 tolerances, de-skew).
+
+    Its searches finish calls after their scan and judge it with that scan's rays, ranges and
+    tolerances. There the floor's repeated offices may stay rivals (in 30 s several explain
+    99-100 % of the rays within the datasheet's tolerances, as before the searches were sliced):
+    undecided is allowed, wrong never.
+    """
     from amr_evaluation.localization_episode import run_localization_episode
     from amr_localization.pose_search import SLICE_CELLS, PoseSearch
     world = _building(tmp_path, 12)
@@ -254,10 +266,11 @@ def test_no_filter_call_searches_more_than_a_slice_and_the_floor_still_localizes
 
     monkeypatch.setattr(PoseSearch, "_score_into", counting_score_into)
     monkeypatch.setattr(ParticleFilter, "correct", counting_correct)
-    result = run_localization_episode(world, "corridor_west", profile="turtlebot3", seed=0,
+    result = run_localization_episode(world, "corridor_west", profile=profile, seed=0,
                                       duration=30.0, record=False,
                                       filter_params={"max_memory_mb": 50})
     assert max(scored) <= SLICE_CELLS, f"a call scored {max(scored)} positions"
     assert sum(scored) > 3 * SLICE_CELLS  # the seed's and the check's searches, sliced
     assert result.false_localizations == 0, result.summary()
-    assert result.time_to_localized_s is not None, result.summary()
+    if must_localize:
+        assert result.time_to_localized_s is not None, result.summary()
