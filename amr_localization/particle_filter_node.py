@@ -282,32 +282,34 @@ class ParticleFilterNode(GuardedLifecycleNode):
         n = len(scan.ranges)
         geometry = (scan.angle_min, scan.angle_increment, n, scan.range_min, scan.range_max)
         if n == 0 or not all(math.isfinite(v) for v in geometry) or scan.angle_increment == 0:
-            self._warn(f"scan has no rays or unusable angles/limits {geometry}: skipped")
+            self.warn_every("scan", f"scan has no rays or unusable angles/limits {geometry}: "
+                            "skipped")
             return None
         expected = round((scan.angle_max - scan.angle_min) / scan.angle_increment) + 1 \
             if math.isfinite(scan.angle_max) else -1
         if expected != n:
-            self._warn(f"scan has {n} ranges but angle_min/angle_max/angle_increment describe "
-                       f"{expected}: skipped")
+            self.warn_every("scan", f"scan has {n} ranges but angle_min/angle_max/"
+                            f"angle_increment describe {expected}: skipped")
             return None
         if geometry != self._scan_key:
             try:
                 self.filter.set_scan_geometry(scan.angle_min, scan.angle_increment, n,
                                               scan.range_min, scan.range_max)
             except ValueError as exc:
-                self._warn(f"scan geometry rejected: {exc}")
+                self.warn_every("scan", f"scan geometry rejected: {exc}")
                 return None
             self._scan_key = geometry
         ranges = scan_ranges(scan)
         valid = np.count_nonzero(return_mask(ranges, scan.range_min, scan.range_max))
         if valid < self.node_params["min_valid_share"] * n:
-            self._warn(f"scan has {valid} valid readings of {n} (NaN, inf, 0.0 or outside "
-                       f"[{scan.range_min}, {scan.range_max}]): skipped")
+            self.warn_every("scan", f"scan has {valid} valid readings of {n} (NaN, inf, 0.0 or "
+                            f"outside [{scan.range_min}, {scan.range_max}]): skipped")
             return None
         return ranges
 
-    def _warn(self, text: str) -> None:
-        self.get_logger().warning(text, throttle_duration_sec=2.0)
+    def _refuse_initial_pose(self, text: str) -> None:
+        """Say why an /initialpose was ignored: every time (a user sent it and must know)."""
+        self.warn_every("initialpose", text, period_s=0.0)
 
     # --- outputs ---------------------------------------------------------------------------
     def localized(self, stamp_ns: int) -> bool:
@@ -379,25 +381,25 @@ class ParticleFilterNode(GuardedLifecycleNode):
             return
         frame = message.header.frame_id
         if frame and frame != self.node_params["map_frame"]:
-            self._warn(f"/initialpose in frame '{frame}' ignored: expected "
-                       f"'{self.node_params['map_frame']}'")
+            self._refuse_initial_pose(f"/initialpose in frame '{frame}' ignored: "
+                                      f"expected '{self.node_params['map_frame']}'")
             return
         try:
             x, y, theta = pose_from_message(message.pose.pose)
         except ValueError as exc:
-            self._warn(f"/initialpose ignored: {exc}")
+            self._refuse_initial_pose(f"/initialpose ignored: {exc}")
             return
         cov = np.asarray(message.pose.covariance, dtype=float)
         variances = cov[[0, 7, 35]] if cov.size == 36 else np.zeros(3)
         if not all(math.isfinite(v) for v in (x, y, theta, *variances)):
-            self._warn(f"/initialpose ignored: pose ({x}, {y}, {theta}) or variances "
-                       f"{variances.tolist()} not finite")
+            self._refuse_initial_pose(f"/initialpose ignored: pose ({x}, {y}, {theta}) or "
+                                      f"variances {variances.tolist()} not finite")
             return
         sigma = np.sqrt(variances) if np.all(variances > 0.0) else None
         try:
             used = self.filter.initialize_pose((x, y, theta), sigma)
         except ValueError as exc:
-            self._warn(f"/initialpose ignored: {exc}")
+            self._refuse_initial_pose(f"/initialpose ignored: {exc}")
             return
         clamped = sigma is not None and not np.allclose(used, sigma, rtol=0.0, atol=0.0)
         note = f" (clamped to the map from {_rounded(sigma)})" if clamped else ""

@@ -127,6 +127,27 @@ def test_bad_scans_are_skipped_with_a_message_and_poses_keep_coming(ros):
     assert node.filter.total_updates > updates
 
 
+def test_a_refused_initialpose_is_said_even_right_after_a_bad_scan(ros):
+    # All warnings went through one call site with rclpy's throttle (keyed on the call site):
+    # a bad scan's warning silenced the refusal of an /initialpose sent within 2 s. Heard on
+    # /rosout, as a user would (the real logger, its throttle included).
+    from rcl_interfaces.msg import Log
+    logged = []
+    ros.node("rosout_listener").create_subscription(
+        Log, "/rosout",
+        lambda msg: logged.append(msg.msg) if msg.name == "particle_filter" else None,
+        QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+    node = make_node(ros, world="lab02")
+    graph = FakeGraph(ros, profile="ideal")
+    bring_up(ros, node, graph)
+    step_lockstep(ros, graph, 2, ranges=[math.nan] * graph.sim.profile.scan_rays)
+    ros.spin_until(lambda: any("valid readings" in text for text in logged), 5.0,
+                   "the bad scan's warning")
+    graph.initialpose.publish(_initialpose(5.0, 5.0, 0.0, [0.01, 0.01, 0.01]))
+    ros.spin_until(lambda: any("/initialpose ignored" in text for text in logged), 5.0,
+                   "the refusal of the /initialpose outside the map")
+
+
 def test_missing_or_malformed_world_fails_configure_with_the_reason(ros, tmp_path):
     messages = []
     node = make_node(ros, world=str(tmp_path / "nowhere.yaml"))
