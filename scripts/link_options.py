@@ -79,7 +79,10 @@ def check_particle_filter(args, script: str, set_by_script: dict[str, str]) -> N
                          "without them)")
     from amr_common.controller_loader import DEFAULT_LOCALIZER, link_parameters, load_class
     from amr_common.parameters import typed_values
-    from amr_localization.particle_filter_node import node_parameter_problems, node_parameters
+    from amr_localization.particle_filter_node_params import (
+        node_parameter_problems,
+        node_parameters,
+    )
     from amr_localization.particle_filter_params import check_parameters
     from launch_common import _refused
     _refused("--pf-param", args.pf_overrides, script, set_by_script)
