@@ -200,114 +200,145 @@ def run_navigation_episode(
         planner = link_class(planner_class, "planner")(map_obj, **(planner_params or {}))
     params = {"lidar_offset_x_m": prof.lidar_offset_x, **(pursuit_params or {})}
     pursuit = link_class(follower, "follower")(sim.dt, **params)
-    radius = pursuit.robot_radius_m
     if wall_follower is None:
         wall_follower = default_controller(sim.dt, prof)
-    geometry = sim.scan_geometry
-    tell_scan_geometry(wall_follower, geometry)
-
-    n_steps = int(round(duration / sim.dt))
-    trajectory = [[0.0, *sim.pose]] if record_trajectory else []
-    localized_time = None
-    plans, errors, plan_ms, path = 0, [], None, None
-    pursued: list[tuple[float, float]] = []  # true positions while the pursuit drives
-    poses: list[tuple[float, ...]] = []  # (t, true x, y, theta, estimated x, y, theta, localized)
-    stalled = False
-    idle_steps = 0  # consecutive localized zero commands before the goal
-    # The rules the nodes follow (amr_common.navigation_behaviour).
-    handover = Handover()
-    goal_check = GoalCheck(goal_xy, goal_tolerance, goal_rest_time)
-    kidnapping = KidnapSchedule(kidnap)
-    z_scan, z_v, z_w = sim.measure()
-    z_scan = as_sent_ranges(z_scan)
-    odometry = OdometryHold(prof.odom_period, z_v, z_w)
+    run = _Navigation(sim, pose_source, planner, pursuit, wall_follower, goal_xy, kidnap,
+                      GoalCheck(goal_xy, goal_tolerance, goal_rest_time), record_trajectory)
     wall_start = time.perf_counter()
-    for _ in range(n_steps):
-        estimate, localized = pose_source.update(sim, z_scan, *odometry.twist)
-        poses.append((sim.time, *sim.pose, *estimate, float(localized)))
-        event = handover.update(localized)
-        if localized and localized_time is None:
-            localized_time = sim.time
-        if event == "lost":
-            pursuit.clear_path()  # the wall follower takes over; replan when relocalized
-        # The wall follower computes on every measurement (as its node), commands while in charge.
-        explore = as_commanded(wall_follower.compute_commands(z_scan, *odometry.twist))
-        if handover.explorer_in_charge:
-            v, w = explore
-        else:
-            v, w = _pursue(pursuit, as_sent_pose(estimate), z_scan, geometry, prof, radius)
-            if pursuit.state in ("track", "rotate"):
-                pursued.append(sim.pose[:2])
-        if handover.plans(event):
-            # After the pursuit answered this pose: in the graph the planner's /path arrives
-            # after the /pose it was planned from has reached the pursuit (a zero command).
-            plans += 1
-            began = time.perf_counter()
-            try:
-                path = np.asarray(planner.plan(estimate[:2], goal_xy).points, dtype=float)
-                plan_ms = (time.perf_counter() - began) * 1e3
-                pursuit.set_path(path)
-            except ValueError as exc:  # PlanningError (the interface's): no path
-                errors.append(f"t={sim.time:.2f} s: {exc}")
-                pursuit.clear_path()
-        idle_steps = idle_steps + 1 if localized and (v, w) == (0.0, 0.0) else 0
-        if idle_steps * sim.dt >= stall_timeout_s:
-            stalled = True
+    for _ in range(int(round(duration / sim.dt))):
+        if run.step(stall_timeout_s):
             break
-        teleport = kidnapping.due(sim.time)
-        if teleport is not None:
-            sim.teleport(teleport)
-        z_scan, z_v, z_w = sim.step(v, w)
-        z_scan = as_sent_ranges(z_scan)
-        if record_trajectory:
-            trajectory.append([sim.time, *sim.pose])
-        if goal_check.update(sim.time, sim.pose, localized, (v, w) == (0.0, 0.0), sim.dt):
-            break
-        if sim.scan_geometry is not geometry:  # the LDS-02: every scan
-            geometry = sim.scan_geometry
-            tell_scan_geometry(wall_follower, geometry)
-        odometry.update(sim.time, z_v, z_w)
     wall_time = time.perf_counter() - wall_start
-
-    x, y, _ = sim.pose
-    rows = np.array(poses, dtype=float).reshape(-1, 8)
-    pose_figures = localization_metrics(rows[:, :4], rows[:, [0, 4, 5, 6, 7]],
-                                        np.zeros(len(rows)), kidnap)
-    over = goal_check.reached_time is not None and goal_check.rest_since is not None and \
-        sim.time - goal_check.rest_since >= goal_check.rest_time - 1e-9
-    stopped_time = goal_check.rest_since if over else None
-    cross = distances_to_polyline(np.array(pursued), path) \
-        if pursued and path is not None else None
     start_label = start if isinstance(start, str) else (
         next(iter(world_obj.starts)) if start is None and world_obj.starts
         else [float(c) for c in sim.start])
-    return NavigationResult(
-        world=world_obj.name, start=start_label, goal=[float(goal_xy[0]), float(goal_xy[1])],
-        profile=prof.name, seed=int(seed), pose_source=source_name, steps=sim.steps,
-        sim_time_s=sim.time,
-        wall_time_s=wall_time,
-        real_time_factor=sim.time / wall_time if wall_time > 0 else None,
-        localized_time_s=localized_time, goal_reached_time_s=goal_check.reached_time,
-        stopped_time_s=stopped_time,
-        path_length_m=polyline_length(path) if path is not None else None,
-        path_min_clearance_m=float(map_obj.clearances(path).min()) if path is not None
-        else None,
-        distance_m=sim.distance,
-        final_position_error_m=math.hypot(x - goal_xy[0], y - goal_xy[1]),
-        min_clearance_m=sim.min_clearance, collisions=sim.collisions, plans=plans,
-        planning_errors=errors, plan_time_ms=plan_ms,
-        cross_track_mean_m=float(cross.mean()) if cross is not None else None,
-        cross_track_max_m=float(cross.max()) if cross is not None else None,
-        finish_reason="stopped at the goal" if stopped_time is not None else
-        "stalled" if stalled else "duration",
-        invalid_commands=sim.bad_commands,
-        false_localizations=pose_figures["false_localizations"],
-        tracking_error_mean_m=pose_figures["tracking_error_mean_m"],
-        kidnap=[float(k) for k in kidnap] if kidnap is not None else None, stalled=stalled,
-        dt=sim.dt, map=map_obj.name, goal_warning=goal_warning, trajectory=trajectory,
-        path=path.tolist() if path is not None else [],
-        collision_points=[[float(px), float(py)] for px, py in sim.collision_points],
-        effects=sim.effects.as_dict() if sim.effects else None)
+    return run.result(world_obj.name, start_label, map_obj, source_name, seed, wall_time,
+                      goal_warning)
+
+
+class _Navigation:
+    """One navigation episode's loop: the rules the nodes follow (navigation_behaviour)."""
+
+    def __init__(self, sim: Simulator, pose_source: Any, planner: Any, pursuit: PathFollower,
+                 wall_follower: Any, goal_xy: tuple[float, float],
+                 kidnap: Sequence[float] | None, goal_check: GoalCheck,
+                 record_trajectory: bool) -> None:
+        self.sim, self.pose_source, self.planner = sim, pose_source, planner
+        self.pursuit, self.wall_follower, self.goal_xy = pursuit, wall_follower, goal_xy
+        self.kidnap, self.goal_check = kidnap, goal_check
+        self.record_trajectory = record_trajectory
+        self.geometry = sim.scan_geometry
+        tell_scan_geometry(wall_follower, self.geometry)
+        self.trajectory = [[0.0, *sim.pose]] if record_trajectory else []
+        self.localized_time: float | None = None
+        self.plans, self.errors, self.plan_ms, self.path = 0, [], None, None
+        self.pursued: list[tuple[float, float]] = []  # true positions while pursuing
+        # (t, true x, y, theta, estimated x, y, theta, localized)
+        self.poses: list[tuple[float, ...]] = []
+        self.stalled = False
+        self.idle_steps = 0  # consecutive localized zero commands before the goal
+        self.handover = Handover()
+        self.kidnapping = KidnapSchedule(kidnap)
+        z_scan, z_v, z_w = sim.measure()
+        self.z_scan = as_sent_ranges(z_scan)
+        self.odometry = OdometryHold(sim.profile.odom_period, z_v, z_w)
+
+    def step(self, stall_timeout_s: float) -> bool:
+        """One measurement -> command -> simulator step; True when the episode is over."""
+        sim, pursuit = self.sim, self.pursuit
+        estimate, localized = self.pose_source.update(sim, self.z_scan, *self.odometry.twist)
+        self.poses.append((sim.time, *sim.pose, *estimate, float(localized)))
+        event = self.handover.update(localized)
+        if localized and self.localized_time is None:
+            self.localized_time = sim.time
+        if event == "lost":
+            pursuit.clear_path()  # the wall follower takes over; replan when relocalized
+        # The wall follower computes on every measurement (as its node), commands while in charge.
+        explore = as_commanded(self.wall_follower.compute_commands(self.z_scan,
+                                                                   *self.odometry.twist))
+        if self.handover.explorer_in_charge:
+            v, w = explore
+        else:
+            v, w = _pursue(pursuit, as_sent_pose(estimate), self.z_scan, self.geometry,
+                           sim.profile, pursuit.robot_radius_m)
+            if pursuit.state in ("track", "rotate"):
+                self.pursued.append(sim.pose[:2])
+        if self.handover.plans(event):
+            # After the pursuit answered this pose: in the graph the planner's /path arrives
+            # after the /pose it was planned from has reached the pursuit (a zero command).
+            self._plan(estimate)
+        self.idle_steps = self.idle_steps + 1 if localized and (v, w) == (0.0, 0.0) else 0
+        if self.idle_steps * sim.dt >= stall_timeout_s:
+            self.stalled = True
+            return True
+        teleport = self.kidnapping.due(sim.time)
+        if teleport is not None:
+            sim.teleport(teleport)
+        z_scan, z_v, z_w = sim.step(v, w)
+        self.z_scan = as_sent_ranges(z_scan)
+        if self.record_trajectory:
+            self.trajectory.append([sim.time, *sim.pose])
+        if self.goal_check.update(sim.time, sim.pose, localized, (v, w) == (0.0, 0.0), sim.dt):
+            return True
+        if sim.scan_geometry is not self.geometry:  # the LDS-02: every scan
+            self.geometry = sim.scan_geometry
+            tell_scan_geometry(self.wall_follower, self.geometry)
+        self.odometry.update(sim.time, z_v, z_w)
+        return False
+
+    def _plan(self, estimate: Sequence[float]) -> None:
+        """A path from the estimate to the goal for the pursuit (or the planner's error)."""
+        self.plans += 1
+        began = time.perf_counter()
+        try:
+            self.path = np.asarray(self.planner.plan(estimate[:2], self.goal_xy).points,
+                                   dtype=float)
+            self.plan_ms = (time.perf_counter() - began) * 1e3
+            self.pursuit.set_path(self.path)
+        except ValueError as exc:  # PlanningError (the interface's): no path
+            self.errors.append(f"t={self.sim.time:.2f} s: {exc}")
+            self.pursuit.clear_path()
+
+    def result(self, world_name: str, start_label: Any, map_obj: World, source_name: str,
+               seed: int, wall_time: float, goal_warning: str | None) -> NavigationResult:
+        """What the episode measured."""
+        sim, path, goal_check, kidnap = self.sim, self.path, self.goal_check, self.kidnap
+        x, y, _ = sim.pose
+        rows = np.array(self.poses, dtype=float).reshape(-1, 8)
+        pose_figures = localization_metrics(rows[:, :4], rows[:, [0, 4, 5, 6, 7]],
+                                            np.zeros(len(rows)), kidnap)
+        over = goal_check.reached_time is not None and goal_check.rest_since is not None and \
+            sim.time - goal_check.rest_since >= goal_check.rest_time - 1e-9
+        stopped_time = goal_check.rest_since if over else None
+        cross = distances_to_polyline(np.array(self.pursued), path) \
+            if self.pursued and path is not None else None
+        return NavigationResult(
+            world=world_name, start=start_label,
+            goal=[float(self.goal_xy[0]), float(self.goal_xy[1])], profile=sim.profile.name,
+            seed=int(seed), pose_source=source_name, steps=sim.steps, sim_time_s=sim.time,
+            wall_time_s=wall_time,
+            real_time_factor=sim.time / wall_time if wall_time > 0 else None,
+            localized_time_s=self.localized_time, goal_reached_time_s=goal_check.reached_time,
+            stopped_time_s=stopped_time,
+            path_length_m=polyline_length(path) if path is not None else None,
+            path_min_clearance_m=float(map_obj.clearances(path).min()) if path is not None
+            else None,
+            distance_m=sim.distance,
+            final_position_error_m=math.hypot(x - self.goal_xy[0], y - self.goal_xy[1]),
+            min_clearance_m=sim.min_clearance, collisions=sim.collisions, plans=self.plans,
+            planning_errors=self.errors, plan_time_ms=self.plan_ms,
+            cross_track_mean_m=float(cross.mean()) if cross is not None else None,
+            cross_track_max_m=float(cross.max()) if cross is not None else None,
+            finish_reason="stopped at the goal" if stopped_time is not None else
+            "stalled" if self.stalled else "duration",
+            invalid_commands=sim.bad_commands,
+            false_localizations=pose_figures["false_localizations"],
+            tracking_error_mean_m=pose_figures["tracking_error_mean_m"],
+            kidnap=[float(k) for k in kidnap] if kidnap is not None else None,
+            stalled=self.stalled, dt=sim.dt, map=map_obj.name, goal_warning=goal_warning,
+            trajectory=self.trajectory, path=path.tolist() if path is not None else [],
+            collision_points=[[float(px), float(py)] for px, py in sim.collision_points],
+            effects=sim.effects.as_dict() if sim.effects else None)
 
 
 __all__ = ["run_navigation_episode", "NavigationResult", "distances_to_polyline",
