@@ -143,6 +143,19 @@ def filter_parameters(profile: SensorProfile, map_is_world: bool = False) -> dic
             "map_walls": "edges" if map_is_world else "likely"}
 
 
+def episode_start_label(start: Any, world: World, sim: Any) -> str | list[float]:
+    """How a result names its start.
+
+    The name given; the world's first start's name when none was given; else the pose the
+    simulator started from.
+    """
+    if isinstance(start, str):
+        return start
+    if start is None and world.starts:
+        return next(iter(world.starts))
+    return [float(c) for c in sim.start]
+
+
 def tell_scan_geometry(target: Any, geometry: tuple, with_rays: bool = False) -> None:
     """target.set_scan_geometry(...) with a Simulator.scan_geometry, if target has it.
 
@@ -225,9 +238,7 @@ def run_episode(world: World | str, start=None, profile: str | SensorProfile = "
             trajectory.append([sim.time, x, y, th])
     wall_time = time.perf_counter() - wall_start
 
-    start_label = start if isinstance(start, str) else (
-        next(iter(world_obj.starts)) if start is None and world_obj.starts
-        else [float(c) for c in sim.start])
+    start_label = episode_start_label(start, world_obj, sim)
     bundled_name = world_obj.name if _is_bundled(world_obj) else world_obj.source
     metrics = trajectory_metrics(world_obj, positions)
     return EpisodeResult(

@@ -48,7 +48,12 @@ from amr_common.navigation_behaviour import (
     as_sent_ranges,
 )
 from amr_common.world import World
-from amr_evaluation.episode import as_commanded, default_controller, tell_scan_geometry
+from amr_evaluation.episode import (
+    as_commanded,
+    default_controller,
+    episode_start_label,
+    tell_scan_geometry,
+)
 from amr_evaluation.pose_sources import ParticleFilterPose
 from amr_sim.profiles import SensorProfile, get_profile
 from amr_sim.simulator import Simulator
@@ -148,17 +153,28 @@ def run_localization_episode(world: World | str, start=None,
     sim = Simulator(world_obj, start=start, dt=dt, profile=prof, seed=seed)
     if controller is None:
         controller = default_controller(sim.dt, prof)
-    geometry = sim.scan_geometry
-    tell_scan_geometry(controller, geometry)
+    tell_scan_geometry(controller, sim.scan_geometry)
     source = ParticleFilterPose(map_obj, sim, seed, localizer, **(filter_params or {}))
-    pf = source.filter
+    series, costs = _run_steps(sim, source, controller, int(round(float(duration) / sim.dt)),
+                               kidnap, stop_when_localized, record)
+    return _result(sim, source.filter, seed, world_obj.name, map_obj.name,
+                   episode_start_label(start, world_obj, sim), kidnap, record,
+                   series, costs)
 
-    n_steps = int(round(float(duration) / sim.dt))
-    truth = np.empty((n_steps + 1, 4))
-    estimate = np.empty((n_steps + 1, 5))
-    distances = np.empty(n_steps + 1)
+
+def _run_steps(sim: Simulator, source: ParticleFilterPose, controller: Any, n_steps: int,
+               kidnap, stop_when_localized: bool, record: bool) -> tuple[tuple, tuple]:
+    """The episode's steps, as the nodes take them.
+
+    ((truth, estimate, distances, particles snapshot), (wall time, the filter's wall time, the
+    most particles)).
+    """
+    pf = source.filter
+    geometry = sim.scan_geometry
+    # (t, x, y, theta) true and (t, x, y, theta, localized) estimated per step; distance driven
+    truth, estimate, distances = (np.empty((n_steps + 1, 4)), np.empty((n_steps + 1, 5)),
+                                  np.zeros(n_steps + 1))
     truth[0] = (0.0, *sim.pose)
-    distances[0] = 0.0
     particles_max = len(pf.particles)
     snapshot: list[list[float]] = []
     # The rules the nodes follow (amr_common.navigation_behaviour); the filter is fed as its
@@ -167,7 +183,7 @@ def run_localization_episode(world: World | str, start=None,
     kidnapping = KidnapSchedule(kidnap)
     z_scan, z_v, z_w = sim.measure()
     z_scan = as_sent_ranges(z_scan)
-    odometry = OdometryHold(prof.odom_period, z_v, z_w)
+    odometry = OdometryHold(sim.profile.odom_period, z_v, z_w)
     started = time.perf_counter()
     estimate[0] = (0.0, *source.update(sim, z_scan, *odometry.twist)[0], float(pf.localized))
     filter_time = time.perf_counter() - started
@@ -184,8 +200,7 @@ def run_localization_episode(world: World | str, start=None,
         z_scan = as_sent_ranges(z_scan)
         odometry.update(sim.time, z_v, z_w)
         if sim.scan_geometry is not geometry:  # the LDS-02: every scan
-            geometry = sim.scan_geometry
-            tell_scan_geometry(controller, geometry)
+            tell_scan_geometry(controller, geometry := sim.scan_geometry)
         started = time.perf_counter()
         source.update(sim, z_scan, *odometry.twist)
         filter_time += time.perf_counter() - started
@@ -196,13 +211,22 @@ def run_localization_episode(world: World | str, start=None,
         if record and not snapshot and pf.localized:
             snapshot = np.asarray(pf.particles)[::max(1, len(pf.particles) // 500)].tolist()
     wall_time = time.perf_counter() - wall_start
+    return (truth, estimate, distances, snapshot), (wall_time, filter_time, particles_max)
 
-    start_label = start if isinstance(start, str) else (
-        next(iter(world_obj.starts)) if start is None and world_obj.starts
-        else [float(c) for c in sim.start])
+
+def _result(sim: Simulator, pf: Any, seed: int, world_name: str, map_name: str,
+            start_label: Any, kidnap, record: bool, series: tuple,
+            costs: tuple) -> LocalizationResult:
+    """The episode's LocalizationResult.
+
+    series: (truth, estimate, distances, particles snapshot); costs: (wall time, the filter's
+    wall time, the most particles).
+    """
+    truth, estimate, distances, snapshot = series
+    wall_time, filter_time, particles_max = costs
     metrics = localization_metrics(truth, estimate, distances, kidnap)
     return LocalizationResult(
-        world=world_obj.name, map=map_obj.name, start=start_label, profile=prof.name,
+        world=world_name, map=map_name, start=start_label, profile=sim.profile.name,
         seed=int(seed), steps=sim.steps, sim_time_s=sim.time, wall_time_s=wall_time,
         filter_wall_time_s=filter_time, collisions=sim.collisions, distance_m=sim.distance,
         global_searches=pf.global_searches, particles_max=particles_max,

@@ -28,7 +28,7 @@ import numpy as np
 from amr_common.geometry import compose, inverse
 from amr_common.navigation_behaviour import OdometryHold, ScanNovelty
 from amr_common.world import World
-from amr_evaluation.episode import default_controller
+from amr_evaluation.episode import default_controller, episode_start_label
 from amr_evaluation.mapping_metrics import RayHits, mapping_figures, trajectory_errors
 from amr_mapping.mapper import Mapper
 from amr_mapping.scan_points import Scan
@@ -181,9 +181,7 @@ def run_mapping_episode(world: World | str, start=None, profile: str | SensorPro
                               hits)
     odom_errors = trajectory_errors(sim.start, np.asarray(run.truth), np.asarray(run.odometry))
     stats = mapper.statistics()
-    start_label = start if isinstance(start, str) else (
-        next(iter(world_obj.starts)) if start is None and world_obj.starts
-        else [float(c) for c in sim.start])
+    start_label = episode_start_label(start, world_obj, sim)
     return MappingResult(
         world=world_obj.name, start=start_label, profile=prof.name, seed=int(seed),
         loop_closure=bool(mapper.p["loop_closure"]),

@@ -57,7 +57,12 @@ from amr_common.navigation_behaviour import (
 )
 from amr_common.world import World
 from amr_control.pure_pursuit import scan_clearance, scan_free_ahead
-from amr_evaluation.episode import as_commanded, default_controller, tell_scan_geometry
+from amr_evaluation.episode import (
+    as_commanded,
+    default_controller,
+    episode_start_label,
+    tell_scan_geometry,
+)
 from amr_evaluation.localization_episode import localization_metrics
 from amr_evaluation.pose_sources import make_pose_source
 from amr_sim.profiles import get_profile
@@ -209,9 +214,7 @@ def run_navigation_episode(
         if run.step(stall_timeout_s):
             break
     wall_time = time.perf_counter() - wall_start
-    start_label = start if isinstance(start, str) else (
-        next(iter(world_obj.starts)) if start is None and world_obj.starts
-        else [float(c) for c in sim.start])
+    start_label = episode_start_label(start, world_obj, sim)
     return run.result(world_obj.name, start_label, map_obj, source_name, seed, wall_time,
                       goal_warning)
 
