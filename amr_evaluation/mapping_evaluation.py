@@ -21,6 +21,7 @@ from typing import Any, Callable, Iterable
 
 import numpy as np
 
+from amr_common.controller_loader import DEFAULT_MAPPER
 from amr_evaluation.executors import TaskLost, local_executor, run_tasks
 from amr_evaluation.mapping_episode import TYPICAL_DRIFT, OdometryDrift, run_mapping_episode
 
@@ -39,6 +40,7 @@ class MappingSpec:
     mapper_params: dict[str, Any] | None = None  # Mapper parameter overrides
     controller: str | None = None  # MODULE:CLASS of the explorer; None: the wall follower
     controller_params: tuple[tuple[str, Any], ...] = ()
+    mapper: str | None = None  # MODULE:CLASS of the mapper; None: amr_mapping.mapper:Mapper
 
 
 def mapping_specs(worlds: Iterable[str], seeds: Iterable[int], duration: float = 300.0,
@@ -58,7 +60,7 @@ def run_mapping_spec(spec: MappingSpec) -> dict[str, Any]:
         result = run_mapping_episode(spec.world, start=spec.start, profile=spec.profile,
                                      seed=spec.seed, duration=spec.duration,
                                      loop_closure=spec.loop_closure, drift=spec.drift,
-                                     mapper_params=spec.mapper_params,
+                                     mapper_params=spec.mapper_params, mapper=spec.mapper,
                                      controller=_controller(spec))
     except Exception as exc:  # noqa: BLE001 - reported per episode, the batch goes on
         return {**asdict(spec), "error": f"{type(exc).__name__}: {exc}",
@@ -165,14 +167,16 @@ def evaluate_main(specs, settings: dict[str, Any], mapper_params: dict[str, Any]
     """
     import csv
     controller = settings["controller"]
+    mapper = settings.get("links", {}).get("mapper")
     mapping = [MappingSpec(s.world, s.seed, s.duration,
                            bool(mapper_params.get("loop_closure", True)), profile=s.profile,
                            start=list(s.start) if isinstance(s.start, tuple) else s.start,
                            mapper_params=dict(mapper_params) or None,
-                           controller=controller, controller_params=s.params)
+                           controller=controller, controller_params=s.params, mapper=mapper)
                for s in specs]
-    print(f"evaluate: {len(mapping)} mapping episodes of {settings['duration']:g} s"
-          + (f", Mapper {mapper_params}" if mapper_params else ""), flush=True)
+    print(f"evaluate: {len(mapping)} mapping episodes of {settings['duration']:g} s, mapper "
+          f"{mapper or DEFAULT_MAPPER}" + (f" {mapper_params}" if mapper_params else ""),
+          flush=True)
     started = time.monotonic()
 
     def progress(done: int, total: int, result: dict[str, Any]) -> None:
@@ -185,7 +189,8 @@ def evaluate_main(specs, settings: dict[str, Any], mapper_params: dict[str, Any]
     failed = sum("error" in r for r in results)
     collided = sum(r.get("collisions", 0) > 0 for r in results)
     out.mkdir(parents=True, exist_ok=True)
-    summary = {"episodes": len(results), "failed": failed, "collided": collided,
+    summary = {"mapper": mapper or DEFAULT_MAPPER, "episodes": len(results), "failed": failed,
+               "collided": collided,
                "wall_time_s": round(time.monotonic() - started, 1),
                "per_world": summary_rows(results)}
     (out / "results.json").write_text(json.dumps({"summary": summary, "episodes": results},

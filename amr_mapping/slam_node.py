@@ -153,10 +153,12 @@ class SlamNode(GuardedLifecycleNode):
         self._timer = self.create_timer(node["map_update_interval_s"], self._on_map_timer)
         p = self._mapper_params
         self.get_logger().info(
-            f"configured: {100 * p['resolution_m']:g} cm cells, loop closure "
-            f"{'on' if p['loop_closure'] else 'off'}, odometry from {node['odometry_topic']}, "
-            f"map start pose {list(self._start)}, LiDAR at x = {p['lidar_offset_x_m']} m until "
-            f"/tf_static says otherwise"
+            f"configured: mapper {node['mapper']}"
+            + (f", {100 * p['resolution_m']:g} cm cells" if "resolution_m" in p else "")
+            + (f", loop closure {'on' if p['loop_closure'] else 'off'}"
+               if "loop_closure" in p else "")
+            + f", odometry from {node['odometry_topic']}, map start pose {list(self._start)}, "
+            f"LiDAR at x = {self.mapper.lidar_offset_x_m} m until /tf_static says otherwise"
             + (f", saved to {node['output_prefix']}.yaml on the way down"
                if node["output_prefix"] else ""))
         return TransitionCallbackReturn.SUCCESS
@@ -264,7 +266,9 @@ class SlamNode(GuardedLifecycleNode):
                 not all(math.isfinite(v) for v in estimate.pose):
             return  # the Mapper said why (throttled)
         self.mapped_scans += 1
-        if estimate.keyframe or estimate.loop_closed:
+        # A mapper that says when its map changed (the Mapper: keyframes and loop closures
+        # only) is redrawn then; any other after every mapped scan.
+        if getattr(estimate, "keyframe", True) or getattr(estimate, "loop_closed", False):
             self._map_version += 1
         self._last_scan_stamp = scan.header.stamp
         self._publish_pose(estimate)
@@ -357,8 +361,10 @@ class SlamNode(GuardedLifecycleNode):
                                      "name": Path(prefix).name or "slam_map",
                                      "description": f"built by amr_slam from "
                                                     f"{self.mapped_scans} scans, "
-                                                    f"{stats['keyframes']} keyframes, "
-                                                    f"{stats['loop_closures']} loop closures",
+                                                    f"{stats.get('keyframes', 'no')} "
+                                                    f"keyframes, "
+                                                    f"{stats.get('loop_closures', 'no')} "
+                                                    "loop closures",
                                      "starts": {"slam_start": list(self._start)}})
         self._saved_version = self._map_version
         self.saved_maps.append(yaml_path)

@@ -27,6 +27,8 @@ LINK_OPTIONS = {
                "examples.wavefront_planner:WavefrontPlanner",
     "follower": "a path follower (amr_common.interfaces.PathFollower), e.g. "
                 "examples.plain_pursuit:PlainPursuit",
+    "mapper": "a mapper (amr_common.interfaces.Mapper), e.g. "
+              "examples.odometry_mapper:OdometryMapper",
 }
 RUN_SCRIPT_NEEDS = {"localizer": "--localize or --goal", "planner": "--goal",
                     "follower": "--goal"}
