@@ -189,8 +189,6 @@ def run_mapping_episode(world: World | str, start=None, profile: str | SensorPro
                               hits)
     odom_errors = trajectory_errors(sim.start, np.asarray(run.truth), np.asarray(run.odometry))
     stats = mapper.statistics()
-    update_ms = _times_ms(run.update_cpu_ms)
-    closed_ms = stats.get("loop_closed_cpu_ms") or {}
     start_label = start if isinstance(start, str) else (
         next(iter(world_obj.starts)) if start is None and world_obj.starts
         else [float(c) for c in sim.start])
@@ -203,10 +201,7 @@ def run_mapping_episode(world: World | str, start=None, profile: str | SensorPro
         collisions=sim.collisions, distance_m=sim.distance, scans=len(rows),
         keyframes=stats.get("keyframes"), loop_closures=stats.get("loop_closures"),
         odometry_max_error_m=odom_errors["trajectory_max_m"], **figures,
-        update_ms_median=update_ms["median"], update_ms_p90=update_ms["p90"],
-        update_ms_max=update_ms["max"],
-        loop_closure_ms_median=float(closed_ms.get("median", math.nan)),
-        loop_closure_ms_max=float(closed_ms.get("max", math.nan)), statistics=stats,
+        **_timings(run.update_cpu_ms, stats), statistics=stats,
         real_time_factor=sim.time / run.wall_time if run.wall_time > 0 else math.inf,
         cpu_real_time_factor=sim.time / run.cpu_time if run.cpu_time > 0 else math.inf,
         estimate=rows.tolist() if record else [])
@@ -233,13 +228,18 @@ def _spec_of(mapper: Any) -> str:
     return f"{cls.__module__}:{cls.__qualname__}"
 
 
-def _times_ms(values: list[float]) -> dict[str, float]:
-    """Median, p90 and max of a list of ms (0.0 for none, as the reference's statistics)."""
-    if not values:
-        return {"median": 0.0, "p90": 0.0, "max": 0.0}
-    array = np.asarray(values)
-    return {"median": float(np.median(array)), "p90": float(np.percentile(array, 90)),
-            "max": float(array.max())}
+def _timings(update_cpu_ms: list[float], stats: dict[str, Any]) -> dict[str, float]:
+    """MappingResult's update_ms_* (the episode's measures) and loop_closure_ms_* (statistics).
+
+    Updates: median, p90 and max (0.0 for none); closures NaN unless the mapper reports them.
+    """
+    array = np.asarray(update_cpu_ms if update_cpu_ms else [0.0])
+    closed = stats.get("loop_closed_cpu_ms") or {}
+    return {"update_ms_median": float(np.median(array)),
+            "update_ms_p90": float(np.percentile(array, 90)),
+            "update_ms_max": float(array.max()),
+            "loop_closure_ms_median": float(closed.get("median", math.nan)),
+            "loop_closure_ms_max": float(closed.get("max", math.nan))}
 
 
 @dataclass

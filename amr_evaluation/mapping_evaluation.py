@@ -46,11 +46,15 @@ class MappingSpec:
 def mapping_specs(worlds: Iterable[str], seeds: Iterable[int], duration: float = 300.0,
                   loop_closure: Iterable[bool] = (True,), starts: dict[str, Any] | None = None,
                   drift: OdometryDrift | None = TYPICAL_DRIFT,
-                  mapper_params: dict[str, Any] | None = None) -> list[MappingSpec]:
-    """Every world x loop-closure setting x seed; starts: world -> start for worlds without."""
+                  mapper_params: dict[str, Any] | None = None,
+                  mapper: str | None = None) -> list[MappingSpec]:
+    """Every world x loop-closure setting x seed; starts: world -> start for worlds without.
+
+    mapper: MODULE:CLASS of an amr_common.interfaces.Mapper (None: the project's).
+    """
     starts = starts or {}
     return [MappingSpec(world, int(seed), float(duration), bool(closure), drift,
-                        start=starts.get(world), mapper_params=mapper_params)
+                        start=starts.get(world), mapper_params=mapper_params, mapper=mapper)
             for world in worlds for closure in loop_closure for seed in seeds]
 
 
