@@ -129,16 +129,21 @@ def mapping_table(results: list[dict[str, Any]]) -> str:
 
 
 def summary_rows(results: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Per world and loop-closure setting: mean and worst RMSE, max, precision, recall."""
-    groups: dict[tuple[str, bool], list[dict[str, Any]]] = {}
+    """Per mapper, world and loop-closure setting: mean and worst RMSE, max, precision, recall.
+
+    Figures a mapper does not report (loop closures, their times) are NaN.
+    """
+    groups: dict[tuple[str, str, bool], list[dict[str, Any]]] = {}
     for result in results:
         if "error" not in result:
-            groups.setdefault((result["world"], result["loop_closure"]), []).append(result)
+            key = (result.get("mapper", DEFAULT_MAPPER), result["world"], result["loop_closure"])
+            groups.setdefault(key, []).append(result)
     rows = []
-    for (world, closure), group in groups.items():
-        def values(name):
+    for (mapper, world, closure), group in groups.items():
+        def values(name):  # None (not reported) becomes NaN
             return np.array([g[name] for g in group], dtype=np.float64)
-        rows.append({"world": world, "loop_closure": closure, "episodes": len(group),
+        rows.append({"mapper": mapper, "world": world, "loop_closure": closure,
+                     "episodes": len(group),
                      "rmse_mean_m": float(values("trajectory_rmse_m").mean()),
                      "rmse_worst_m": float(values("trajectory_rmse_m").max()),
                      "max_worst_m": float(values("trajectory_max_m").max()),
