@@ -96,6 +96,15 @@ def test_evaluate_maps_with_the_odometry_mapper(tmp_path, capsys):
     assert 0.5 < episode["precision"] <= 1.0 and episode["recall"] > 0.8
 
 
+def test_evaluate_takes_the_mapper_from_its_config(tmp_path, capsys):
+    config = tmp_path / "set.yaml"
+    config.write_text(f"worlds: [lab02]\nmapper: {PURSUIT}\n")
+    assert evaluate.main(["--config", str(config), "--slam", "--duration", "1"]) == 2
+    assert evaluate.main(["--config", str(config), "--duration", "1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert f"mapper '{PURSUIT}' has no update" in err[0] and "--mapper needs --slam" in err[1]
+
+
 def test_evaluate_runs_the_examples_and_compare_sets_them_side_by_side(tmp_path, capsys):
     grid = ["--worlds", "lab02", "--starts", "inner", "--goals", "north_west", "--profiles",
             "turtlebot3", "--duration", "45", "--jobs", "1", "--no-sheet"]
