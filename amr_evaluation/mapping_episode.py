@@ -143,7 +143,8 @@ class MappingResult:
                 f"{100 * self.trajectory_max_m:.2f} cm (odometry max "
                 f"{100 * self.odometry_max_error_m:.1f} cm), precision "
                 f"{100 * self.precision:.1f} %, recall {100 * self.recall:.1f} %, "
-                f"{self.loop_closures} loop closures, {self.keyframes} keyframes, update median "
+                f"{_count(self.loop_closures)} loop closures, {_count(self.keyframes)} "
+                f"keyframes, update median "
                 f"{self.update_ms_median:.2f} ms, {self.real_time_factor:.0f}x real time "
                 f"({self.cpu_real_time_factor:.0f}x per CPU second)")
 
@@ -205,6 +206,11 @@ def run_mapping_episode(world: World | str, start=None, profile: str | SensorPro
         real_time_factor=sim.time / run.wall_time if run.wall_time > 0 else math.inf,
         cpu_real_time_factor=sim.time / run.cpu_time if run.cpu_time > 0 else math.inf,
         estimate=rows.tolist() if record else [])
+
+
+def _count(value: int | None) -> str:
+    """A count for a summary line: 'n/a' when the mapper does not report it."""
+    return "n/a" if value is None else str(value)
 
 
 def _built_mapper(mapper, prof: SensorProfile, loop_closure: bool,

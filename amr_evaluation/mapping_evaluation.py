@@ -222,7 +222,8 @@ def _summary_line(result: dict[str, Any]) -> str:
             f"{result['seed']}: RMSE {100 * result['trajectory_rmse_m']:.2f} cm, max "
             f"{100 * result['trajectory_max_m']:.2f} cm, precision "
             f"{100 * result['precision']:.1f} %, recall {100 * result['recall']:.1f} %, "
-            f"{result['loop_closures']} loop closures, {result['collisions']} collisions")
+            f"{_cell(result, ('loop_closures', '{}'))} loop closures, {result['collisions']} "
+            "collisions")
 
 
 __all__ = ["MappingSpec", "evaluate_main", "mapping_specs", "mapping_table", "run_mapping_grid",
