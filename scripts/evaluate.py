@@ -251,31 +251,12 @@ def check_option_pairs(args: argparse.Namespace, settings: dict) -> None:
 
 
 def check_slam_params(items: list[str], mapper: str | None) -> dict:
-    """--slam-param NAME:=VALUE for the mapper's class (loaded): its names, typed and checked.
-
-    The project's Mapper checks the values here; another class when an episode builds it.
-    """
-    from amr_common.controller_loader import DEFAULT_MAPPER, described_parameters, load_class
-    from amr_common.parameters import typed_values
+    """--slam-param for the mapper's class (link_options.check_mapper_params); EvaluationError."""
+    from link_options import check_mapper_params
     try:
-        overrides = parse_overrides(items)
-        if mapper in (None, DEFAULT_MAPPER):
-            from amr_mapping.mapper_params import check_parameters
-            check_parameters(overrides)
-            return overrides
-        table = described_parameters(load_class(mapper, "mapper"))
-        if table is None:  # the class lists no parameters: it checks them itself
-            return overrides
-        unknown = [name for name in overrides if name not in table]
-        if unknown:
-            raise ValueError(f"{', '.join(unknown)}: no such parameter of mapper {mapper}; "
-                             f"known: {', '.join(sorted(table))}")
-        overrides, problems = typed_values(table, overrides)
-        if problems:
-            raise ValueError("; ".join(problems))
+        return check_mapper_params(items, mapper)
     except ValueError as exc:
         raise EvaluationError(f"--slam-param: {exc}") from None
-    return overrides
 
 
 def check_localization_options(args: argparse.Namespace, settings: dict, specs) -> None:
