@@ -260,7 +260,11 @@ class PathFollower(Protocol):
 
 @runtime_checkable
 class MappingEstimate(Protocol):
-    """What Mapper.update returns."""
+    """What Mapper.update returns.
+
+    Optional members, used when present: `keyframe` and `loop_closed` (bool: the map changed
+    with this scan; the slam node then republishes /map; without them, after every scan).
+    """
 
     pose: Pose  # map frame, at the scan's stamp
     status: str  # "matched", "odometry", "first", or "rejected: <why>"
@@ -309,7 +313,13 @@ class Mapper(Protocol):
         ...
 
     def statistics(self) -> dict[str, Any]:
-        """Counts and timings for reports (keyframes, loop_closures, ...)."""
+        """Counts and timings for reports; every key optional.
+
+        Read when present: `keyframes`, `loop_closures` (ints), `rejected` ({reason: count}),
+        `loop_closed_cpu_ms` ({median, max} CPU ms of the closures), `update_ms` and
+        `loop_closed_ms` (wall ms) for run_sim's report. The episodes measure update() times
+        themselves.
+        """
         ...
 
 

@@ -18,7 +18,7 @@ from amr_common.parameter_table import finite
 
 CONFIG_KEYS = ("worlds", "map", "starts", "goals", "pose_source", "profiles", "seeds", "duration",
                "dt", "controller", "params_file", "params", "jobs", "localizer", "planner",
-               "follower")
+               "follower", "mapper")
 POSE_SOURCES = ("filter", "truth")
 MAX_EPISODES = 10_000
 
@@ -174,7 +174,7 @@ def load_config(path: str | os.PathLike) -> dict[str, Any]:
             parse_start_list(config["starts"])
         except EvaluationError as exc:
             raise EvaluationError(f"{path}: 'starts': {exc}") from None
-    for key in ("controller", "localizer", "planner", "follower"):
+    for key in ("controller", "localizer", "planner", "follower", "mapper"):
         if key in config and not isinstance(config[key], str):
             raise EvaluationError(f"{path}: '{key}' must be MODULE:CLASS, got "
                                   f"{config[key]!r}")

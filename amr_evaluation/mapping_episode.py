@@ -15,6 +15,11 @@ radius and gyro scale errors, gyro bias, random walk) to it, seeded by the episo
 Figures (amr_evaluation.mapping_metrics): trajectory RMSE / max against the truth aligned at
 the start, map precision and recall at 3 cm, loop closures, SLAM update times, and the speed
 (simulated seconds per wall-clock second of the whole loop, simulator and controller included).
+
+The mapper is any amr_common.interfaces.Mapper (`mapper`: MODULE:CLASS, a class or a ready
+object; default amr_mapping.mapper:Mapper), used only through the interface's members: the
+update times are measured around its update() calls; keyframes, loop closures and the loop
+closures' times come from its statistics() when it reports them (None / NaN otherwise).
 """
 from __future__ import annotations
 
@@ -25,12 +30,12 @@ from typing import Any
 
 import numpy as np
 
+from amr_common.controller_loader import DEFAULT_MAPPER, described_parameters, link_class
 from amr_common.geometry import compose, inverse
 from amr_common.navigation_behaviour import OdometryHold, ScanNovelty
 from amr_common.world import World
 from amr_evaluation.episode import default_controller, episode_start_label
 from amr_evaluation.mapping_metrics import RayHits, mapping_figures, trajectory_errors
-from amr_mapping.mapper import Mapper
 from amr_mapping.scan_points import Scan
 from amr_sim.profiles import SensorProfile, get_profile
 from amr_sim.simulator import Simulator
@@ -94,7 +99,7 @@ class MappingResult:
     start: str | list[float]
     profile: str
     seed: int
-    loop_closure: bool
+    loop_closure: bool  # asked of the mapper (False for a mapper without a loop_closure param)
     drift: dict[str, float] | None
     sim_time_s: float
     wall_time_s: float  # the whole loop: simulator, controller, SLAM, truth bookkeeping
@@ -103,8 +108,8 @@ class MappingResult:
     collisions: int
     distance_m: float
     scans: int
-    keyframes: int
-    loop_closures: int
+    keyframes: int | None  # None: the mapper's statistics() does not report them
+    loop_closures: int | None
     trajectory_rmse_m: float
     trajectory_max_m: float
     heading_rmse_rad: float
@@ -112,12 +117,15 @@ class MappingResult:
     precision: float
     recall: float
     seen_wall_m: float
-    # SLAM timings in CPU ms of the mapping thread (Mapper.statistics() has the wall clock too)
+    # CPU ms of the mapper's update() calls (this thread), measured by the episode
     update_ms_median: float
     update_ms_p90: float
     update_ms_max: float
-    loop_closure_ms_median: float  # the attempts that closed a loop: search + optimization
+    # From statistics()["loop_closed_cpu_ms"] (the reference's closures: search +
+    # optimization); NaN for a mapper that does not report it
+    loop_closure_ms_median: float
     loop_closure_ms_max: float
+    mapper: str = DEFAULT_MAPPER  # MODULE:CLASS of the mapper
     real_time_factor: float = 0.0  # simulated seconds per wall-clock second of the loop
     cpu_real_time_factor: float = 0.0  # ... per CPU second
     statistics: dict[str, Any] = field(default_factory=dict)
@@ -135,7 +143,8 @@ class MappingResult:
                 f"{100 * self.trajectory_max_m:.2f} cm (odometry max "
                 f"{100 * self.odometry_max_error_m:.1f} cm), precision "
                 f"{100 * self.precision:.1f} %, recall {100 * self.recall:.1f} %, "
-                f"{self.loop_closures} loop closures, {self.keyframes} keyframes, update median "
+                f"{_count(self.loop_closures)} loop closures, {_count(self.keyframes)} "
+                f"keyframes, update median "
                 f"{self.update_ms_median:.2f} ms, {self.real_time_factor:.0f}x real time "
                 f"({self.cpu_real_time_factor:.0f}x per CPU second)")
 
@@ -146,10 +155,12 @@ def run_mapping_episode(world: World | str, start=None, profile: str | SensorPro
                         mapper_params: dict[str, Any] | None = None,
                         record: bool = False, mapper=None, controller=None,
                         world_frame: bool = False) -> MappingResult:
-    """Explore `world` with the wall follower for `duration` s while the Mapper maps it.
+    """Explore `world` with the wall follower for `duration` s while the mapper maps it.
 
-    mapper: a ready Mapper (or an object with its update / occupancy_raster / statistics /
-    p); by default one with the profile's LiDAR offset, `loop_closure` and `mapper_params`.
+    mapper: the mapper's class as "MODULE:CLASS" or a class (amr_common.interfaces.Mapper;
+    None: amr_mapping.mapper:Mapper), built with the profile's LiDAR offset, `loop_closure`
+    (if the class has that parameter) and `mapper_params`; or a ready object with the
+    interface's members.
     controller: the explorer (compute_commands(z_scan, z_v, z_w)); by default the project's
     wall follower told where the profile's LiDAR sits.
     world_frame: build the map in the world's frame (the Mapper's odometry moved by the start
@@ -165,9 +176,7 @@ def run_mapping_episode(world: World | str, start=None, profile: str | SensorPro
     if callable(getattr(controller, "set_scan_geometry", None)):
         controller.set_scan_geometry(prof.angle_min, prof.angle_increment, prof.range_min,
                                      prof.range_max)
-    if mapper is None:
-        mapper = Mapper({"lidar_offset_x_m": prof.lidar_offset_x,
-                         "loop_closure": bool(loop_closure), **(mapper_params or {})})
+    mapper, closure = _built_mapper(mapper, prof, loop_closure, mapper_params)
     odometry = DriftingOdometry(drift, seed)
     hits = RayHits(world_obj, prof.angle_min, prof.angle_increment, prof.scan_rays,
                    prof.range_min, min(prof.range_max, mapper.max_range_m))
@@ -184,20 +193,57 @@ def run_mapping_episode(world: World | str, start=None, profile: str | SensorPro
     start_label = episode_start_label(start, world_obj, sim)
     return MappingResult(
         world=world_obj.name, start=start_label, profile=prof.name, seed=int(seed),
-        loop_closure=bool(mapper.p["loop_closure"]),
+        loop_closure=closure, mapper=_spec_of(mapper),
         drift=None if drift is None else asdict(drift),
         sim_time_s=sim.time, wall_time_s=run.wall_time, cpu_time_s=run.cpu_time,
         slam_wall_time_s=run.slam_time,
         collisions=sim.collisions, distance_m=sim.distance, scans=len(rows),
-        keyframes=stats["keyframes"], loop_closures=stats["loop_closures"],
+        keyframes=stats.get("keyframes"), loop_closures=stats.get("loop_closures"),
         odometry_max_error_m=odom_errors["trajectory_max_m"], **figures,
-        update_ms_median=stats["update_cpu_ms"]["median"],
-        update_ms_p90=stats["update_cpu_ms"]["p90"], update_ms_max=stats["update_cpu_ms"]["max"],
-        loop_closure_ms_median=stats["loop_closed_cpu_ms"]["median"],
-        loop_closure_ms_max=stats["loop_closed_cpu_ms"]["max"], statistics=stats,
+        **_timings(run.update_cpu_ms, stats), statistics=stats,
         real_time_factor=sim.time / run.wall_time if run.wall_time > 0 else math.inf,
         cpu_real_time_factor=sim.time / run.cpu_time if run.cpu_time > 0 else math.inf,
         estimate=rows.tolist() if record else [])
+
+
+def _count(value: int | None) -> str:
+    """A count for a summary line: 'n/a' when the mapper does not report it."""
+    return "n/a" if value is None else str(value)
+
+
+def _built_mapper(mapper, prof: SensorProfile, loop_closure: bool,
+                  mapper_params: dict[str, Any] | None) -> tuple[Any, bool]:
+    """(the mapper, whether loop closure was asked of it) for run_mapping_episode's `mapper`."""
+    params = dict(mapper_params or {})
+    if mapper is not None and not isinstance(mapper, (str, type)):  # a ready one
+        return mapper, bool(params.get("loop_closure", loop_closure))
+    cls = link_class(mapper or DEFAULT_MAPPER, "mapper")
+    takes = described_parameters(cls)
+    values: dict[str, Any] = {"lidar_offset_x_m": prof.lidar_offset_x}
+    if takes is None or "loop_closure" in takes:
+        values["loop_closure"] = bool(loop_closure)
+    values.update(params)
+    return cls(values), bool(values.get("loop_closure", False))
+
+
+def _spec_of(mapper: Any) -> str:
+    """MODULE:CLASS of a mapper object."""
+    cls = type(mapper)
+    return f"{cls.__module__}:{cls.__qualname__}"
+
+
+def _timings(update_cpu_ms: list[float], stats: dict[str, Any]) -> dict[str, float]:
+    """MappingResult's update_ms_* (the episode's measures) and loop_closure_ms_* (statistics).
+
+    Updates: median, p90 and max (0.0 for none); closures NaN unless the mapper reports them.
+    """
+    array = np.asarray(update_cpu_ms if update_cpu_ms else [0.0])
+    closed = stats.get("loop_closed_cpu_ms") or {}
+    return {"update_ms_median": float(np.median(array)),
+            "update_ms_p90": float(np.percentile(array, 90)),
+            "update_ms_max": float(array.max()),
+            "loop_closure_ms_median": float(closed.get("median", math.nan)),
+            "loop_closure_ms_max": float(closed.get("max", math.nan))}
 
 
 @dataclass
@@ -208,6 +254,7 @@ class _Recording:
     estimate: list = field(default_factory=list)
     odometry: list = field(default_factory=list)
     slam_time: float = 0.0  # wall seconds inside Mapper.update
+    update_cpu_ms: list = field(default_factory=list)  # this thread's CPU ms of each update
     wall_time: float = 0.0
     cpu_time: float = 0.0
 
@@ -227,10 +274,12 @@ def _explore(sim: Simulator, controller, mapper, odometry: DriftingOdometry, hit
     novelty.is_new(z_scan, sim.scan_geometry[:2])
 
     def feed(ranges: np.ndarray, stamp: float) -> None:
-        started = time.perf_counter()
-        result = mapper.update(Scan(ranges, prof.angle_min, prof.angle_increment,
-                                    prof.range_min, prof.range_max),
-                               compose(frame, held.held[2]), stamp)
+        scan = Scan(ranges, prof.angle_min, prof.angle_increment, prof.range_min,
+                    prof.range_max)
+        odom = compose(frame, held.held[2])
+        started, cpu_started = time.perf_counter(), time.thread_time()
+        result = mapper.update(scan, odom, stamp)
+        run.update_cpu_ms.append(1e3 * (time.thread_time() - cpu_started))
         run.slam_time += time.perf_counter() - started
         if not result.status.startswith("rejected"):
             run.truth.append(sim.pose)

@@ -21,6 +21,7 @@ from typing import Any, Callable, Iterable
 
 import numpy as np
 
+from amr_common.controller_loader import DEFAULT_MAPPER
 from amr_evaluation.executors import TaskLost, local_executor, run_tasks
 from amr_evaluation.mapping_episode import TYPICAL_DRIFT, OdometryDrift, run_mapping_episode
 
@@ -39,16 +40,21 @@ class MappingSpec:
     mapper_params: dict[str, Any] | None = None  # Mapper parameter overrides
     controller: str | None = None  # MODULE:CLASS of the explorer; None: the wall follower
     controller_params: tuple[tuple[str, Any], ...] = ()
+    mapper: str | None = None  # MODULE:CLASS of the mapper; None: amr_mapping.mapper:Mapper
 
 
 def mapping_specs(worlds: Iterable[str], seeds: Iterable[int], duration: float = 300.0,
                   loop_closure: Iterable[bool] = (True,), starts: dict[str, Any] | None = None,
                   drift: OdometryDrift | None = TYPICAL_DRIFT,
-                  mapper_params: dict[str, Any] | None = None) -> list[MappingSpec]:
-    """Every world x loop-closure setting x seed; starts: world -> start for worlds without."""
+                  mapper_params: dict[str, Any] | None = None,
+                  mapper: str | None = None) -> list[MappingSpec]:
+    """Every world x loop-closure setting x seed; starts: world -> start for worlds without.
+
+    mapper: MODULE:CLASS of an amr_common.interfaces.Mapper (None: the project's).
+    """
     starts = starts or {}
     return [MappingSpec(world, int(seed), float(duration), bool(closure), drift,
-                        start=starts.get(world), mapper_params=mapper_params)
+                        start=starts.get(world), mapper_params=mapper_params, mapper=mapper)
             for world in worlds for closure in loop_closure for seed in seeds]
 
 
@@ -58,7 +64,7 @@ def run_mapping_spec(spec: MappingSpec) -> dict[str, Any]:
         result = run_mapping_episode(spec.world, start=spec.start, profile=spec.profile,
                                      seed=spec.seed, duration=spec.duration,
                                      loop_closure=spec.loop_closure, drift=spec.drift,
-                                     mapper_params=spec.mapper_params,
+                                     mapper_params=spec.mapper_params, mapper=spec.mapper,
                                      controller=_controller(spec))
     except Exception as exc:  # noqa: BLE001 - reported per episode, the batch goes on
         return {**asdict(spec), "error": f"{type(exc).__name__}: {exc}",
@@ -123,16 +129,21 @@ def mapping_table(results: list[dict[str, Any]]) -> str:
 
 
 def summary_rows(results: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Per world and loop-closure setting: mean and worst RMSE, max, precision, recall."""
-    groups: dict[tuple[str, bool], list[dict[str, Any]]] = {}
+    """Per mapper, world and loop-closure setting: mean and worst RMSE, max, precision, recall.
+
+    Figures a mapper does not report (loop closures, their times) are NaN.
+    """
+    groups: dict[tuple[str, str, bool], list[dict[str, Any]]] = {}
     for result in results:
         if "error" not in result:
-            groups.setdefault((result["world"], result["loop_closure"]), []).append(result)
+            key = (result.get("mapper", DEFAULT_MAPPER), result["world"], result["loop_closure"])
+            groups.setdefault(key, []).append(result)
     rows = []
-    for (world, closure), group in groups.items():
-        def values(name):
+    for (mapper, world, closure), group in groups.items():
+        def values(name):  # None (not reported) becomes NaN
             return np.array([g[name] for g in group], dtype=np.float64)
-        rows.append({"world": world, "loop_closure": closure, "episodes": len(group),
+        rows.append({"mapper": mapper, "world": world, "loop_closure": closure,
+                     "episodes": len(group),
                      "rmse_mean_m": float(values("trajectory_rmse_m").mean()),
                      "rmse_worst_m": float(values("trajectory_rmse_m").max()),
                      "max_worst_m": float(values("trajectory_max_m").max()),
@@ -165,14 +176,16 @@ def evaluate_main(specs, settings: dict[str, Any], mapper_params: dict[str, Any]
     """
     import csv
     controller = settings["controller"]
+    mapper = settings.get("links", {}).get("mapper")
     mapping = [MappingSpec(s.world, s.seed, s.duration,
                            bool(mapper_params.get("loop_closure", True)), profile=s.profile,
                            start=list(s.start) if isinstance(s.start, tuple) else s.start,
                            mapper_params=dict(mapper_params) or None,
-                           controller=controller, controller_params=s.params)
+                           controller=controller, controller_params=s.params, mapper=mapper)
                for s in specs]
-    print(f"evaluate: {len(mapping)} mapping episodes of {settings['duration']:g} s"
-          + (f", Mapper {mapper_params}" if mapper_params else ""), flush=True)
+    print(f"evaluate: {len(mapping)} mapping episodes of {settings['duration']:g} s, mapper "
+          f"{mapper or DEFAULT_MAPPER}" + (f" {mapper_params}" if mapper_params else ""),
+          flush=True)
     started = time.monotonic()
 
     def progress(done: int, total: int, result: dict[str, Any]) -> None:
@@ -185,7 +198,8 @@ def evaluate_main(specs, settings: dict[str, Any], mapper_params: dict[str, Any]
     failed = sum("error" in r for r in results)
     collided = sum(r.get("collisions", 0) > 0 for r in results)
     out.mkdir(parents=True, exist_ok=True)
-    summary = {"episodes": len(results), "failed": failed, "collided": collided,
+    summary = {"mapper": mapper or DEFAULT_MAPPER, "episodes": len(results), "failed": failed,
+               "collided": collided,
                "wall_time_s": round(time.monotonic() - started, 1),
                "per_world": summary_rows(results)}
     (out / "results.json").write_text(json.dumps({"summary": summary, "episodes": results},
@@ -208,7 +222,8 @@ def _summary_line(result: dict[str, Any]) -> str:
             f"{result['seed']}: RMSE {100 * result['trajectory_rmse_m']:.2f} cm, max "
             f"{100 * result['trajectory_max_m']:.2f} cm, precision "
             f"{100 * result['precision']:.1f} %, recall {100 * result['recall']:.1f} %, "
-            f"{result['loop_closures']} loop closures, {result['collisions']} collisions")
+            f"{_cell(result, ('loop_closures', '{}'))} loop closures, {result['collisions']} "
+            "collisions")
 
 
 __all__ = ["MappingSpec", "evaluate_main", "mapping_specs", "mapping_table", "run_mapping_grid",

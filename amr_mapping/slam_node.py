@@ -50,7 +50,7 @@ from amr_common.ros_conversions import pose_from_message, time_to_nanoseconds, y
 from amr_mapping.mapper import timing_summary
 from amr_mapping.slam_map_files import read_save_request, write_slam_map
 from amr_mapping.slam_node_params import NODE_PARAMETERS as _NODE_PARAMETERS
-from amr_mapping.slam_node_params import node_parameter_problems
+from amr_mapping.slam_node_params import configured_line, node_parameter_problems
 
 _ODOMETRY_HISTORY_S = 5.0  # how far back a scan's stamp may lie behind the newest odometry
 _MAX_WAITING_SCANS = 10  # 2 s of 5 Hz scans
@@ -150,14 +150,8 @@ class SlamNode(GuardedLifecycleNode):
         self._service = self.create_service(SaveMap, "~/save_map", self._on_save_request)
         self._timer = self.create_timer(node["map_update_interval_s"],
                                         lambda: self.is_active and self._publish_map())
-        p = self._mapper_params
-        self.get_logger().info(
-            f"configured: {100 * p['resolution_m']:g} cm cells, loop closure "
-            f"{'on' if p['loop_closure'] else 'off'}, odometry from {node['odometry_topic']}, "
-            f"map start pose {list(self._start)}, LiDAR at x = {p['lidar_offset_x_m']} m until "
-            f"/tf_static says otherwise"
-            + (f", saved to {node['output_prefix']}.yaml on the way down"
-               if node["output_prefix"] else ""))
+        self.get_logger().info(configured_line(node, self._mapper_params,
+                                               self.mapper.lidar_offset_x_m, self._start))
         return TransitionCallbackReturn.SUCCESS
 
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -264,7 +258,9 @@ class SlamNode(GuardedLifecycleNode):
                 not all(math.isfinite(v) for v in estimate.pose):
             return  # the Mapper said why (throttled)
         self.mapped_scans += 1
-        if estimate.keyframe or estimate.loop_closed:
+        # A mapper that says when its map changed (the Mapper: keyframes and loop closures
+        # only) is redrawn then; any other after every mapped scan.
+        if getattr(estimate, "keyframe", True) or getattr(estimate, "loop_closed", False):
             self._map_version += 1
         self._last_scan_stamp = scan.header.stamp
         self._publish_pose(estimate)

@@ -85,5 +85,20 @@ def output_prefix_problems(prefix: str) -> list[str]:
     return []
 
 
-__all__ = ["NODE_PARAMETERS", "node_parameter_problems", "node_parameters",
+
+def configured_line(node: dict[str, Any], mapper_params: dict[str, Any],
+                    lidar_offset_x_m: float, start: tuple[float, float, float]) -> str:
+    """The slam node's log line once configured: its mapper and the settings that matter."""
+    p = mapper_params
+    return (f"configured: mapper {node['mapper']}"
+            + (f", {100 * p['resolution_m']:g} cm cells" if "resolution_m" in p else "")
+            + (f", loop closure {'on' if p['loop_closure'] else 'off'}"
+               if "loop_closure" in p else "")
+            + f", odometry from {node['odometry_topic']}, map start pose {list(start)}, "
+            f"LiDAR at x = {lidar_offset_x_m} m until /tf_static says otherwise"
+            + (f", saved to {node['output_prefix']}.yaml on the way down"
+               if node["output_prefix"] else ""))
+
+
+__all__ = ["NODE_PARAMETERS", "configured_line", "node_parameter_problems", "node_parameters",
            "output_prefix_problems"]

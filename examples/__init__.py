@@ -2,6 +2,7 @@
 
 Each implements one interface of amr_common.interfaces and runs in place of the project's class
 through run_sim.py, evaluate.py and tune.py (README, "Bring your own algorithm"):
-likelihood_mcl (--localizer), wavefront_planner (--planner), plain_pursuit (--follower).
+likelihood_mcl (--localizer), wavefront_planner (--planner), plain_pursuit (--follower),
+odometry_mapper (--mapper, with --slam).
 They import only the shared layer (amr_common), as a student's class would.
 """

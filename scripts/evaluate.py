@@ -27,6 +27,8 @@ Examples:
       --localizer examples.likelihood_mcl:LikelihoodFieldMcl --out out/mine   # your own link
   .venv/bin/python scripts/evaluate.py --slam --worlds all --profiles turtlebot3 --seeds 0-4 \
       --starts south_west,outer,south,south_east --duration 300   # SLAM: mapping figures
+  .venv/bin/python scripts/evaluate.py --slam --worlds lab02 --profiles turtlebot3 \
+      --duration 120 --mapper examples.odometry_mapper:OdometryMapper   # your own mapper
 Options given on the command line override the same keys of --config.
 """
 from __future__ import annotations
@@ -81,7 +83,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                                      epilog=__doc__.split("\n", 1)[1])
     parser.add_argument("--config", default=None, help="episode-set YAML (keys: worlds, map, "
                         "starts, profiles, seeds, duration, dt, controller, params_file, params, "
-                        "jobs)")
+                        "jobs, localizer, planner, follower, mapper)")
     parser.add_argument("--worlds", default=None, help="comma-separated world names or paths, "
                         "or 'all' (default lab02)")
     parser.add_argument("--map", default=None, help="with --goals or --localize: the map of "
@@ -200,16 +202,18 @@ def resolve_settings(args: argparse.Namespace) -> dict:
     settings["episode_timeout"] = timeout
     check_option_pairs(args, settings)
     settings["links"] = check_links(args, settings)
+    if args.slam:
+        args.mapper_params = check_slam_params(args.slam_param, settings["links"].get("mapper"))
     return settings
 
 
-# --localizer, --planner, --follower (and the config keys): what each goes with.
+# --localizer, --planner, --follower, --mapper (and the config keys): what each goes with.
 EVALUATE_NEEDS = {"localizer": "--localize or --goals with the filter's pose",
-                  "planner": "--goals", "follower": "--goals"}
+                  "planner": "--goals", "follower": "--goals", "mapper": "--slam"}
 
 
 def check_links(args: argparse.Namespace, settings: dict) -> dict[str, str]:
-    """The --localizer / --planner / --follower classes, loaded now: {link: MODULE:CLASS}.
+    """The --localizer / --planner / --follower / --mapper classes, loaded now: {link: spec}.
 
     ControllerSpecError (one line) naming what a class lacks; EvaluationError for a link the
     episodes do not run (a planner without --goals).
@@ -217,7 +221,8 @@ def check_links(args: argparse.Namespace, settings: dict) -> dict[str, str]:
     from link_options import check_links as load_links
     runs = {"localizer": bool(args.localize or (settings["goals"]
                                                  and settings["pose_source"] == "filter")),
-            "planner": bool(settings["goals"]), "follower": bool(settings["goals"])}
+            "planner": bool(settings["goals"]), "follower": bool(settings["goals"]),
+            "mapper": bool(args.slam)}
     try:
         return load_links({link: settings.get(link) for link in EVALUATE_NEEDS}, runs,
                           EVALUATE_NEEDS)
@@ -240,16 +245,18 @@ def check_option_pairs(args: argparse.Namespace, settings: dict) -> None:
         raise EvaluationError("--slam-param needs --slam")
     if args.slam and (args.localize or settings["goals"]):
         raise EvaluationError("--slam (mapping) excludes --localize and --goals")
-    if args.slam:  # the Mapper's own checks
-        from amr_mapping.mapper_params import check_parameters
-        try:
-            args.mapper_params = parse_overrides(args.slam_param)
-            check_parameters(args.mapper_params)
-        except ValueError as exc:
-            raise EvaluationError(f"--slam-param: {exc}") from None
     if args.ray is not None:
         check_ray_options(args.ray, settings["jobs"],
                           60.0 if args.ray_keep_workers is None else args.ray_keep_workers)
+
+
+def check_slam_params(items: list[str], mapper: str | None) -> dict:
+    """--slam-param for the mapper's class (link_options.check_mapper_params); EvaluationError."""
+    from link_options import check_mapper_params
+    try:
+        return check_mapper_params(items, mapper)
+    except ValueError as exc:
+        raise EvaluationError(f"--slam-param: {exc}") from None
 
 
 def check_localization_options(args: argparse.Namespace, settings: dict, specs) -> None:
@@ -307,7 +314,9 @@ def episode_specs(settings: dict) -> list:
                         settings["seeds"], duration=settings["duration"], dt=settings["dt"],
                         controller=settings["controller"], params=settings["params"],
                         goals=settings["goals"], pose_source=settings["pose_source"],
-                        map=settings["map"], warnings=warnings, links=settings.get("links"))
+                        map=settings["map"], warnings=warnings,
+                        links={link: spec for link, spec in settings.get("links", {}).items()
+                               if link != "mapper"})
     check_controller(settings["controller"], settings["params"], settings["dt"])
     for warning in warnings:  # the map and the world disagree: allowed, said
         print(f"evaluate: warning: {warning}", file=sys.stderr)

@@ -2,7 +2,8 @@
 
 And the particle filter's (--localize, --pf-param and the map check): each class is loaded, and
 the parameters checked, before anything runs (one line, exit code 2). evaluate.py checks its
---localizer / --planner / --follower with check_links too.
+--localizer / --planner / --follower / --mapper with check_links too, and its --slam-param
+with check_mapper_params.
 """
 from __future__ import annotations
 
@@ -27,6 +28,8 @@ LINK_OPTIONS = {
                "examples.wavefront_planner:WavefrontPlanner",
     "follower": "a path follower (amr_common.interfaces.PathFollower), e.g. "
                 "examples.plain_pursuit:PlainPursuit",
+    "mapper": "a mapper (amr_common.interfaces.Mapper), e.g. "
+              "examples.odometry_mapper:OdometryMapper",
 }
 RUN_SCRIPT_NEEDS = {"localizer": "--localize or --goal", "planner": "--goal",
                     "follower": "--goal"}
@@ -68,6 +71,38 @@ def check_link_options(args, needs: dict[str, bool]) -> dict[str, str]:
     """
     return check_links({link: getattr(args, link, None) for link in needs}, needs,
                        RUN_SCRIPT_NEEDS)
+
+
+def check_mapper_params(items: list[str], mapper: str | None) -> dict[str, Any]:
+    """evaluate.py's --slam-param NAME:=VALUE for the mapper's class: typed; ValueError.
+
+    Names from the class's parameter_descriptions(); the project's Mapper checks the values
+    here, another class when an episode builds it. (The run scripts' --slam-param also takes
+    the slam node's own parameters: launch_slam.slam_overrides.)
+    """
+    from amr_common.controller_loader import (
+        DEFAULT_MAPPER,
+        described_parameters,
+        load_class,
+        parse_overrides,
+    )
+    from amr_common.parameters import typed_values
+    overrides = parse_overrides(items)
+    if mapper in (None, DEFAULT_MAPPER):
+        from amr_mapping.mapper_params import check_parameters
+        check_parameters(overrides)
+        return overrides
+    table = described_parameters(load_class(mapper, "mapper"))
+    if table is None:  # the class lists no parameters: it checks them itself
+        return overrides
+    unknown = [name for name in overrides if name not in table]
+    if unknown:
+        raise ValueError(f"{', '.join(unknown)}: no such parameter of mapper {mapper}; "
+                         f"known: {', '.join(sorted(table))}")
+    overrides, problems = typed_values(table, overrides)
+    if problems:
+        raise ValueError("; ".join(problems))
+    return overrides
 
 
 def check_particle_filter(args, script: str, set_by_script: dict[str, str]) -> None:

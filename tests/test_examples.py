@@ -2,7 +2,7 @@
 
 Headless (the episodes), through evaluate.py and through the ROS graph (run_sim.py); a class
 that cannot be loaded is one line and exit code 2 before anything runs; compare.py sets two
-result sets side by side. Short episodes on lab02 (the examples localize and drive there).
+result sets side by side. Short episodes on lab02 (the examples localize, drive and map there).
 """
 from __future__ import annotations
 
@@ -26,6 +26,7 @@ import tune  # noqa: E402
 MCL = "examples.likelihood_mcl:LikelihoodFieldMcl"
 WAVEFRONT = "examples.wavefront_planner:WavefrontPlanner"
 PURSUIT = "examples.plain_pursuit:PlainPursuit"
+ODOMETRY_MAPPER = "examples.odometry_mapper:OdometryMapper"
 EXAMPLES = ["--localizer", MCL, "--planner", WAVEFRONT, "--follower", PURSUIT]
 
 
@@ -33,7 +34,9 @@ def test_the_examples_implement_their_interfaces():
     world = World.load("lab02")
     built = {"localizer": load_class(MCL, "localizer")(world, particles=100),
              "planner": load_class(WAVEFRONT, "planner")(world),
-             "follower": load_class(PURSUIT, "follower")(0.05)}
+             "follower": load_class(PURSUIT, "follower")(0.05),
+             "mapper": load_class(ODOMETRY_MAPPER, "mapper")({})}
+    assert isinstance(built["mapper"], interfaces.Mapper)
     assert isinstance(built["localizer"], interfaces.Localizer)
     assert isinstance(built["planner"], interfaces.Planner)
     assert isinstance(built["follower"], interfaces.PathFollower)
@@ -60,6 +63,46 @@ def test_the_three_examples_drive_to_the_goal_headless():
                                     record_trajectory=False)
     assert result.goal_reached and result.collisions == 0 and result.stalled is False
     assert result.false_localizations == 0 and result.final_position_error_m < 0.03
+
+
+def test_the_odometry_mapper_maps_at_known_poses_and_smears_as_the_odometry_drifts():
+    from amr_evaluation.mapping_episode import TYPICAL_DRIFT, run_mapping_episode
+    exact, drifting = (run_mapping_episode("lab02", profile="turtlebot3", seed=0,
+                                           duration=40.0, drift=drift, mapper=ODOMETRY_MAPPER)
+                       for drift in (None, TYPICAL_DRIFT))
+    for result in (exact, drifting):
+        assert result.mapper == ODOMETRY_MAPPER and result.collisions == 0
+        assert result.loop_closure is False and result.loop_closures is None  # not reported
+        assert result.update_ms_median > 0.0 and result.scans == 201
+    # Exact poses: every wall it saw is in the map (range noise leaves a few cells behind it).
+    assert exact.trajectory_rmse_m < 1e-9
+    assert exact.recall >= 0.95 and exact.precision >= 0.75
+    # Drift: its poses are the odometry's, and the walls drawn again land beside the first.
+    assert drifting.trajectory_max_m == pytest.approx(drifting.odometry_max_error_m)
+    assert drifting.trajectory_max_m > 0.03
+    assert drifting.precision < exact.precision - 0.1
+
+
+def test_evaluate_maps_with_the_odometry_mapper(tmp_path, capsys):
+    out = tmp_path / "slam"
+    assert evaluate.main(["--slam", "--worlds", "lab02", "--profiles", "turtlebot3",
+                          "--duration", "20", "--jobs", "1", "--mapper", ODOMETRY_MAPPER,
+                          "--slam-param", "resolution_m:=0.03", "--out", str(out)]) == 0
+    assert f"mapper {ODOMETRY_MAPPER} {{'resolution_m': 0.03}}" in capsys.readouterr().out
+    data = json.loads((out / "results.json").read_text())
+    assert data["summary"]["mapper"] == ODOMETRY_MAPPER and data["summary"]["failed"] == 0
+    episode = data["episodes"][0]
+    assert episode["mapper"] == ODOMETRY_MAPPER and episode["loop_closure"] is False
+    assert 0.5 < episode["precision"] <= 1.0 and episode["recall"] > 0.8
+
+
+def test_evaluate_takes_the_mapper_from_its_config(tmp_path, capsys):
+    config = tmp_path / "set.yaml"
+    config.write_text(f"worlds: [lab02]\nmapper: {PURSUIT}\n")
+    assert evaluate.main(["--config", str(config), "--slam", "--duration", "1"]) == 2
+    assert evaluate.main(["--config", str(config), "--duration", "1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert f"mapper '{PURSUIT}' has no update" in err[0] and "--mapper needs --slam" in err[1]
 
 
 def test_evaluate_runs_the_examples_and_compare_sets_them_side_by_side(tmp_path, capsys):
@@ -113,6 +156,14 @@ def test_run_sim_runs_the_examples_in_the_ros_graph(tmp_path):
     (evaluate, ["--worlds", "lab02", "--goals", "inner_far", "--localizer", PURSUIT],
      f"localizer '{PURSUIT}' has no set_scan_geometry"),
     (evaluate, ["--worlds", "lab02", "--follower", PURSUIT], "--follower needs --goals"),
+    (evaluate, ["--worlds", "lab02", "--slam", "--mapper", PURSUIT],
+     f"mapper '{PURSUIT}' has no update"),
+    (evaluate, ["--worlds", "lab02", "--slam", "--mapper", "examples.odometry_mapper:Mapper"],
+     "module 'examples.odometry_mapper' has no 'Mapper'"),
+    (evaluate, ["--worlds", "lab02", "--mapper", ODOMETRY_MAPPER], "--mapper needs --slam"),
+    (evaluate, ["--worlds", "lab02", "--slam", "--mapper", ODOMETRY_MAPPER, "--slam-param",
+                "loop_closure:=false"], "--slam-param: loop_closure: no such parameter of "
+                                       f"mapper {ODOMETRY_MAPPER}"),
     (tune, ["--worlds", "lab02", "--goals", "inner_far", "--space", "kp=1,2", "--planner",
             MCL], f"planner '{MCL}' has no plan, warm_up"),
 ])
@@ -156,3 +207,19 @@ def test_the_slam_node_refuses_a_mapper_without_the_interface(ros):
     node = ros.add(SlamNode("slam_wrong", context=ros.context, parameter_overrides=[
         Parameter("mapper", value=MCL)]))
     assert node.trigger_configure().name == "FAILURE"
+    mine = ros.add(SlamNode("slam_mine", context=ros.context, parameter_overrides=[
+        Parameter("mapper", value=ODOMETRY_MAPPER), Parameter("map_size_m", value=8.0)]))
+    assert mine.trigger_configure().name == "SUCCESS"  # its own parameters, declared
+    assert mine.mapper.log_odds.shape == (400, 400)
+
+
+@pytest.mark.slow
+def test_run_sim_maps_with_the_odometry_mapper_in_the_ros_graph(tmp_path):
+    report = tmp_path / "run.json"
+    assert run_sim.main(["--world", "lab02", "--profile", "turtlebot3", "--duration", "20",
+                         "--slam", "--mapper", ODOMETRY_MAPPER, "--map-out",
+                         str(tmp_path / "map"), "--report", str(report)]) == 0
+    slam = json.loads(report.read_text())["slam"]
+    assert slam["scans"] >= 90 and slam["trajectory_rmse_m"] < 1e-9  # the simulator's odometry
+    assert slam["precision"] >= 0.75 and slam["recall"] >= 0.95
+    assert World.load(str(tmp_path / "map" / "map.yaml")).starts  # a map a run can use
