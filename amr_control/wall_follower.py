@@ -45,7 +45,13 @@ from amr_common.geometry import wrap_angle
 from amr_common.python_logging import ThrottledLogger
 from amr_control.look_around import IdleTurns, LookAround
 from amr_control.pose_trail import PoseTrail
-from amr_control.scan_sectors import LocalPointCloud, Perception, PerceptionSpec, ScanGeometry
+from amr_control.scan_sectors import (
+    LocalPointCloud,
+    Perception,
+    PerceptionSpec,
+    ScanGeometry,
+    ScanTiming,
+)
 from amr_control.wall_follower_inputs import as_ranges, checked_odometry, limit_to_free_path
 from amr_control.wall_follower_params import PARAMETERS, check_parameters
 
@@ -78,8 +84,9 @@ class WallFollower:
             path_half_width_m=self.robot_radius_m + self.path_margin_m,
             side_window_m=self.side_window_half_length_m, side_open_m=self.side_open_distance_m,
             fit_half_length_m=self.wall_fit_half_length_m)
+        timing = ScanTiming(self.scan_revolution_s, self.memory_time_s, self.memory_range_m)
         self._cloud = LocalPointCloud(self.invalid_hold_time_s, self.invalid_hold_range_m,
-                                      self.lidar_offset_x_m, spec)
+                                      self.lidar_offset_x_m, spec, timing)
         self._perception: Perception | None = None
         self.state = "follow_wall"
         self.wall_distance_error: float | None = None
