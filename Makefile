@@ -11,7 +11,7 @@ PY := $(VENV)/bin/python
 DEPS_STAMP := $(VENV)/.stamp-deps
 CLUSTER_STAMP := $(VENV)/.stamp-cluster
 MSGS_STAMP := $(VENV)/.stamp-amr_msgs
-MSGS_SOURCES := $(wildcard amr_msgs/msg/*.msg) amr_msgs/CMakeLists.txt amr_msgs/package.xml \
+MSGS_SOURCES := $(wildcard amr_msgs/msg/*.msg amr_msgs/srv/*.srv) amr_msgs/CMakeLists.txt amr_msgs/package.xml \
 	tools/cmake/ros_pypi_wheels.cmake tools/build_amr_msgs.py
 # tf2_msgs (TFMessage for /tf) is not among the PyPI wheels: built into the venv unless an apt ROS
 # install provides it. The amr_msgs stamp depends on it, so every target gets both.

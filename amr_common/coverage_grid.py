@@ -22,6 +22,8 @@ from typing import Sequence
 
 import numpy as np
 
+from amr_common.cell_grid import CellIndexing
+
 MAX_GRID_CELLS = 4_000_000  # 800 m x 800 m at 0.4 m; about 30 MB of working arrays
 _CHUNK_CELLS = 262_144  # rows are processed in blocks of about this many cells
 _EPS = 1e-9  # relative slack so that a boundary on a grid line does not add a row of cells
@@ -45,27 +47,26 @@ def check_grid_size(columns: float, rows: float, cell_size: float, what: str,
 
 
 @dataclass(frozen=True)
-class CoverageGrid:
+class CoverageGrid(CellIndexing):
     """Square cells of `cell_size` m and which of them are free.
 
-    Cell (row i, column j) has its centre at
-    (origin_x + (j + 0.5) * cell_size, origin_y + (i + 0.5) * cell_size).
+    Indexed as every grid of a world (amr_common.cell_grid): cell (row i, column j) has its
+    centre at (origin_x + (j + 0.5) * cell_size, origin_y + (i + 0.5) * cell_size).
     """
 
-    origin_x: float
-    origin_y: float
-    cell_size: float
+    resolution: float  # the cell size, m
+    origin: tuple[float, float]  # (x, y) of the lower-left corner of cell (0, 0), m
     free: np.ndarray  # (rows, columns) bool
 
     @property
-    def x_centres(self) -> np.ndarray:
-        """Centre x of each column (m)."""
-        return self.origin_x + (np.arange(self.free.shape[1]) + 0.5) * self.cell_size
+    def shape(self) -> tuple[int, int]:
+        """(rows, columns)."""
+        return self.free.shape
 
     @property
-    def y_centres(self) -> np.ndarray:
-        """Centre y of each row (m)."""
-        return self.origin_y + (np.arange(self.free.shape[0]) + 0.5) * self.cell_size
+    def cell_size(self) -> float:
+        """The cell size (m): the world file's `cell_size`."""
+        return self.resolution
 
     def free_centres(self) -> np.ndarray:
         """(K, 2) centres of the free cells, row by row (y, then x, increasing)."""
@@ -75,12 +76,11 @@ class CoverageGrid:
     def visited(self, positions: np.ndarray) -> np.ndarray:
         """(rows, columns) bool: cells whose centre some position passed within cell_size / 2."""
         pos = np.asarray(positions, dtype=np.float64).reshape(-1, 2)
-        cs = self.cell_size
-        column = np.floor((pos[:, 0] - self.origin_x) / cs)
-        row = np.floor((pos[:, 1] - self.origin_y) / cs)
+        row, column = self.cells_of(pos[:, 0], pos[:, 1])
         # A point within cs / 2 of a centre lies in that centre's cell.
-        near = np.hypot(self.origin_x + (column + 0.5) * cs - pos[:, 0],
-                        self.origin_y + (row + 0.5) * cs - pos[:, 1]) <= cs / 2
+        centres = self.cell_centres(row, column)
+        near = np.hypot(centres[:, 0] - pos[:, 0], centres[:, 1] - pos[:, 1]) <= \
+            self.resolution / 2
         rows, columns = self.free.shape
         keep = near & (column >= 0) & (column < columns) & (row >= 0) & (row < rows)
         out = np.zeros(self.free.shape, dtype=bool)
@@ -117,7 +117,7 @@ def build_coverage_grid(segments: np.ndarray, boundary: np.ndarray | None,
         free[rows, columns] &= ~inside_polygon_grid(hole, xs[columns], ys[rows])
     for segment in segments:
         _clear_near_segment(free, segment, xs, ys, margin)
-    return CoverageGrid(grid_x, grid_y, cs, free)
+    return CoverageGrid(cs, (grid_x, grid_y), free)
 
 
 def inside_polygon_points(polygon: np.ndarray, points: np.ndarray) -> np.ndarray:

@@ -39,6 +39,10 @@ class LifecycleStartupError(RuntimeError):
     """A managed node is missing or failed a transition; the message names it."""
 
 
+class StartupInterrupted(RuntimeError):
+    """The stop flag (Ctrl-C, SIGTERM) was set during start-up: no further transition."""
+
+
 class LifecycleManager(Node):
     """A plain node that configures, then activates, lifecycle nodes in a given order.
 
@@ -65,11 +69,17 @@ class LifecycleManager(Node):
         self.node_startup_order = [n for n in self.get_parameter("node_startup_order").value
                                    if n]
         self._lifecycle_clients: dict[str, tuple] = {}
+        self._stop: StopFlag | None = None
 
-    def startup(self, executor: Executor) -> None:
-        """Configure, then activate, every node in order. Raises LifecycleStartupError."""
+    def startup(self, executor: Executor, stop: StopFlag | None = None) -> None:
+        """Configure, then activate, every node in order. Raises LifecycleStartupError.
+
+        With `stop`: StartupInterrupted as soon as it is set (between transitions, or while
+        waiting for a node), the nodes left in the states they reached.
+        """
         if not self.node_startup_order:
             raise LifecycleStartupError("node_startup_order is empty: nothing to start")
+        self._stop = stop
         for name in self.node_startup_order:
             self._wait_for_services(name, executor)
         for transition in (Transition.TRANSITION_CONFIGURE, Transition.TRANSITION_ACTIVATE):
@@ -95,6 +105,7 @@ class LifecycleManager(Node):
         deadline = time.monotonic() + timeout
         clients = self._clients_for(name)
         while not all(client.service_is_ready() for client in clients):
+            self._check_stop()
             if time.monotonic() > deadline:
                 raise LifecycleStartupError(
                     f"lifecycle node '{name}' not found: its services {name}/get_state and "
@@ -104,9 +115,13 @@ class LifecycleManager(Node):
 
     def _call(self, name: str, client, request, executor: Executor, what: str):
         timeout = self.get_parameter("transition_timeout").value
+        self._check_stop()
         future = client.call_async(request)
         deadline = time.monotonic() + timeout
         while not future.done():
+            if self._stop is not None and self._stop.requested:
+                client.remove_pending_request(future)
+                self._check_stop()
             if time.monotonic() > deadline:
                 client.remove_pending_request(future)
                 raise LifecycleStartupError(
@@ -116,6 +131,10 @@ class LifecycleManager(Node):
             raise LifecycleStartupError(f"lifecycle node '{name}': '{what}' raised "
                                         f"{future.exception()!r}")
         return future.result()
+
+    def _check_stop(self) -> None:
+        if self._stop is not None and self._stop.requested:
+            raise StartupInterrupted("start-up interrupted")
 
     def _transition(self, name: str, transition: int, executor: Executor) -> None:
         label = _TRANSITION_LABELS[transition]
@@ -143,15 +162,18 @@ def run_managed(manager: LifecycleManager, stop: StopFlag,
     Then the in-process nodes go through their shutdown transition in reverse startup order
     (controllers first: their final zero command goes out while DDS is still up), everything is
     destroyed and rclpy shut down. The caller has run rclpy.init(signal_handler_options=NO) and
-    installed `stop`. Returns the process exit code.
+    installed `stop`; a stop during start-up ends it there (no further transition). Returns the
+    process exit code (0 after a stop: the caller knows it from `stop`).
     """
     executor = make_executor()
     for node in [*nodes, manager]:
         executor.add_node(node)
     exit_code = 0
     try:
-        manager.startup(executor)
+        manager.startup(executor, stop)
         spin_until_stopped(executor, stop)  # stay up, as a launch file's manager would
+    except StartupInterrupted:
+        manager.get_logger().info("start-up interrupted: shutting the nodes down")
     except LifecycleStartupError as exc:
         manager.get_logger().error(str(exc))
         exit_code = 1

@@ -278,8 +278,12 @@ def write_map(raster: Raster, prefix: str | Path, image_format: str = "pgm",
         unknown = set(extras) - PROJECT_KEYS
         if unknown:
             raise MapFileError(f"{yaml_path}: unknown extra key(s) {sorted(unknown)}")
-        text += ("# This project's keys (amr_common.map_file); Nav2's map_server ignores them.\n"
-                 + yaml.safe_dump(_plain(extras), sort_keys=False, default_flow_style=None))
+        # One top-level key at a time: a mapping of scalars only would be dumped as one
+        # flow line ({name: x}), which is no YAML after the block keys above.
+        text += "# This project's keys (amr_common.map_file); Nav2's map_server ignores them.\n"
+        for key, value in _plain(extras).items():
+            text += yaml.safe_dump({key: value}, sort_keys=False, default_flow_style=(
+                None if isinstance(value, (dict, list)) else False))
     try:
         yaml_path.parent.mkdir(parents=True, exist_ok=True)
         _replace_atomically(image_path, lambda f: _write_image(f, pixels, image_format,
@@ -299,8 +303,7 @@ def world_as_map(world: World, resolution: float = CONVERT_RESOLUTION
     place, and the free space loses half a cell along each wall); the extras keep its name,
     starts, goals and coverage grid (write_map(raster, prefix, extras=extras)).
     """
-    grid = OccupancyGrid.from_world(world, resolution)
-    raster = Raster(grid.occupancy_values(), grid.resolution, grid.origin)
+    raster = OccupancyGrid.from_world(world, resolution).raster()
     grid_origin = world.grid_origin
     if grid_origin is None and world.boundary is not None:  # the coverage grid's default
         grid_origin = tuple(float(v) for v in world.boundary.min(axis=0))

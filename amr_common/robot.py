@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import math
 
+from amr_common.jit import jit
+
 WHEEL_RADIUS = 0.033  # m
 TRACK = 0.16  # m, wheel separation
 ROBOT_RADIUS = 0.105  # m, footprint
@@ -91,13 +93,46 @@ def sinc_half(angle: float) -> float:
     return math.sin(half) / half
 
 
+# --- the pose-integration step: every pose that moves by a (v, w) step moves with these -------
+# A step that turns by dtheta moves the robot along the chord of its arc, at the mid heading
+# theta + dtheta / 2. The exact unicycle chord is v dt sinc_half(w dt); the particle filter's
+# motion model takes v dt (the arc for the chord: second-order close, and cheaper).
+
+def arc_displacement(theta: float, chord: float, dtheta: float) -> tuple[float, float]:
+    """(dx, dy) of a step of length `chord` (m) at the mid heading theta + dtheta / 2."""
+    mid = theta + 0.5 * dtheta
+    return chord * math.cos(mid), chord * math.sin(mid)
+
+
+# The compiled twin, for numba kernels (the particle filter's motion model).
+arc_displacement_kernel = jit(arc_displacement)
+
+
+def arc_step(x: float, y: float, theta: float, chord: float,
+             dtheta: float) -> tuple[float, float, float]:
+    """The pose (x, y, theta) after a step along `chord` (m) that turns by dtheta (rad).
+
+    The heading is not wrapped (callers keep theirs in their own range).
+    """
+    dx, dy = arc_displacement(theta, chord, dtheta)
+    return x + dx, y + dy, theta + dtheta
+
+
+def step_chord(dx: float, dy: float, theta: float, dtheta: float) -> float:
+    """The chord of the step that moved the robot by (dx, dy) while it turned theta -> +dtheta.
+
+    The displacement projected on the mid heading (arc_displacement's inverse; sideways motion,
+    such as sliding along a wall, drops out). arc length = chord / sinc_half(dtheta).
+    """
+    mid = theta + 0.5 * dtheta
+    return dx * math.cos(mid) + dy * math.sin(mid)
+
+
 def unicycle_step(x: float, y: float, theta: float, v: float, w: float,
                   dt: float) -> tuple[float, float, float]:
     """Exact integration of the unicycle model over dt with a constant twist (v, w)."""
     dtheta = w * dt
-    chord = v * dt * sinc_half(dtheta)
-    mid = theta + 0.5 * dtheta
-    return x + chord * math.cos(mid), y + chord * math.sin(mid), theta + dtheta
+    return arc_step(x, y, theta, v * dt * sinc_half(dtheta), dtheta)
 
 
 def encoder_increments(ds: float, dtheta: float) -> tuple[float, float]:

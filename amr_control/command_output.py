@@ -14,7 +14,7 @@ from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackRet
 from rclpy.publisher import Publisher
 
 from amr_common.lifecycle_node import GuardedLifecycleNode
-from amr_common.parameter_table import finite
+from amr_common.parameter_table import above
 from amr_common.qos import RELIABLE_10
 from amr_common.robot import MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED
 
@@ -26,18 +26,15 @@ COMMAND_PARAMETERS: dict[str, tuple[Any, str]] = {
     "angular_sign": (1, "+1 for REP 103 (counter-clockwise positive), -1 for setups with the "
                         "opposite convention"),
 }
+# The rules of the parameters every commanding node has (each describes them in its table).
+COMMAND_RULES = {"dt": above(0.0), "data_timeout": above(0.0)}
 
 
 def command_parameter_problems(p: dict[str, Any]) -> list[str]:
-    """What is wrong with the commanding parameters dt, angular_sign and data_timeout."""
-    problems = []
-    if not (finite(p["dt"]) and p["dt"] > 0):
-        problems.append(f"dt must be a positive number of seconds (got {p['dt']})")
+    """What is wrong with angular_sign (dt and data_timeout: COMMAND_RULES, in the tables)."""
     if p["angular_sign"] not in (1, -1):
-        problems.append(f"angular_sign must be 1 or -1 (got {p['angular_sign']})")
-    if not (finite(p["data_timeout"]) and p["data_timeout"] > 0):
-        problems.append(f"data_timeout must be > 0 s (got {p['data_timeout']})")
-    return problems
+        return [f"angular_sign must be 1 or -1 (got {p['angular_sign']})"]
+    return []
 
 
 def limit_command(v: float, w: float) -> tuple[float, float]:
@@ -161,5 +158,5 @@ class CommandingNode(GuardedLifecycleNode):
             self._output.publish_zero(why, self._last_stamp if self.simulation else None, force)
 
 
-__all__ = ["COMMAND_PARAMETERS", "CommandOutput", "CommandingNode", "command_parameter_problems",
-           "limit_command"]
+__all__ = ["COMMAND_PARAMETERS", "COMMAND_RULES", "CommandOutput", "CommandingNode",
+           "command_parameter_problems", "limit_command"]

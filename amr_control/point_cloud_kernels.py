@@ -19,6 +19,8 @@ import math
 import numpy as np
 
 from amr_common.jit import jit
+from amr_common.robot import arc_displacement_kernel
+from amr_common.scan_returns import is_return
 from amr_control.point_memory_kernels import deskew_point, remember
 
 TWO_PI = 2.0 * math.pi
@@ -39,9 +41,7 @@ def move_points(cloud, distance, rotation, dt):
         ages[i] += dt
     if n == 0 or (distance == 0.0 and rotation == 0.0):
         return
-    half = 0.5 * rotation
-    shift_x = distance * math.cos(half)
-    shift_y = distance * math.sin(half)
+    shift_x, shift_y = arc_displacement_kernel(0.0, distance, rotation)  # in the old frame
     c = math.cos(rotation)
     s = math.sin(rotation)
     for i in range(n):
@@ -85,7 +85,7 @@ def merge_scan(cloud, ranges, ray_cos, ray_sin, angle_min, angle_increment,
     n_new = 0
     for i in range(n_rays):
         r = ranges[i]
-        ok = math.isfinite(r) and r > 0.0 and r >= range_min and r <= range_max
+        ok = is_return(r, range_min, range_max)
         valid[i] = ok
         if ok:
             n_new += 1

@@ -25,6 +25,7 @@ import math
 import numpy as np
 
 from amr_common.jit import jit
+from amr_common.robot import arc_displacement_kernel
 
 TWO_PI = 2.0 * math.pi
 
@@ -40,11 +41,10 @@ def deskew_point(x, y, angle, revolution, speed, turn_rate):
     if revolution <= 0.0:
         return x, y
     age = revolution * (angle % TWO_PI) / TWO_PI
-    distance = speed * age
     rotation = turn_rate * age
-    half = 0.5 * rotation
-    sx = x - distance * math.cos(half)
-    sy = y - distance * math.sin(half)
+    shift_x, shift_y = arc_displacement_kernel(0.0, speed * age, rotation)
+    sx = x - shift_x
+    sy = y - shift_y
     c = math.cos(rotation)
     s = math.sin(rotation)
     return c * sx + s * sy, -s * sx + c * sy

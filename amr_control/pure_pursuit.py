@@ -42,11 +42,12 @@ from typing import Any
 import numpy as np
 
 from amr_common.geometry import without_repeats, wrap_angle
-from amr_common.parameter_table import finite, table_values
+from amr_common.parameter_table import Param, above, at_least, checked_values, finite, ruled
 from amr_common.robot import MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED, ROBOT_RADIUS, TRACK
+from amr_common.scan_returns import return_mask
 
 # name: (default, description with units). The pure_pursuit node declares each as a parameter.
-PARAMETERS: dict[str, tuple[Any, str]] = {
+_TABLE: dict[str, tuple[Any, str]] = {
     "max_linear_speed_mps": (MAX_LINEAR_SPEED, "Cruise speed [m/s]; at most the Burger's "
                                                f"{MAX_LINEAR_SPEED}."),
     "max_angular_speed_radps": (2.0, f"Angular speed limit [rad/s]; at most {MAX_ANGULAR_SPEED}."),
@@ -80,32 +81,26 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
                               "(-0.032 on a real Burger)."),
     "track_m": (TRACK, "Wheel separation [m], to keep both wheels within max_linear_speed."),
 }
-_SIGNED = {"lidar_offset_x_m"}
+# Numbers >= 0 but for these; speeds above the Burger's limits are clipped (check_parameters).
+PARAMETERS: dict[str, Param] = ruled(
+    _TABLE, at_least(0.0), lidar_offset_x_m=None,
+    **{name: above(0.0) for name in (
+        "max_linear_speed_mps", "max_angular_speed_radps", "min_lookahead_m",
+        "rotate_speed_radps", "goal_tolerance_m", "max_linear_accel_mps2",
+        "max_path_deviation_m", "regulated_min_radius_m", "approach_gain_per_s")})
 _PROJECTION_WINDOW_M = 0.5  # how far along the path the robot's projection may move per step
 
 
 def check_parameters(overrides: dict[str, Any]) -> dict[str, float]:
     """Every parameter's value (defaults updated with `overrides`), checked.
 
-    Finite numbers, >= 0 (lidar_offset_x_m any sign), speeds clipped to the Burger's limits.
-    ValueError names the problem or unknown names.
+    Each against its rule in PARAMETERS, speeds clipped to the Burger's limits. ValueError
+    names every problem or unknown names.
     """
-    values = table_values(PARAMETERS, overrides, "PurePursuit")
-    checked: dict[str, float] = {}
-    for name, value in values.items():
-        if not finite(value) or (value < 0 and name not in _SIGNED):
-            raise ValueError(f"PurePursuit: {name} must be a finite number"
-                             f"{'' if name in _SIGNED else ' >= 0'}, got {value!r}")
-        checked[name] = float(value)
+    checked = checked_values(PARAMETERS, overrides, "PurePursuit")
     checked["max_linear_speed_mps"] = min(checked["max_linear_speed_mps"], MAX_LINEAR_SPEED)
     checked["max_angular_speed_radps"] = min(checked["max_angular_speed_radps"],
                                              MAX_ANGULAR_SPEED)
-    positive = ("max_linear_speed_mps", "max_angular_speed_radps", "min_lookahead_m",
-                "rotate_speed_radps", "goal_tolerance_m", "max_linear_accel_mps2",
-                "max_path_deviation_m", "regulated_min_radius_m", "approach_gain_per_s")
-    for name in positive:
-        if checked[name] <= 0:
-            raise ValueError(f"PurePursuit: {name} must be > 0, got {checked[name]!r}")
     if checked["max_lookahead_m"] < checked["min_lookahead_m"]:
         raise ValueError("PurePursuit: max_lookahead_m must be >= min_lookahead_m")
     if not checked["heading_tolerance_rad"] < checked["rotate_to_heading_angle_rad"]:
@@ -119,8 +114,8 @@ def scan_clearance(ranges: np.ndarray, angle_min: float, angle_increment: float,
                    robot_radius: float) -> float | None:
     """Smallest distance from the robot's footprint to a scan point (m).
 
-    None without a valid reading. Readings outside [range_min, range_max], NaN and inf are no
-    returns.
+    None without a return (amr_common.scan_returns: NaN, inf, 0.0 and readings outside
+    [range_min, range_max] are none).
     """
     points = _scan_points(ranges, angle_min, angle_increment, range_min, range_max,
                           lidar_offset_x)
@@ -155,8 +150,7 @@ def _scan_points(ranges: np.ndarray, angle_min: float, angle_increment: float,
                  lidar_offset_x: float) -> tuple[np.ndarray, np.ndarray] | None:
     """(x, y) of the valid readings in the robot's frame (m), or None if there is none."""
     r = np.asarray(ranges, dtype=np.float64)
-    with np.errstate(invalid="ignore"):
-        valid = np.isfinite(r) & (r >= range_min) & (r <= range_max)
+    valid = return_mask(r, range_min, range_max)
     if not valid.any():
         return None
     cos_a, sin_a = _ray_directions(float(angle_min), float(angle_increment), len(r))

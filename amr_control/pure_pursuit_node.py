@@ -33,6 +33,7 @@ from sensor_msgs.msg import LaserScan
 
 from amr_common.geometry import polyline_length
 from amr_common.node_runner import run_lifecycle_node
+from amr_common.parameter_table import Param, ruled
 from amr_common.parameters import declare_parameters, read_parameters
 from amr_common.qos import LATCHED, RELIABLE_10, scan_qos
 from amr_common.ros_conversions import (
@@ -43,6 +44,7 @@ from amr_common.ros_conversions import (
 )
 from amr_control.command_output import (
     COMMAND_PARAMETERS,
+    COMMAND_RULES,
     CommandingNode,
     CommandOutput,
     command_parameter_problems,
@@ -50,7 +52,7 @@ from amr_control.command_output import (
 )
 from amr_control.pure_pursuit import PurePursuit, scan_clearance, scan_free_ahead
 
-_NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
+_NODE_PARAMETERS: dict[str, Param] = ruled({
     "simulation": (True, "true: answer each localized /pose (lockstep with the simulator); "
                          "false: robot mode, compute on a timer every dt with the newest pose"),
     "dt": (0.05, "Control period in seconds"),
@@ -62,7 +64,7 @@ _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
     "path_topic": ("/path", "nav_msgs/Path input (transient local, from the planner)"),
     "scan_topic": ("/scan", "sensor_msgs/LaserScan input for the proximity slow-down"),
     "cmd_vel_topic": ("/cmd_vel", "Velocity command output"),
-}
+}, **COMMAND_RULES)
 
 
 class PurePursuitNode(CommandingNode):
@@ -105,10 +107,11 @@ class PurePursuitNode(CommandingNode):
         problems += tuning_problems
         if not problems:
             problems = command_parameter_problems(p)
-        try:
-            pursuit = PurePursuit(p["dt"] if not problems else 0.05, **tuning)
-        except (TypeError, ValueError) as exc:
-            problems.append(str(exc))
+        if not problems:
+            try:
+                pursuit = PurePursuit(p["dt"], **tuning)
+            except (TypeError, ValueError) as exc:  # its checks of several parameters
+                problems.append(str(exc))
         if problems:
             self.get_logger().error("configure failed: " + "; ".join(problems))
             return TransitionCallbackReturn.FAILURE

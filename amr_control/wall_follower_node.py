@@ -40,6 +40,7 @@ from amr_common.controller_loader import (
 )
 from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.node_runner import run_lifecycle_node
+from amr_common.parameter_table import Param, at_least, check_values, ruled
 from amr_common.parameters import declare_parameters, read_parameters
 from amr_common.qos import RELIABLE_10, scan_qos
 from amr_common.robot import (
@@ -50,13 +51,14 @@ from amr_common.robot import (
 from amr_common.tf import StaticTransformListener
 from amr_control.command_output import (
     COMMAND_PARAMETERS,
+    COMMAND_RULES,
     CommandingNode,
     CommandOutput,
     command_parameter_problems,
     limit_command,
 )
 
-_NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
+_NODE_PARAMETERS: dict[str, Param] = ruled({
     "simulation": (True, "true: compute on each synchronized set (lockstep with the simulator);"
                          " false: robot mode, compute on a timer every dt with the newest set"),
     "dt": (0.05, "Control period in seconds"),
@@ -82,7 +84,12 @@ _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
                                      "as base_frame -> scan_frame"),
     "scan_frame": ("base_scan", "LiDAR frame (see base_frame); without it on /tf_static, "
                                 "lidar_offset_x_m is used"),
-}
+}, **COMMAND_RULES, queue_size=at_least(1))
+
+
+def node_parameters() -> dict[str, Param]:
+    """The node's own parameters (not the controller's): name -> (default, description, rule)."""
+    return dict(_NODE_PARAMETERS)
 
 
 def _load_controller_spec(node: GuardedLifecycleNode) -> str:
@@ -116,13 +123,12 @@ def parameter_names(controller_class: type) -> list[str]:
 
 
 def node_parameter_problems(p: dict[str, Any]) -> list[str]:
-    """What is wrong with the node's own parameter values (typed as declared)."""
-    problems = command_parameter_problems(p)
-    if p["queue_size"] < 1:
-        problems.append(f"queue_size must be >= 1 (got {p['queue_size']})")
-    if not math.isfinite(p["slop"]):
-        problems.append(f"slop must be finite (got {p['slop']})")
-    return problems
+    """What is wrong with the node's own parameter values (typed as declared).
+
+    Each against its rule in the node's table, then angular_sign.
+    """
+    own = {name: value for name, value in p.items() if name in _NODE_PARAMETERS}
+    return check_values(_NODE_PARAMETERS, own)[1] + command_parameter_problems(p)
 
 
 class WallFollowerNode(CommandingNode):

@@ -1,18 +1,18 @@
 """The WallFollower's tuning parameters and their checking.
 
-name -> (default, description with units). No rclpy import; the wall_follower node declares
-each as a ROS parameter.
+name -> (default, description with units, rule). No rclpy import; the wall_follower node
+declares each as a ROS parameter (with its range).
 """
 from __future__ import annotations
 
 import math
 from typing import Any
 
-from amr_common.parameter_table import table_values
+from amr_common.parameter_table import Param, at_least, between, checked_values, one_of, ruled
 from amr_common.robot import MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED, ROBOT_RADIUS, TRACK
 
 # name: (default, description). Defaults work in the simulator's "ideal" and "turtlebot3" profiles.
-PARAMETERS: dict[str, tuple[Any, str]] = {
+_TABLE: dict[str, tuple[Any, str]] = {
     "follow_side": ("right", "Wall kept on this side: 'right' (right-hand rule) or 'left'."),
     "wall_distance_m": (0.20, "Target distance from the robot centre to the followed wall [m]."),
     "kp": (10.0, "Proportional gain: angular speed per metre of wall-distance error [rad/s/m]."),
@@ -70,46 +70,21 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
                            "swept path for this long after it was last seen [s]; 0 = off."),
     "memory_range_m": (0.7, "Only points this close to the robot centre are remembered [m]."),
 }
+# Numbers >= 0 but for these; speeds above the Burger's limits are clipped (check_parameters).
+PARAMETERS: dict[str, Param] = ruled(
+    _TABLE, at_least(0.0), follow_side=one_of("right", "left"), lidar_offset_x_m=None,
+    sector_half_width_rad=between(0.0, 0.5 * math.pi, low_open=True, high_open=True))
 
 
 def check_parameters(overrides: dict[str, Any]) -> dict[str, Any]:
     """Every parameter's value (defaults updated with `overrides`), checked.
 
-    follow_side 'right' or 'left', escape_islands a boolean (or 'true'/'false'), the rest
-    finite numbers >= 0 (lidar_offset_x_m may be negative). Speeds above the Burger's limits
-    are clipped to them. Raises ValueError naming the problem, or unknown names.
+    Each against its rule in PARAMETERS; speeds above the Burger's limits are clipped to them.
+    Raises ValueError naming every problem, or unknown names.
     """
-    values = table_values(PARAMETERS, overrides, "WallFollower")
-    side = str(values["follow_side"]).lower()
-    if side not in ("right", "left"):
-        raise ValueError(f"WallFollower: follow_side must be 'right' or 'left', got {side!r}")
-    checked: dict[str, Any] = {"follow_side": side,
-                               "escape_islands": _as_bool(values["escape_islands"])}
-    for name, value in values.items():
-        if name in checked:
-            continue
-        try:
-            number = float(value)
-        except (TypeError, ValueError):
-            raise ValueError(f"WallFollower: {name} must be a number, got {value!r}") from None
-        if not math.isfinite(number) or (number < 0.0 and name != "lidar_offset_x_m"):
-            raise ValueError(f"WallFollower: {name} must be finite and >= 0, got {value!r}")
-        checked[name] = number
+    checked = checked_values(PARAMETERS, overrides, "WallFollower")
     checked["max_linear_speed_mps"] = min(checked["max_linear_speed_mps"], MAX_LINEAR_SPEED)
     checked["max_angular_speed_radps"] = min(checked["max_angular_speed_radps"], MAX_ANGULAR_SPEED)
     if checked["front_stop_distance_m"] >= checked["front_turn_distance_m"]:
         raise ValueError("WallFollower: front_stop_distance_m must be below front_turn_distance_m")
-    if not 0.0 < checked["sector_half_width_rad"] < 0.5 * math.pi:
-        raise ValueError("WallFollower: sector_half_width_rad must be in (0, pi/2), got "
-                         f"{checked['sector_half_width_rad']!r}")
     return checked
-
-
-def _as_bool(value: Any) -> bool:
-    if isinstance(value, str):
-        if value.strip().lower() in ("true", "1", "yes"):
-            return True
-        if value.strip().lower() in ("false", "0", "no"):
-            return False
-        raise ValueError(f"WallFollower: expected a boolean, got {value!r}")
-    return bool(value)

@@ -28,12 +28,7 @@ import numpy as np
 from amr_common.geometry import compose, inverse
 from amr_common.world import World
 from amr_evaluation.episode import default_controller
-from amr_evaluation.mapping_metrics import (
-    RayHits,
-    map_precision,
-    map_recall,
-    trajectory_errors,
-)
+from amr_evaluation.mapping_metrics import RayHits, mapping_figures, trajectory_errors
 from amr_mapping.mapper import Mapper
 from amr_mapping.scan_points import Scan
 from amr_sim.profiles import SensorProfile, get_profile
@@ -148,16 +143,24 @@ def run_mapping_episode(world: World | str, start=None, profile: str | SensorPro
                         "turtlebot3", seed: int = 0, duration: float = 300.0, dt: float = 0.05,
                         loop_closure: bool = True, drift: OdometryDrift | None = TYPICAL_DRIFT,
                         mapper_params: dict[str, Any] | None = None,
-                        record: bool = False, mapper=None) -> MappingResult:
+                        record: bool = False, mapper=None, controller=None,
+                        world_frame: bool = False) -> MappingResult:
     """Explore `world` with the wall follower for `duration` s while the Mapper maps it.
 
     mapper: a ready Mapper (or an object with its update / occupancy_raster / statistics /
     p); by default one with the profile's LiDAR offset, `loop_closure` and `mapper_params`.
+    controller: the explorer (compute_commands(z_scan, z_v, z_w)); by default the project's
+    wall follower told where the profile's LiDAR sits.
+    world_frame: build the map in the world's frame (the Mapper's odometry moved by the start
+    pose, as the slam node's map_start_pose does in run_sim.py --slam), so the map lies on the
+    world; by default the map frame is the odometry frame at the start. The figures hold
+    either way.
     """
     world_obj = world if isinstance(world, World) else World.load(world)
     prof = get_profile(profile)
     sim = Simulator(world_obj, start=start, dt=dt, profile=prof, seed=seed)
-    controller = default_controller(sim.dt, prof)
+    if controller is None:
+        controller = default_controller(sim.dt, prof)
     if callable(getattr(controller, "set_scan_geometry", None)):
         controller.set_scan_geometry(prof.angle_min, prof.angle_increment, prof.range_min,
                                      prof.range_max)
@@ -167,12 +170,15 @@ def run_mapping_episode(world: World | str, start=None, profile: str | SensorPro
     odometry = DriftingOdometry(drift, seed)
     hits = RayHits(world_obj, prof.angle_min, prof.angle_increment, prof.scan_rays,
                    prof.range_min, min(prof.range_max, mapper.p["max_range_m"]))
-    run = _explore(sim, controller, mapper, odometry, hits, duration)
+    frame = sim.start if world_frame else (0.0, 0.0, 0.0)
+    run = _explore(sim, controller, mapper, odometry, hits, duration, frame)
     raster = mapper.occupancy_raster()
     rows = np.asarray(run.estimate, dtype=np.float64).reshape(-1, 4)
-    errors = trajectory_errors(sim.start, np.asarray(run.truth), rows[:, 1:])
+    # The map frame in the world: the start pose, or the world's own frame.
+    origin = (0.0, 0.0, 0.0) if world_frame else sim.start
+    figures = mapping_figures(world_obj, origin, np.asarray(run.truth), rows[:, 1:], raster,
+                              hits)
     odom_errors = trajectory_errors(sim.start, np.asarray(run.truth), np.asarray(run.odometry))
-    recall, seen = map_recall(raster, world_obj, sim.start, hits)
     stats = mapper.statistics()
     start_label = start if isinstance(start, str) else (
         next(iter(world_obj.starts)) if start is None and world_obj.starts
@@ -185,8 +191,7 @@ def run_mapping_episode(world: World | str, start=None, profile: str | SensorPro
         slam_wall_time_s=run.slam_time,
         collisions=sim.collisions, distance_m=sim.distance, scans=len(rows),
         keyframes=stats["keyframes"], loop_closures=stats["loop_closures"],
-        odometry_max_error_m=odom_errors["trajectory_max_m"], **errors,
-        precision=map_precision(raster, world_obj, sim.start), recall=recall, seen_wall_m=seen,
+        odometry_max_error_m=odom_errors["trajectory_max_m"], **figures,
         update_ms_median=stats["update_cpu_ms"]["median"],
         update_ms_p90=stats["update_cpu_ms"]["p90"], update_ms_max=stats["update_cpu_ms"]["max"],
         loop_closure_ms_median=stats["loop_closed_cpu_ms"]["median"],
@@ -209,8 +214,11 @@ class _Recording:
 
 
 def _explore(sim: Simulator, controller, mapper, odometry: DriftingOdometry, hits: RayHits,
-             duration: float) -> _Recording:
-    """The episode's loop: control every dt, the newest odometry, every new scan mapped."""
+             duration: float, frame=(0.0, 0.0, 0.0)) -> _Recording:
+    """The episode's loop: control every dt, the newest odometry, every new scan mapped.
+
+    The Mapper gets the odometry moved by `frame` (the map's pose of the odometry frame).
+    """
     prof = sim.profile
     run = _Recording()
     n_steps = int(round(float(duration) / sim.dt))
@@ -223,7 +231,8 @@ def _explore(sim: Simulator, controller, mapper, odometry: DriftingOdometry, hit
     def feed(ranges: np.ndarray, stamp: float) -> None:
         started = time.perf_counter()
         result = mapper.update(Scan(ranges, prof.angle_min, prof.angle_increment,
-                                    prof.range_min, prof.range_max), held_odom, stamp)
+                                    prof.range_min, prof.range_max),
+                               compose(frame, held_odom), stamp)
         run.slam_time += time.perf_counter() - started
         if not result.status.startswith("rejected"):
             run.truth.append(sim.pose)

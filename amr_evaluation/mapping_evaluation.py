@@ -6,12 +6,17 @@
 
 Each result is MappingResult.to_dict() (without the estimate rows), or {"error": ...} for an
 episode that failed or whose process died, so one bad world does not lose the others.
+`scripts/evaluate.py --slam` is the command line (evaluate_main): its grid of worlds x starts x
+profiles x seeds, on all cores or Ray, each episode within --episode-timeout.
 """
 from __future__ import annotations
 
+import json
 import math
+import time
 import traceback
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any, Callable, Iterable
 
 import numpy as np
@@ -32,6 +37,8 @@ class MappingSpec:
     profile: str = "turtlebot3"
     start: Any = None  # a world's named start or [x, y, theta]; None: its first
     mapper_params: dict[str, Any] | None = None  # Mapper parameter overrides
+    controller: str | None = None  # MODULE:CLASS of the explorer; None: the wall follower
+    controller_params: tuple[tuple[str, Any], ...] = ()
 
 
 def mapping_specs(worlds: Iterable[str], seeds: Iterable[int], duration: float = 300.0,
@@ -51,32 +58,53 @@ def run_mapping_spec(spec: MappingSpec) -> dict[str, Any]:
         result = run_mapping_episode(spec.world, start=spec.start, profile=spec.profile,
                                      seed=spec.seed, duration=spec.duration,
                                      loop_closure=spec.loop_closure, drift=spec.drift,
-                                     mapper_params=spec.mapper_params)
+                                     mapper_params=spec.mapper_params,
+                                     controller=_controller(spec))
     except Exception as exc:  # noqa: BLE001 - reported per episode, the batch goes on
         return {**asdict(spec), "error": f"{type(exc).__name__}: {exc}",
                 "traceback": traceback.format_exc()}
     return result.to_dict()
 
 
+def _controller(spec: MappingSpec):
+    """The spec's explorer, built as evaluate.py builds controllers, or None (the default)."""
+    if spec.controller is None:
+        return None
+    from amr_common.controller_loader import load_controller_class
+    from amr_evaluation.episode import robot_parameters
+    from amr_sim.profiles import get_profile
+    controller_class = load_controller_class(spec.controller)
+    params = {**robot_parameters(controller_class, get_profile(spec.profile)),
+              **dict(spec.controller_params)}
+    return controller_class(0.05, **params)  # the episode's dt
+
+
 def run_mapping_grid(specs: list[MappingSpec], jobs: int | None = 2,
-                     progress: Callable[[int, int, Any], None] | None = None
-                     ) -> list[dict[str, Any]]:
-    """Run the specs on `jobs` local processes; results in spec order."""
+                     progress: Callable[[int, int, Any], None] | None = None,
+                     executor=None) -> list[dict[str, Any]]:
+    """Run the specs; results in spec order.
+
+    On `executor` (amr_evaluation.executors, e.g. Ray's), else on `jobs` local processes.
+    """
     def lost(spec: MappingSpec, loss: TaskLost) -> dict[str, Any]:
         return {**asdict(spec), "error": loss.error}
 
-    return run_tasks(run_mapping_spec, specs, local_executor(jobs, len(specs)), lost, progress,
+    if executor is None:
+        executor = local_executor(jobs, len(specs))
+    return run_tasks(run_mapping_spec, specs, executor, lost, progress,
                      preload=("amr_evaluation.mapping_episode",))
 
 
-_COLUMNS = (("world", "{}"), ("seed", "{}"), ("loop_closure", "{}"),
+_COLUMNS = (("world", "{}"), ("start", "{}"), ("profile", "{}"), ("seed", "{}"),
+            ("loop_closure", "{}"),
             ("trajectory_rmse_m", "{:.2f}", 100.0), ("trajectory_max_m", "{:.2f}", 100.0),
             ("odometry_max_error_m", "{:.1f}", 100.0), ("precision", "{:.1f}", 100.0),
             ("recall", "{:.1f}", 100.0), ("loop_closures", "{}"), ("keyframes", "{}"),
             ("update_ms_median", "{:.2f}"), ("loop_closure_ms_median", "{:.1f}"),
             ("loop_closure_ms_max", "{:.1f}"),
             ("cpu_real_time_factor", "{:.0f}"))
-_HEADERS = ("world", "seed", "loop closure", "RMSE cm", "max cm", "odometry max cm",
+_HEADERS = ("world", "start", "profile", "seed", "loop closure", "RMSE cm", "max cm",
+            "odometry max cm",
             "precision %", "recall %", "loop closures", "keyframes", "update ms (median)",
             "loop closure ms (median)", "loop closure ms (max)", "x real time (CPU)")
 
@@ -86,8 +114,9 @@ def mapping_table(results: list[dict[str, Any]]) -> str:
     lines = ["| " + " | ".join(_HEADERS) + " |", "|" + "---|" * len(_HEADERS)]
     for result in results:
         if "error" in result:
-            lines.append(f"| {result['world']} | {result['seed']} | {result['loop_closure']} | "
-                         f"error: {result['error']} |")
+            lines.append(f"| {result['world']} | {result['start']} | {result['profile']} | "
+                         f"{result['seed']} | {result['loop_closure']} | error: "
+                         f"{result['error']} |")
             continue
         lines.append("| " + " | ".join(_cell(result, column) for column in _COLUMNS) + " |")
     return "\n".join(lines)
@@ -126,5 +155,61 @@ def _cell(result: dict[str, Any], column: tuple) -> str:
     return form.format(value)
 
 
-__all__ = ["MappingSpec", "mapping_specs", "mapping_table", "run_mapping_grid",
+def evaluate_main(specs, settings: dict[str, Any], mapper_params: dict[str, Any], out: Path,
+                  executor=None) -> int:
+    """evaluate.py --slam: mapping episodes for evaluate.py's grid (EpisodeSpecs).
+
+    Writes results.json (per world summary + one row per episode, the Mapper's statistics
+    included) and results.csv to `out`, prints the table; exit code 3 if an episode failed to
+    run, 1 if one collided, else 0.
+    """
+    import csv
+    controller = settings["controller"]
+    mapping = [MappingSpec(s.world, s.seed, s.duration,
+                           bool(mapper_params.get("loop_closure", True)), profile=s.profile,
+                           start=list(s.start) if isinstance(s.start, tuple) else s.start,
+                           mapper_params=dict(mapper_params) or None,
+                           controller=controller, controller_params=s.params)
+               for s in specs]
+    print(f"evaluate: {len(mapping)} mapping episodes of {settings['duration']:g} s"
+          + (f", Mapper {mapper_params}" if mapper_params else ""), flush=True)
+    started = time.monotonic()
+
+    def progress(done: int, total: int, result: dict[str, Any]) -> None:
+        text = f"{result['world']} seed {result['seed']}: ERROR {result['error']}" \
+            if "error" in result else _summary_line(result)
+        print(f"[{done}/{total}] {text}", flush=True)
+
+    results = run_mapping_grid(mapping, jobs=settings["jobs"], progress=progress,
+                               executor=executor)
+    failed = sum("error" in r for r in results)
+    collided = sum(r.get("collisions", 0) > 0 for r in results)
+    out.mkdir(parents=True, exist_ok=True)
+    summary = {"episodes": len(results), "failed": failed, "collided": collided,
+               "wall_time_s": round(time.monotonic() - started, 1),
+               "per_world": summary_rows(results)}
+    (out / "results.json").write_text(json.dumps({"summary": summary, "episodes": results},
+                                                 indent=1, default=float))
+    with open(out / "results.csv", "w", newline="") as handle:
+        keys = list(dict.fromkeys(k for r in results for k in r
+                                  if k not in ("statistics", "estimate", "drift",
+                                               "mapper_params", "traceback")))
+        writer = csv.DictWriter(handle, fieldnames=keys, extrasaction="ignore")
+        writer.writeheader()
+        writer.writerows(results)
+    print(mapping_table(results))
+    print(f"evaluate: {len(results)} mapping episodes, {failed} failed, {collided} collided, "
+          f"in {summary['wall_time_s']:.1f} s; results in {out}")
+    return 3 if failed else 1 if collided else 0
+
+
+def _summary_line(result: dict[str, Any]) -> str:
+    return (f"{result['world']} / {result['start']} / {result['profile']} / seed "
+            f"{result['seed']}: RMSE {100 * result['trajectory_rmse_m']:.2f} cm, max "
+            f"{100 * result['trajectory_max_m']:.2f} cm, precision "
+            f"{100 * result['precision']:.1f} %, recall {100 * result['recall']:.1f} %, "
+            f"{result['loop_closures']} loop closures, {result['collisions']} collisions")
+
+
+__all__ = ["MappingSpec", "evaluate_main", "mapping_specs", "mapping_table", "run_mapping_grid",
            "run_mapping_spec", "summary_rows"]

@@ -15,9 +15,11 @@ import math
 
 import numpy as np
 
+from amr_common.cell_grid import cell_index
 from amr_common.geometry import compose, inverse, wrap_angles
 from amr_common.map_raster import OCCUPIED, Raster
 from amr_common.raycast import scan_into
+from amr_common.scan_returns import return_mask
 from amr_common.world import World
 
 TOLERANCE_M = 0.03
@@ -53,8 +55,7 @@ def trajectory_errors(start, truth: np.ndarray, estimate: np.ndarray) -> dict[st
 def occupied_centres(raster: Raster) -> np.ndarray:
     """(K, 2) centres of the OCCUPIED cells (map frame)."""
     rows, cols = np.nonzero(raster.values == OCCUPIED)
-    return np.column_stack([raster.origin[0] + (cols + 0.5) * raster.resolution,
-                            raster.origin[1] + (rows + 0.5) * raster.resolution])
+    return raster.cell_centres(rows, cols)
 
 
 def map_precision(raster: Raster, world: World, start,
@@ -100,16 +101,16 @@ class RayHits:
         ranges = self._ranges
         scan_into(self._segments, lidar_x, lidar_y, theta, self._cos, self._sin,
                   self._limits[0], self._limits[1], math.nan, self._zeros, ranges)
-        ok = np.isfinite(ranges)
+        ok = return_mask(ranges, *self._limits)
         c, s = math.cos(theta), math.sin(theta)
         x = lidar_x + ranges[ok] * (c * self._cos[ok] - s * self._sin[ok])
         y = lidar_y + ranges[ok] * (s * self._cos[ok] + c * self._sin[ok])
         self.hit[self._cells(x, y)] = True
 
     def _cells(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        rows = np.clip(((y - self._origin[1]) / _HIT_CELL_M).astype(np.int64), 0,
+        rows = np.clip(cell_index(y, self._origin[1], _HIT_CELL_M).astype(np.int64), 0,
                        self._shape[0] - 1)
-        cols = np.clip(((x - self._origin[0]) / _HIT_CELL_M).astype(np.int64), 0,
+        cols = np.clip(cell_index(x, self._origin[0], _HIT_CELL_M).astype(np.int64), 0,
                        self._shape[1] - 1)
         return rows, cols
 
@@ -130,8 +131,7 @@ def near_occupied(raster: Raster, points: np.ndarray, tolerance: float = TOLERAN
     """Bool per (N, 2) map-frame point: an OCCUPIED cell centre lies within `tolerance`."""
     res = raster.resolution
     rows_n, cols_n = raster.values.shape
-    row = np.floor((points[:, 1] - raster.origin[1]) / res).astype(np.int64)
-    col = np.floor((points[:, 0] - raster.origin[0]) / res).astype(np.int64)
+    row, col = (index.astype(np.int64) for index in raster.cells_of(points[:, 0], points[:, 1]))
     reach = int(math.ceil(tolerance / res)) + 1
     found = np.zeros(len(points), dtype=bool)
     for dr in range(-reach, reach + 1):
@@ -158,5 +158,21 @@ def map_recall(raster: Raster, world: World, start, hits: RayHits,
         float(seen.sum() * SAMPLE_SPACING_M)
 
 
-__all__ = ["RayHits", "TOLERANCE_M", "map_precision", "map_recall", "near_occupied",
-           "occupied_centres", "trajectory_errors", "transform_points", "wall_samples"]
+def mapping_figures(world: World, start, truth: np.ndarray, estimate: np.ndarray,
+                    raster: Raster, hits: RayHits) -> dict[str, float]:
+    """The figures of a mapping run: trajectory RMSE / max / heading RMSE, precision, recall.
+
+    `start`: the pose of the map frame in the world (the robot's start when the map frame is
+    the odometry frame at the first scan; (0, 0, 0) when the map was built in the world's
+    frame); truth: (N, 3) true poses at the estimate's rows (N, 3) [x, y, theta]; `hits`: the
+    noise-free rays of the run from the true poses.
+    """
+    recall, seen = map_recall(raster, world, start, hits)
+    return {**trajectory_errors(start, truth, estimate),
+            "precision": map_precision(raster, world, start), "recall": recall,
+            "seen_wall_m": seen}
+
+
+__all__ = ["RayHits", "TOLERANCE_M", "map_precision", "map_recall", "mapping_figures",
+           "near_occupied", "occupied_centres", "trajectory_errors", "transform_points",
+           "wall_samples"]

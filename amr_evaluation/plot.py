@@ -74,14 +74,19 @@ def draw_world(ax, world: World, show_starts: bool = True, show_grid: bool = Fal
             _draw_goal(ax, *world.goal)
 
 
+def draw_raster(ax, raster, zorder: float = 1) -> None:
+    """A raster's cells as map viewers show them: free white, unknown light, occupied dark."""
+    rows, cols = raster.values.shape
+    shade = np.where(raster.values == 0, 1.0, np.where(raster.values == -1, 0.8, 0.35))
+    x0, y0 = raster.origin
+    ax.imshow(shade, cmap="gray", vmin=0.0, vmax=1.0, origin="lower", zorder=zorder,
+              interpolation="nearest", extent=(x0, x0 + cols * raster.resolution,
+                                               y0, y0 + rows * raster.resolution))
+
+
 def _draw_cells(ax, world: World, zorder: float = 1) -> None:
     """A map world's cells: free white, unknown light grey, occupied dark grey."""
-    r = world.raster
-    rows, cols = r.values.shape
-    shade = np.where(r.values == 0, 1.0, np.where(r.values == -1, 0.8, 0.35))
-    ax.imshow(shade, cmap="gray", vmin=0.0, vmax=1.0, origin="lower", zorder=zorder,
-              interpolation="nearest", extent=(r.origin[0], r.origin[0] + cols * r.resolution,
-                                               r.origin[1], r.origin[1] + rows * r.resolution))
+    draw_raster(ax, world.raster, zorder)
 
 
 def _draw_map(ax, map_world: World) -> None:

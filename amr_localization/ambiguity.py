@@ -23,6 +23,7 @@ from typing import Callable
 import numpy as np
 
 from amr_common.geometry import wrap_angles
+from amr_common.robot import arc_step
 from amr_localization.localization_check import ScanMatcher, weighted_pose_mean
 from amr_localization.pose_search import Alternative, close_poses, refine
 
@@ -62,10 +63,8 @@ class AmbiguityGuard:
     def predict(self, v: float, w: float, dt: float) -> None:
         """Move every track by the odometry twist (v, w) over dt (mid-point heading)."""
         for track in self.tracks:
-            x, y, theta = track.pose
-            mid = theta + 0.5 * w * dt
-            track.pose = (x + v * dt * math.cos(mid), y + v * dt * math.sin(mid),
-                          math.remainder(theta + w * dt, 2.0 * math.pi))
+            x, y, theta = arc_step(*track.pose, v * dt, w * dt)
+            track.pose = (x, y, math.remainder(theta, 2.0 * math.pi))
 
     def observe(self, estimate, estimate_match: float, matcher: ScanMatcher, ranges: np.ndarray,
                 tolerance: float, particles: np.ndarray, weights: np.ndarray,

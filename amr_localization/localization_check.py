@@ -30,7 +30,9 @@ import numpy as np
 
 from amr_common.jit import jit
 from amr_common.raycast import scan_into
+from amr_common.scan_returns import is_return
 from amr_localization.cluster import Cluster, dominant_cluster, weighted_pose_mean
+from amr_localization.particle_filter_params import PARAMETERS
 
 
 def _count_matches(expected, ranges, range_min, range_max, tolerance):
@@ -42,7 +44,7 @@ def _count_matches(expected, ranges, range_min, range_max, tolerance):
     matches = 0
     for i in range(ranges.shape[0]):
         r = ranges[i]
-        valid = r >= range_min and r <= range_max and r > 0.0  # NaN fails
+        valid = is_return(r, range_min, range_max)
         e = expected[i]
         if valid:
             if e == e and abs(r - e) <= tolerance:
@@ -95,18 +97,25 @@ class ScanMatcher:
         return matches / max(self.rays, 1)
 
 
+def _default(name: str):
+    return PARAMETERS[name][0]
+
+
 @dataclass
 class CheckSettings:
-    """Thresholds of the localized test (see the module docstring)."""
+    """Thresholds of the localized test (see the module docstring).
 
-    match_tolerance_m: float = 0.03
-    localize_match_fraction: float = 0.97
-    localize_updates: int = 10
-    cluster_min_share: float = 0.9
-    keep_match_fraction: float = 0.8
-    lost_updates: int = 3
-    reinit_match_fraction: float = 0.5
-    reinit_updates: int = 3
+    The defaults are the filter's parameter table's (particle_filter_params: their one home).
+    """
+
+    match_tolerance_m: float = _default("match_tolerance_m")
+    localize_match_fraction: float = _default("localize_match_fraction")
+    localize_updates: int = _default("localize_updates")
+    cluster_min_share: float = _default("cluster_min_share")
+    keep_match_fraction: float = _default("keep_match_fraction")
+    lost_updates: int = _default("lost_updates")
+    reinit_match_fraction: float = _default("reinit_match_fraction")
+    reinit_updates: int = _default("reinit_updates")
 
 
 class LocalizedDecision:

@@ -12,7 +12,9 @@ tracks from there. Predict: motion_model. Correct: beam model on the expected-ra
 (beam_model, expected_ranges, scan_beams; weights flattened while searching: weighting),
 low-variance resampling when the effective sample size drops, with a KLD-sized particle count
 (resampling). Particles are drawn by particle_sets. The localized flag: localization_check,
-with the exhaustive pose search (pose_search) and the rival tracks (ambiguity).
+with the exhaustive pose search (pose_search) and the rival tracks (ambiguity). The exhaustive
+searches (a global search's first scan, the check before declaring) are scored a slice per
+correct() call, so none blocks for long on a big map (filter_searches).
 """
 from __future__ import annotations
 
@@ -22,11 +24,12 @@ from typing import Any
 
 import numpy as np
 
-from amr_common.robot import ROBOT_RADIUS
+from amr_common.robot import arc_step
 from amr_common.world import World
-from amr_localization.ambiguity import TRACK_ANGLE_RAD, TRACK_DISTANCE_M, AmbiguityGuard
+from amr_localization.ambiguity import AmbiguityGuard
 from amr_localization.beam_model import BeamModel
 from amr_localization.expected_ranges import expected_range_table
+from amr_localization.filter_searches import DOUBT, SEED, FilterSearches, PendingSearch
 from amr_localization.localization_check import (
     CheckSettings,
     LocalizedDecision,
@@ -50,8 +53,11 @@ from amr_localization.weighting import updated_weights
 log = logging.getLogger("amr_localization.particle_filter")
 
 
-class ParticleFilter:
-    """Particles (N, 3) [x, y, theta] with weights; see the module docstring for the cycle."""
+class ParticleFilter(FilterSearches):
+    """Particles (N, 3) [x, y, theta] with weights; see the module docstring for the cycle.
+
+    The exhaustive searches and what they decide: FilterSearches (filter_searches).
+    """
 
     def __init__(self, world: World | str, **params: Any) -> None:
         self.world = world if isinstance(world, World) else World.load(world)
@@ -59,8 +65,7 @@ class ParticleFilter:
         self.params = p
         self.rng = np.random.default_rng(p["seed"])
         self.plan = check_world(self.world, p)
-        if (self.plan.resolution, self.plan.angles) != (p["table_resolution_m"],
-                                                        p["table_angles"]):
+        if self.plan.reduced:
             log.info("%s: a big map: expected-range table of %s to stay within max_memory_mb "
                      "%g", self.world.source, self.plan.describe(), p["max_memory_mb"])
         self.table = expected_range_table(self.world, self.plan.resolution, self.plan.angles)
@@ -83,6 +88,7 @@ class ParticleFilter:
         self.guard = AmbiguityGuard(p["ambiguity_match_fraction"], p["localize_match_fraction"])
         self.last_alternatives: list = []
         self._last_doubt = -10**9  # total_updates at the last search for a better pose
+        self._pending: PendingSearch | None = None  # an exhaustive search in progress
         self.particles = np.zeros((0, 3))
         self.weights = np.zeros(0)
         self.estimate: tuple[float, float, float] = (math.nan, math.nan, math.nan)
@@ -103,33 +109,14 @@ class ParticleFilter:
     def initialize_global(self) -> None:
         """Uniform over the free space (clearance >= robot radius), all headings: not localized.
 
-        The next scan re-seeds the particles at the poses that fit it (_seed_from_scan).
+        The particles are re-seeded at the poses that fit the next scan (_seed), once the
+        exhaustive search of that scan is done; until then they are only moved by odometry.
         """
         count = self.params["max_particles"]
         self._set_particles(sample_free_poses(self.world, self.table.grid, count, self.rng))
         self._seed_pending = True
         self.global_searches += 1
         self.events.append(("global", self.total_updates))
-
-    def _seed_from_scan(self, ranges: np.ndarray) -> None:
-        """Seed a global search from an exhaustive pose search on this scan.
-
-        Particles of a global search from an exhaustive pose search on this scan: the
-        best-fitting grid poses (share 1 - seed_uniform_share) and uniform ones (the rest).
-
-        Uniform particles alone are too sparse: 8,000 of them over a 2.4 m maze leave ~1 within
-        5 cm and 10 degrees of any pose, and the first updates collapse onto the luckiest one,
-        in a symmetric maze often a rotated copy of the truth.
-        """
-        p = self.params
-        count = p["max_particles"]
-        seeded = int(round(count * (1.0 - p["seed_uniform_share"])))
-        poses = self.search.best_poses(seeded, self.beams, self.beams.readings_mm(ranges),
-                                       self.rng)
-        poses = poses[self.world.clearances(poses[:, :2]) >= ROBOT_RADIUS]
-        uniform = sample_free_poses(self.world, self.table.grid, count - len(poses), self.rng)
-        self._set_particles(np.concatenate([poses, uniform]))
-        self._seed_pending = False
 
     def initialize_pose(self, pose, sigma=None) -> tuple[float, float, float]:
         """Re-initialize around a pose: Gaussian particles, not localized.
@@ -171,6 +158,7 @@ class ParticleFilter:
 
     def _set_particles(self, particles: np.ndarray) -> None:
         self._seed_pending = False
+        self._pending = None  # a search of another particle set's scan
         self.particles = np.ascontiguousarray(particles, dtype=np.float64)
         self.weights = np.full(len(particles), 1.0 / len(particles))
         self.check.reset()
@@ -196,6 +184,7 @@ class ParticleFilter:
         """
         self.beams = ScanBeams.from_geometry(angle_min, angle_increment, rays, range_min,
                                              range_max, self.params["beams"], self.table.angles)
+        self._pending = None  # a search of a scan of the old geometry (a seed starts again)
         self._scan_geometry = (angle_min, angle_increment, rays, range_min, range_max)
         self.matcher = ScanMatcher(self.world.segments, angle_min, angle_increment, rays,
                                    range_min, range_max, self.params["lidar_offset_x_m"],
@@ -218,6 +207,7 @@ class ParticleFilter:
                                p["z_random"])
         self.search = PoseSearch(self.table, self._robot_ok, offset_m,
                                  stride=search_stride(self.table.resolution))
+        self._pending = None
         if self.matcher is not None:
             self.set_scan_geometry(*self._scan_geometry)
 
@@ -237,12 +227,11 @@ class ParticleFilter:
             return
         sample_motion(self.particles, len(self.particles), v, w, dt, self.noise, self.rng)
         # The estimate follows the same twist until the next measurement update.
-        x, y, theta = self.estimate
-        mid = theta + 0.5 * w * dt
-        theta = theta + w * dt
-        self.estimate = (x + v * dt * math.cos(mid), y + v * dt * math.sin(mid),
-                         math.atan2(math.sin(theta), math.cos(theta)))
+        x, y, theta = arc_step(*self.estimate, v * dt, w * dt)
+        self.estimate = (x, y, math.atan2(math.sin(theta), math.cos(theta)))
         self.guard.predict(v, w, dt)
+        if self._pending is not None:
+            self._pending.predict(v, w, dt)
         since = self._since_update
         since[0] += abs(v) * dt
         since[1] += abs(w) * dt
@@ -273,9 +262,15 @@ class ParticleFilter:
         if ranges.shape != (self.matcher.rays,):
             raise ValueError(f"scan has {ranges.size} rays, the scan geometry {self.matcher.rays}")
         if self._seed_pending:
-            self._seed_from_scan(ranges)
-        elif not (force or self.update_due(new_scan)):
-            return False
+            if self._run_search(SEED if self._pending is None else None, ranges) is None:
+                return False  # the particles wait for the search of the global search's scan
+        else:
+            if self._pending is not None:  # a search of an earlier scan: its next slice
+                event = self._run_search(None, ranges)
+                if event:
+                    self.events.append((event, self.total_updates))
+            if not (force or self.update_due(new_scan)):
+                return False
         self._weigh(ranges)
         self._since_update = [0.0, 0.0, 0.0]
         self.updates += 1
@@ -292,13 +287,12 @@ class ParticleFilter:
                                          tolerance).match_fraction
         if not self.localized and self.cluster_share >= self.params["cluster_min_share"] and \
                 self.match_fraction < self.params["ambiguity_match_fraction"] and \
+                self._pending is None and \
                 self.total_updates - self._last_doubt >= self.params["localize_updates"]:
             # Converged on a pose that does not explain the scan: if the true pose lost its
             # particles earlier (a symmetric maze), the exhaustive search finds it again.
             self._last_doubt = self.total_updates
-            rivals = self.guard.unresolved(self._alternatives(ranges))
-            if rivals:
-                self._inject([a.pose for a in rivals])
+            self._run_search(DOUBT, ranges)
         if not self.localized and self.guard.tracks:
             winner = self.guard.observe(self.estimate, self.match_fraction, self.matcher, ranges,
                                         self.params["match_tolerance_m"], self.particles,
@@ -322,39 +316,6 @@ class ParticleFilter:
             self._resample()
         return True
 
-    def _searcher(self, ranges: np.ndarray):
-        """best_near(pose) of PoseSearch for this scan, over a rival track's neighbourhood."""
-        z_mm = self.beams.readings_mm(ranges)
-        return lambda pose: self.search.best_near(
-            pose, TRACK_DISTANCE_M, TRACK_ANGLE_RAD, self.beams, z_mm, self.matcher, ranges,
-            self.params["match_tolerance_m"])
-
-    def _check_ambiguity(self, ranges: np.ndarray) -> str:
-        """Declare the candidate only if no other pose explains the scan as well.
-
-        Declare the candidate only if no other pose explains the scan nearly as well;
-        otherwise add particles at those poses (the filter must then tell them apart).
-        """
-        p = self.params
-        live = [t for t in self.guard.open_tracks if t.last_match >= p["ambiguity_match_fraction"]]
-        if live:  # known rivals still explain the scan: no need to search again
-            self.check.reject()
-            return "ambiguous"
-        rivals = self.guard.unresolved(self._alternatives(ranges))
-        if not rivals:
-            self.check.confirm()
-            return "localized"
-        self.check.reject()
-        self._inject([a.pose for a in rivals])
-        return "ambiguous"
-
-    def _alternatives(self, ranges: np.ndarray) -> list:
-        """The best poses away from the estimate for this scan (PoseSearch.alternatives)."""
-        self.last_alternatives = self.search.alternatives(
-            self.estimate, self.beams, self.beams.readings_mm(ranges), self.matcher, ranges,
-            self.params["match_tolerance_m"])
-        return self.last_alternatives
-
     def _move_to(self, pose) -> None:
         """Move every particle to a rival that explains the scans better.
 
@@ -362,22 +323,11 @@ class ParticleFilter:
         estimate did), the rival tracks kept: not localized.
         """
         count = len(self.particles)
+        self._pending = None  # a search about the particle set it replaces
         self.particles = gaussian_poses([pose], (0.02, 0.02, 0.03), count, self.rng)
         self.weights = np.full(count, 1.0 / count)
         self.check.reset()
         self.estimate = tuple(float(v) for v in pose)
-
-    def _inject(self, poses) -> None:
-        """Replace a share of the particles by Gaussians around `poses` (equal weights)."""
-        p = self.params
-        per_pose = max(int(p["inject_share"] * len(self.particles) / len(poses)), 1)
-        sx, sy, st = p["initial_pose_sigma"]
-        new = gaussian_poses(poses, (min(sx, 0.03), min(sy, 0.03), min(st, 0.05)), per_pose,
-                             self.rng)
-        replace = self.rng.choice(len(self.particles), size=min(len(new), len(self.particles)),
-                                  replace=False)
-        self.particles[replace] = new[:len(replace)]
-        self.weights = np.full(len(self.particles), 1.0 / len(self.particles))
 
     def _weigh(self, ranges: np.ndarray) -> None:
         beams = self.beams

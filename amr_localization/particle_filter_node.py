@@ -16,6 +16,9 @@ Thin: messages become ParticleFilter.predict / correct calls and results become 
 - /amcl_pose (geometry_msgs/PoseWithCovarianceStamped) after every measurement update;
   /particles (geometry_msgs/PoseArray) at most every `particles_period_s` of stamp time.
 - /initialpose (RViz's and Foxglove's "2D Pose Estimate") re-initializes around that pose.
+- No callback blocks the node for long: on a big map the filter's exhaustive pose searches
+  are scored a slice per scan (amr_localization.filter_searches; on the 40 x 40 m floor at most
+  ~0.15 s of CPU per call instead of ~3 s for a search in one go).
 Bad input (NaN or 0.0 everywhere, inconsistent scan geometry, non-finite odometry, stamps going
 backwards) is skipped with a throttled message, never a crash (a jump back by more than
 max_odometry_gap_s restarts the integration from there: one stamp far in the future cannot stop
@@ -38,7 +41,8 @@ from sensor_msgs.msg import LaserScan
 from amr_common import message_filters
 from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.node_runner import run_lifecycle_node
-from amr_common.parameters import declare_parameters, finite, read_parameters
+from amr_common.parameter_table import Param, at_least, between, check_values, ruled
+from amr_common.parameters import declare_parameters, read_parameters
 from amr_common.qos import RELIABLE_10, scan_qos
 from amr_common.ros_conversions import (
     pose_from_message,
@@ -46,13 +50,14 @@ from amr_common.ros_conversions import (
     time_to_nanoseconds,
     yaw_to_quaternion,
 )
+from amr_common.scan_returns import return_mask
 from amr_common.world import World, WorldError
 from amr_localization.localization_tf import LocalizationTf
 from amr_localization.particle_filter import ParticleFilter
 from amr_localization.particle_filter_params import PARAMETERS as FILTER_PARAMETERS
 from amr_localization.particle_filter_params import check_parameters
 
-_NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
+_NODE_PARAMETERS: dict[str, Param] = ruled({
     "world": ("lab02", "Bundled world name or path to a world .yaml / course map .json / Nav2 "
                        "map .yaml (the simulator's loader)"),
     "queue_size": (10, "Synchronizer queue size per input"),
@@ -80,7 +85,8 @@ _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
     "amcl_pose_topic": ("/amcl_pose", "geometry_msgs/PoseWithCovarianceStamped output"),
     "particles_topic": ("/particles", "geometry_msgs/PoseArray output"),
     "initialpose_topic": ("/initialpose", "geometry_msgs/PoseWithCovarianceStamped input"),
-}
+}, at_least(0.0), min_valid_share=between(0.0, 1.0), queue_size=at_least(1),
+    particles_published=at_least(1))
 _ARRAYS = {"initial_pose", "initial_pose_sigma"}
 
 
@@ -90,17 +96,8 @@ def node_parameters() -> dict[str, tuple[Any, str]]:
 
 
 def node_parameter_problems(node: dict[str, Any]) -> list[str]:
-    """What is wrong with the node's own parameter values (typed as declared)."""
-    problems = []
-    for name in ("slop", "max_odometry_gap_s", "max_scan_age_s", "particles_period_s"):
-        if not finite(node[name]) or node[name] < 0:
-            problems.append(f"{name} must be a number >= 0 (got {node[name]!r})")
-    if not 0.0 <= float(node["min_valid_share"]) <= 1.0:
-        problems.append(f"min_valid_share must be in [0, 1] (got {node['min_valid_share']})")
-    for name in ("queue_size", "particles_published"):
-        if node[name] < 1:
-            problems.append(f"{name} must be >= 1 (got {node[name]})")
-    return problems
+    """What is wrong with the node's own parameter values: each against its rule."""
+    return check_values(_NODE_PARAMETERS, node)[1]
 
 
 class ParticleFilterNode(GuardedLifecycleNode):
@@ -150,8 +147,6 @@ class ParticleFilterNode(GuardedLifecycleNode):
         node, problems = read_parameters(self, _NODE_PARAMETERS)
         filter_values, filter_problems = read_parameters(self, FILTER_PARAMETERS)
         problems += filter_problems
-        if not problems:
-            problems += node_parameter_problems(node)
         filter_params: dict[str, Any] = {}
         if not filter_problems:
             try:
@@ -315,9 +310,7 @@ class ParticleFilterNode(GuardedLifecycleNode):
                 return None
             self._scan_key = geometry
         ranges = scan_ranges(scan)
-        with np.errstate(invalid="ignore"):
-            valid = np.count_nonzero(np.isfinite(ranges) & (ranges >= scan.range_min)
-                                     & (ranges <= scan.range_max) & (ranges > 0.0))
+        valid = np.count_nonzero(return_mask(ranges, scan.range_min, scan.range_max))
         if valid < self.node_params["min_valid_share"] * n:
             self._warn(f"scan has {valid} valid readings of {n} (NaN, inf, 0.0 or outside "
                        f"[{scan.range_min}, {scan.range_max}]): skipped")

@@ -13,7 +13,16 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from amr_common.parameter_table import finite, table_values
+from amr_common.parameter_table import (
+    Param,
+    above,
+    at_least,
+    between,
+    check_values,
+    ruled,
+    table_values,
+    vector,
+)
 from amr_common.robot import ROBOT_RADIUS
 from amr_common.world import World
 from amr_localization.table_memory import MemoryPlan, choose_table
@@ -21,10 +30,16 @@ from amr_localization.table_memory import MemoryPlan, choose_table
 # A particle's centre may be this much closer to a wall than the robot radius before it counts
 # as inside the wall: the table's cells are 2 cm, and the simulated robot rests ~0.5 mm deep.
 WALL_SLACK_M = 0.02
-MAX_PARTICLES = 200_000  # ~20 ms per measurement update at 60 beams: the node stays responsive
+# The most particles of any count (max_particles, min_particles, tracking_particles), for the
+# filter, its node and the run scripts' checks: the node stays responsive. Measured at 200,000
+# (lab02, 60 beams, 2-core machine, CPU time): the first scan of a global search (pose search
+# seeding 180,000 particles, then weighing them) 0.21 s, later global-search updates 0.1 s or
+# less, +40 MB beside the table; a million took ~0.3 s per update and ~2 s to build. 8000
+# localize the mazes.
+MAX_PARTICLES = 200_000
 
 # name: (default, description). The defaults localize in both simulator profiles.
-PARAMETERS: dict[str, tuple[Any, str]] = {
+_TABLE: dict[str, tuple[Any, str]] = {
     "lidar_offset_x_m": (0.0, "Forward position of the LiDAR relative to the robot centre [m] "
                               "(-0.032 on a real Burger; the run scripts set the profile's)."),
     "initial_pose": ([], "Tracking start [x, y, theta] (m, m, rad); [] = global localization "
@@ -93,24 +108,26 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     "reinit_updates": (10, "... at this many consecutive updates restarts the global search."),
 }
 
-# More particles than this cost seconds per scan update and configure (a million: ~0.3 s per
-# update, ~2 s to build, ~150 MB on the 2-core reference machine); 8000 localize the mazes.
-MAX_PARTICLE_COUNT = 1_000_000
-_INTEGERS = {"seed", "max_particles", "min_particles", "tracking_particles", "beams",
-             "table_angles", "localize_updates", "lost_updates", "reinit_updates"}
-_FRACTIONS = {"z_random", "seed_uniform_share", "resample_ess_fraction", "search_ess_fraction",
+_FRACTIONS = ("seed_uniform_share", "resample_ess_fraction", "search_ess_fraction",
               "cluster_min_share", "inject_share", "ambiguity_match_fraction",
-              "localize_match_fraction", "keep_match_fraction", "reinit_match_fraction"}
-_VECTORS = {"initial_pose", "initial_pose_sigma"}
-# Bounds beyond which a value costs absurd memory or time (or is meaningless): name -> (low, high)
-_RANGES = {"max_particles": (1, MAX_PARTICLES), "min_particles": (1, MAX_PARTICLES),
-           "tracking_particles": (1, MAX_PARTICLES), "beams": (1, 4096),
-           "table_angles": (8, 4096), "table_resolution_m": (0.005, 0.2),
-           "max_memory_mb": (1.0, 1e6), "kld_bin_xy_m": (0.005, 10.0),
-           "kld_bin_theta_rad": (0.005, 2 * math.pi), "cluster_radius_m": (0.001, 10.0),
-           "cluster_angle_rad": (0.001, 2 * math.pi), "noise_v_per_v": (0.0, 10.0),
-           "noise_v_per_w": (0.0, 10.0), "noise_w_per_w": (0.0, 10.0),
-           "noise_w_per_v": (0.0, 10.0)}
+              "localize_match_fraction", "keep_match_fraction", "reinit_match_fraction")
+# Numbers >= 0 but for these. The bounds keep a value from costing absurd memory or time (or
+# being meaningless); checks of several parameters: check_parameters.
+PARAMETERS: dict[str, Param] = ruled(
+    _TABLE, at_least(0.0), lidar_offset_x_m=None,
+    initial_pose=vector(0, 3), initial_pose_sigma=vector(3, low=0.0),
+    seed=at_least(0), beams=between(1, 4096), table_angles=between(8, 4096),
+    localize_updates=at_least(1), lost_updates=at_least(1), reinit_updates=at_least(1),
+    z_random=between(0.0, 1.0, low_open=True, high_open=True),
+    sigma_hit_m=above(0.0), kld_epsilon=above(0.0), match_tolerance_m=above(0.0),
+    table_resolution_m=between(0.005, 0.2), max_memory_mb=between(1.0, 1e6),
+    kld_bin_xy_m=between(0.005, 10.0), kld_bin_theta_rad=between(0.005, 2 * math.pi),
+    cluster_radius_m=between(0.001, 10.0), cluster_angle_rad=between(0.001, 2 * math.pi),
+    **{name: between(1, MAX_PARTICLES) for name in ("max_particles", "min_particles",
+                                                    "tracking_particles")},
+    **{name: between(0.0, 10.0) for name in ("noise_v_per_v", "noise_v_per_w",
+                                             "noise_w_per_w", "noise_w_per_v")},
+    **{name: between(0.0, 1.0) for name in _FRACTIONS})
 
 
 def check_parameters(overrides: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -119,50 +136,16 @@ def check_parameters(overrides: dict[str, Any] | None = None) -> dict[str, Any]:
     Every parameter's value (defaults updated with `overrides`), checked and normalised
     (floats, ints, tuples; initial_pose None when empty); ValueError naming every bad one.
     """
-    values = table_values(PARAMETERS, overrides, "ParticleFilter")
-    problems = []
-    for name, value in values.items():
-        if name in _VECTORS:
-            continue
-        if not finite(value):
-            problems.append(f"{name} must be a finite number (got {value!r})")
-        elif name in _INTEGERS:
-            if int(value) != value or value < (0 if name == "seed" else 1):
-                problems.append(f"{name} must be a positive integer (got {value!r})")
-            values[name] = int(value)
-        elif name in _FRACTIONS and not 0.0 <= value <= 1.0:
-            problems.append(f"{name} must be in [0, 1] (got {value!r})")
-        elif name != "lidar_offset_x_m" and value < 0.0:
-            problems.append(f"{name} must be >= 0 (got {value!r})")
-        else:
-            values[name] = float(value)
-    for name in ("sigma_hit_m", "table_resolution_m", "kld_epsilon", "kld_bin_xy_m",
-                 "kld_bin_theta_rad", "cluster_radius_m", "cluster_angle_rad",
-                 "match_tolerance_m"):
-        if isinstance(values[name], float) and values[name] <= 0.0:
-            problems.append(f"{name} must be > 0 (got {values[name]!r})")
-    for name, (low, high) in _RANGES.items():
-        if isinstance(values[name], (int, float)) and not low <= values[name] <= high \
-                and not any(p.startswith(f"{name} ") for p in problems):
-            problems.append(f"{name} must be in [{low:g}, {high:g}] (got {values[name]!r})")
-    if isinstance(values["z_random"], float) and not 0.0 < values["z_random"] < 1.0:
-        problems.append(f"z_random must be in (0, 1) (got {values['z_random']!r})")
-    for name in ("max_particles", "min_particles", "tracking_particles"):
-        if isinstance(values[name], int) and values[name] > MAX_PARTICLE_COUNT:
-            problems.append(f"{name} must be at most {MAX_PARTICLE_COUNT} (got {values[name]}): "
-                            f"a million particles already take ~0.3 s per scan update")
-    if isinstance(values["min_particles"], int) and isinstance(values["max_particles"], int) \
-            and values["min_particles"] > values["max_particles"]:
-        problems.append(f"min_particles ({values['min_particles']}) must not exceed "
-                        f"max_particles ({values['max_particles']})")
-    pose = _vector(values["initial_pose"], (0, 3), "initial_pose", problems)
-    values["initial_pose"] = pose if pose else None
-    sigma = _vector(values["initial_pose_sigma"], (3,), "initial_pose_sigma", problems)
-    if sigma is not None and any(s < 0 for s in sigma):
-        problems.append(f"initial_pose_sigma must be >= 0 (got {list(sigma)})")
-    values["initial_pose_sigma"] = sigma
+    values, problems = check_values(PARAMETERS,
+                                    table_values(PARAMETERS, overrides, "ParticleFilter"))
+    counts = (values["min_particles"], values["max_particles"])
+    if not any(p.startswith(("min_particles ", "max_particles ")) for p in problems) \
+            and counts[0] > counts[1]:
+        problems.append(f"min_particles ({counts[0]}) must not exceed max_particles "
+                        f"({counts[1]})")
     if problems:
         raise ValueError("; ".join(problems))
+    values["initial_pose"] = values["initial_pose"] or None
     return values
 
 
@@ -194,20 +177,6 @@ def pose_problem(world: World, x: float, y: float) -> str | None:
         return (f"({x:.3f}, {y:.3f}) is on or too close to a wall: the robot's centre must be "
                 f"at least {ROBOT_RADIUS - WALL_SLACK_M:.3f} m from every wall")
     return None
-
-
-def _vector(value: Any, lengths: tuple[int, ...], name: str, problems: list[str]):
-    try:
-        items = tuple(float(v) for v in value if not isinstance(v, bool))
-        ok = len(items) == len(list(value)) and len(items) in lengths and \
-            all(math.isfinite(v) for v in items)
-    except (TypeError, ValueError):
-        ok, items = False, ()
-    if not ok:
-        sizes = " or ".join("[]" if n == 0 else f"{n} finite numbers" for n in lengths)
-        problems.append(f"{name} must be {sizes} (got {value!r})")
-        return None
-    return items
 
 
 def parameter_descriptions() -> dict[str, tuple[Any, str]]:

@@ -7,7 +7,10 @@ lookups) match within a wide tolerance; the best poses away from the estimate ar
 exact local search (ray casting all rays, ScanMatcher). If one of them explains nearly as much of
 the scan as the estimate, the scan is ambiguous (a symmetric part of the maze): the filter does not
 declare, and gets particles at those poses so that the ambiguity must be resolved by driving on.
-Cost on a 2.4 m maze: about 10-30 ms (lookups) + a few ms per refined candidate. No rclpy import.
+Cost on a 2.4 m maze: about 10-30 ms (lookups) + a few ms per refined candidate; on a 40 x 40 m
+floor (885,000 positions) about 3 s, so a search is a SearchJob scored a slice of SLICE_CELLS
+positions at a time: the filter advances it once per scan and uses its result when done, and no
+call blocks its node for long (every course maze fits in one slice). No rclpy import.
 """
 from __future__ import annotations
 
@@ -24,6 +27,10 @@ from amr_localization.scan_beams import ScanBeams
 
 SEARCH_BEAMS = 30
 _CHUNK_CELLS = 4096  # cells scored at a time (x 120 headings x 4 bytes: 2 MB)
+# Cells (robot positions, x 120 headings) one SearchJob.advance() scores: at most ~0.1 s of CPU
+# on the 2-core reference machine (3.5-6 us per position), against ~3 s for the 885,000 of a
+# 40 x 40 m floor in one go; the course's mazes have 1,800-5,400 positions: one slice, as before.
+SLICE_CELLS = 8 * _CHUNK_CELLS
 _ALTERNATIVE_POSES = 4000  # best grid poses among which alternatives() picks its candidates
 
 
@@ -145,49 +152,34 @@ class PoseSearch:
         self.candidates = int(candidates)
         self.miss_share = float(miss_share)
         self.step = (stride * table.resolution, 2.0 * math.pi / headings)
+        # Scratch scores of one chunk, shared by the jobs of this search (one at a time).
         self._scores = np.empty((min(len(self.cells), _CHUNK_CELLS), self.headings),
                                 dtype=np.int32)
-        self._limits_mm = (0, 0)  # the scan's valid range limits (mm), set per search
 
     def _score_into(self, centres: np.ndarray, beam_bins: np.ndarray, z_mm: np.ndarray,
-                    max_misses: int, out: np.ndarray) -> None:
+                    max_misses: int, out: np.ndarray, limits_mm: tuple[int, int]) -> None:
         """Scores of the poses at `centres` x every heading into out (beams in that order)."""
-        table, limits_mm = self.table, self._limits_mm
+        table = self.table
         score_poses(np.ascontiguousarray(centres), self.headings, table.ranges, table.rows,
                     table.angles, table.x0, table.y0, table.resolution, table.nx,
                     self.lidar_offset, np.ascontiguousarray(beam_bins), np.ascontiguousarray(z_mm),
                     self.tolerance_mm, limits_mm[0], limits_mm[1], max_misses, out)
 
-    def _best(self, count: int, beams: ScanBeams, z_mm: np.ndarray) -> tuple[np.ndarray, ...]:
-        """The `count` best grid poses: (scores, flat indices cell * headings + heading).
+    def start(self, count: int, beams: ScanBeams, z_mm: np.ndarray) -> "SearchJob":
+        """A search of every grid pose for this scan, keeping the `count` best: nothing scored yet.
 
-        Best first: highest score, then lowest flat index (a fixed order for equal scores).
+        Advance it (SearchJob.advance) until done; then best_poses() or alternatives() use it.
         """
-        beam_bins, self._limits_mm = beams.bins, beams.limits_mm
-        # At most SEARCH_BEAMS beams, spread around: a coarse ranking (the candidates are then
-        # refined with every ray), and half the lookups of 60 beams.
-        keep = np.arange(0, len(beam_bins), max(1, -(-len(beam_bins) // SEARCH_BEAMS)))
-        beam_bins, z_mm = beam_bins[keep], z_mm[keep]
-        order = interleaved_order(len(beam_bins))
-        self.scored_beams = len(beam_bins)
-        best = _TopScores(count)
-        for first in range(0, len(self.cells), _CHUNK_CELLS):
-            centres = self.centres[first:first + _CHUNK_CELLS]
-            out = self._scores[:len(centres)]
-            self._score_into(centres, beam_bins[order], z_mm[order],
-                             int(self.miss_share * len(beam_bins)), out)
-            best.add(out.ravel(), first * self.headings)
-        return best.scores, best.flat
+        return SearchJob(self, count, beams, z_mm)
 
-    def best_poses(self, count: int, beams: ScanBeams, z_mm: np.ndarray,
-                   rng: np.random.Generator) -> np.ndarray:
-        """The best-fitting grid poses for this scan, jittered: a global search's particles.
+    def best_poses(self, job: "SearchJob", rng: np.random.Generator) -> np.ndarray:
+        """The best-fitting grid poses of a finished search, jittered: a global search's particles.
 
-        (count, 3) poses: the `count` best-scoring grid poses for this scan, each jittered
+        (count, 3) poses: the `count` best-scoring grid poses for the job's scan, each jittered
         uniformly within its grid step (the particles of a global search, so that every pose
         that fits the first scan, the true one and its symmetric copies alike, is represented).
         """
-        _, flat = self._best(count, beams, z_mm)
+        flat = job.flat
         count = len(flat)
         cells, headings = np.divmod(flat, self.headings)
         half_xy, half_theta = self.step[0] / 2.0, self.step[1] / 2.0
@@ -207,7 +199,7 @@ class PoseSearch:
         `pose` itself) refined exactly. Used before calling a hypothesis refuted: refuted must
         mean that NO pose near it explains the scan, not that its current pose drifted.
         """
-        beam_bins, self._limits_mm = beams.bins, beams.limits_mm
+        beam_bins = beams.bins
         near = np.flatnonzero(np.hypot(self.centres[:, 0] - pose[0],
                                        self.centres[:, 1] - pose[1]) <= radius)
         candidates = [tuple(pose)]
@@ -215,7 +207,8 @@ class PoseSearch:
             centres = self.centres[near]
             scores = np.empty((len(centres), self.headings), dtype=np.int32)
             order = interleaved_order(len(beam_bins))
-            self._score_into(centres, beam_bins[order], z_mm[order], len(beam_bins), scores)
+            self._score_into(centres, beam_bins[order], z_mm[order], len(beam_bins), scores,
+                             beams.limits_mm)
             headings = np.arange(self.headings) * self.step[1]
             off = np.abs(wrap_angles(headings - pose[2]))
             scores[:, off > angle] = -1
@@ -231,19 +224,23 @@ class PoseSearch:
         refined = [refine(c, matcher, ranges, match_tolerance, self.step) for c in candidates]
         return max(refined, key=lambda a: a.match_fraction)
 
-    def alternatives(self, estimate, beams: ScanBeams, z_mm: np.ndarray,
-                     matcher: ScanMatcher, ranges: np.ndarray, match_tolerance: float,
-                     exclusion_m: float = 0.15,
+    def start_alternatives(self, beams: ScanBeams, z_mm: np.ndarray) -> "SearchJob":
+        """The search alternatives() takes, not scored yet."""
+        return self.start(_ALTERNATIVE_POSES, beams, z_mm)
+
+    def alternatives(self, job: "SearchJob", estimate, matcher: ScanMatcher,
+                     ranges: np.ndarray, match_tolerance: float, exclusion_m: float = 0.15,
                      exclusion_rad: float = math.radians(15.0)) -> list[Alternative]:
         """The best distinct poses away from `estimate`, refined, best first.
 
-        The best distinct poses farther than exclusion_m / exclusion_rad from `estimate`,
-        each refined locally, best first.
+        From a finished search of the scan `ranges` (start_alternatives): the best distinct
+        poses farther than exclusion_m / exclusion_rad from `estimate`, each refined locally
+        on that scan, best first.
         """
-        scores, flat = self._best(_ALTERNATIVE_POSES, beams, z_mm)
+        scores, flat = job.scores, job.flat
         # Candidates: the poses within a few beams of the best (a rival explaining >= 90 % of
         # the rays matches nearly every beam at this tolerance), best first.
-        flat = flat[scores >= scores[0] - max(self.scored_beams // 6, 2)] if len(flat) else flat
+        flat = flat[scores >= scores[0] - max(job.scored_beams // 6, 2)] if len(flat) else flat
         chosen: list[tuple[float, float, float]] = []
         for index in flat:
             c, h = divmod(int(index), self.headings)
@@ -261,6 +258,66 @@ class PoseSearch:
         return sorted(refined, key=lambda a: -a.match_fraction)
 
 
+class SearchJob:
+    """One exhaustive search of PoseSearch's grid poses for one scan, scored a slice at a time.
+
+    advance() scores the next SLICE_CELLS positions (every heading) and says whether the search
+    is done; then `scores` and `flat` (cell * headings + heading) hold the `count` best poses,
+    best first (ties: lowest index), the same however it was sliced.
+    """
+
+    def __init__(self, search: PoseSearch, count: int, beams: ScanBeams,
+                 z_mm: np.ndarray) -> None:
+        beam_bins = beams.bins
+        # At most SEARCH_BEAMS beams, spread around: a coarse ranking (the candidates are then
+        # refined with every ray), and half the lookups of 60 beams; misses come early in an
+        # interleaved order.
+        keep = np.arange(0, len(beam_bins), max(1, -(-len(beam_bins) // SEARCH_BEAMS)))
+        order = interleaved_order(len(keep))
+        self.search = search
+        self.scored_beams = len(keep)
+        self._bins = np.ascontiguousarray(beam_bins[keep][order])
+        self._z_mm = np.ascontiguousarray(np.asarray(z_mm)[keep][order])
+        self._max_misses = int(search.miss_share * len(keep))
+        self._limits_mm = beams.limits_mm
+        self._best = _TopScores(count)
+        self._next = 0  # the first cell not scored yet
+
+    @property
+    def done(self) -> bool:
+        """True once every position was scored."""
+        return self._next >= len(self.search.cells)
+
+    def advance(self, cells: int = SLICE_CELLS) -> bool:
+        """Score the next `cells` positions (whole chunks); True if the search is done."""
+        search, end = self.search, self._next + cells
+        while self._next < min(end, len(search.cells)):
+            first = self._next
+            centres = search.centres[first:first + _CHUNK_CELLS]
+            out = search._scores[:len(centres)]
+            search._score_into(centres, self._bins, self._z_mm, self._max_misses, out,
+                               self._limits_mm)
+            self._best.add(out.ravel(), first * search.headings)
+            self._next = first + len(centres)
+        return self.done
+
+    def finish(self) -> "SearchJob":
+        """Score every position left (the whole search at once); returns the job."""
+        while not self.advance():
+            pass
+        return self
+
+    @property
+    def scores(self) -> np.ndarray:
+        """Scores of the best poses so far (matched beams), best first."""
+        return self._best.scores
+
+    @property
+    def flat(self) -> np.ndarray:
+        """Their flat indices: cell * headings + heading."""
+        return self._best.flat
+
+
 class _TopScores:
     """The `count` highest scores seen so far and their flat indices (ties: lowest index)."""
 
@@ -274,7 +331,7 @@ class _TopScores:
         if len(self.scores) == self.count:  # full: only a strictly higher score gets in
             index = np.flatnonzero(scores > self.scores[-1])
         elif scores.size > self.count:  # the chunk's own best `count` (ties: lowest index)
-            kth = np.partition(scores, scores.size - self.count)[scores.size - self.count]
+            kth = _kth_highest(scores, self.count)
             above = np.flatnonzero(scores > kth)
             index = np.sort(np.r_[above, np.flatnonzero(scores == kth)[:self.count - len(above)]])
         else:
@@ -285,6 +342,15 @@ class _TopScores:
         merged_flat = np.r_[self.flat, offset + index]
         keep = np.lexsort((merged_flat, -merged_scores))[:self.count]
         self.scores, self.flat = merged_scores[keep], merged_flat[keep]
+
+
+def _kth_highest(scores: np.ndarray, k: int) -> int:
+    """The k-th highest of non-negative integer scores (matched beams), by counting them.
+
+    np.partition took ~60 ms on a chunk's 491,520 scores (few distinct values); this ~2 ms.
+    """
+    at_least = np.cumsum(np.bincount(scores)[::-1])  # at_least[i]: scores >= top - i
+    return int(len(at_least) - 1 - np.searchsorted(at_least, k))
 
 
 def refine(pose, matcher: ScanMatcher, ranges: np.ndarray, tolerance: float,

@@ -15,6 +15,7 @@ from typing import NamedTuple
 import numpy as np
 
 from amr_common.jit import jit
+from amr_common.scan_returns import is_return
 
 _WHOLE_BIN = 1e-9  # a direction this close to a whole table bin is that bin
 
@@ -22,7 +23,7 @@ _WHOLE_BIN = 1e-9  # a direction this close to a whole table bin is that bin
 def _reading_to_mm(ranges, range_min, range_max, out):
     for i in range(ranges.shape[0]):
         r = ranges[i]
-        if r >= range_min and r <= range_max and r > 0.0 and r < 2.0e6:  # NaN, inf fail
+        if is_return(r, range_min, range_max) and r < 2.0e6:  # 2e6 m: int32 mm
             out[i] = np.int32(round(r * 1000.0))
         else:
             out[i] = -1

@@ -14,18 +14,25 @@ episodes of scripts/evaluate.py --localize): no wrong pose, tracking error mean 
 (2 cm x 360: 0.29-0.34 cm). The free space is estimated on a lattice of at most
 _LATTICE_POINTS points, so a plan costs milliseconds and nothing is built: run scripts call it
 (particle_filter_params.check_world) to refuse a map before anything runs. No rclpy import.
+
+A map world (a Nav2 map YAML, a SLAM map: World.raster) has its table on the map's own cells
+(OccupancyGrid of a raster), whatever table_resolution_m says: its plan takes the map's shape,
+cell size and free cells (counted, not estimated), and only the directions can shrink.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
 from amr_common.coverage_grid import MAX_GRID_CELLS
+from amr_common.distance_transform import free_cell_clearances
+from amr_common.map_raster import Raster
 from amr_common.occupancy_grid import grid_shape
 from amr_common.world import World
+from amr_localization.expected_ranges import MIN_CLEARANCE_M
 
 COARSEST_RESOLUTION_M = 0.04
 _LATTICE_POINTS = 100_000  # the free space is estimated on at most this many points ...
@@ -50,6 +57,7 @@ class MemoryPlan:
     free_cells: int  # of them, in the free space (an estimate): those get a row
     table_bytes: int
     other_bytes: int
+    reduced: bool = False  # fewer directions or coarser cells than the parameters ask for
 
     @property
     def total_bytes(self) -> int:
@@ -76,10 +84,17 @@ def free_share(world: World) -> float:
 
 def memory_plan(world: World, resolution: float, angles: int, params: dict[str, Any],
                 share: float | None = None) -> MemoryPlan:
-    """The memory the filter needs on `world` with this table and the (checked) parameters."""
+    """The memory the filter needs on `world` with this table and the (checked) parameters.
+
+    A map world: on the map's cells, whatever `resolution` says (see the module docstring).
+    """
     height, width = grid_shape(world, resolution)
     cells = height * width
-    free = int(math.ceil(cells * (free_share(world) if share is None else share)))
+    if world.raster is not None:
+        resolution = world.raster.resolution
+        free = map_table_cells(world.raster)
+    else:
+        free = int(math.ceil(cells * (free_share(world) if share is None else share)))
     table = (free + 1) * angles * 2 + cells * 4
     xmin, ymin, xmax, ymax = world.bounds
     bins = ((math.ceil((xmax - xmin) / params["kld_bin_xy_m"]) + 2)
@@ -89,6 +104,19 @@ def memory_plan(world: World, resolution: float, angles: int, params: dict[str, 
     particles = max(params["max_particles"], params["tracking_particles"]) * _PARTICLE_BYTES
     other = cells * _GRID_BYTES_PER_CELL + search + bins + particles
     return MemoryPlan(float(resolution), int(angles), cells, free, int(table), int(other))
+
+
+def map_table_cells(raster: Raster) -> int:
+    """The cells of a map that get a row of the table, counted.
+
+    Those with clearance >= MIN_CLEARANCE_M (expected_ranges). A free cell's centre is at
+    least half a cell from every non-free one (the map's walls), so with cells of 2 cm or more
+    every free cell; finer maps need their clearances.
+    """
+    if 0.5 * raster.resolution >= MIN_CLEARANCE_M:
+        return int(np.count_nonzero(raster.free))
+    clearance = free_cell_clearances(raster.free, raster.resolution)
+    return int(np.count_nonzero(clearance >= MIN_CLEARANCE_M))
 
 
 def search_stride(resolution: float) -> int:
@@ -105,9 +133,12 @@ def candidate_plans(world: World, params: dict[str, Any]) -> list[MemoryPlan]:
     """The tables the filter may use on `world`, finest first (see the module docstring)."""
     resolution, angles = params["table_resolution_m"], params["table_angles"]
     choices = [(resolution, angles), (resolution, angles // 2)]
-    if 2 * resolution <= COARSEST_RESOLUTION_M + 1e-9:
-        choices += [(2 * resolution, angles), (2 * resolution, angles // 2)]
-    share = free_share(world)
+    if world.raster is not None:  # the map's cells: only the directions can shrink
+        share = None
+    else:
+        if 2 * resolution <= COARSEST_RESOLUTION_M + 1e-9:
+            choices += [(2 * resolution, angles), (2 * resolution, angles // 2)]
+        share = free_share(world)
     return [memory_plan(world, r, a, params, share) for r, a in choices if a >= 8]
 
 
@@ -118,9 +149,9 @@ def choose_table(world: World, params: dict[str, Any]) -> MemoryPlan:
     """
     plans = candidate_plans(world, params)
     budget = params["max_memory_mb"] * _MB
-    for plan in plans:
+    for index, plan in enumerate(plans):
         if plan.total_bytes <= budget and plan.cells <= MAX_GRID_CELLS:
-            return plan
+            return replace(plan, reduced=index > 0)
     xmin, ymin, xmax, ymax = world.bounds
     last = plans[-1]
     too_many = f"; its grid has {last.cells:,} cells (most {MAX_GRID_CELLS:,})" \

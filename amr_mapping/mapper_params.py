@@ -7,10 +7,18 @@ from __future__ import annotations
 
 from typing import Any
 
-from amr_common.parameter_table import finite, table_values
+from amr_common.parameter_table import (
+    Param,
+    above,
+    at_least,
+    between,
+    checked_values,
+    one_of,
+    ruled,
+)
 
 # name: (default, description)
-PARAMETERS: dict[str, tuple[Any, str]] = {
+_TABLE: dict[str, tuple[Any, str]] = {
     # --- sensor
     "lidar_offset_x_m": (0.0, "Forward position of the LiDAR relative to the robot centre [m] "
                               "(-0.032 on a real Burger; the run scripts set the profile's)."),
@@ -87,58 +95,33 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
                                       "map."),
 }
 
-_INTEGERS = {"min_points", "max_map_cells", "local_map_keyframes", "loop_chain_keyframes",
-             "loop_interval_keyframes"}
-_BOOLEANS = {"loop_closure"}
-_CHOICES = {"correlative_search": ("branch_and_bound", "exhaustive")}
-_MAY_BE_NEGATIVE = {"lidar_offset_x_m", "free_log_odds"}
-_MAY_BE_ZERO = {"miss_stop_m", "occupied_min_hit_share", "keyframe_distance_m",
-                "keyframe_angle_rad", "min_match_score",
-                "odometry_sigma_per_m", "odometry_sigma_per_rad", "loop_min_travel_m",
-                "rerender_tolerance_m", "rerender_tolerance_rad", "occupied_log_odds"}
+# Numbers > 0 but for these; integers >= 1. Checks of several parameters: check_parameters.
+PARAMETERS: dict[str, Param] = ruled(
+    _TABLE, above(0.0), lidar_offset_x_m=None, free_log_odds=None,
+    correlative_search=one_of("branch_and_bound", "exhaustive"),
+    **{name: at_least(1) for name in ("min_points", "max_map_cells", "local_map_keyframes",
+                                      "loop_chain_keyframes", "loop_interval_keyframes")},
+    **{name: at_least(0.0) for name in (
+        "miss_stop_m", "keyframe_distance_m", "keyframe_angle_rad", "odometry_sigma_per_m",
+        "odometry_sigma_per_rad", "loop_min_travel_m", "rerender_tolerance_m",
+        "rerender_tolerance_rad", "occupied_log_odds")},
+    **{name: between(0.0, 1.0) for name in ("min_match_score", "occupied_min_hit_share")},
+    **{name: between(0.0, 1.0, low_open=True) for name in ("loop_min_score",
+                                                           "loop_ambiguity_ratio")})
 
 
 def check_parameters(overrides: dict[str, Any] | None = None) -> dict[str, Any]:
     """Every parameter's value (defaults updated with `overrides`), checked and normalised.
 
-    Floats, ints and bools; ValueError naming every bad one.
+    Floats, ints and bools, each against its rule in PARAMETERS, then together; ValueError
+    naming every bad one.
     """
-    values = table_values(PARAMETERS, overrides, "Mapper")
+    values = checked_values(PARAMETERS, overrides, "Mapper")
     problems = []
-    for name, value in values.items():
-        if name in _BOOLEANS:
-            if not isinstance(value, bool):
-                problems.append(f"{name} must be true or false (got {value!r})")
-            continue
-        if name in _CHOICES:
-            if value not in _CHOICES[name]:
-                problems.append(f"{name} must be one of {list(_CHOICES[name])} (got {value!r})")
-            continue
-        if not finite(value):
-            problems.append(f"{name} must be a finite number (got {value!r})")
-        elif name in _INTEGERS:
-            if int(value) != value or value < 1:
-                problems.append(f"{name} must be a positive integer (got {value!r})")
-            else:
-                values[name] = int(value)
-        elif name not in _MAY_BE_NEGATIVE and (value < 0.0 or (value == 0.0
-                                                                and name not in _MAY_BE_ZERO)):
-            problems.append(f"{name} must be {'>= 0' if name in _MAY_BE_ZERO else '> 0'} "
-                            f"(got {value!r})")
-        else:
-            values[name] = float(value)
-    for name in ("min_match_score", "loop_min_score", "loop_ambiguity_ratio",
-                 "occupied_min_hit_share"):
-        if isinstance(values[name], float) and values[name] > 1.0:
-            problems.append(f"{name} must be in [0, 1] (got {values[name]!r})")
-    if isinstance(values["free_log_odds"], float) and \
-            isinstance(values["occupied_log_odds"], float) and \
-            not values["free_log_odds"] < values["occupied_log_odds"]:
+    if not values["free_log_odds"] < values["occupied_log_odds"]:
         problems.append(f"free_log_odds ({values['free_log_odds']}) must be below "
                         f"occupied_log_odds ({values['occupied_log_odds']})")
-    if isinstance(values["resolution_m"], float) and \
-            isinstance(values["smear_sigma_m"], float) and \
-            values["smear_sigma_m"] > 10.0 * values["resolution_m"]:
+    if values["smear_sigma_m"] > 10.0 * values["resolution_m"]:
         problems.append(f"smear_sigma_m ({values['smear_sigma_m']}) must be at most 10 cells "
                         f"({10.0 * values['resolution_m']:g} m)")
     if problems:

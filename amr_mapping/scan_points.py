@@ -14,6 +14,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from amr_common.scan_returns import return_mask
+
 MAX_RAYS = 100_000  # more rays than any 2D LiDAR gives: refused as malformed
 
 
@@ -54,10 +56,7 @@ def scan_points(scan: Any, lidar_offset_x: float, max_range: float) -> np.ndarra
         raise ScanError(f"ranges must be a flat list of at most {MAX_RAYS} numbers "
                         f"(got shape {ranges.shape})")
     upper = min(range_max, max_range)
-    with np.errstate(invalid="ignore"):
-        usable = np.isfinite(ranges) & (ranges > 0.0) & (ranges >= range_min) & \
-            (ranges <= upper)
-    index = np.flatnonzero(usable)
+    index = np.flatnonzero(return_mask(ranges, range_min, upper))
     angles = angle_min + increment * index
     r = ranges[index]
     return np.column_stack([lidar_offset_x + r * np.cos(angles), r * np.sin(angles)])

@@ -33,7 +33,7 @@ import numpy as np
 
 from amr_common.geometry import polyline_length, without_repeats
 from amr_common.occupancy_grid import OccupancyGrid
-from amr_common.parameter_table import finite, table_values
+from amr_common.parameter_table import Param, above, at_least, checked_values, one_of, ruled
 from amr_common.raycast import nearest_wall_kernel
 from amr_common.robot import ROBOT_RADIUS
 from amr_common.world import SAFETY_MARGIN, World
@@ -42,7 +42,7 @@ from amr_planning import search, smoothing
 ALGORITHMS = ("astar", "wavefront")
 
 # name: (default, description with units). The planner node declares each as a ROS parameter.
-PARAMETERS: dict[str, tuple[Any, str]] = {
+_TABLE: dict[str, tuple[Any, str]] = {
     "algorithm": ("astar", "Grid search: 'astar' (8-connected A* with the clearance cost) or "
                            "'wavefront' (the seeds' breadth-first wave from the goal)."),
     "resolution_m": (0.02, "Grid cell size [m]."),
@@ -65,6 +65,11 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     "max_turn_radius_m": (0.5, "Largest arc radius of a rounded corner [m]."),
     "path_spacing_m": (0.02, "Distance between the points of the returned path [m]."),
 }
+# Numbers >= 0 but for these (heuristic_weight: 0 or >= 1, checked in check_parameters).
+PARAMETERS: dict[str, Param] = ruled(
+    _TABLE, at_least(0.0), algorithm=one_of(*ALGORITHMS),
+    **{name: above(0.0) for name in ("resolution_m", "robot_radius_m", "path_spacing_m",
+                                     "min_turn_radius_m")})
 
 
 class PlanningError(ValueError):
@@ -92,22 +97,10 @@ class Plan:
 def check_parameters(overrides: dict[str, Any]) -> dict[str, Any]:
     """All parameter values (defaults updated with `overrides`), checked.
 
-    ValueError names the problem (unknown names, non-numbers, out-of-range values).
+    Each against its rule in PARAMETERS, then together. ValueError names every problem
+    (unknown names, non-numbers, out-of-range values).
     """
-    values = table_values(PARAMETERS, overrides, "Planner")
-    if values["algorithm"] not in ALGORITHMS:
-        raise ValueError(f"Planner: algorithm must be one of {ALGORITHMS}, got "
-                         f"{values['algorithm']!r}")
-    checked: dict[str, Any] = {"algorithm": values["algorithm"], "smooth": bool(values["smooth"])}
-    for name, value in values.items():
-        if name in checked:
-            continue
-        if not finite(value) or value < 0:
-            raise ValueError(f"Planner: {name} must be a finite number >= 0, got {value!r}")
-        checked[name] = float(value)
-    for name in ("resolution_m", "robot_radius_m", "path_spacing_m", "min_turn_radius_m"):
-        if checked[name] <= 0:
-            raise ValueError(f"Planner: {name} must be > 0, got {checked[name]!r}")
+    checked = checked_values(PARAMETERS, overrides, "Planner")
     if checked["heuristic_weight"] < 1.0 and checked["heuristic_weight"] != 0.0:
         raise ValueError("Planner: heuristic_weight must be 0 (Dijkstra) or >= 1, got "
                          f"{checked['heuristic_weight']!r}")

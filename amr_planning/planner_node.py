@@ -25,13 +25,14 @@ from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 
 from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.node_runner import run_lifecycle_node
-from amr_common.parameters import declare_parameters, finite, read_parameters
+from amr_common.parameter_table import Param, ruled, vector
+from amr_common.parameters import declare_parameters, read_parameters
 from amr_common.qos import LATCHED, RELIABLE_10
 from amr_common.ros_conversions import path_message
 from amr_common.world import World
 from amr_planning.planner import Planner, PlanningError
 
-_NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
+_NODE_PARAMETERS: dict[str, Param] = ruled({
     "world": ("lab02", "Bundled world name or path to a world .yaml / course map .json / Nav2 "
                        "map .yaml (the simulator's and the particle filter's map)"),
     "goal": ([], "Goal [x, y] in metres; [] = goal_name, else the world's default goal"),
@@ -42,7 +43,7 @@ _NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
     "pose_topic": ("/pose", "amr_msgs/PoseStamped input (the particle filter's estimate)"),
     "goal_pose_topic": ("/goal_pose", "geometry_msgs/PoseStamped goal input"),
     "path_topic": ("/path", "nav_msgs/Path output (transient local)"),
-}
+}, goal=vector(0, 2))
 
 
 class PlannerNode(GuardedLifecycleNode):
@@ -198,13 +199,11 @@ class PlannerNode(GuardedLifecycleNode):
 
 
 def _configured_goal(world: World, goal: Any, goal_name: str) -> tuple[float, float] | None:
-    """The goal the parameters ask for; ValueError for a malformed goal or an unknown name.
+    """The goal the parameters ask for (`goal` passed its rule); ValueError for an unknown name.
 
     Not checked against the walls here: a goal in a wall is reported when planning.
     """
     if goal is not None and len(goal) > 0:
-        if len(goal) != 2 or not all(finite(v) for v in goal):
-            raise ValueError(f"goal must be [] or [x, y] with finite numbers (got {list(goal)})")
         return float(goal[0]), float(goal[1])
     if goal_name:
         if goal_name not in world.goals:

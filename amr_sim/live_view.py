@@ -18,6 +18,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from amr_common.robot import ROBOT_RADIUS
+from amr_common.scan_returns import return_mask
 
 DEFAULT_MAX_WINDOW_PX = (1000, 800)
 MARGIN_M = 0.25
@@ -205,10 +206,7 @@ class LiveView:
         increment = float(getattr(profile, "angle_increment", 2 * math.pi / max(len(ranges), 1)))
         range_min = float(getattr(profile, "range_min", 0.0))
         range_max = float(getattr(profile, "range_max", math.inf))
-        with np.errstate(invalid="ignore"):
-            valid = (np.isfinite(ranges) & (ranges >= range_min) & (ranges <= range_max)
-                     & (ranges > 0))
-        index = np.nonzero(valid)[0]
+        index = np.nonzero(return_mask(ranges, range_min, range_max))[0]
         if index.size == 0:
             return
         angles = theta + angle_min + increment * index

@@ -146,10 +146,8 @@ class Simulator:
         self._command = (v, w)
 
         x0, y0, th0 = self._x, self._y, self._theta
-        chord_speed = v * robot.sinc_half(w * dt)  # exact unicycle arc: its chord, mid heading
-        mid = th0 + 0.5 * w * dt
-        vx, vy = constrain_velocity(self._segments, x0, y0, chord_speed * math.cos(mid),
-                                    chord_speed * math.sin(mid), dt, _ROBOT_RADIUS,
+        chord_v = robot.arc_displacement(th0, v * robot.sinc_half(w * dt), w * dt)  # exact arc
+        vx, vy = constrain_velocity(self._segments, x0, y0, *chord_v, dt, _ROBOT_RADIUS,
                                     ALLOWED_PENETRATION)
         body = self._body
         body.velocity = (vx, vy)
@@ -165,9 +163,8 @@ class Simulator:
 
         # Encoders from the actual motion: arc length along the mid heading -> wheel angle
         # increments -> forward kinematics (z_v = ds / dt, z_w = dtheta / dt).
-        dx, dy, dth = x1 - x0, y1 - y0, th1 - th0
-        mid = th0 + 0.5 * dth
-        chord = dx * math.cos(mid) + dy * math.sin(mid)
+        dth = th1 - th0
+        chord = robot.step_chord(x1 - x0, y1 - y0, th0, dth)
         ds = chord / robot.sinc_half(dth)
         wheels = self._wheel_angles
         if self._real is not None:  # encoders, odometry with the IMU heading (it drifts)
@@ -182,11 +179,8 @@ class Simulator:
             self._z_v, self._z_w = robot.twist_from_increments(dphi_l, dphi_r, dt)
             # Dead reckoning (the encoders do not see sideways sliding along a wall).
             odom = self._odom
-            odom_mid = odom[2] + 0.5 * dth
-            odom[0] += chord * math.cos(odom_mid)
-            odom[1] += chord * math.sin(odom_mid)
-            odom[2] += dth
-        self._distance += math.hypot(dx, dy)
+            odom[0], odom[1], odom[2] = robot.arc_step(odom[0], odom[1], odom[2], chord, dth)
+        self._distance += math.hypot(x1 - x0, y1 - y0)
 
         clearance = nearest_wall(self._segments, x1, y1)[0] - _ROBOT_RADIUS
         if clearance < self._min_clearance:

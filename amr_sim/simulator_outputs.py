@@ -13,7 +13,6 @@ and, in real time, ScanDelivery loses some and delays the others as a Wi-Fi link
 """
 from __future__ import annotations
 
-import math
 from typing import Any
 
 from builtin_interfaces.msg import Time
@@ -27,7 +26,7 @@ from amr_common.coverage_grid import GridTooLargeError
 from amr_common.geometry import angle_difference
 from amr_common.map_messages import MAP_MARKERS_TOPIC, MAP_TOPIC, world_map_messages
 from amr_common.qos import LATCHED, RELIABLE_10, scan_qos
-from amr_common.robot import LIDAR_HEIGHT
+from amr_common.robot import LIDAR_HEIGHT, step_chord
 from amr_common.ros_conversions import (
     float32_array,
     laser_scan,
@@ -48,9 +47,7 @@ from amr_sim.reality import delivery_stream
 def true_velocity(before: tuple, after: tuple, dt: float) -> tuple[float, float]:
     """Body-frame (v, w) that moved the robot from pose `before` to `after` in dt."""
     d_theta = angle_difference(after[2], before[2])
-    mid_heading = before[2] + 0.5 * d_theta
-    forward = (after[0] - before[0]) * math.cos(mid_heading) + \
-        (after[1] - before[1]) * math.sin(mid_heading)
+    forward = step_chord(after[0] - before[0], after[1] - before[1], before[2], d_theta)
     return forward / dt, d_theta / dt
 
 

@@ -6,14 +6,22 @@ from __future__ import annotations
 
 from typing import Any
 
-from amr_common.parameter_table import finite
+from amr_common.parameter_table import (
+    Param,
+    at_least,
+    between,
+    check_values,
+    one_of,
+    ruled,
+    vector,
+)
 from amr_common.world import parse_start
 
 DEFAULT_START = "outer"  # the course's "outer corridor" start in lab02
 # name: (default, description); the default's type is the parameter's ([] = a double array).
 # Numbers accept ints or doubles (`-p dt:=1` must not kill the process): amr_common.parameters
 # declares them with dynamic typing, on_configure checks.
-PARAMETERS: dict[str, tuple[Any, str]] = {
+_TABLE: dict[str, tuple[Any, str]] = {
     "world": ("lab02", "Bundled world name or path to a world .yaml / course map .json / Nav2 "
                        "map .yaml"),
     "start": (DEFAULT_START, "Start pose: a name from the world file or 'x,y,theta' "
@@ -60,49 +68,24 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
                           "/map_markers (walls) once, latched"),
     "map_resolution": (0.05, "Cell size of /map in metres (0.005 to 1)"),
 }
+PARAMETERS: dict[str, Param] = ruled(
+    _TABLE, dt=between(1e-4, 1.0), seed=at_least(0), mode=one_of("lockstep", "realtime"),
+    command_timeout=between(0.0, 3600.0), goal=vector(0, 2), goal_rest_time=between(0.0, 3600.0),
+    goal_tolerance=between(1e-3, 100.0), kidnap=vector(0, 4), map_resolution=between(0.005, 1.0))
 
 
 def check_parameters(values: dict[str, Any]) -> dict[str, Any]:
     """The node's parameter values (name -> value as declared), checked and normalised.
 
-    Floats, the goal as a tuple or None, the start parsed; raises ValueError naming every bad
-    one.
+    Each against its rule in PARAMETERS; floats, the goal and kidnap as tuples or None, the
+    start parsed; raises ValueError naming every bad one.
     """
-    p = dict(values)
-    problems = []
-
-    def number(name: str, low: float, high: float) -> None:
-        value = p[name]
-        if not (finite(value) and low <= value <= high):
-            problems.append(f"{name} must be a number in [{low}, {high}] (got {value!r})")
-        else:
-            p[name] = float(value)
-
-    number("dt", 1e-4, 1.0)
-    number("command_timeout", 0.0, 3600.0)
-    number("goal_tolerance", 1e-3, 100.0)
-    number("goal_rest_time", 0.0, 3600.0)
-    number("map_resolution", 0.005, 1.0)
-    if isinstance(p["seed"], bool) or not isinstance(p["seed"], int) or p["seed"] < 0:
-        problems.append(f"seed must be a non-negative integer (got {p['seed']!r})")
-    if p["mode"] not in ("lockstep", "realtime"):
-        problems.append(f"mode must be 'lockstep' or 'realtime' (got '{p['mode']}')")
-    goal = p["goal"]
-    if goal is None or (hasattr(goal, "__len__") and len(goal) == 0):
-        p["goal"] = None
-    elif isinstance(goal, (list, tuple)) and len(goal) == 2 and all(finite(g) for g in goal):
-        p["goal"] = (float(goal[0]), float(goal[1]))
-    else:
-        problems.append(f"goal must be [] or [x, y] with finite numbers (got {goal!r})")
-    kidnap = p["kidnap"]
-    if kidnap is None or (hasattr(kidnap, "__len__") and len(kidnap) == 0):
-        p["kidnap"] = None
-    elif isinstance(kidnap, (list, tuple)) and len(kidnap) == 4 and \
-            all(finite(k) for k in kidnap) and kidnap[0] >= 0:
-        p["kidnap"] = tuple(float(k) for k in kidnap)
-    else:
-        problems.append(f"kidnap must be [] or [t, x, y, theta] with finite numbers and t >= 0 "
-                        f"(got {kidnap!r})")
+    p, problems = check_values(PARAMETERS, {**values, **{
+        name: [] for name in ("goal", "kidnap") if values[name] is None}})
+    if isinstance(p["kidnap"], tuple) and p["kidnap"] and p["kidnap"][0] < 0:
+        problems.append(f"kidnap time must be >= 0 (got {p['kidnap'][0]!r})")
+    p["goal"] = p["goal"] or None
+    p["kidnap"] = p["kidnap"] or None
     try:
         p["start"] = parse_start(p["start"])
     except ValueError as exc:

@@ -16,14 +16,12 @@ Both topics are reliable, KeepLast(10), like the robot's /odom.
 """
 from __future__ import annotations
 
-import math
-from typing import Any
-
 from nav_msgs.msg import Odometry
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 
 from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.node_runner import run_lifecycle_node
+from amr_common.parameter_table import Param, above, at_least, ruled
 from amr_common.parameters import declare_parameters, read_parameters
 from amr_common.qos import RELIABLE_10
 from amr_common.ros_conversions import time_to_nanoseconds
@@ -31,15 +29,15 @@ from amr_turtlebot3.velocity_estimator import Status, VelocityEstimator
 
 WARNING_PERIOD = 5.0  # seconds between repeated warnings of one kind
 
-_PARAMETERS: dict[str, tuple[Any, str]] = {
+_PARAMETERS: dict[str, Param] = ruled({
     "max_gap": (0.5, "Seconds between /odom stamps above which the estimator resets instead "
-                     "of differentiating across the gap (> 0)"),
+                     "of differentiating across the gap"),
     "smoothing_time_constant": (0.0, "Time constant in seconds of a first-order low-pass on "
-                                     "(v, w); 0 = off (>= 0)"),
+                                     "(v, w); 0 = off"),
     "input_topic": ("/odom", "nav_msgs/Odometry input with the pose filled (the robot's /odom)"),
     "output_topic": ("/odometry", "nav_msgs/Odometry output: the input with twist.twist."
                                   "linear.x and angular.z estimated"),
-}
+}, max_gap=above(0.0), smoothing_time_constant=at_least(0.0))
 
 
 class OdometryNode(GuardedLifecycleNode):
@@ -71,11 +69,6 @@ class OdometryNode(GuardedLifecycleNode):
         """
         p, problems = read_parameters(self, _PARAMETERS)
         max_gap, tau = p["max_gap"], p["smoothing_time_constant"]
-        if isinstance(max_gap, float) and not (math.isfinite(max_gap) and max_gap > 0.0):
-            problems.append(f"max_gap must be a number of seconds > 0 (got {p['max_gap']!r})")
-        if isinstance(tau, float) and not (math.isfinite(tau) and tau >= 0.0):
-            problems.append("smoothing_time_constant must be a number of seconds >= 0 "
-                            f"(got {p['smoothing_time_constant']!r})")
         for name in ("input_topic", "output_topic"):
             if not (isinstance(p[name], str) and p[name].strip()):
                 problems.append(f"{name} must be a non-empty topic name (got {p[name]!r})")

@@ -40,6 +40,7 @@ from amr_common.robot import (
     MAX_PLAUSIBLE_ANGULAR_SPEED,
     MAX_PLAUSIBLE_LINEAR_SPEED,
     is_plausible_twist,
+    step_chord,
 )
 
 MIN_INTERVAL_NS = 1_000_000  # samples closer than 1 ms to the previous one are skipped
@@ -133,9 +134,7 @@ class VelocityEstimator:
                                     f"{status.value} (dt = {dt_ns * 1e-9:.3f} s)")
         dt = dt_ns * 1e-9
         dyaw = wrap_angle(sample.yaw - previous.yaw)
-        mid_yaw = previous.yaw + 0.5 * dyaw
-        along = ((sample.x - previous.x) * math.cos(mid_yaw)
-                 + (sample.y - previous.y) * math.sin(mid_yaw))
+        along = step_chord(sample.x - previous.x, sample.y - previous.y, previous.yaw, dyaw)
         half = 0.5 * dyaw
         arc_over_chord = half / math.sin(half) if abs(half) > 1e-9 else 1.0
         v = along * arc_over_chord / dt

@@ -14,10 +14,15 @@
    office floors (tools/make_building_world.py), each in a fresh process: 40 x 40 m
    (tests/worlds/building_40m.yaml) and 20 x 20 m with the default max_memory_mb, vs 20 x 20 m
    with the 2 cm x 360 table every map had before (target: 40 x 40 m within 1 GB).
+5. (--callbacks) Big maps: the longest ParticleFilter.correct() call (CPU time of the calling
+   thread: what blocks a node's callback) of global-localization episodes on the 40 x 40 m
+   floor, vs one exhaustive pose search in one go, what such a call took before the searches
+   were sliced (target: every call within 0.2 s).
 Rates are per CPU second of this process (time.process_time: on a shared machine the
 wall-clock figure also counts waiting for a CPU); wall-clock figures are printed alongside.
 
 Usage: .venv/bin/python scripts/bench_localization.py [--quick] [--measurement-only] [--memory]
+       [--callbacks]
 """
 from __future__ import annotations
 
@@ -45,6 +50,8 @@ TARGET_UPDATES_PER_S = 5e6
 TARGET_UPDATE_MS = 1.0
 TARGET_REAL_TIME = 200.0
 TARGET_PEAK_MB = 1000.0
+TARGET_CALL_S = 0.2
+BUILDING_40M = Path(__file__).resolve().parents[1] / "tests" / "worlds" / "building_40m.yaml"
 REPO = Path(__file__).resolve().parents[1]
 # One episode in a fresh process: its peak RSS is the episode's (imports included).
 _EPISODE = """
@@ -209,6 +216,50 @@ def bench_memory(duration: float) -> dict:
     return figures
 
 
+def bench_callbacks(duration: float, seeds: int) -> dict:
+    """The longest correct() call per episode on the 40 x 40 m floor, vs a search in one go."""
+    from amr_evaluation.localization_episode import run_localization_episode
+    from amr_sim.profiles import get_profile
+    world = World.load(BUILDING_40M)
+    profile = get_profile("turtlebot3")
+    pf = ParticleFilter(world, lidar_offset_x_m=profile.lidar_offset_x)  # the table, cached
+    pf.set_scan_geometry(profile.angle_min, profile.angle_increment, profile.scan_rays,
+                         profile.range_min, profile.range_max)
+    lidar = Lidar(world.segments, profile.scan_rays, profile.angle_min, profile.angle_increment,
+                  profile.range_min, profile.range_max, math.nan)
+    z_mm = pf.beams.readings_mm(scan_from_robot(lidar, *world.starts["corridor_west"]))
+    pf.search.start(100, pf.beams, z_mm).advance()  # compiled
+    cpu = time.thread_time()
+    pf.search.start(7200, pf.beams, z_mm).finish()  # a global search's, in one go
+    whole = time.thread_time() - cpu
+    calls: list[float] = []
+    correct = ParticleFilter.correct
+
+    def timed(self, *args, **kwargs):
+        started = time.thread_time()
+        try:
+            return correct(self, *args, **kwargs)
+        finally:
+            calls.append(time.thread_time() - started)
+
+    episodes = []
+    ParticleFilter.correct = timed
+    try:
+        for start in ("corridor_west", "corridor_north"):
+            for seed in range(seeds):
+                calls.clear()
+                result = run_localization_episode(world, start, profile="turtlebot3",
+                                                  seed=seed, duration=duration, record=False)
+                episodes.append({"start": start, "seed": seed, "longest_call_s": max(calls),
+                                 "calls_over_target": sum(c > TARGET_CALL_S for c in calls),
+                                 "time_to_localized_s": result.time_to_localized_s,
+                                 "false_localizations": result.false_localizations})
+    finally:
+        ParticleFilter.correct = correct
+    return {"search_in_one_go_s": whole, "positions": len(pf.search.cells),
+            "episodes": episodes}
+
+
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true")
@@ -216,8 +267,26 @@ def main(argv=None) -> dict:
                         help="only the measurement update (1.)")
     parser.add_argument("--memory", action="store_true",
                         help="only the big maps' peak memory (4.)")
+    parser.add_argument("--callbacks", action="store_true",
+                        help="only the big map's longest filter call (5.)")
     args = parser.parse_args(argv)
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    if args.callbacks:
+        c = bench_callbacks(30.0 if args.quick else 60.0, 1 if args.quick else 4)
+        longest = max(e["longest_call_s"] for e in c["episodes"])
+        for e in c["episodes"]:
+            localized = "never" if e["time_to_localized_s"] is None else \
+                f"after {e['time_to_localized_s']:.1f} s"
+            print(f"40 x 40 m, {e['start']} seed {e['seed']}: longest call "
+                  f"{e['longest_call_s']:.3f} s CPU ({e['calls_over_target']} over "
+                  f"{TARGET_CALL_S} s); localized {localized}, {e['false_localizations']} false")
+        whole = c["search_in_one_go_s"]
+        print(f"longest call {longest:.3f} s vs one search in one go ({c['positions']:,} "
+              f"positions) {whole:.2f} s: {whole / longest:.0f}x shorter; target every call "
+              f"within {TARGET_CALL_S} s: "
+              f"{'met' if longest <= TARGET_CALL_S else 'MISSED'}; load average {load:.1f} on "
+              f"{os.cpu_count()} cores")
+        return {"callbacks": c, "load": load}
     if args.memory:
         figures = bench_memory(30.0 if args.quick else 60.0)
         reference = figures["20 x 20 m, the old 2 cm x 360 table"]["peak_mb"]

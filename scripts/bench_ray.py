@@ -65,13 +65,14 @@ def run_evaluate(args: list[str], out: Path) -> float:
 
 
 def measure_sweeps(episodes: int, duration: float, rounds: int, jobs: int) -> dict:
-    args = evaluate_args(episodes, duration) + ["--jobs", str(jobs)]
-    running = RayExecutor(num_cpus=jobs)  # the instance `--ray ADDRESS` joins
+    args = evaluate_args(episodes, duration)
+    running = RayExecutor(num_cpus=jobs)  # the instance `--ray ADDRESS` joins (`jobs` CPUs)
     running.connect()
     address = running._ray.get_runtime_context().gcs_address
     times: dict[str, list[float]] = {way: [] for way in WAYS}
-    extra = {"pool": [], "ray_started": ["--ray"], "ray_joined_cold": ["--ray", address],
-             "ray_joined_warm": ["--ray", address]}
+    jobs_option = ["--jobs", str(jobs)]
+    extra = {"pool": jobs_option, "ray_started": ["--ray", *jobs_option],
+             "ray_joined_cold": ["--ray", address], "ray_joined_warm": ["--ray", address]}
     try:
         with tempfile.TemporaryDirectory() as tmp:
             run_evaluate([*args, "--duration", "1"], Path(tmp) / "warm")  # kernels cached

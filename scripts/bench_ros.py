@@ -126,27 +126,48 @@ class PingPong(_Graph):
 
 
 class Lockstep(_Graph):
-    def __init__(self, controller: str, use_sim_time: bool, name_suffix: str = "") -> None:
+    """amr_simulator (lockstep) + wall_follower, as run_sim.py runs them.
+
+    `profile`: the simulator's sensor profile; `slam`: also the slam node (its parameter
+    overrides), the map built in the world's frame as run_sim.py --slam builds it.
+    """
+
+    def __init__(self, controller: str, use_sim_time: bool, name_suffix: str = "",
+                 profile: str = "ideal", slam: dict | None = None) -> None:
         super().__init__()
         from rclpy.parameter import Parameter
 
         from amr_control.wall_follower_node import WallFollowerNode
+        from amr_sim.profiles import get_profile
         from amr_sim.simulator_node import SimulatorNode
         # Distinct node names: the graphs share the process's loggers.
         simulator = SimulatorNode("amr_simulator" + name_suffix, context=self.context,
                                   parameter_overrides=[
             Parameter("world", value="lab02"), Parameter("start", value="outer"),
-            Parameter("dt", value=DT)])
+            Parameter("dt", value=DT), Parameter("profile", value=profile),
+            Parameter("publish_map", value=slam is None)])
+        lidar = get_profile(profile).lidar_offset_x
         follower = WallFollowerNode("wall_follower" + name_suffix, context=self.context,
                                     parameter_overrides=[
             Parameter("use_sim_time", value=use_sim_time),
-            Parameter("controller", value=controller), Parameter("dt", value=DT)])
+            Parameter("controller", value=controller), Parameter("dt", value=DT)] + ([
+                Parameter("lidar_offset_x_m", value=lidar)] if lidar else []))
         self.nodes = [follower, simulator]
+        if slam is not None:
+            from amr_mapping.slam_node import SlamNode
+            self.slam = SlamNode("slam" + name_suffix, context=self.context, parameter_overrides=[
+                Parameter(name, value=value) for name, value in {
+                    "lidar_offset_x_m": lidar, "map_start_pose": [1.0, -1.0, 1.5707963267948966],
+                    **slam}.items()])
+            self.nodes.append(self.slam)
         for node in self.nodes:
             self.executor.add_node(node)
         follower.trigger_configure()
         simulator.trigger_configure()
         follower.trigger_activate()
+        if slam is not None:
+            self.slam.trigger_configure()
+            self.slam.trigger_activate()
         self.wait_for(lambda: simulator.count_subscribers("/scan") >= 1
                       and follower.count_publishers("/scan") >= 1
                       and simulator.count_publishers("/cmd_vel") >= 1, "lockstep")
@@ -170,14 +191,13 @@ GRAPHS = {
 CYCLES, SEGMENT = 12, 500   # the default run: 12 turns of 500 loops per graph
 
 
-def measure(cycles: int = CYCLES, segment: int = SEGMENT, warm_up: int = 300) -> dict:
-    """Loops/s of every graph, and each lockstep graph's ratio to the ping-pong.
-
-    Over `cycles` round-robin segments of `segment` loops each; ratios in total and min/max
-    over the cycles.
-    """
-    graphs = {name: make() for name, make in GRAPHS.items()}
+def round_robin(makers: dict, cycles: int, segment: int, warm_up: int
+                ) -> tuple[dict[str, float], dict[str, list[float]]]:
+    """Build the graphs, let them take turns; (loops/s in total, loops/s per cycle) per graph."""
+    graphs = {}
     try:
+        for name, make in makers.items():
+            graphs[name] = make()
         for graph in graphs.values():
             graph.run(warm_up)            # first-use costs (kernel loading, caches) left out
         totals = {name: [0, 0.0] for name in graphs}
@@ -191,9 +211,18 @@ def measure(cycles: int = CYCLES, segment: int = SEGMENT, warm_up: int = 300) ->
     finally:
         for graph in graphs.values():
             graph.close()
-    rates = {name: loops / seconds for name, (loops, seconds) in totals.items()}
+    return {name: loops / seconds for name, (loops, seconds) in totals.items()}, per_cycle
+
+
+def measure(cycles: int = CYCLES, segment: int = SEGMENT, warm_up: int = 300) -> dict:
+    """Loops/s of every graph, and each lockstep graph's ratio to the ping-pong.
+
+    Over `cycles` round-robin segments of `segment` loops each; ratios in total and min/max
+    over the cycles.
+    """
+    rates, per_cycle = round_robin(GRAPHS, cycles, segment, warm_up)
     result: dict = {"loops_per_s": rates, "segments": cycles, "segment_loops": segment}
-    for name in graphs:
+    for name in rates:
         if name == "pingpong":
             continue
         ratios = [a / b for a, b in zip(per_cycle[name], per_cycle["pingpong"])]

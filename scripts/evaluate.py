@@ -23,6 +23,8 @@ Examples:
       --profiles ideal,turtlebot3 --seeds 0-2 --duration 300   # navigation to named goals
   .venv/bin/python scripts/evaluate.py --worlds evaluations/worlds/lab02_box.yaml --map lab02 \
       --goals inner_far --profiles turtlebot3 --seeds 0-4 --duration 200  # a box the map lacks
+  .venv/bin/python scripts/evaluate.py --slam --worlds all --profiles turtlebot3 --seeds 0-4 \
+      --starts south_west,outer,south,south_east --duration 300   # SLAM: mapping figures
 Options given on the command line override the same keys of --config.
 """
 from __future__ import annotations
@@ -111,7 +113,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         "(default: the larger of 60 s and twice --duration; 0: no limit)")
     parser.add_argument("--jobs", "-j", type=int, default=None,
                         help="worker processes (default: all cores); with --ray and no address, "
-                        "the local Ray instance's CPUs")
+                        "the local Ray instance's CPUs; not with --ray ADDRESS (the cluster's "
+                        "CPUs run the episodes)")
     parser.add_argument("--ray", nargs="?", const="", default=None, metavar="ADDRESS",
                         help="run the episodes on Ray: no ADDRESS starts a local Ray "
                         "instance (127.0.0.1, stopped at the end); 'auto' joins the cluster "
@@ -135,6 +138,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         "named start, turned by 90 deg")
     parser.add_argument("--pf-param", action="append", default=[], metavar="NAME:=VALUE",
                         help="with --localize: particle filter parameter override")
+    parser.add_argument("--slam", action="store_true", help="mapping episodes: the controller "
+                        "explores while SLAM maps; columns: trajectory RMSE / max, map "
+                        "precision and recall, loop closures, timings (the odometry drifts "
+                        "like a real Burger's: amr_evaluation.mapping_episode)")
+    parser.add_argument("--slam-param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="with --slam: Mapper parameter override, e.g. loop_closure:=false")
     return parser.parse_args(join_negative_values(argv, ["--starts"]))
 
 
@@ -193,6 +202,20 @@ def check_option_pairs(args: argparse.Namespace, settings: dict) -> None:
                 raise EvaluationError(f"{option} needs --localize")
     if args.pose_source is not None and settings["goals"] is None:
         raise EvaluationError("--pose-source needs --goals (navigation episodes)")
+    if args.slam_param and not args.slam:
+        raise EvaluationError("--slam-param needs --slam")
+    if args.slam and (args.localize or settings["goals"]):
+        raise EvaluationError("--slam (mapping) excludes --localize and --goals")
+    if args.slam:  # the Mapper's own checks
+        from amr_mapping.mapper_params import check_parameters
+        try:
+            args.mapper_params = parse_overrides(args.slam_param)
+            check_parameters(args.mapper_params)
+        except ValueError as exc:
+            raise EvaluationError(f"--slam-param: {exc}") from None
+    if args.ray is not None:
+        check_ray_options(args.ray, settings["jobs"],
+                          60.0 if args.ray_keep_workers is None else args.ray_keep_workers)
 
 
 def check_localization_options(args: argparse.Namespace, settings: dict, specs) -> None:
@@ -216,6 +239,28 @@ def check_localization_options(args: argparse.Namespace, settings: dict, specs) 
         check_parameters(parse_overrides(args.pf_param))
     except ValueError as exc:
         raise EvaluationError(f"--pf-param: {exc}") from None
+
+
+def check_filter_maps(specs, overrides: dict, localize: bool = False) -> None:
+    """The particle filter's checks against every map it will run on, before anything runs.
+
+    Its episodes: all with `localize`, else the navigation ones on the filter's pose. A map too
+    big for its memory budget (saying what it would need), an initial pose where the robot
+    cannot be: EvaluationError (one line). Milliseconds per map: nothing is built.
+    """
+    from amr_common.map_vs_world import load_map
+    from amr_common.world import World
+    from amr_localization.particle_filter_params import check_parameters, check_world
+    maps = [(spec.map, spec.world) for spec in specs  # the filter runs on the map, if one
+            if localize or (spec.goal is not None and spec.pose_source == "filter")]
+    if not maps:
+        return
+    values = check_parameters(overrides)
+    for map_source, world in dict.fromkeys(maps):
+        try:
+            check_world(load_map(map_source, World.load(world)), values)
+        except ValueError as exc:
+            raise EvaluationError(str(exc)) from None
 
 
 def episode_specs(settings: dict) -> list:
@@ -252,12 +297,11 @@ def ray_executor(address: str | None, jobs: int | None, runtime_env: str | None,
 
     `runtime_env`: --ray-runtime-env's JSON text or file; `keep_workers_s`:
     --ray-keep-workers; `episode_timeout_s`: the limit of one episode (None or 0: none).
-    EvaluationError with the reason.
+    EvaluationError with the reason (also for `jobs` with an address: a cluster's CPUs are
+    its own).
     """
+    check_ray_options(address, jobs, keep_workers_s)
     from amr_evaluation.ray_executor import RayExecutor, RaySetupError
-    if not math.isfinite(keep_workers_s) or keep_workers_s < 0:
-        raise EvaluationError(f"--ray-keep-workers must be a number of seconds >= 0, got "
-                              f"{keep_workers_s:g}")
     executor = RayExecutor(address or None, num_cpus=jobs,
                            runtime_env=read_runtime_env(runtime_env) if runtime_env else None,
                            keep_workers_s=keep_workers_s, episode_timeout_s=episode_timeout_s)
@@ -266,6 +310,17 @@ def ray_executor(address: str | None, jobs: int | None, runtime_env: str | None,
     except RaySetupError as exc:
         raise EvaluationError(str(exc)) from None
     return executor
+
+
+def check_ray_options(address: str | None, jobs: int | None, keep_workers_s: float) -> None:
+    """--ray's companions, before anything runs (also tune.py's); EvaluationError if wrong."""
+    if not math.isfinite(keep_workers_s) or keep_workers_s < 0:
+        raise EvaluationError(f"--ray-keep-workers must be a number of seconds >= 0, got "
+                              f"{keep_workers_s:g}")
+    if address and jobs is not None:  # it was silently ignored
+        raise EvaluationError(f"--jobs {jobs} sets the CPUs of a local Ray instance (--ray "
+                              "without an address): with --ray ADDRESS the cluster's CPUs run "
+                              "the episodes, one per CPU (drop --jobs, or jobs in --config)")
 
 
 def read_runtime_env(value: str) -> dict:
@@ -298,6 +353,7 @@ def main(argv: list[str] | None = None) -> int:
         specs = episode_specs(settings)
         if args.localize:
             check_localization_options(args, settings, specs)
+        check_filter_maps(specs, parse_overrides(args.pf_param), args.localize)
         started = dt_module.datetime.now(dt_module.timezone.utc)
         out = check_output_folder(args.out or Path("out") / f"evaluate-{started:%Y%m%d-%H%M%S}",
                                   "--out")
@@ -319,6 +375,9 @@ def run_and_report(args, settings: dict, specs, executor, out: Path, started) ->
     if args.localize:
         from amr_evaluation.localization_evaluation import evaluate_main
         return evaluate_main(specs, settings, args, out, executor=executor)
+    if args.slam:
+        from amr_evaluation.mapping_evaluation import evaluate_main as evaluate_mapping
+        return evaluate_mapping(specs, settings, args.mapper_params, out, executor=executor)
     print(f"evaluate: {len(specs)} episodes of {settings['duration']:g} s on "
           f"{executor.describe()}, controller {settings['controller']}"
           + (f" {settings['params']}" if settings["params"] else ""), flush=True)

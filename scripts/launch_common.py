@@ -47,7 +47,7 @@ def add_foxglove_options(parser) -> None:
 def _origin(text: str) -> str:
     import argparse
 
-    from amr_common.foxglove_gate import normalize_origin
+    from amr_tools.foxglove_gate import normalize_origin
     try:
         return normalize_origin(text)
     except ValueError as exc:
@@ -61,7 +61,7 @@ def make_viewer_nodes(context, args, *, use_sim_time: bool = False) -> list:
     """
     if not getattr(args, "foxglove", False):
         return []
-    from amr_common.foxglove_bridge import FoxgloveBridgeNode
+    from amr_tools.foxglove_bridge import FoxgloveBridgeNode
     values = {"port": args.foxglove_port, "host": args.foxglove_host,
               "client_teleop": getattr(args, "foxglove_teleop", False),
               "use_sim_time": use_sim_time}
@@ -76,7 +76,7 @@ def make_map_publisher(context, map_source: str, *, use_sim_time: bool = False):
 
     The robot's /map, and the simulation's when the map is not the world.
     """
-    from amr_common.map_publisher import MapPublisherNode
+    from amr_tools.map_publisher import MapPublisherNode
     return MapPublisherNode(context=context, parameter_overrides=overrides_to_parameters(
         {"world": str(map_source), "use_sim_time": use_sim_time}))
 
@@ -102,14 +102,18 @@ def check_common_options(parser, args, script: str, wall_follower_set: dict[str,
     Sets args.overrides and args.pf_overrides (typed as the nodes declare them) and
     args.controller_spec (the MODULE:CLASS the wall follower will run).
     """
-    import math
-
     from amr_common.controller_loader import ControllerSpecError, parse_overrides
-    if args.dt is not None and not (math.isfinite(args.dt) and args.dt > 0):
-        parser.error("--dt must be > 0")
-    if getattr(args, "foxglove_port", 0) is not None and \
-            not 0 <= getattr(args, "foxglove_port", 0) <= 65535:
-        parser.error("--foxglove-port must be within 0-65535")
+    from amr_common.parameter_table import check_value
+    from amr_control.wall_follower_node import node_parameters
+    from amr_tools.foxglove_bridge import PARAMETERS as FOXGLOVE_PARAMETERS
+    # The options that stand for node parameters: by the rules of those parameters.
+    for option, name, table, value in (
+            ("--dt", "dt", node_parameters(), args.dt),
+            ("--foxglove-port", "port", FOXGLOVE_PARAMETERS,
+             getattr(args, "foxglove_port", None))):
+        problem = check_value(name, table[name], value)[1] if value is not None else None
+        if problem:
+            parser.error(f"{option} {value:g}: {problem}")
     if (getattr(args, "foxglove_teleop", False) or getattr(args, "foxglove_origin", [])) \
             and not args.foxglove:
         parser.error("--foxglove-teleop and --foxglove-origin need --foxglove")
@@ -207,6 +211,18 @@ def _check_particle_filter(args, script: str, set_by_script: dict[str, str]) -> 
             problems.append(str(exc))
     if problems:
         raise ValueError(f"--pf-param: {'; '.join(problems)}")
+
+
+def check_filter_map(world, pf_overrides: dict[str, Any]) -> None:
+    """The particle filter's checks against its map, before anything runs: ValueError (one line).
+
+    A map too big for its memory budget (saying what it would need), an initial pose where the
+    robot cannot be; with the filter's own parameters (--pf-param may also set its node's).
+    Milliseconds: nothing is built.
+    """
+    from amr_localization.particle_filter_params import PARAMETERS, check_parameters, check_world
+    check_world(world, check_parameters(
+        {name: value for name, value in pf_overrides.items() if name in PARAMETERS}))
 
 
 def _listen_problem(host: str, port: int) -> str | None:

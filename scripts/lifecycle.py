@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from amr_common.introspection import GraphProbe  # noqa: E402
+from amr_tools.introspection import GraphProbe  # noqa: E402
 from cli_checks import (  # noqa: E402
     add_domain_id_option,
     number_argument,

@@ -61,7 +61,7 @@ def shown(topic: str, include_all: bool) -> bool:
 
 def collect_graph(wait: float = 3.0, include_all: bool = False) -> RosGraph:
     """The graph as rclpy sees it after `wait` seconds of discovery (own context and node)."""
-    from amr_common.introspection import GraphProbe, describe_qos
+    from amr_tools.introspection import GraphProbe, describe_qos
     probe = GraphProbe("ros_graph")
     node = probe.node
     try:

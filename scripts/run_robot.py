@@ -15,7 +15,12 @@ does not change discovery, it prints what it uses.
 filter's with --localize, the planner's with --goal. With --goal: also the particle filter, the
 planner and the pure pursuit (robot mode): explore until localized, then drive to the goal and
 stop there. (--world is an old name of --map: on the robot there is no simulated world.)
-Ctrl-C stops the robot: the controllers publish a zero command before exiting.
+  .venv/bin/python scripts/run_robot.py --domain-id 30 --slam --map-out ~/maps/room  # map it
+  .venv/bin/python scripts/run_robot.py --domain-id 30 --slam --teleop --map-out ~/maps/room
+With --slam: the slam node maps while the wall follower explores (or, with --teleop, while you
+drive with scripts/teleop.py); --map-out DIR writes DIR/map.yaml + DIR/map.pgm on Ctrl-C.
+Ctrl-C stops the robot: the controllers publish a zero command before exiting (exit code 130),
+at any moment, start-up included.
 """
 from __future__ import annotations
 
@@ -24,6 +29,11 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from amr_common.stop_flag import StopFlag  # noqa: E402
+
+# Run as a script, Ctrl-C (or SIGTERM) only sets a flag from the first moment on: see main().
+_STOP = StopFlag().install() if __name__ == "__main__" else None
+
 from amr_common.ros_env import describe_graph_settings, environment_domain_id  # noqa: E402
 from cli_checks import (  # noqa: E402
     OneLineArgumentParser,
@@ -37,15 +47,25 @@ from launch_common import (  # noqa: E402
     add_foxglove_options,
     add_localization_options,
     check_common_options,
+    check_filter_map,
     make_robot_graph,
     make_viewer_nodes,
 )
+from launch_slam import (  # noqa: E402
+    add_slam_options,
+    check_slam_options,
+    make_slam_node,
+    map_prefix,
+    without_controller,
+)
 
+INTERRUPTED = 130  # exit code after Ctrl-C / SIGTERM, as a shell reports it
 # Node parameters run_robot sets itself: a -p / --pf-param would contradict them.
 WALL_FOLLOWER_SET = {"simulation": "(robot mode)", "dt": "from --dt",
                      "cmd_vel_stamped": "from --cmd-vel", "controller": "from --controller"}
 FILTER_SET = {"world": "from --map",
               "lidar_offset_x_m": "(the Burger's LiDAR position; the robot's /tf_static gives it)"}
+SLAM_SET = {"lidar_offset_x_m": FILTER_SET["lidar_offset_x_m"], "output_prefix": "from --map-out"}
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -71,6 +91,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--goal", default=None, help="navigate to X,Y (metres, negative numbers "
                         "typed as is) or a named goal of --map: also the particle filter, the "
                         "planner and the pure pursuit")
+    add_slam_options(parser, "run_robot")
     args = parser.parse_args(join_negative_values(argv, ["--goal"]))
     if args.domain_id is None:
         try:
@@ -78,6 +99,13 @@ def parse_args(argv=None) -> argparse.Namespace:
         except ValueError as exc:
             parser.error(str(exc))
     check_common_options(parser, args, "run_robot", WALL_FOLLOWER_SET, FILTER_SET)
+    try:
+        check_slam_options(args, "run_robot", SLAM_SET)
+    except ValueError as exc:
+        parser.error(str(exc))
+    if args.no_controller and args.goal is not None:
+        parser.error("--no-controller and --goal exclude each other: the pure pursuit drives "
+                     "to the goal")
     args.localize = args.localize or args.goal is not None  # navigation needs the filter
     args.deprecated_world = args.world is not None
     if args.world is not None and args.map is not None and args.world != args.map:
@@ -88,39 +116,63 @@ def parse_args(argv=None) -> argparse.Namespace:
         parser.error(f"{'--goal' if args.goal else '--localize'} needs --map (the map of the "
                      f"room the robot is in)")
     if args.map is not None:
-        from amr_common.world import World, WorldError
+        from amr_common.world import World
         try:
             world = World.load(args.map)
             if args.goal is not None:
                 args.goal = world.resolve_goal(args.goal)
-        except WorldError as exc:
+            if args.localize:  # the particle filter runs on `world`
+                check_filter_map(world, args.pf_overrides)
+        except ValueError as exc:  # WorldError, a map too big for the filter
             parser.error(str(exc))
     return args
 
 
 def main(argv=None) -> int:
-    args = parse_args(argv)
-    if args.deprecated_world:
-        print("run_robot: --world is deprecated: use --map (the map of the filter, the planner "
-              "and /map; the robot has no simulated world)", file=sys.stderr)
+    # Ctrl-C (or SIGTERM) only sets the flag, whenever it comes (own signal handling: the final
+    # zero command must go out before the context shuts down): before any node exists the
+    # script just ends; once nodes exist the manager stops starting them and every node is
+    # shut down (a configured controller sends a zero command), instead of a KeyboardInterrupt
+    # tearing through imports or callbacks.
+    stop = _STOP if _STOP is not None else StopFlag().install()
+    try:
+        args = parse_args(argv)
+        if args.deprecated_world:
+            print("run_robot: --world is deprecated: use --map (the map of the filter, the "
+                  "planner and /map; the robot has no simulated world)", file=sys.stderr)
+        code = INTERRUPTED if stop.requested else _run(args, stop)
+    finally:
+        stop.uninstall()
+    if stop.requested:
+        print("run_robot: interrupted", file=sys.stderr)
+        return INTERRUPTED if code == 0 else code
+    return code
+
+
+def _run(args: argparse.Namespace, stop: StopFlag) -> int:
+    """Build the graph and run it until stopped; the exit code (0 after a stop)."""
     use_domain_id(args)
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
     from amr_common.lifecycle_manager import LifecycleManager, run_managed
-    from amr_common.node_runner import StopFlag
 
-    # Own signal handling: the final zero command must go out before the context shuts down.
     # No arguments for rcl: it would read the script's own command line (a '__ns:=...' value
     # as a remapping of every node).
     rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
-    stop = StopFlag().install()
     stamped = None if args.cmd_vel is None else args.cmd_vel == "stamped"
     nodes = make_robot_graph(None, params_file=args.params_file, dt=args.dt,
                              cmd_vel_stamped=stamped, controller=args.controller,
                              tuning=args.overrides,
                              localize_world=args.map if args.localize else None,
                              filter_overrides=args.pf_overrides, goal=args.goal)
+    if args.no_controller:  # the user drives (scripts/teleop.py)
+        without_controller(nodes)
+    if args.slam:
+        from amr_common.robot import LIDAR_OFFSET_X
+        nodes.append(make_slam_node(None, lidar_offset_x_m=LIDAR_OFFSET_X,
+                                    output_prefix=map_prefix(args.map_out),
+                                    overrides=args.slam_overrides))
     if args.map:
         from launch_common import make_map_publisher
         nodes.insert(0, make_map_publisher(None, args.map))

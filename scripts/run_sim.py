@@ -11,6 +11,8 @@ follower in robot (timer) mode with params/turtlebot3.yaml - the graph run_robot
 `--localize`: the particle filter joins the graph (/pose with `localized`); the simulator
 synchronizes /cmd_vel with /pose and the report gains the localization figures and the
 estimate at every /pose.
+`--slam`: the slam node maps while the wall follower explores (`--map-out DIR`: DIR/map.yaml +
+DIR/map.pgm at the end, Ctrl-C included); the report gains the `slam` figures and the SLAM pose.
 
 Examples:
   .venv/bin/python scripts/run_sim.py                                  # lab02, outer, ideal
@@ -25,6 +27,10 @@ Examples:
   .venv/bin/python scripts/run_sim.py --world maze_deadends --localize --kidnap 25,1.4,1,0
   .venv/bin/python scripts/run_sim.py --world lab02 --goal inner_far --plot out/nav.png
   .venv/bin/python scripts/run_sim.py --world lab02 --goal -1.0,0.6 --kidnap 40,0.2,1,3.14
+  .venv/bin/python scripts/run_sim.py --profile turtlebot3 --slam --map-out maps/lab02 \
+      --duration 300 --plot out/slam.png                  # map it: maps/lab02/map.yaml + .pgm
+  .venv/bin/python scripts/run_sim.py --profile turtlebot3 --realtime --slam --teleop \
+      --map-out maps/mine           # drive with scripts/teleop.py (same ROS_DOMAIN_ID)
   .venv/bin/python scripts/run_sim.py --world evaluations/worlds/lab02_box.yaml --map lab02 \
       --goal inner_far --profile turtlebot3 --plot out/box.png   # a box the map lacks
 `--map`: the particle filter, the planner and /map use this map while the simulator drives in
@@ -64,7 +70,9 @@ from launch_common import (  # noqa: E402
     add_foxglove_options,
     add_localization_options,
     check_common_options,
+    check_filter_map,
 )
+from launch_slam import add_slam_options, check_slam_options, map_prefix  # noqa: E402
 
 INTERRUPTED = 130  # exit code after Ctrl-C / SIGTERM, as a shell reports it
 # Node parameters run_sim sets from its own options: a -p / --pf-param would contradict them.
@@ -73,6 +81,8 @@ WALL_FOLLOWER_SET = {"dt": "from --dt", "simulation": "from --realtime and --pro
                      "controller": "from --controller"}
 FILTER_SET = {"world": "from --map (default --world)",
               "lidar_offset_x_m": "from --profile (where the simulated LiDAR sits)"}
+SLAM_SET = {"lidar_offset_x_m": FILTER_SET["lidar_offset_x_m"], "output_prefix": "from --map-out",
+            "map_start_pose": "from --start (the map is built in the world's frame)"}
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -111,6 +121,7 @@ def parse_args(argv=None) -> argparse.Namespace:
                         help="the simulator synchronizes /cmd_vel with /pose from a "
                         "localization node of yours (--localize starts the project's)")
     add_localization_options(parser)
+    add_slam_options(parser, "run_sim")
     parser.add_argument("--kidnap", default=None, metavar="T,X,Y,THETA",
                         help="teleport the robot at simulated time T (s) to (X, Y, THETA): "
                         "the encoders see no motion; tests the filter's recovery")
@@ -140,6 +151,16 @@ def parse_args(argv=None) -> argparse.Namespace:
         args.params_file = str(ROBOT_PARAMS if rehearsal else SIM_PARAMS)
     _check_simulator_options(parser, args)
     check_common_options(parser, args, "run_sim", WALL_FOLLOWER_SET, FILTER_SET)
+    try:
+        check_slam_options(args, "run_sim", SLAM_SET)
+    except ValueError as exc:
+        parser.error(str(exc))
+    if args.no_controller and not args.realtime:
+        parser.error("--no-controller needs --realtime: lockstep advances on the controller's "
+                     "commands")
+    if args.no_controller and args.goal is not None:
+        parser.error("--no-controller and --goal exclude each other: the pure pursuit drives "
+                     "to the goal")
     from amr_common.world import parse_start
     try:
         if args.start != "all":
@@ -221,9 +242,11 @@ def _prepare(args):
         if args.goal is not None:  # a name or X,Y, checked against the map's walls
             args.goal, goal_warning = resolve_goal_on_map(args.goal, map_world, world)
             warnings.append(goal_warning)
+        if args.localize or args.goal is not None:  # the particle filter runs on the map
+            check_filter_map(map_world, args.pf_overrides)
         starts = [next(iter(world.starts)) if s is None else s for s in starts]
         outputs = _check_outputs(args, [start_label(s) for s in starts])
-    except ValueError as exc:  # WorldError, a bad domain id or output path
+    except ValueError as exc:  # WorldError, a bad domain id or output path, a map too big
         print(f"run_sim: {exc}", file=sys.stderr)
         return 2
     args.map_warnings = [w for w in warnings if w is not None]
@@ -239,22 +262,26 @@ def _simulate(args, world, map_world, starts, outputs, stop) -> int:
 
     from amr_common.world import start_label
     print(f"run_sim: {describe_graph_settings()}", flush=True)  # the graph starts now
-    reports = []
+    reports, rasters = [], {}  # rasters: the SLAM map of each start (for the plot)
     for start in starts:
         if stop.requested:
             if not reports:  # stopped before any node existed: nothing moved, nothing to stop
                 reports.append(report_before_start(args, world, start, map_world))
             break
+        label = start_label(start) if len(starts) > 1 else None
         session = SimSession(args, world, start, stop=stop,
                              record_path=outputs["record"].get(start_label(start)),
-                             map_world=map_world)
+                             map_world=map_world,
+                             map_prefix=map_prefix(args.map_out, label) if args.slam else "")
         try:
             report = session.run()
         finally:
             session.close()
         reports.append(report)
+        rasters[report["start"]] = getattr(session, "slam_raster", None)
         print(session.summary_line(report))
-    _write_outputs(world, map_world, reports, outputs, several_starts=len(starts) > 1)
+    _write_outputs(world, map_world, reports, outputs, several_starts=len(starts) > 1,
+                   rasters=rasters)
     if stop.requested:
         print("run_sim: interrupted", file=sys.stderr)
         return INTERRUPTED
@@ -278,10 +305,12 @@ def _check_outputs(args, labels: list[str]) -> dict:
             "record": per_start(args.record, "--record") if args.record else {}}
 
 
-def _write_outputs(world, map_world, reports, outputs, several_starts: bool) -> None:
+def _write_outputs(world, map_world, reports, outputs, several_starts: bool,
+                   rasters=None) -> None:
     """The report (a list for several starts, even if stopped after one) and the plots.
 
-    A map that is not the world is drawn as its cells (or walls) under the world's true walls.
+    A map that is not the world is drawn as its cells (or walls) under the world's true walls;
+    a map SLAM built (`rasters`, one per start) over them.
     """
     if outputs["report"] is not None:
         path = outputs["report"]
@@ -300,7 +329,11 @@ def _write_outputs(world, map_world, reports, outputs, several_starts: bool) -> 
                           + ("not reached" if reached is None else
                              f"reached {reached:.1f} s, final error "
                              f"{report['final_position_error_m'] * 100:.1f} cm"))
-            if "estimate" in report:
+            if "slam" in report:
+                from amr_evaluation.mapping_plot import plot_mapping
+                written = plot_mapping(world, report, (rasters or {}).get(report["start"]),
+                                       path=str(outputs["plot"][report["start"]]), title=title)
+            elif "estimate" in report:
                 from amr_evaluation.localization_plot import plot_localization
                 written = plot_localization(world, report,
                                             path=str(outputs["plot"][report["start"]]),

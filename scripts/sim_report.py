@@ -2,8 +2,9 @@
 
 Keys: what ran (world, the map of the filter and the planner with what it and the world disagree
 on, start, profile, mode, nodes), the simulator's figures, the trajectory metrics (in the
-world); with the particle filter its localization figures, with a goal the navigation ones. A
-run stopped before its graph ran gets the same keys (report_before_start).
+world); with the particle filter its localization figures, with a goal the navigation ones,
+with SLAM the mapping figures (as the headless mapping episode's) and the SLAM pose. A run
+stopped before its graph ran gets the same keys (report_before_start).
 """
 from __future__ import annotations
 
@@ -68,7 +69,57 @@ def report_before_start(args, world, start, map_world=None) -> dict:
         report |= navigation_fields(goal, {
             "goal_reached_time_s": None, "stopped_time_s": None,
             "final_position_error_m": math.hypot(x - goal[0], y - goal[1])}, None, [], None)
+    if getattr(args, "slam", False):
+        report |= slam_fields(world, args.profile, trajectory, [], None, None, {})
     return report
+
+
+def slam_fields(world, profile: str, trajectory: list, estimate: list, raster, mapper,
+                timings: dict, map_file=None) -> dict:
+    """The report's SLAM figures and every SLAM pose ([t, x, y, theta], map = world frame).
+
+    The headless mapping episode's figures (amr_evaluation.mapping_metrics): trajectory RMSE /
+    max against the truth at each scan's stamp, map precision and recall (noise-free rays from
+    the true poses); loop closures, Mapper and node timings (wall ms), the map file written.
+    None for the figures when nothing was mapped.
+    """
+    figures: dict = dict.fromkeys(("trajectory_rmse_m", "trajectory_max_m", "heading_rmse_rad",
+                                   "precision", "recall", "seen_wall_m"))
+    stats = mapper.statistics() if mapper is not None else {}
+    if estimate and raster is not None:
+        from amr_evaluation.mapping_metrics import RayHits, mapping_figures
+        from amr_sim.profiles import get_profile
+        prof = get_profile(profile)
+        rows = np.asarray(trajectory, dtype=np.float64).reshape(-1, 4)
+        est = np.asarray(estimate, dtype=np.float64).reshape(-1, 4)
+        index = np.clip(np.searchsorted(rows[:, 0], est[:, 0] - 1e-6), 0, len(rows) - 1)
+        truth = rows[index, 1:]
+        hits = RayHits(world, prof.angle_min, prof.angle_increment, prof.scan_rays,
+                       prof.range_min, min(prof.range_max, mapper.p["max_range_m"]))
+        for x, y, theta in truth:
+            hits.add(x + prof.lidar_offset_x * math.cos(theta),
+                     y + prof.lidar_offset_x * math.sin(theta), theta)
+        figures = mapping_figures(world, (0.0, 0.0, 0.0), truth, est[:, 1:], raster, hits)
+    return {"slam": {**figures, "scans": len(estimate), "keyframes": stats.get("keyframes", 0),
+                     "loop_closures": stats.get("loop_closures", 0),
+                     "rejected_scans": stats.get("rejected", {}),
+                     "update_ms": stats.get("update_ms"),
+                     "loop_closure_ms": stats.get("loop_closed_ms"),
+                     "node_scan_ms": timings.get("scan_ms"), "node_map_ms": timings.get("map_ms"),
+                     "map_file": None if map_file is None else str(map_file)},
+            "estimate": estimate}
+
+
+def slam_line(report: dict) -> str:
+    s = report.get("slam")
+    if s is None:
+        return ""
+    if s["trajectory_rmse_m"] is None:
+        return "; SLAM: nothing mapped"
+    return (f"; SLAM: {s['scans']} scans, pose RMSE {100 * s['trajectory_rmse_m']:.2f} cm, max "
+            f"{100 * s['trajectory_max_m']:.2f} cm, map precision {100 * s['precision']:.1f} %, "
+            f"recall {100 * s['recall']:.1f} %, {s['loop_closures']} loop closures"
+            + (f", map written to {s['map_file']}" if s["map_file"] else ""))
 
 
 def localization_fields(args, trajectory: list, estimate: list, particles: list) -> dict:

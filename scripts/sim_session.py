@@ -9,6 +9,8 @@ follower explores until /pose is localized, the simulator ends the run once the 
 the goal.
 With a map that is not the world (`--map`), the particle filter and the planner load the map,
 and /map is the map (amr_map_publisher, as on the robot; the simulator publishes none).
+With `--slam`, the slam node maps (its /map and map -> odom replace the simulator's) in
+the world's frame; the map is written at the end (`--map-out`), Ctrl-C included.
 """
 from __future__ import annotations
 
@@ -25,6 +27,8 @@ from sim_report import (
     navigation_line,
     report_before_start,
     run_report,
+    slam_fields,
+    slam_line,
     world_label,
 )
 
@@ -78,7 +82,7 @@ class SimSession:
     """
 
     def __init__(self, args, world, start, stop=None, record_path=None,
-                 map_world=None) -> None:
+                 map_world=None, map_prefix="") -> None:
         self.args = args
         self.world = world
         self.map_world = map_world if map_world is not None else world
@@ -100,14 +104,18 @@ class SimSession:
 
         self.navigating = getattr(args, "goal", None) is not None
         localize = getattr(args, "localize", False) or self.navigating
+        slam = getattr(args, "slam", False)
         sim_values = {"world": args.world, "start": start_label(self.start),
                       "profile": args.profile, "dt": args.dt, "seed": args.seed,
                       "mode": "realtime" if args.realtime else "lockstep",
                       "enable_localization": args.enable_localization or localize,
                       # Viewers get a whole TF tree: the particle filter sends map -> odom when
                       # it runs; without it (or a user's own localization node) the truth does.
-                      "map_to_odom_from_truth": not (args.enable_localization or localize),
+                      "map_to_odom_from_truth": not (args.enable_localization or localize
+                                                     or slam),
                       "publish_map": not own_map}  # the map publisher below sends the map
+        if slam:  # the slam node's /map: the map being built, not the world
+            sim_values["publish_map"] = False
         if args.goal:
             sim_values["goal"] = list(args.goal)
         if getattr(args, "kidnap", None):
@@ -125,6 +133,9 @@ class SimSession:
                 tuning=tuning, localize_world=map_source if localize else None,
                 filter_overrides=filter_overrides,
                 goal=args.goal if self.navigating else None)
+            if getattr(args, "no_controller", False):  # the user drives (teleop.py)
+                from launch_slam import without_controller
+                without_controller(self.control_nodes)
         else:
             base = {"simulation": True, "dt": args.dt}
             if args.enable_localization:  # a localization node of the user's
@@ -149,8 +160,11 @@ class SimSession:
                 self.control_nodes += make_navigators(
                     self.context, world=map_source, goal=args.goal,
                     wall_follower=self.control_nodes[0], lidar_offset_x_m=lidar_offset_x)
-        self.wall_follower = next(n for n in self.control_nodes
-                                  if n.get_name() == "wall_follower")
+        self.slam_node = None
+        if slam:
+            self._add_slam_node(map_prefix)
+        self.wall_follower = next((n for n in self.control_nodes
+                                   if n.get_name() == "wall_follower"), None)
         self.particle_filter = next((n for n in self.control_nodes
                                      if n.get_name() == "particle_filter"), None)
         self.planner_node = next((n for n in self.control_nodes if n.get_name() == "planner"),
@@ -173,6 +187,22 @@ class SimSession:
         self.wall_errors: list[float] = []
         self.view = None
         self.recorder = None
+
+    def _add_slam_node(self, map_prefix: str) -> None:
+        """The slam node, mapping in the world's frame (its start pose), saving to map_prefix."""
+        from amr_sim.profiles import get_profile
+        from launch_slam import make_slam_node
+        self.map_prefix = map_prefix
+        self.slam_estimate: list[list[float]] = []
+        self.slam_raster = None  # the map at the end of the run (for the plot)
+        self.slam_node = make_slam_node(
+            self.context, lidar_offset_x_m=get_profile(self.args.profile).lidar_offset_x,
+            output_prefix=map_prefix, start_pose=self.world.resolve_start(self.start),
+            overrides=self.args.slam_overrides)
+        self.slam_node.on_estimate.append(
+            lambda stamp_ns, estimate, node: self.slam_estimate.append(
+                [round(stamp_ns * 1e-9, 6), *estimate.pose]))
+        self.control_nodes.append(self.slam_node)
 
     # --- per-step observation (called by the simulator node after each step) ------------
     def _on_step(self, sim) -> None:
@@ -203,7 +233,7 @@ class SimSession:
             self.view = LiveView(self.world, title=f"amr_sim: {args.world} / "
                                                    f"{start_label(self.start)}")
         if self.record_path:
-            from amr_common.mcap_recorder import McapRecorder
+            from amr_tools.mcap_recorder import McapRecorder
             self.recorder = McapRecorder(self.record_path, metadata={
                 "world": self.world.name, "map": self.map_world.name,
                 "start": start_label(self.start),
@@ -268,9 +298,12 @@ class SimSession:
                                                                 "/map_markers")}
         if self.rehearsal:  # the simulated robot's pose-only /odom, before amr_odometry
             topics["/odom"] = Odometry
-        stamped = not self.rehearsal or self.wall_follower.get_parameter(
-            "cmd_vel_stamped").value
+        stamped = not self.rehearsal or self.wall_follower is None or \
+            self.wall_follower.get_parameter("cmd_vel_stamped").value
         topics["/cmd_vel"] = TwistStamped if stamped else Twist
+        if self.slam_node is not None:
+            from amr_msgs.msg import PoseStamped
+            topics["/slam_pose"] = PoseStamped
         if self.particle_filter is not None:
             from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
 
@@ -286,14 +319,33 @@ class SimSession:
                              log_time="receive" if self.args.realtime else "header")
 
     def _report(self, sim, wall_time: float) -> dict:
+        follower = self.wall_follower
         return run_report(self.args, self.world, self.start, sim, self.trajectory,
                           self.wall_errors, wall_time, self.interrupted, graph={
-                              "controller": self.wall_follower.get_parameter("controller").value,
+                              "controller": None if follower is None else
+                              follower.get_parameter("controller").value,
                               "nodes": self.manager.node_startup_order,
-                              "controller_mode": "simulation" if self.wall_follower.get_parameter(
-                                  "simulation").value else "robot (timer)"},
+                              "controller_mode": "none (teleop)" if follower is None else
+                              "simulation" if follower.get_parameter("simulation").value
+                              else "robot (timer)"},
                           map_world=self.map_world) \
-            | self._localization_report() | self._navigation_report()
+            | self._localization_report() | self._navigation_report() | self._slam_report()
+
+    def _slam_report(self) -> dict:
+        """The SLAM figures; the map written to the --map-out prefix first (if any)."""
+        node = self.slam_node
+        if node is None:
+            return {}
+        map_file = None
+        if node.mapper is not None and node.mapped_scans:
+            self.slam_raster = node.mapper.occupancy_raster()
+            if self.map_prefix:
+                try:
+                    map_file = node.save_map(self.map_prefix)
+                except ValueError as exc:  # the folder was checked; a full disk is possible
+                    print(f"run_sim: the map could not be written: {exc}", file=sys.stderr)
+        return slam_fields(self.world, self.args.profile, self.trajectory, self.slam_estimate,
+                           self.slam_raster, node.mapper, node.timings(), map_file)
 
     def _localization_report(self) -> dict:
         if self.particle_filter is None:
@@ -326,7 +378,8 @@ class SimSession:
                 f"{report['min_clearance_m'] * 100:.1f} cm, distance {report['distance_m']:.1f} m,"
                 + (" explored n/a" if report["explored_fraction"] is None else
                    f" explored {report['explored_fraction'] * 100:.0f}%")
-                + (f", laps {laps}" if laps else "") + localization_line(report))
+                + (f", laps {laps}" if laps else "") + localization_line(report)
+                + slam_line(report))
 
     def close(self) -> None:
         """Shut the graph down (controllers first: their zero command goes out), close files."""

@@ -22,7 +22,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from amr_common.introspection import (  # noqa: E402
+from amr_tools.introspection import (  # noqa: E402
     GraphProbe,
     UnknownTypeError,
     describe_qos,

@@ -99,7 +99,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         check_options(args, episode_args)
         settings = evaluate.resolve_settings(episode_args)
+        evaluate.check_ray_options(args.ray, settings["jobs"], 0.0)
         specs = evaluate.episode_specs(settings)
+        evaluate.check_filter_maps(specs, {})  # navigation episodes run the particle filter
         dims = parse_space(args.space, settings["controller"])
         for dim in dims:  # the controller must take the ends of every searched range
             for value in (dim.values or (dim.low, dim.high)):

@@ -2,6 +2,8 @@
 
 Fixtures:
 - `course_map`: a map JSON file as the course gives them (a room with a box, no named starts).
+- `big_floor`: a generated 60 x 60 m office floor with a named goal, too big for the particle
+  filter's default max_memory_mb (it would need about 1,050 MB).
 - `ray_cluster`: a Ray cluster on loopback (head + one worker node), this process its driver;
   one per test session (tests/ray_cluster.py).
 - `ros`: an initialised rclpy context with an executor; `ros.node(name)` creates a plain node,
@@ -52,6 +54,16 @@ def course_map(tmp_path):
     path.write_text(json.dumps({"metric": {
         "boundary": [[-2, -2], [2, -2], [2, 2], [-2, 2]],
         "holes": [[[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]]]}}))
+    return path
+
+
+@pytest.fixture
+def big_floor(tmp_path):
+    from tools.make_building_world import building, to_yaml
+    world = building(60, 18)
+    x, y, _ = world["starts"]["corridor_west"]
+    path = tmp_path / "building_60m.yaml"
+    path.write_text(to_yaml(world) + f"goals:\n  along: [{x + 2:g}, {y:g}]\n")
     return path
 
 

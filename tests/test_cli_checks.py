@@ -69,7 +69,8 @@ def test_a_misspelled_parameter_is_an_error_listing_the_known_ones(capsys):
 
 
 def test_a_bad_parameter_value_is_found_before_the_run(capsys):
-    _fails_with(capsys, ["-p", "kp:=-1"], "rejects its parameters: WallFollower: kp must be")
+    _fails_with(capsys, ["-p", "kp:=-1"], "wall follower parameters (-p, --params-file): kp must "
+                                          "be >= 0 (got -1.0)")
 
 
 # --- output paths --------------------------------------------------------------------------
@@ -138,8 +139,8 @@ def test_bad_params_files_and_controllers_are_one_line_errors(capsys, tmp_path, 
     (["--goal", "1e308,1e308"], "goal (1e+308, 1e+308) is outside the boundary"),
     (["--goal", "1.094,-0.2", "--profile", "turtlebot3"],
      "goal (1.094, -0.2) is too close to a wall: clearance 0.106 m < 0.135 m"),
-    (["--dt", "10"], "--dt 10: dt must be a number in [0.0001, 1.0]"),
-    (["--seed", "-1"], "--seed -1: seed must be a non-negative integer"),
+    (["--dt", "10"], "--dt 10: dt must be in [0.0001, 1] (got 10.0)"),
+    (["--seed", "-1"], "--seed -1: seed must be >= 0 (got -1)"),
     (["--pf-param", "beams:=90"], "--pf-param needs --localize or --goal"),
 ])
 def test_bad_run_options_are_one_line_errors(capsys, argv, message):
@@ -166,14 +167,14 @@ def test_a_foxglove_port_in_use_is_found_before_the_run(capsys):
 
 @pytest.mark.parametrize("override, message", [
     ("beamz:=3", "--pf-param beamz: no such particle filter parameter; known: "),
-    ("max_particles:=0", "max_particles must be a positive integer"),
-    ("beams:=0", "beams must be a positive integer"),
-    ("sigma_hit_m:=-0.03", "sigma_hit_m must be >= 0"),
-    ("z_random:=2", "z_random must be in [0, 1]"),
-    ("max_particles:=100000000", "max_particles must be at most 1000000"),
-    ("initial_pose:=[0.0,0.0]", "initial_pose must be 0 numbers or 3 numbers"),
+    ("max_particles:=0", "max_particles must be in [1, 200000] (got 0)"),
+    ("beams:=0", "beams must be in [1, 4096] (got 0)"),
+    ("sigma_hit_m:=-0.03", "sigma_hit_m must be > 0 (got -0.03)"),
+    ("z_random:=2", "z_random must be in (0, 1) (got 2.0)"),
+    ("max_particles:=100000000", "max_particles must be in [1, 200000] (got 100000000)"),
+    ("initial_pose:=[0.0,0.0]", "initial_pose must be [] or 3 finite numbers"),
     ("sigma_hit_m:=nan", "--pf-param: override 'sigma_hit_m:=nan': value 'nan' is not finite"),
-    ("slop:=-1", "slop must be a number >= 0"),
+    ("slop:=-1", "slop must be >= 0 (got -1.0)"),
     ("pose_topic:=5", "pose_topic must be a string"),
     ("world:=twin_maze", "--pf-param world: run_sim sets it from --map (default --world)"),
     ("lidar_offset_x_m:=0.1", "--pf-param lidar_offset_x_m: run_sim sets it from --profile"),
@@ -218,7 +219,31 @@ def test_wall_follower_overrides_are_checked_like_the_filters(capsys, override, 
      "--pf-param world: run_robot sets it from --map"),
     (["--pf-param", "beams:=90"], "--pf-param needs --localize or --goal"),
     (["-p", "simulation:=true"], "-p simulation: run_robot sets it (robot mode)"),
-    (["--dt", "0"], "--dt must be > 0"),
+    (["--dt", "0"], "--dt 0: dt must be > 0 (got 0.0)"),
 ])
 def test_run_robot_checks_the_same_way(capsys, argv, message):
     _robot_fails_with(capsys, argv, message)
+
+
+# --- a map too big for the particle filter (issue 18 #9) -------------------------------------
+# Refused only when the filter configured (exit 1, after the nodes started); now one line, exit
+# code 2, before anything runs, saying what it would need; with the filter's own parameters
+# (a node parameter such as slop is not the filter's); a run without the filter is not refused.
+TOO_BIG = "60.0 x 60.0 m map is too big for the particle filter: it would need 1,0"
+
+
+@pytest.mark.parametrize("options", [["--localize"], ["--goal", "along"],
+                                     ["--localize", "--pf-param", "slop:=0.2"]])
+def test_a_map_too_big_for_the_filter_is_refused_before_anything_runs(capsys, big_floor,
+                                                                      options):
+    _fails_with(capsys, ["--world", str(big_floor), *options], TOO_BIG)
+    _robot_fails_with(capsys, ["--world", str(big_floor), *options], TOO_BIG)
+
+
+def test_a_big_map_is_the_filters_concern_only(capsys, big_floor):
+    _fails_with(capsys, ["--world", str(big_floor), "--localize", "--pf-param",
+                         "max_memory_mb:=2"], "max_memory_mb is 2")
+    args = run_sim.parse_args(["--world", str(big_floor), "--duration", "1"])
+    assert isinstance(run_sim._prepare(args), tuple)  # wall following: no filter, no refusal
+    args = run_robot.parse_args(["--domain-id", "5", "--map", str(big_floor)])
+    assert args.map == str(big_floor) and not args.localize

@@ -189,12 +189,12 @@ def test_metrics_of_a_2500_obstacle_world_do_not_hang(tmp_path):
                                 "holes": holes, "starts": {"a": [0.5, 0.5, 0.0]}}))
     code = ("import sys, numpy as np; from amr_common.world import World; "
             "from amr_evaluation.episode import trajectory_metrics; "
-            "from amr_common.map_raster import OCCUPIED, rasterize_world; "
+            "from amr_common.map_messages import grid_values, world_map_messages; "
             "w = World.load(sys.argv[1]); "
             "m = trajectory_metrics(w, np.array([[0.5, 0.5], [0.5, 51.5], [51.5, 51.5]])); "
-            "r = rasterize_world(w, 0.05); "   # the simulator's /map
+            "r = grid_values(world_map_messages(w, 0.05)[0]); "   # the simulator's /map
             "print(len(w.free_cells()), m['explored_fraction'], m['laps'], "
-            "int((r.values == OCCUPIED).sum()))")
+            "int((r == 100).sum()))")
     process = subprocess.run([sys.executable, "-c", code, str(path)], cwd=REPO,
                              capture_output=True, text=True, timeout=120)
     assert process.returncode == 0, process.stderr

@@ -8,7 +8,10 @@ from __future__ import annotations
 
 import json
 import sys
+from dataclasses import replace
 from pathlib import Path
+
+import pytest
 
 SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
 sys.path.insert(0, str(SCRIPTS))
@@ -50,7 +53,11 @@ def test_bad_inputs_are_one_line_errors_with_exit_code_2(capsys, tmp_path, monke
              (["--ray", "127.0.0.1:1", "--ray-keep-workers", "-1"],
               "--ray-keep-workers must be a number of seconds >= 0, got -1"),
              (["--ray", "127.0.0.1:1", "--ray-keep-workers", "nan"],
-              "--ray-keep-workers must be a number of seconds >= 0, got nan")]
+              "--ray-keep-workers must be a number of seconds >= 0, got nan"),
+             # Issue 18 #6: --jobs with a cluster's address was silently ignored.
+             (["--ray", "127.0.0.1:1"], "--jobs 1 sets the CPUs of a local Ray instance (--ray "
+                                        "without an address): with --ray ADDRESS"),
+             (["--ray", "auto"], "with --ray ADDRESS the cluster's CPUs run the episodes")]
     for argv, message in cases:
         code, out, err = _evaluate(capsys, "--worlds", "lab02", *argv)
         assert code == 2, (argv, err)
@@ -96,7 +103,7 @@ def test_options_that_would_be_ignored_or_mean_nothing_are_one_line_errors(capsy
              (["--kidnap-at", "0.5"], "--kidnap-at needs --localize"),
              (["--pf-param", "beams:=30"], "--pf-param needs --localize"),
              (["--localize", "--pf-param", "beams:=0"],
-              "--pf-param: beams must be a positive integer (got 0)"),
+              "--pf-param: beams must be in [1, 4096] (got 0)"),
              (["--localize", "--pf-param", "bemas:=30"], "unknown parameter(s) ['bemas']"),
              (["--localize", "--pf-param", "beams"], "'beams' must look like name:=value"),
              (["--goals", ""], "no goals given (an empty list)"),
@@ -143,3 +150,25 @@ def test_a_hanging_or_crashing_controller_is_its_episodes_error_with_the_results
     assert any(e and "ran past its wall-clock limit of 3 s" in e for e in errors), errors
     assert data["meta"]["episode_timeout_s"] == 3.0
     assert (tmp_path / "sleep" / "results.csv").read_text().count("\n") == 3
+
+
+@pytest.mark.parametrize("options", [["--localize"], ["--goals", "along"],
+                                     ["--localize", "--pf-param", "initial_pose:=[0.05,20,0]"]])
+def test_a_map_too_big_for_the_filter_is_refused_before_anything_runs(capsys, tmp_path,
+                                                                      big_floor, options):
+    """Issue 18 #9: the episodes failed one by one when their filter was built."""
+    code, out, err = _evaluate(capsys, "--worlds", str(big_floor), *options, "--out",
+                               str(tmp_path / "out"))
+    assert code == 2 and len(err.strip().splitlines()) == 1, err
+    message = "initial_pose [0.05, 20.0, 0.0]: (0.050, 20.000) is on or too close to a wall" \
+        if "--pf-param" in options else \
+        "60.0 x 60.0 m map is too big for the particle filter: it would need 1,0"
+    assert message in err and not (tmp_path / "out").exists(), err
+
+
+def test_navigation_on_the_true_pose_runs_no_filter(big_floor):
+    specs = evaluate.episode_specs(evaluate.resolve_settings(evaluate.parse_args(
+        ["--worlds", str(big_floor), "--goals", "along", "--pose-source", "truth"])))
+    evaluate.check_filter_maps(specs, {})  # no filter: no refusal
+    with pytest.raises(ValueError, match="too big"):
+        evaluate.check_filter_maps([replace(spec, pose_source="filter") for spec in specs], {})

@@ -31,10 +31,10 @@ from sensor_msgs.msg import LaserScan
 from websockets.exceptions import InvalidHandshake, InvalidMessage, InvalidStatus
 from websockets.sync.client import connect
 
-from amr_common.foxglove_bridge import FoxgloveBridgeNode
 from amr_common.map_messages import occupancy_grid
 from amr_common.qos import LATCHED, scan_qos
 from amr_common.ros_conversions import laser_scan, seconds_to_time
+from amr_tools.foxglove_bridge import FoxgloveBridgeNode
 from tests.processes import terminate, wait_for
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "scripts"))

@@ -1,7 +1,9 @@
 """The house rules: amr_common at the bottom, algorithm packages beside it, harness on top.
 
 Algorithm packages sit beside each other (never importing one another); the evaluation harness
-and the scripts sit above them.
+and the scripts sit above them. amr_tools (whole programs: Foxglove bridge, map publisher, MCAP
+recorder, introspection) imports only the shared layer, like an algorithm, and nothing below the
+scripts imports it.
 """
 from __future__ import annotations
 
@@ -17,6 +19,7 @@ SHARED = "amr_common"
 ALGORITHM_PACKAGES = ["amr_sim", "amr_control", "amr_turtlebot3", "amr_localization",
                       "amr_planning", "amr_mapping"]
 HARNESS = "amr_evaluation"
+TOOLS = "amr_tools"
 
 
 def imported_amr_packages(package: str) -> dict[str, set[str]]:
@@ -44,6 +47,18 @@ def test_algorithm_packages_import_only_the_shared_layer(package):
     allowed = {SHARED, package, "amr_msgs"}
     for module, names in imported_amr_packages(package).items():
         assert names <= allowed, f"{module} imports {sorted(names - allowed)}"
+
+
+def test_tools_import_only_the_shared_layer():
+    allowed = {SHARED, TOOLS, "amr_msgs"}
+    for module, names in imported_amr_packages(TOOLS).items():
+        assert names <= allowed, f"{module} imports {sorted(names - allowed)}"
+
+
+@pytest.mark.parametrize("package", [SHARED, *ALGORITHM_PACKAGES, HARNESS])
+def test_nothing_below_the_scripts_imports_the_tools(package):
+    for module, names in imported_amr_packages(package).items():
+        assert TOOLS not in names, f"{module} imports {TOOLS}"
 
 
 def test_harness_imports_no_script():

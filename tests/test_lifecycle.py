@@ -7,7 +7,7 @@ import sys
 import pytest
 from rclpy.parameter import Parameter
 
-from amr_common.map_publisher import MapPublisherNode
+from amr_tools.map_publisher import MapPublisherNode
 from tests.processes import REPO, run_script_while_spinning
 
 sys.path.insert(0, str(REPO / "scripts"))

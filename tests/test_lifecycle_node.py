@@ -19,14 +19,14 @@ from lifecycle_msgs.srv import ChangeState, GetState
 from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.parameter import Parameter
 
-from amr_common.foxglove_bridge import FoxgloveBridgeNode
 from amr_common.lifecycle_node import GuardedLifecycleNode
-from amr_common.map_publisher import MapPublisherNode
 from amr_control.pure_pursuit_node import PurePursuitNode
 from amr_control.wall_follower_node import WallFollowerNode
 from amr_localization.particle_filter_node import ParticleFilterNode
 from amr_planning.planner_node import PlannerNode
 from amr_sim.simulator_node import SimulatorNode
+from amr_tools.foxglove_bridge import FoxgloveBridgeNode
+from amr_tools.map_publisher import MapPublisherNode
 from amr_turtlebot3.odometry_node import OdometryNode
 from tests.processes import terminate, wait_for
 

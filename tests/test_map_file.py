@@ -266,3 +266,22 @@ def test_a_named_start_off_the_free_cells_is_refused(tmp_path):
     pgm(tmp_path / "map.pgm", np.full((20, 20), 254, dtype=np.uint8))
     _refused(map_yaml(tmp_path, extra="starts:\n  out: [5.0, 5.0, 0]\n"),
              "start 'out' (5, 5) is outside the map", WorldError)
+
+
+def test_extras_of_scalars_only_stay_a_valid_map_yaml(tmp_path):
+    """Extras of scalars only (a name and a description) stay block-style YAML.
+
+    They were dumped as one flow mapping line after the Nav2 keys: invalid YAML, the saved map
+    could not be read back.
+    """
+    values = np.zeros((6, 6), dtype=np.int8)
+    values[0, :] = 100
+    yaml_path, _ = write_map(Raster(values, 0.05, (0.0, 0.0)), tmp_path / "m",
+                             extras={"name": "room", "description": "SLAM map: seed 0"})
+    spec = read_map(yaml_path)
+    assert spec.name == "room" and spec.description == "SLAM map: seed 0"
+    assert np.array_equal(spec.raster.values, values)
+    yaml_path, _ = write_map(Raster(values, 0.05, (0.0, 0.0)), tmp_path / "n", extras={
+        "name": "room", "grid_origin": [0.0, 0.1], "starts": {"a": [0.1, 0.1, 0.0]}})
+    spec = read_map(yaml_path)
+    assert spec.grid_origin == (0.0, 0.1) and spec.starts == {"a": (0.1, 0.1, 0.0)}

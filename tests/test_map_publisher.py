@@ -14,12 +14,15 @@ from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.parameter import Parameter
 from visualization_msgs.msg import Marker
 
+from amr_common import occupancy_grid
 from amr_common.map_file import world_as_map, write_map
-from amr_common.map_messages import grid_values
-from amr_common.map_publisher import MapPublisherNode
-from amr_common.map_raster import OCCUPIED, Raster, rasterize_world
+from amr_common.map_messages import grid_values, world_map_messages
+from amr_common.map_raster import OCCUPIED, Raster
 from amr_common.qos import LATCHED
 from amr_common.world import World
+from amr_localization.expected_ranges import expected_range_table
+from amr_planning.planner import Planner
+from amr_tools.map_publisher import MapPublisherNode
 from tests.tf_map_helpers import FrameProbe, check_raster_matches_world, start_with_frames
 
 
@@ -42,10 +45,23 @@ def test_map_matches_the_world_and_markers_draw_its_walls(ros):
     assert grid_values(got[0]).tolist() == grid_values(grid).tolist()
 
 
+@pytest.mark.parametrize("world", ["lab02", "room_obstacles"])
+def test_map_is_the_grid_the_planner_and_the_filter_use(world):
+    # One raster of a world: /map once had cell edges (not centres) on multiples of the
+    # resolution and 0.1 m of padding, so it showed other cells than the planner searched.
+    loaded = World.load(world)
+    planner = Planner(loaded, resolution_m=0.02)
+    table = expected_range_table(loaded, 0.02, 8)
+    message, _ = world_map_messages(loaded, 0.02)
+    origin = (message.info.origin.position.x, message.info.origin.position.y)
+    assert origin == planner.grid.origin == table.grid.origin
+    assert grid_values(message).tolist() == planner.grid.occupancy_values().tolist()
+
+
 @pytest.mark.parametrize("world", ["room_obstacles", "maze_deadends"])
 def test_raster_of_bundled_worlds(world):
     loaded = World.load(world)
-    raster = rasterize_world(loaded, 0.05)
+    raster = occupancy_grid.OccupancyGrid.from_world(loaded, 0.05).raster()
     check_raster_matches_world(raster, loaded)
     # Obstacles (holes) are solid: their inside is occupied too.
     if loaded.holes:
@@ -57,7 +73,7 @@ def test_raster_of_bundled_worlds(world):
 def test_raster_rejects_a_bad_resolution():
     for bad in (0.0, -0.1, float("nan")):
         with pytest.raises(ValueError):
-            rasterize_world(World.load("lab02"), bad)
+            occupancy_grid.OccupancyGrid.from_world(World.load("lab02"), bad)
 
 
 def test_map_publisher_serves_a_course_map_json(ros, tmp_path):

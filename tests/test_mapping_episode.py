@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from amr_common.map_raster import Raster, rasterize_world
+from amr_common.map_raster import Raster
+from amr_common.occupancy_grid import OccupancyGrid
 from amr_common.world import World
 from amr_evaluation.mapping_episode import (
     TYPICAL_DRIFT,
@@ -37,7 +38,7 @@ def lab02_seen():
 
 def test_a_true_map_scores_full_precision_and_recall_and_a_shifted_one_does_not(lab02_seen):
     world, hits = lab02_seen
-    truth = rasterize_world(world, 0.02)
+    truth = OccupancyGrid.from_world(world, 0.02).raster()
     start = (0.0, 0.0, 0.0)  # map frame = world frame
     assert map_precision(truth, world, start) == 1.0
     recall, seen = map_recall(truth, world, start, hits)
@@ -56,7 +57,7 @@ def test_only_walls_that_rays_hit_count_for_recall():
     world = World.load("lab02")
     hits = RayHits(world, *LIDAR)
     hits.add(1.0, -1.0, math.pi / 2)  # one scan from the outer corridor's south-east corner
-    truth = rasterize_world(world, 0.02)
+    truth = OccupancyGrid.from_world(world, 0.02).raster()
     recall, seen = map_recall(truth, world, (0.0, 0.0, 0.0), hits)
     total = float(np.hypot(*(world.segments[:, 2:] - world.segments[:, :2]).T).sum())
     assert recall == 1.0 and 1.0 < seen < 0.5 * total

@@ -167,9 +167,10 @@ def test_a_full_map_drops_rays_with_a_count_instead_of_growing():
     ({"resolution_m": 0.0}, "resolution_m must be > 0"),
     ({"resolution_m": math.nan}, "resolution_m must be a finite number"),
     ({"loop_closure": "yes"}, "loop_closure must be true or false"),
-    ({"local_map_keyframes": 2.5}, "local_map_keyframes must be a positive integer"),
+    ({"local_map_keyframes": 2.5}, "local_map_keyframes must be an integer"),
+    ({"local_map_keyframes": 0}, "local_map_keyframes must be >= 1"),
     ({"free_log_odds": 0.7}, "free_log_odds (0.7) must be below occupied_log_odds"),
-    ({"loop_min_score": 1.5}, "loop_min_score must be in [0, 1]"),
+    ({"loop_min_score": 1.5}, "loop_min_score must be in (0, 1]"),
     ({"smear_sigma_m": 1.0}, "smear_sigma_m (1.0) must be at most 10 cells"),
     ({"no_such_thing": 1}, "unknown parameter"),
 ])

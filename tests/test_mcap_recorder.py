@@ -13,8 +13,8 @@ from nav_msgs.msg import Odometry
 from rosbags.highlevel import AnyReader
 from sensor_msgs.msg import LaserScan
 
-from amr_common.mcap_recorder import McapRecorder, cdr_header_stamp_ns, full_message_definition
 from amr_msgs.msg import PoseStamped as GroundTruthPose
+from amr_tools.mcap_recorder import McapRecorder, cdr_header_stamp_ns, full_message_definition
 
 DT_NS = 50_000_000  # 0.05 s
 STEPS = 20

@@ -64,3 +64,22 @@ def test_walls_are_occupied_lines_and_values_follow_the_nav_msgs_layout():
 def test_bad_resolution_is_a_clear_error(resolution):
     with pytest.raises(ValueError, match="resolution must be a positive number"):
         OccupancyGrid.from_world(World.load("lab02"), resolution)
+
+
+def test_every_grid_indexes_its_cells_alike():
+    # One cell_of (amr_common.cell_grid) behind the occupancy grid, a raster and the coverage
+    # grid: the vector form agrees with it point for point, cell borders included.
+    world = World.load("room_obstacles")
+    grid = OccupancyGrid.from_world(world, 0.05)
+    raster = grid.raster()
+    coverage = world.coverage_grid()
+    rng = np.random.default_rng(7)
+    points = np.vstack([rng.uniform(-0.5, 4.5, (400, 2)), np.arange(-0.5, 4.5, 0.05)[:, None]
+                        * np.ones((1, 2))])   # multiples of the resolution: cell borders
+    for cells in (grid, raster, coverage):
+        rows, cols = cells.cells_of(points[:, 0], points[:, 1])
+        assert [cells.cell_of(x, y) for x, y in points] == list(zip(rows.astype(int).tolist(),
+                                                                    cols.astype(int).tolist()))
+    free = [grid.contains_cell(*grid.cell_of(x, y)) and bool(grid.free[grid.cell_of(x, y)])
+            for x, y in points]
+    assert raster.free_at(points).tolist() == free

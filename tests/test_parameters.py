@@ -5,6 +5,7 @@ configure with a reason instead of a crash.
 """
 from __future__ import annotations
 
+import math
 import os
 import signal
 import subprocess
@@ -12,6 +13,7 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
 from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -80,6 +82,31 @@ def test_simulator_and_odometry_take_integers(ros):
         Parameter("max_gap", value=2)]))
     assert odometry.trigger_configure() == TransitionCallbackReturn.SUCCESS
     assert odometry.estimator.max_gap == 2.0
+
+
+def test_ranges_are_on_the_descriptors_and_a_value_outside_fails_configure(ros):
+    """`ros2 param describe` shows each rule; a start-up value outside one fails configure.
+
+    rclpy enforces a descriptor's range already when -p gives the value: declared with it
+    from the start, `-p kp:=-1` would raise in the constructor and kill the process.
+    """
+    from amr_control.wall_follower_node import WallFollowerNode
+    node = ros.add(WallFollowerNode(context=ros.context, parameter_overrides=[
+        Parameter("kd", value=-1.0)]))
+    kp = node.describe_parameter("kp")
+    assert (kp.floating_point_range[0].from_value, kp.floating_point_range[0].to_value) == \
+        (0.0, math.inf) and kp.additional_constraints == ">= 0"
+    queue = node.describe_parameter("queue_size").integer_range[0]
+    assert (queue.from_value, queue.to_value) == (1, 2 ** 63 - 1)
+    sector = node.describe_parameter("sector_half_width_rad")
+    assert sector.floating_point_range[0].to_value == pytest.approx(math.pi / 2)
+    assert sector.additional_constraints == "in (0, 1.5708)"
+    assert node.describe_parameter("follow_side").additional_constraints == \
+        "one of: right, left"
+    assert not node.describe_parameter("kd").floating_point_range  # -1 stays, for configure
+    assert node.trigger_configure() == TransitionCallbackReturn.FAILURE
+    assert not node.set_parameters([Parameter("kp", value=-2.0)])[0].successful
+    assert node.set_parameters([Parameter("kp", value=4.0)])[0].successful
 
 
 def test_wall_follower_executable_survives_an_integer_gain():

@@ -327,6 +327,20 @@ def test_values_that_would_cost_absurd_memory_or_time_are_refused(name, value):
         check_parameters({name: value})
 
 
+@pytest.mark.parametrize("name", ["max_particles", "min_particles", "tracking_particles"])
+def test_one_particle_cap_for_every_count(name):
+    """One cap, named once (there were two: 200,000 in the bounds and 1,000,000 after them).
+
+    A count above it got both messages, contradicting each other.
+    """
+    from amr_localization.particle_filter_params import MAX_PARTICLES
+    cap = {"max_particles": MAX_PARTICLES} if name == "min_particles" else {}
+    assert check_parameters({name: MAX_PARTICLES, **cap})[name] == MAX_PARTICLES
+    with pytest.raises(ValueError) as error:
+        check_parameters({name: 100_000_000, **cap})
+    assert str(error.value) == f"{name} must be in [1, {MAX_PARTICLES}] (got 100000000)"
+
+
 def test_adaptive_count_shrinks_when_tracking():
     """Tracking converges to the minimum count; a search starts at the maximum.
 

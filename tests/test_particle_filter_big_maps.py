@@ -146,3 +146,118 @@ def test_the_pose_search_of_a_coarse_table_finds_the_exact_twin_in_corridor_loop
     rivals = [a for a in pf._alternatives(scan) if a.match_fraction >= 0.9]
     assert any(math.hypot(a.pose[0] - twin[0], a.pose[1] - twin[1]) < 0.05 for a in rivals), \
         [(a.pose, a.match_fraction) for a in pf.last_alternatives]
+
+
+def _map_world(tmp_path, name: str, resolution: float) -> World:
+    """A bundled world as a Nav2 map (what scripts/world_to_map.py writes), loaded."""
+    from amr_common.map_file import world_as_map, write_map
+    raster, extras = world_as_map(World.load(name), resolution)
+    yaml_path, _ = write_map(raster, tmp_path / f"{name}_{100 * resolution:g}cm", "pgm", extras)
+    return World.load(yaml_path)
+
+
+@pytest.mark.parametrize("name, resolution", [("lab02", 0.02), ("lab02", 0.05),
+                                              ("room_obstacles", 0.02)])
+def test_a_map_worlds_plan_is_its_own_grid_and_predicts_the_tables_bytes(tmp_path, caplog, name,
+                                                                          resolution):
+    """A map world's table is on the map's cells (OccupancyGrid of a raster): so is its plan.
+
+    The plan took the world's outline at table_resolution_m (2 cm, then 4 cm for a big map)
+    and estimated the free cells: its figures were another grid's.
+    """
+    world = _map_world(tmp_path, name, resolution)
+    plan = check_world(world, check_parameters({}))
+    assert (plan.resolution, plan.angles) == (world.raster.resolution, 360)
+    table = build_expected_range_table(world, plan.resolution, plan.angles)
+    assert (table.ny, table.nx) == world.raster.values.shape and plan.cells == table.cells
+    assert plan.free_cells == len(table.ranges) - 1
+    assert plan.table_bytes == table.nbytes
+    caplog.set_level("INFO", logger="amr_localization.particle_filter")
+    ParticleFilter(world)
+    assert "big map" not in caplog.text, "a map's own cell size is not a reduced table"
+
+
+@pytest.mark.parametrize("resolution", [0.02, 0.05])
+def test_a_map_world_too_big_is_refused_with_its_own_grids_figure(tmp_path, resolution):
+    """Only the directions of a map's table can shrink: the refusal names its cells' table."""
+    world = _map_world(tmp_path, "lab02", resolution)
+    values = check_parameters({"max_memory_mb": 1})
+    plans = candidate_plans(world, values)
+    assert [(p.resolution, p.angles) for p in plans] == [(resolution, 360), (resolution, 180)]
+    table = build_expected_range_table(world, resolution, 180)
+    with pytest.raises(MapTooBigError) as error:
+        check_world(world, values)
+    assert f"({100 * resolution:g} cm x 180 directions, table {table.nbytes / 1e6:,.0f} MB)" \
+        in str(error.value)
+    assert f"would need {plans[-1].total_bytes / 1e6:,.0f} MB" in str(error.value)
+    assert plans[-1].table_bytes == table.nbytes
+
+
+# --- the exhaustive pose search of a big map, a slice per scan (issue 18 #9 follow-up) --------
+# On the 40 x 40 m floor the search (885,000 positions, ~3 s of CPU) ran in one correct() call:
+# at the first scan of a global search and before each declaration the node answered nothing
+# for seconds while the robot drove on its last command. Now each call scores at most
+# SLICE_CELLS positions; a course maze (at most ~5,400) still searches in one call.
+
+def test_a_sliced_search_finds_what_a_search_in_one_go_finds(tmp_path):
+    from amr_localization.pose_search import SLICE_CELLS
+    from amr_sim.lidar import Lidar
+    world = _building(tmp_path, 12)
+    pf = ParticleFilter(world, max_memory_mb=50)
+    pf.set_scan_geometry(0.0, 2 * math.pi / 360, 360, 0.12, 3.5)
+    pose = world.starts["corridor_crossing"]
+    scan = Lidar(world.segments, 360, 0.0, 2 * math.pi / 360, 0.12, 3.5, math.nan).scan(*pose)
+    z_mm = pf.beams.readings_mm(scan)
+    positions = len(pf.search.cells)
+    assert positions > 2 * SLICE_CELLS
+    whole = pf.search.start(500, pf.beams, z_mm).finish()
+    sliced, slices = pf.search.start(500, pf.beams, z_mm), 1
+    while not sliced.advance():
+        slices += 1
+    assert slices == -(-positions // SLICE_CELLS)
+    assert np.array_equal(sliced.scores, whole.scores) and np.array_equal(sliced.flat, whole.flat)
+    for name in ("lab02", "room_obstacles", "wide_maze"):  # the roomiest course mazes
+        assert len(ParticleFilter(World.load(name)).search.cells) <= SLICE_CELLS
+
+
+def test_searches_carry_their_poses_by_the_odometry_since_their_scan():
+    """A pose found for an earlier scan, moved as the robot moved since (its own frame)."""
+    from amr_localization.filter_searches import PendingSearch
+    pending = PendingSearch("seed", None, np.zeros(1), (0.0, 0.0, 0.0))
+    poses = np.array([[1.0, 2.0, 0.3], [-0.5, 0.7, -2.9]])
+    twists = [(0.2, 0.5, 0.05)] * 20 + [(0.15, -1.0, 0.05)] * 15
+    for v, w, dt in twists:
+        pending.predict(v, w, dt)
+    for pose, carried in zip(poses, pending.carry(poses)):
+        x, y, theta = pose
+        for v, w, dt in twists:  # the filter's own mid-point integration, from that pose
+            mid = theta + 0.5 * w * dt
+            x, y, theta = x + v * dt * math.cos(mid), y + v * dt * math.sin(mid), theta + w * dt
+        assert np.allclose(carried, (x, y, math.remainder(theta, 2 * math.pi)), atol=1e-9)
+
+
+def test_no_filter_call_searches_more_than_a_slice_and_the_floor_still_localizes(tmp_path,
+                                                                               monkeypatch):
+    from amr_evaluation.localization_episode import run_localization_episode
+    from amr_localization.pose_search import SLICE_CELLS, PoseSearch
+    world = _building(tmp_path, 12)
+    scored: list[int] = []
+    score_into, correct = PoseSearch._score_into, ParticleFilter.correct
+
+    def counting_score_into(search, centres, *args):
+        scored[-1] += len(centres)
+        return score_into(search, centres, *args)
+
+    def counting_correct(pf, *args, **kwargs):
+        scored.append(0)
+        return correct(pf, *args, **kwargs)
+
+    monkeypatch.setattr(PoseSearch, "_score_into", counting_score_into)
+    monkeypatch.setattr(ParticleFilter, "correct", counting_correct)
+    result = run_localization_episode(world, "corridor_west", profile="turtlebot3", seed=0,
+                                      duration=30.0, record=False,
+                                      filter_params={"max_memory_mb": 50})
+    assert max(scored) <= SLICE_CELLS, f"a call scored {max(scored)} positions"
+    assert sum(scored) > 3 * SLICE_CELLS  # the seed's and the check's searches, sliced
+    assert result.false_localizations == 0, result.summary()
+    assert result.time_to_localized_s is not None, result.summary()

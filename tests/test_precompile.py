@@ -36,7 +36,7 @@ def _make_would_run(stamp: Path, *touched: str) -> str:
 def test_setup_compiles_the_kernels_when_a_file_they_are_made_of_changes(tmp_path):
     stamp, step = tmp_path / "stamp-numba", ".venv/bin/python tools/precompile.py"
     assert step in _make_would_run(stamp, "tools/precompile.py")
-    assert step in _make_would_run(stamp, "amr_sim/simulator.py")  # kernels
+    assert step in _make_would_run(stamp, "amr_sim/lidar.py")  # kernels
     assert step in _make_would_run(stamp, "amr_common/robot.py")  # a constant compiled in
     assert step not in _make_would_run(stamp, "amr_sim/simulator_node.py")  # no kernel
     assert step not in _make_would_run(stamp)

@@ -115,7 +115,7 @@ def test_a_new_path_after_arriving_is_followed():
 @pytest.mark.parametrize("params, problem", [
     ({"min_lookahead_m": 0.3}, "max_lookahead_m must be >= min_lookahead_m"),
     ({"heading_tolerance_rad": 1.0}, "heading_tolerance_rad must be below"),
-    ({"goal_tolerance_m": -0.1}, "goal_tolerance_m must be a finite number >= 0"),
+    ({"goal_tolerance_m": -0.1}, "goal_tolerance_m must be > 0 \\(got -0.1\\)"),
     ({"max_linear_speed_mps": 0}, "max_linear_speed_mps must be > 0"),
     ({"speed": 1.0}, "unknown parameter"),
 ])
@@ -136,6 +136,10 @@ def test_scan_clearance_from_the_lidar_position_ignoring_invalid_rays():
     assert scan_clearance(ranges, 0.0, increment, 0.12, 3.5, -0.032, 0.105) == \
         pytest.approx(0.232 - 0.105)
     assert scan_clearance(np.zeros(360), 0.0, increment, 0.12, 3.5, 0.0, 0.105) is None
+    # A scan whose range_min is 0 (some drivers): 0.0 is still "no return", not a wall at the
+    # LiDAR (the pursuit slowed to its crawl on it).
+    assert scan_clearance(ranges, 0.0, increment, 0.0, 3.5, -0.032, 0.105) == \
+        pytest.approx(0.232 - 0.105)
 
 
 # --- an obstacle the map lacks, in the way -------------------------------------------------

@@ -121,12 +121,13 @@ def _table(stdout: str) -> list[str]:
 
 def test_evaluate_py_on_ray_writes_the_local_pools_files(ray_cluster, tmp_path, capsys):
     args = ["--worlds", "lab02,wide_maze", "--profiles", "ideal,turtlebot3", "--seeds", "3",
-            "--duration", "15", "--jobs", "2"]
-    assert evaluate.main([*args, "--out", str(tmp_path / "pool")]) == 0
+            "--duration", "15"]
+    assert evaluate.main([*args, "--jobs", "2", "--out", str(tmp_path / "pool")]) == 0
     pool_stdout = capsys.readouterr().out
     # Other driver processes, started elsewhere: the workers import the project from the venv.
-    # One joins the cluster, one starts (and stops) a Ray instance of its own.
-    runs = {"cluster": ["--ray", ray_cluster.address], "local": ["--ray"]}
+    # One joins the cluster (its CPUs: --jobs is refused there), one starts (and stops) a Ray
+    # instance of its own with --jobs CPUs.
+    runs = {"cluster": ["--ray", ray_cluster.address], "local": ["--ray", "--jobs", "2"]}
     for name, ray_args in runs.items():
         proc = subprocess.run([sys.executable, str(REPO / "scripts" / "evaluate.py"), *args,
                                *ray_args, "--out", str(tmp_path / name)],

@@ -52,6 +52,22 @@ def test_free_motion_matches_exact_unicycle(world, start, v, w, steps):
     assert sim.collisions == 0
 
 
+@pytest.mark.parametrize("v, w", [(0.2, 0.0), (0.1, 0.5), (-0.15, -0.8), (0.0, 1.2)])
+def test_the_shared_step_is_the_exact_unicycle_and_step_chord_inverts_it(v, w):
+    x, y, th = 0.3, -0.2, 2.9
+    for _ in range(40):
+        x1, y1, th1 = robot.unicycle_step(x, y, th, v, w, 0.05)
+        # Its chord back from the displacement, its arc length back from the chord.
+        chord = robot.step_chord(x1 - x, y1 - y, th, th1 - th)
+        assert chord / robot.sinc_half(th1 - th) == pytest.approx(v * 0.05, abs=1e-15)
+        x, y, th = x1, y1, th1
+    ex, ey, eth = exact_unicycle(0.3, -0.2, 2.9, v, w, 2.0)
+    assert math.hypot(x - ex, y - ey) < EXACT_TOL and abs(angle_diff(th, eth)) < EXACT_TOL
+    # The compiled twin gives the same bits.
+    assert robot.arc_displacement_kernel(2.9, 0.01, 0.04) == robot.arc_displacement(2.9, 0.01,
+                                                                                     0.04)
+
+
 @pytest.mark.parametrize("v, w", [(0.22, 1.0), (-0.3, -2.0), (0.1, 5.0), (0.0, -9.0), (1e12, 1e12),
                                   (-0.22, 0.5)])
 def test_saturation_keeps_turning_direction_and_curvature(v, w):

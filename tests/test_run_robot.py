@@ -86,3 +86,60 @@ def test_robot_graph_drives_the_emulated_robot_and_stops_when_scans_stop(ros, tm
     late = [c for c in commands if c["t"] > t_stop + 1.0]
     assert late, "run_robot must keep publishing (zero) commands while data is stale"
     assert all(c["linear"][0] == 0.0 and c["angular"][2] == 0.0 for c in late), late[:3]
+
+
+# Ctrl-C at any moment of start-up (issue 18 #7): during the imports it was a KeyboardInterrupt
+# traceback, and once the graph ran the exit code was 0. Each moment: exit code 130, no
+# traceback; a controller that had been configured sends its zero command on the way down (the
+# robot keeps its last command), and a zero is the last command the test hears; nothing at all
+# if no node existed yet. (Whether the test's subscriber has discovered a publisher created
+# a moment before is up to DDS: the node's log says it sent the zero.)
+STARTUP_MOMENTS = {"importing": lambda text, elapsed: elapsed > 0.3,
+                   "checking the options": lambda text, elapsed: elapsed > 1.5,
+                   "nodes built": lambda text, elapsed: "ROS_DOMAIN_ID=" in text,
+                   "configuring": lambda text, elapsed: "'wall_follower': configure OK" in text,
+                   "running": lambda text, elapsed: "all nodes active" in text}
+
+
+@pytest.mark.parametrize("moment", list(STARTUP_MOMENTS))
+def test_ctrl_c_at_any_moment_of_start_up_exits_130_with_a_final_zero(ros, tmp_path, moment):
+    import signal
+
+    from geometry_msgs.msg import TwistStamped
+
+    from amr_common.qos import RELIABLE_10
+    commands = []
+    ros.node("cmd_vel_listener").create_subscription(TwistStamped, "/cmd_vel", commands.append,
+                                                     RELIABLE_10)
+    log_path = tmp_path / "run_robot.log"
+    with open(log_path, "w") as output:
+        # With the particle filter: the longest start-up (its table is built when configuring).
+        process = subprocess.Popen(
+            [sys.executable, str(RUN_ROBOT), "--domain-id", os.environ["ROS_DOMAIN_ID"],
+             "--cmd-vel", "stamped", "--localize", "--world", "lab02"],
+            stdout=output, stderr=subprocess.STDOUT)
+        started = time.monotonic()
+        try:
+            ready = STARTUP_MOMENTS[moment]
+            ros.spin_until(lambda: ready(log_path.read_text(), time.monotonic() - started)
+                           or process.poll() is not None, 60.0, moment)
+            assert process.poll() is None, log_path.read_text()
+            configured = "'wall_follower': configure OK" in log_path.read_text()
+            process.send_signal(signal.SIGINT)
+            ros.spin_until(lambda: process.poll() is not None, 30.0, "run_robot to exit")
+            ros.spin_for(0.5)  # commands still in flight
+        finally:
+            terminate(process, 5.0)
+    text = log_path.read_text()
+    assert process.returncode == 130, f"{moment}: {text}"
+    assert "Traceback" not in text and "KeyboardInterrupt" not in text, f"{moment}: {text}"
+    assert "run_robot: interrupted" in text, text
+    if configured:
+        assert "[wall_follower]: shutting down: commanding zero velocity" in text, text
+    if moment == "running":
+        assert commands, f"{moment}: no command heard: {text}"
+    if commands:
+        last = commands[-1].twist
+        assert (last.linear.x, last.angular.z) == (0.0, 0.0), f"{moment}: {text}"
+    if moment in ("importing", "checking the options"):
+        assert "ROS_DOMAIN_ID=" not in text and not commands, f"{moment}: {text}"

@@ -123,3 +123,21 @@ def test_echo_with_a_type_the_topic_does_not_carry_fails_at_once(ros, talker):
     assert process.returncode == 2
     assert err.strip() == ("topic.py: topic /probe_scan carries sensor_msgs/msg/LaserScan, not "
                            "--type std_msgs/msg/String")
+
+
+def test_the_tools_command_line_never_reaches_rcl(monkeypatch, capfd):
+    """A tool's own arguments are not rcl's (GraphProbe of topic.py, ros_graph.py, lifecycle.py).
+
+    rclpy.init() reads sys.argv by default: a value like '__ns:=/evil' moved the probe node into
+    that namespace, '__node:=evil' renamed it, 'a:=b' warned about a deprecated remap rule.
+    """
+    from amr_tools.introspection import GraphProbe
+    monkeypatch.setattr(sys, "argv", ["topic.py", "echo", "/x", "a:=b", "__node:=evil",
+                                      "__ns:=/evil"])
+    probe = GraphProbe("topic")
+    try:
+        assert probe.node.get_namespace() == "/"
+        assert probe.node.get_name().startswith("_topic_")
+    finally:
+        probe.close()
+    assert "deprecated" not in capfd.readouterr().err

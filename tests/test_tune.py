@@ -154,7 +154,7 @@ def test_safe_exploration_ranks_collisions_then_exploration_then_clearance():
     assert score(clearance=0.09) > score(clearance=0.08)
 
 
-def test_bad_tune_options_are_one_line_errors(capsys, tmp_path):
+def test_bad_tune_options_are_one_line_errors(capsys, tmp_path, big_floor):
     for argv, message in [(["--space", "kq=1,2"], "no such parameter"),
                           (["--space", "kp=1:5"], "grid needs values or LOW:HIGH:N"),
                           (["--space", "kp=-1,5"], "rejected its parameters"),
@@ -178,7 +178,12 @@ def test_bad_tune_options_are_one_line_errors(capsys, tmp_path):
                           (["--space", "kp=1,2", "--ray-keep-workers", "5"],
                            "--ray-keep-workers is not a tune.py option"),
                           (["--space", "kp=1,2", "--kidnap-at", "5"],
-                           "--kidnap-at needs --localize")]:
+                           "--kidnap-at needs --localize"),
+                          (["--space", "kp=1,2", "--ray", "127.0.0.1:1", "--jobs", "2"],
+                           "with --ray ADDRESS the cluster's CPUs run the episodes"),
+                          # Issue 18 #9: navigation episodes run the particle filter.
+                          (["--space", "kp=1,2", "--worlds", str(big_floor), "--goals",
+                            "along"], "map is too big for the particle filter")]:
         code = tune.main(["--worlds", "lab02", "--duration", "1", *argv,
                           "--out", str(tmp_path / "out")])
         err = capsys.readouterr().err

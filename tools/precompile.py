@@ -6,9 +6,9 @@ numba compiles a kernel on its first call and caches the machine code beside its
 newcomer's first `make run` spent ~15 s compiling. The kernels are compiled by what calls them,
 with the argument types they get there: short headless episodes of every kind (wall following
 on both sensor profiles, the particle filter's global localization, navigation with both
-planner algorithms and the pure pursuit, mapping, and wall following in a Nav2 map world with a
-SLAM map's speckles, which is ray-marched through its cells) run the same kernels as the ROS
-nodes.
+planner algorithms and the pure pursuit, mapping, the reality-gap profiles, and wall following
+in a Nav2 map world with a SLAM map's speckles, which is ray-marched through its cells) run the
+same kernels as the ROS nodes.
 
 The project's old cache files are removed first: numba checks only the source file of the
 kernel it loads, not the files of the kernels that one calls, so after an edit an outdated one
@@ -115,6 +115,8 @@ def warm_up() -> None:
         run_localization_episode("twin_maze_small", None, profile=profile, duration=3.0,
                                  record=False)
     run_mapping_episode("lab02", "outer", profile="turtlebot3", duration=3.0)
+    for profile in ("turtlebot3_real", "turtlebot3_lds02"):  # the reality gap's kernels
+        run_episode("lab02", "outer", profile=profile, duration=1.0, record_trajectory=False)
     map_world = speckled_map_world()
     run_episode(map_world, "outer", profile="ideal", duration=1.0, record_trajectory=False)
     run_localization_episode(map_world, "outer", profile="ideal", duration=1.0, record=False)

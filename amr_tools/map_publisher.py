@@ -16,16 +16,17 @@ from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from amr_common.lifecycle_node import GuardedLifecycleNode
 from amr_common.map_messages import MAP_MARKERS_TOPIC, MAP_TOPIC, world_map_messages
 from amr_common.node_runner import run_lifecycle_node
-from amr_common.parameters import declare_parameters, finite
+from amr_common.parameter_table import between, ruled
+from amr_common.parameters import declare_parameters, read_parameters
 from amr_common.qos import LATCHED
 from amr_common.world import World
 
-_PARAMETERS = {
+_PARAMETERS = ruled({
     "world": ("lab02", "Bundled world name or path to a world .yaml / the course's map .json / "
                        "a Nav2 map .yaml (published cell for cell)"),
     "resolution": (0.05, "Cell size of /map in metres"),
     "frame_id": ("map", "Frame of the map"),
-}
+}, resolution=between(0.005, 1.0))
 
 
 class MapPublisherNode(GuardedLifecycleNode):
@@ -45,16 +46,14 @@ class MapPublisherNode(GuardedLifecycleNode):
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Load the world and build the messages; create the two latched publishers."""
-        p = {name: self.get_parameter(name).value for name in _PARAMETERS}
-        resolution = p["resolution"]
-        if not (finite(resolution) and 0.005 <= resolution <= 1.0):
-            self.get_logger().error(f"configure failed: resolution must be a number in "
-                                    f"[0.005, 1] m (got {resolution!r})")
+        p, problems = read_parameters(self, _PARAMETERS)
+        if problems:
+            self.get_logger().error("configure failed: " + "; ".join(problems))
             return TransitionCallbackReturn.FAILURE
         try:
             world = World.load(p["world"])
             stamp = self.get_clock().now().to_msg()
-            self._messages = world_map_messages(world, float(resolution), p["frame_id"], stamp)
+            self._messages = world_map_messages(world, p["resolution"], p["frame_id"], stamp)
         except Exception as exc:  # WorldError and friends: a user's file
             self.get_logger().error(f"configure failed: {exc}")
             return TransitionCallbackReturn.FAILURE

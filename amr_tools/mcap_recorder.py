@@ -176,7 +176,7 @@ class McapRecorder:
         self._stream = open(self.path, "wb")
         self._writer = Writer(self._stream, chunk_size=chunk_size,
                               compression=_chunk_compression())
-        self._writer.start(profile="ros2", library="amr_common.mcap_recorder")
+        self._writer.start(profile="ros2", library="amr_tools.mcap_recorder")
         self._lock = threading.Lock()
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, tuple[int, str]] = {}  # topic -> (channel id, type name)

@@ -144,7 +144,9 @@ class GraphProbe:
         from rclpy.executors import SingleThreadedExecutor
         self._rclpy = rclpy
         self.context = rclpy.Context()
-        rclpy.init(context=self.context)
+        # No arguments for rcl: it would read the tool's own command line (a '__ns:=/x' value
+        # as a remapping of the probe node), as run_sim.py and run_robot.py avoid too.
+        rclpy.init(args=[], context=self.context)
         self.node = rclpy.create_node(f"_{tool}_{os.getpid()}", context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)

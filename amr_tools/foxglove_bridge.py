@@ -11,7 +11,7 @@ Clients may publish only on an allow-list, each topic with its types from a fixe
 schema name is looked up there, never imported): "2D Pose Estimate" -> /initialpose, "2D Goal
 Pose" -> /goal_pose, and /cmd_vel (the Teleop panel) only with `client_teleop`; a client's CDR
 message is published if it deserializes as that type. Each handshake passes the gate first
-(amr_common/foxglove_gate.py: known Origins only, both names of the protocol), which relays to
+(amr_tools/foxglove_gate.py: known Origins only, both names of the protocol), which relays to
 the SDK's server on a loopback TLS port.
 
     .venv/bin/amr_foxglove_bridge --ros-args -p autostart:=true     # ws://127.0.0.1:8765
@@ -30,19 +30,20 @@ from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
 
-from amr_common.foxglove_gate import FoxgloveGate, normalize_origin, self_signed_certificate
-from amr_common.introspection import UnknownTypeError, matched_qos, message_class
 from amr_common.lifecycle_node import GuardedLifecycleNode
-from amr_common.mcap_recorder import (
+from amr_common.node_runner import run_lifecycle_node
+from amr_common.parameter_table import Param, between, ruled
+from amr_common.parameters import declare_parameters, read_parameters
+from amr_common.qos import RELIABLE_10
+from amr_tools.foxglove_gate import FoxgloveGate, normalize_origin, self_signed_certificate
+from amr_tools.introspection import UnknownTypeError, matched_qos, message_class
+from amr_tools.mcap_recorder import (
     MessageDefinitionError,
     cdr_header_stamp_ns,
     full_message_definition,
 )
-from amr_common.node_runner import run_lifecycle_node
-from amr_common.parameters import declare_parameters, finite
-from amr_common.qos import RELIABLE_10
 
-PARAMETERS: dict[str, tuple[Any, str]] = {
+PARAMETERS: dict[str, Param] = ruled({
     "host": ("127.0.0.1", "Address the WebSocket server listens on (127.0.0.1: this machine "
                           "only; 0.0.0.0: every interface, e.g. the robot's LAN)"),
     "port": (8765, "WebSocket port (foxglove_bridge's 8765)"),
@@ -52,7 +53,7 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
                              "Estimate, 2D Goal Pose)"),
     "client_teleop": (False, "Also let Foxglove publish /cmd_vel (the Teleop panel): a client "
                              "then drives the robot"),
-}
+}, port=between(0, 65535), discovery_period=between(0.05, 60.0))
 # A string array without a default (rclpy cannot type an empty list): declared on its own.
 ALLOWED_ORIGINS = ("allowed_origins", "WebSocket Origins allowed besides no Origin, "
                    "https://app.foxglove.dev, file:// and http(s)://localhost, 127.0.0.1, "
@@ -116,16 +117,11 @@ class FoxgloveBridgeNode(GuardedLifecycleNode):
     # --- lifecycle -------------------------------------------------------------------------
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Start the servers (FAILURE: port taken, origin malformed, SDK missing)."""
-        p = {name: self.get_parameter(name).value for name in PARAMETERS}
-        port = p["port"]
-        if isinstance(port, bool) or not (isinstance(port, int) and 0 <= port <= 65535):
-            self.get_logger().error(f"configure failed: port must be 0-65535 (got {p['port']})")
+        p, problems = read_parameters(self, PARAMETERS)
+        if problems:
+            self.get_logger().error("configure failed: " + "; ".join(problems))
             return TransitionCallbackReturn.FAILURE
         period = p["discovery_period"]
-        if not (finite(period) and 0.05 <= period <= 60.0):
-            self.get_logger().error(f"configure failed: discovery_period must be 0.05-60 s "
-                                    f"(got {period!r})")
-            return TransitionCallbackReturn.FAILURE
         try:
             extra_origins = frozenset(normalize_origin(o) for o in self.get_parameter_or(
                 ALLOWED_ORIGINS[0], Parameter(ALLOWED_ORIGINS[0], value=[])).value)

@@ -1,0 +1,208 @@
+"""SLAM runs: run_sim.py --slam (map, report, plot, Ctrl-C), run_robot.py and evaluate.py --slam.
+
+Option mistakes of each are one-line errors with exit code 2, before anything runs.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from amr_common.map_file import read_map
+from amr_common.map_raster import OCCUPIED
+from amr_common.world import World
+from amr_evaluation.mapping_metrics import occupied_centres
+from tests.emulator_process import running_emulator
+from tests.processes import terminate, wait_for
+from tests.test_cli_checks import _fails_with, _robot_fails_with
+
+REPO = Path(__file__).resolve().parent.parent
+SCRIPTS = REPO / "scripts"
+sys.path.insert(0, str(SCRIPTS))
+import evaluate  # noqa: E402
+import run_sim  # noqa: E402
+
+pytestmark = pytest.mark.slow
+
+
+def test_slam_run_writes_the_map_the_report_and_the_plot(tmp_path, capsys):
+    maps, report_path = tmp_path / "maps", tmp_path / "run.json"
+    code = run_sim.main(["--profile", "turtlebot3", "--slam", "--map-out", str(maps),
+                         "--duration", "45", "--report", str(report_path), "--plot",
+                         str(tmp_path / "slam.png")])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    report = json.loads(report_path.read_text())
+    slam = report["slam"]
+    assert "slam" in report["nodes"] and report["interrupted"] is False
+    assert slam["map_file"] == str(maps / "map.yaml") and "map written to" in out
+    # 45 s of 5 Hz scans, each mapped once (the lockstep simulator re-sends each 3 times).
+    estimate = np.array(report["estimate"])
+    assert slam["scans"] == len(estimate) and 220 <= len(estimate) <= 226
+    assert np.allclose(estimate[:, 0] / 0.2, np.round(estimate[:, 0] / 0.2), atol=1e-6)
+    assert slam["trajectory_rmse_m"] < 0.015 and slam["trajectory_max_m"] < 0.05
+    assert slam["precision"] >= 0.95 and slam["recall"] >= 0.9
+    # The map lies in the world's frame and loads as a world (its start: where mapping began).
+    saved = read_map(maps / "map.yaml")
+    centres = occupied_centres(saved.raster)
+    assert np.mean(World.load("lab02").clearances(centres) <= 0.03) >= 0.95
+    world = World.load(str(maps / "map.yaml"))
+    assert world.starts["slam_start"] == pytest.approx([1.0, -1.0, math.pi / 2])
+    assert (tmp_path / "slam.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def _sigint_when(tmp_path, ready, options=()) -> tuple[int, str]:
+    """run_sim.py --slam as a user runs it; SIGINT once ready(log text); (exit code, log)."""
+    log_path = tmp_path / "run.log"
+    with open(log_path, "w") as log:
+        process = subprocess.Popen(
+            [sys.executable, str(SCRIPTS / "run_sim.py"), "--profile", "turtlebot3", "--slam",
+             "--map-out", str(tmp_path / "maps"), "--duration", "3000", "--report",
+             str(tmp_path / "run.json"), *options],
+            cwd=REPO, env=dict(os.environ), stdout=log, stderr=subprocess.STDOUT)
+        try:
+            wait_for(lambda: ready(log_path.read_text()) or process.poll() is not None, 60.0,
+                     "the moment to interrupt")
+            assert process.poll() is None, log_path.read_text()
+            process.send_signal(signal.SIGINT)
+            process.wait(30.0)
+        finally:
+            terminate(process, 5.0)
+    return process.returncode, log_path.read_text()
+
+
+def test_ctrl_c_mid_mapping_keeps_the_map_so_far_and_the_report(tmp_path):
+    active = []
+
+    def mapped_a_while(text: str) -> bool:
+        if "all nodes active" in text and not active:
+            active.append(time.monotonic())
+        return bool(active) and time.monotonic() - active[0] > 4.0
+
+    code, output = _sigint_when(tmp_path, mapped_a_while)
+    assert code == 130, output
+    assert "Traceback" not in output and "Error" not in output, output
+    report = json.loads((tmp_path / "run.json").read_text())
+    assert report["interrupted"] is True and 0 < report["sim_time_s"] < 3000
+    assert report["slam"]["map_file"] == str(tmp_path / "maps" / "map.yaml")
+    assert report["slam"]["scans"] == len(report["estimate"]) > 20
+    assert (read_map(tmp_path / "maps" / "map.yaml").raster.values == OCCUPIED).any()
+
+
+def test_ctrl_c_while_the_slam_graph_starts_writes_the_interrupted_report(tmp_path):
+    code, output = _sigint_when(tmp_path, lambda text: "[slam]: configured" in text)
+    assert code == 130, output
+    assert "Traceback" not in output, output
+    report = json.loads((tmp_path / "run.json").read_text())
+    assert report["interrupted"] is True
+    assert set(report["slam"]) >= {"trajectory_rmse_m", "precision", "recall", "map_file"}
+    if report["slam"]["scans"] == 0:  # stopped before the first scan: no map to write
+        assert report["slam"]["map_file"] is None and report["estimate"] == []
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--map-out", "x"], "--map-out needs --slam"),
+    (["--slam-param", "loop_closure:=false"], "--slam-param needs --slam"),
+    (["--slam", "--localize"], "--slam and --localize exclude each other"),
+    (["--slam", "--goal", "inner_far"], "--slam and --goal exclude each other"),
+    (["--slam", "--slam-param", "no_such:=1"], "--slam-param no_such: no such slam parameter"),
+    (["--slam", "--slam-param", "resolution_m:=-0.02"], "resolution_m must be > 0"),
+    (["--slam", "--slam-param", "map_update_interval_s:=0"],
+     "map_update_interval_s must be a number > 0"),
+    (["--slam", "--slam-param", "loop_closure:=maybe"], "loop_closure must be true or false"),
+    (["--slam", "--slam-param", "map_start_pose:=[0.0,0.0,0.0]"],
+     "--slam-param map_start_pose: the script sets it from --start"),
+    (["--slam", "--slam-param", "output_prefix:=/tmp/x"], "sets it from --map-out"),
+    (["--slam", "--no-controller"], "--no-controller needs --realtime"),
+])
+def test_slam_option_mistakes_are_one_line_errors(capsys, argv, message):
+    _fails_with(capsys, argv, message)
+
+
+def test_map_out_must_be_a_writable_folder(capsys, tmp_path):
+    a_file = tmp_path / "a_file"
+    a_file.write_text("")
+    _fails_with(capsys, ["--slam", "--map-out", str(a_file)], "is a file, not a folder")
+    (tmp_path / "maps").mkdir()
+    (tmp_path / "maps" / "map.yaml").mkdir()  # where the map would go
+    _fails_with(capsys, ["--slam", "--map-out", str(tmp_path / "maps")], "is a folder")
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--slam", "--map", "lab02"], "--slam and --map exclude each other"),
+    (["--slam", "--localize", "--world", "lab02"], "--slam and --localize exclude each other"),
+    (["--slam", "--slam-param", "output_prefix:=x"], "sets it from --map-out"),
+    (["--slam", "--slam-param", "lidar_offset_x_m:=0.1"], "lidar_offset_x_m: the script"),
+    (["--teleop", "--world", "lab02", "--goal", "-1.0,0.6"], "--no-controller and --goal"),
+    (["--map-out", "x"], "--map-out needs --slam"),
+])
+def test_run_robot_checks_its_slam_options(capsys, argv, message):
+    _robot_fails_with(capsys, argv, message)
+
+
+def test_run_robot_maps_the_emulated_corridor_and_writes_the_map_on_ctrl_c(ros, tmp_path):
+    """The robot graph (amr_odometry + wall follower + slam) on a robot over the wire."""
+    from amr_msgs.msg import PoseStamped
+    poses = []
+    ros.node("listener").create_subscription(PoseStamped, "/slam_pose", poses.append, 50)
+    maps = tmp_path / "maps"
+    with running_emulator(tmp_path, "--wall-ahead-at", "0.9", "--corridor-width", "0.8",
+                          "--range-noise", "0.01", "--seed", "1"):
+        with open(tmp_path / "run_robot.log", "w") as log:
+            robot = subprocess.Popen(
+                [sys.executable, str(SCRIPTS / "run_robot.py"), "--domain-id",
+                 os.environ["ROS_DOMAIN_ID"], "--cmd-vel", "stamped", "--slam", "--map-out",
+                 str(maps)], stdout=log, stderr=subprocess.STDOUT)
+            try:
+                ros.spin_until(lambda: len(poses) >= 25 or robot.poll() is not None, 60.0,
+                               "25 SLAM poses")
+                assert robot.poll() is None, (tmp_path / "run_robot.log").read_text()
+                robot.send_signal(signal.SIGINT)
+                robot.wait(30.0)
+            finally:
+                terminate(robot, 5.0)
+    output = (tmp_path / "run_robot.log").read_text()
+    assert "map saved to" in output and "Traceback" not in output, output
+    saved = read_map(maps / "map.yaml")
+    # The emulator's corridor: walls at y = +-0.4 and across it at x = 0.9 (the map frame is
+    # the odometry frame at the first scan: the robot's start).
+    centres = occupied_centres(saved.raster)
+    distance = np.minimum(np.abs(np.abs(centres[:, 1]) - 0.4), np.abs(centres[:, 0] - 0.9))
+    assert len(centres) > 50 and np.mean(distance <= 0.03) >= 0.95, output
+
+
+def test_evaluate_slam_runs_mapping_episodes_with_their_figures(capsys, tmp_path):
+    out = tmp_path / "out"
+    code = evaluate.main(["--slam", "--worlds", "lab02,twin_maze_small", "--starts",
+                          "outer,south_east", "--profiles", "turtlebot3", "--seeds", "0",
+                          "--duration", "20", "--jobs", "2", "--out", str(out),
+                          "--slam-param", "loop_closure:=false"])
+    printed = capsys.readouterr().out
+    assert code == 0, printed
+    episodes = json.loads((out / "results.json").read_text())["episodes"]
+    assert [(e["world"], e["start"], e["loop_closure"]) for e in episodes] == [
+        ("lab02", "outer", False), ("twin_maze_small", "south_east", False)]
+    for e in episodes:
+        assert e["trajectory_rmse_m"] < 0.015 and e["precision"] > 0.9 and e["recall"] > 0.8
+    assert "| lab02 | outer | turtlebot3 | 0 | False |" in printed
+    assert (out / "results.csv").read_text().startswith("world,")
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--slam-param", "loop_closure:=false"], "--slam-param needs --slam"),
+    (["--slam", "--localize"], "--slam (mapping) excludes --localize and --goals"),
+    (["--slam", "--goals", "all"], "--slam (mapping) excludes --localize and --goals"),
+    (["--slam", "--slam-param", "resolution_m:=0"], "--slam-param: Mapper: resolution_m"),
+])
+def test_evaluate_slam_option_mistakes(capsys, tmp_path, argv, message):
+    code = evaluate.main([*argv, "--duration", "1", "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1 and message in err, err
