@@ -21,7 +21,12 @@ import numpy as np
 from amr_common.jit import jit
 from amr_common.robot import arc_displacement_kernel
 from amr_common.scan_returns import is_return
-from amr_control.point_memory_kernels import deskew_point, remember
+from amr_control.point_memory_kernels import (
+    advance_pose,
+    deskew_point,
+    memory_path_distance,
+    remember,
+)
 
 TWO_PI = 2.0 * math.pi
 MIN_LATERAL_M = 0.02   # points closer than this to the robot's x axis are on neither side
@@ -75,7 +80,7 @@ def merge_scan(cloud, ranges, ray_cos, ray_sin, angle_min, angle_increment,
     reading is de-skewed to the scan's stamp (point_memory_kernels.deskew_point: `revolution`
     s per scan, the odometry twist `speed`, `turn_rate`; revolution 0: rays taken at once).
 
-    Returns (new cloud, number of valid readings, each ray's column in it or -1).
+    Returns (new cloud, number of valid readings).
     """
     px = cloud[0]
     py = cloud[1]
@@ -108,7 +113,6 @@ def merge_scan(cloud, ranges, ray_cos, ray_sin, angle_min, angle_increment,
                 keep[n_keep] = j
                 n_keep += 1
     merged = np.empty((3, n_new + n_keep))
-    ray_point = np.full(n_rays, -1, np.int64)
     k = 0
     for i in range(n_rays):
         if valid[i]:
@@ -117,7 +121,6 @@ def merge_scan(cloud, ranges, ray_cos, ray_sin, angle_min, angle_increment,
             merged[0, k] = x
             merged[1, k] = y
             merged[2, k] = 0.0
-            ray_point[i] = k
             k += 1
     for m in range(n_keep):
         j = keep[m]
@@ -125,7 +128,7 @@ def merge_scan(cloud, ranges, ray_cos, ray_sin, angle_min, angle_increment,
         merged[1, k] = py[j]
         merged[2, k] = ages[j]
         k += 1
-    return merged, n_new, ray_point
+    return merged, n_new
 
 
 @jit
@@ -400,17 +403,18 @@ def perceive(cloud, side, sector_cos, sector_sin, sector_half_width, sector_perc
 # Layout of step_cloud's `config` array (values fixed for a controller's lifetime).
 CONFIG_FIELDS = ("hold_range", "hold_time", "lidar_offset_x", "side", "sector_half_width",
                  "path_half_width", "side_window", "side_open", "fit_half_length", "min_points",
-                 "min_span", "revolution", "memory_time", "memory_range", "memory_match")
+                 "min_span", "revolution", "memory_time", "memory_range", "memory_cell")
 
 
 @jit
-def step_cloud(cloud, memory, distance, rotation, dt, ranges, scan_given, last_scan, ray_cos,
-               ray_sin, angle_min, angle_increment, range_min, range_max, config, sectors,
-               sector_out):
-    """One control step in one call: move the cloud and memory, merge the scan, perceive.
+def step_cloud(cloud, memory, pose, distance, rotation, dt, ranges, scan_given, last_scan,
+               ray_cos, ray_sin, angle_min, angle_increment, range_min, range_max, config,
+               sectors, sector_out):
+    """One control step in one call: move the cloud, merge the scan, remember, perceive.
 
-    The cloud and the memory (point_memory_kernels.remember) move with the odometry; the scan
-    is merged (de-skewed with this step's odometry twist) if it differs from `last_scan`; then
+    The cloud moves with the odometry (and `pose`, the odometry pose [x, y, theta, time], in
+    place); the scan is merged (de-skewed with this step's odometry twist) if it differs from
+    `last_scan`, and its points go into the memory (point_memory_kernels.remember); then
     perceive (see perceive; `sectors` rows: centre cos, centre sin, percentile), the swept path
     also through the memory's points. One call instead of several matters inside a ROS loop:
     every call wakes numba's dispatcher, which costs ~20 us when the caches are cold.
@@ -419,19 +423,17 @@ def step_cloud(cloud, memory, distance, rotation, dt, ranges, scan_given, last_s
     perceive's values).
     """
     move_points(cloud, distance, rotation, dt)
-    move_points(memory, distance, rotation, dt)
+    advance_pose(pose, distance, rotation, dt)
     valid = -1
     if scan_given and not same_readings(last_scan, ranges):
-        merged, valid, ray_point = merge_scan(
+        cloud, valid = merge_scan(
             cloud, ranges, ray_cos, ray_sin, angle_min, angle_increment, range_min, range_max,
             config[0], config[1], config[2], config[11], distance / dt, rotation / dt)
-        memory = remember(cloud, memory, merged, ray_point, angle_min, angle_increment,
-                          config[2], config[12], config[13], config[14])
-        cloud = merged
+        memory = remember(memory, cloud, valid, pose, config[12], config[13], config[14])
     path, beside, beside_other, fit, reach = perceive(
         cloud, config[3], sectors[0], sectors[1], config[4], sectors[2], config[5], config[6],
         config[7], config[8], int(config[9]), config[10], sector_out)
-    path = min(path, path_distance(memory, config[5]))
+    path = min(path, memory_path_distance(memory, pose, config[5]))
     return cloud, memory, valid, path, beside, beside_other, fit, reach
 
 
@@ -445,8 +447,9 @@ def warm_up() -> None:
     ranges = np.array([1.0, 0.2, math.nan, 0.0])
     table = np.array([1.0, 0.0, -1.0, 0.0])
     config = np.array([0.3, 0.6, 0.0, -1.0, 0.2, 0.135, 0.03, 0.32, 0.15, 6.0, 0.06, 0.2, 8.0,
-                       0.7, 0.03])
+                       0.7, 0.02])
     sectors = np.array([table, table, table])
-    cloud = step_cloud(cloud, np.zeros((3, 0)), 0.01, 0.01, 0.05, ranges, True, np.zeros(0),
-                       table, table, 0.0, math.pi / 2, 0.1, 3.5, config, sectors, np.empty(4))[0]
+    cloud = step_cloud(cloud, np.zeros((3, 0)), np.zeros(4), 0.01, 0.01, 0.05, ranges, True,
+                       np.zeros(0), table, table, 0.0, math.pi / 2, 0.1, 3.5, config, sectors,
+                       np.empty(4))[0]
     side_gap(cloud, -1.0, 0.32, 0.6, np.empty(cloud.shape[1]))

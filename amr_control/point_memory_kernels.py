@@ -8,13 +8,15 @@ sees its surroundings smeared over 17 deg. `deskew_point` moves each ray's point
 the ray was measured at to the pose at the stamp, with the odometry twist (constant over one
 revolution).
 
-Memory. A point seen before stays in `memory` (used for the swept-path check only) while the
-newest scan does not explain it, i.e. has no point within `match` of it, for `memory_time`
-seconds and within `memory_range` of the robot. Why: the end of a thin wall seen end-on returns
-no ray at all (every ray passes beside it, or grazes it and returns nothing), so a robot driving
-along the wall's line toward its end sees free space up to the contact; the wall end was in
-earlier scans, taken from beside the line. Points the scan explains again are dropped (their
-fresh twin is in the cloud), so the memory holds only what the scanner cannot see now.
+Memory. The points of the last scans stay in `memory` (used for the swept-path check only) for
+`memory_time` seconds after a scan last showed a point in their cell, within `memory_range` of
+the robot. Why: the end of a thin wall seen end-on returns no ray at all (every ray passes beside
+it, or grazes it and returns nothing), so a robot driving along the wall's line toward its end
+sees free space up to the contact; the wall end was in earlier scans, taken from beside the line.
+The memory is kept in the odometry frame on a grid of `cell` m (one point per cell, the newest):
+a new point replaces only the point of its own cell. Replacing an old point by any new point
+near it instead lets a wall's end creep away scan after scan, as the grazing rays that still
+return hit the wall ever farther from its end.
 
 Numba-compiled through amr_common.jit (the plain functions are the twins); no rclpy import.
 """
@@ -28,6 +30,8 @@ from amr_common.jit import jit
 from amr_common.robot import arc_displacement_kernel
 
 TWO_PI = 2.0 * math.pi
+CELL_OFFSET = 1 << 30   # grid indices made non-negative (cells of >= 1 mm over 1,000 km)
+CELL_SPAN = 1 << 31
 
 
 @jit
@@ -51,72 +55,81 @@ def deskew_point(x, y, angle, revolution, speed, turn_rate):
 
 
 @jit
-def _explained(x, y, new_cloud, ray_point, angle_min, angle_increment, lidar_offset_x,
-               match):
-    """True if a point of the new scan lies within `match` of (x, y) (robot frame, m).
-
-    Only the rays whose direction passes within `match` of the point are searched (their index
-    from the point's bearing seen from the LiDAR); ray_point[i] is ray i's column in new_cloud
-    (-1: no return).
-    """
-    n_rays = ray_point.shape[0]
-    lx = x - lidar_offset_x
-    r = math.sqrt(lx * lx + y * y)
-    step = abs(angle_increment)
-    if r <= match:
-        k = n_rays // 2
-    else:
-        k = int(math.asin(match / r) / step) + 1
-    k = min(k, n_rays // 2)
-    direction = 1.0 if angle_increment > 0.0 else -1.0
-    centre = int(round((((math.atan2(y, lx) - angle_min) * direction) % TWO_PI) / step))
-    full_turn = int(round(TWO_PI / step))
-    match_squared = match * match
-    for offset in range(-k, k + 1):
-        ray = centre + offset
-        if full_turn > 0:
-            ray = ray % full_turn
-        if ray < 0 or ray >= n_rays:
-            continue
-        j = ray_point[ray]
-        if j < 0:
-            continue
-        dx = new_cloud[0, j] - x
-        dy = new_cloud[1, j] - y
-        if dx * dx + dy * dy <= match_squared:
-            return True
-    return False
+def advance_pose(pose, distance, rotation, dt):
+    """In place: pose = [x, y, theta, time] (odometry frame) after a step of the odometry."""
+    shift_x, shift_y = arc_displacement_kernel(pose[2], distance, rotation)
+    pose[0] += shift_x
+    pose[1] += shift_y
+    pose[2] += rotation
+    pose[3] += dt
 
 
 @jit
-def remember(old_cloud, memory, new_cloud, ray_point, angle_min, angle_increment,
-             lidar_offset_x, memory_time, memory_range, match):
-    """The memory after a new scan: old points (cloud and memory) the new scan does not explain.
+def remember(memory, cloud, n_new, pose, memory_time, memory_range, cell):
+    """The memory after a new scan: the newest point per cell of the new scan and the memory.
 
-    Kept: younger than memory_time (s since a scan last showed them), within memory_range of
-    the robot centre, and no point of the new scan within `match` (m) of them (see _explained).
-    Returns a (3, m) array: x, y, age.
+    memory: (3, m) rows x, y (odometry frame, m), time last seen (s); cloud: the merged cloud
+    (robot frame), its first n_new columns the new scan's points; pose: [x, y, theta, time].
+    Points older than memory_time or farther than memory_range from the robot are dropped.
     """
-    n_cloud = old_cloud.shape[1]
-    n_memory = memory.shape[1]
-    out = np.empty((3, n_cloud + n_memory))
     if memory_time <= 0.0:
-        return out[:, :0].copy()
+        return np.zeros((3, 0))
+    c = math.cos(pose[2])
+    s = math.sin(pose[2])
+    now = pose[3]
     range_squared = memory_range * memory_range
+    total = memory.shape[1] + n_new
+    points = np.empty((3, total))
+    keys = np.empty(total, np.int64)
     m = 0
     for source in range(2):
-        points = old_cloud if source == 0 else memory
-        for i in range(points.shape[1]):
-            x = points[0, i]
-            y = points[1, i]
-            age = points[2, i]
-            if age >= memory_time or x * x + y * y > range_squared:
+        count = memory.shape[1] if source == 0 else n_new
+        for i in range(count):
+            if source == 0:
+                x = memory[0, i]
+                y = memory[1, i]
+                seen = memory[2, i]
+                if now - seen >= memory_time:
+                    continue
+            else:
+                x = pose[0] + c * cloud[0, i] - s * cloud[1, i]
+                y = pose[1] + s * cloud[0, i] + c * cloud[1, i]
+                seen = now
+            dx = x - pose[0]
+            dy = y - pose[1]
+            if dx * dx + dy * dy > range_squared:
                 continue
-            if _explained(x, y, new_cloud, ray_point, angle_min, angle_increment,
-                          lidar_offset_x, match):
-                continue
-            out[0, m] = x
-            out[1, m] = y
-            out[2, m] = age
+            points[0, m] = x
+            points[1, m] = y
+            points[2, m] = seen
+            keys[m] = (int(math.floor(x / cell)) + CELL_OFFSET) * CELL_SPAN + (
+                int(math.floor(y / cell)) + CELL_OFFSET)
             m += 1
-    return out[:, :m].copy()  # contiguous, as the cloud: one array type for the kernels
+    order = np.argsort(keys[:m], kind="mergesort")   # stable: the newest of a cell comes last
+    out = np.empty((3, m))
+    k = 0
+    for j in range(m):
+        i = order[j]
+        if j + 1 < m and keys[order[j + 1]] == keys[i]:
+            continue
+        out[0, k] = points[0, i]
+        out[1, k] = points[1, i]
+        out[2, k] = points[2, i]
+        k += 1
+    return out[:, :k].copy()  # contiguous: one array type for the kernels
+
+
+@jit
+def memory_path_distance(memory, pose, half_width):
+    """Smallest x > 0 of the memory's points in the robot frame with |y| <= half_width; inf."""
+    c = math.cos(pose[2])
+    s = math.sin(pose[2])
+    best = math.inf
+    for i in range(memory.shape[1]):
+        dx = memory[0, i] - pose[0]
+        dy = memory[1, i] - pose[1]
+        x = c * dx + s * dy
+        y = -s * dx + c * dy
+        if x > 0.0 and abs(y) <= half_width and x < best:
+            best = x
+    return best

@@ -263,6 +263,32 @@ def test_never_drives_forward_into_a_close_obstacle():
         assert v <= 0.0
 
 
+def test_a_thin_wall_end_seen_end_on_still_blocks_the_path():
+    """The end of a zero-thickness wall, once the robot is on the wall's line, returns no ray.
+
+    Every ray passes beside it (lab02 with its inner wall 5 cm north: the robot turned in the
+    gap at (0.2, 0) toward the wall ending at (0, 0), drove on and touched it). The tip was in
+    the scans taken from beside the line: it must stay an obstacle in the swept path.
+    """
+    wf = make(LDS01_360)
+    walls = [[0.4, 0.0, 1.5, 0.0],            # the thin wall along the robot's future line
+             [1.5, -1.0, 1.5, 1.0]]           # what the rays passing beside its end hit
+    x, y, th = 0.0, 0.2 * math.sin(0.5), 0.0  # beside the line: the wall's end is seen
+    moves = [(0.0, -1.0)] * 10 + [(0.2, 0.0)] * 20 + [(0.0, 1.0)] * 10   # onto the line
+    v, w = 0.0, 0.0
+    for v, w in moves:
+        wf.compute_commands(cast(walls, LDS01_360, (x, y, th)), v, w)
+        x += v * DT * math.cos(th + 0.5 * w * DT)
+        y += v * DT * math.sin(th + 0.5 * w * DT)
+        th += w * DT
+    assert abs(y) < 1e-9 and abs(th) < 1e-9
+    last = cast(walls, LDS01_360, (x, y, th))
+    assert 0.0 < last[0] and abs(last[0] - (1.5 - x)) < 1e-9   # ray 0 passes the end
+    v, _ = wf.compute_commands(last, v, w)
+    assert wf.distances["path"] <= 0.4 - x + 0.01
+    assert v <= 0.1
+
+
 def test_slows_down_as_the_front_gap_closes():
     speeds = []
     for distance in (1.0, 0.29, 0.26, 0.23):
@@ -321,12 +347,14 @@ def test_params_files_are_ros2_params_files_the_follower_accepts(name, simulatio
     assert params["simulation"] is simulation and params["slop"] == slop
     tuning = {k: v for k, v in params.items() if k not in node_keys}
     described = WallFollower.parameter_descriptions()
-    # sim.yaml leaves the LiDAR position to run_sim.py / evaluate.py (the profile's); the robot
-    # file states the real Burger's.
-    expected = set(described) - ({"lidar_offset_x_m"} if simulation else set())
+    # sim.yaml leaves the LiDAR position and timing to run_sim.py / evaluate.py (the
+    # profile's); the robot file states the real Burger's.
+    expected = set(described) - ({"lidar_offset_x_m", "scan_revolution_s"} if simulation
+                                 else set())
     assert set(tuning) == expected
     if not simulation:
         assert tuning["lidar_offset_x_m"] == -0.032
+        assert tuning["scan_revolution_s"] == 0.2
     for key, value in tuning.items():   # same ROS type as the declared default
         assert type(value) is type(described[key][0]), key
     WallFollower(params["dt"], **tuning)
