@@ -113,6 +113,7 @@ class WallFollower:
         self._odometer = 0.0            # m driven in total (odometry)
         self._wall_end_x = 0.0          # m ahead of the robot where the followed wall ended ...
         self._wall_end_odometer = -math.inf   # ... when the odometer read this
+        self._outer_turns = 0           # outer-corner turns since a wall was last followed
 
     @classmethod
     def parameter_descriptions(cls) -> dict[str, tuple[Any, str]]:
@@ -214,15 +215,7 @@ class WallFollower:
         If the turns lead nowhere, a clearing turn instead (turn_clear).
         """
         if self._idle_turns.lead_nowhere(self._odometer):
-            # The heading memory is wrong, and so are the poses of the loop detection's trail
-            # (the odometry no longer matches the walls): forget both and look around.
-            self._reference_odometer = -math.inf
-            self._trail.clear()
-            self._enter("turn_clear")
-            self._turn_direction = self._side
-            self._turn_goal = self._heading + self._side * 2.0 * math.pi
-            self._look = LookAround()
-            self._last_turn = "turn_clear"
+            self._start_clearing_turn()
             return
         reference = self._reference()
         base = reference if reference is not None else self._heading
@@ -230,6 +223,19 @@ class WallFollower:
         self._turn_goal = base + angle_rad
         self._turn_direction = 1.0 if angle_rad > 0 else -1.0
         self._last_turn = state
+
+    def _start_clearing_turn(self) -> None:
+        """Once around in place, then toward where look_around chooses (turn_clear)."""
+        # The heading memory is wrong, and so are the poses of the loop detection's trail
+        # (the odometry no longer matches the walls): forget both and look around.
+        self._reference_odometer = -math.inf
+        self._trail.clear()
+        self._outer_turns = 0
+        self._enter("turn_clear")
+        self._turn_direction = self._side
+        self._turn_goal = self._heading + self._side * 2.0 * math.pi
+        self._look = LookAround()
+        self._last_turn = "turn_clear"
 
     def _hold_heading(self, speed: float) -> tuple[float, float]:
         """Drive straight at `speed`, steering back to the reference heading if there is one."""
@@ -288,6 +294,13 @@ class WallFollower:
             timed_out = (self._state_time
                          > 3.0 + self._advance_target / max(self.settle_speed_mps, 0.01))
             if front_blocked or self._travelled >= self._advance_target or timed_out:
+                self._outer_turns += 1
+                if self._outer_turns >= OUTER_TURNS_PER_LAP:
+                    # Once around toward the followed side without a wall to follow in between:
+                    # circling a post or an empty junction (walls seen far behind look like
+                    # wall ends). Look around and go where the walls lead.
+                    self._start_clearing_turn()
+                    return None
                 self._start_turn("turn_outer", self._side * 0.5 * math.pi)
                 return None
             return self._hold_heading(self.max_linear_speed_mps)
@@ -411,6 +424,7 @@ class WallFollower:
             error = fit.distance_m - self.wall_distance_m
             rate = side * self.max_linear_speed_mps * math.sin(fit.angle_rad)
             if fit.gives_direction:
+                self._outer_turns = 0
                 self.wall_distance_error = error
                 self._set_reference(self._heading + fit.angle_rad)
                 # Only poses taken beside a well-fitted wall are on the wall's contour.
@@ -432,4 +446,7 @@ class WallFollower:
                              self.track_m)
 
 
+# Outer-corner turns in a row (each a quarter turn toward the followed side) without following a
+# straight wall in between: one full lap around something too small to follow.
+OUTER_TURNS_PER_LAP = 4
 _SECTOR_CENTRES = {"front": 0.0, "left": 0.5 * math.pi, "right": -0.5 * math.pi, "back": math.pi}

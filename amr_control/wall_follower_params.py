@@ -65,7 +65,7 @@ _TABLE: dict[str, tuple[Any, str]] = {
                                "with the odometry to the stamp (de-skew) [s]; 0.2 on a real "
                                "Burger, 0 when all rays are taken at once (the simulator's "
                                "ideal and turtlebot3 profiles)."),
-    "memory_time_s": (5.0, "The scans' points stay obstacles for the swept-path check this "
+    "memory_time_s": (3.0, "The scans' points stay obstacles for the swept-path check this "
                            "long after a scan last showed a point in their 2 cm cell (the end "
                            "of a thin wall seen end-on returns no ray) [s]; 0 = off."),
     "memory_range_m": (0.7, "Only points this close to the robot centre are remembered [m]."),
