@@ -195,8 +195,8 @@ class LocalPointCloud:
         (self._cloud, self._memory, valid, path, beside, beside_other, fit,
          reach) = kernels.step_cloud(
             self._cloud, self._memory, self._pose, float(distance_m), float(rotation_rad),
-            float(dt), ranges, scan_given, self._last_scan, self._ray_cos, self._ray_sin, *self._geometry, self._config,
-            self._spec.sector_table, self._sector_out)
+            float(dt), ranges, scan_given, self._last_scan, self._ray_cos, self._ray_sin,
+            *self._geometry, self._config, self._spec.sector_table, self._sector_out)
         if valid >= 0:
             self._last_scan = ranges   # not copied: the caller hands over a fresh array
         ok, distance, angle, rms, span, inliers = fit
