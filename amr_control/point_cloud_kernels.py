@@ -403,7 +403,8 @@ def perceive(cloud, side, sector_cos, sector_sin, sector_half_width, sector_perc
 # Layout of step_cloud's `config` array (values fixed for a controller's lifetime).
 CONFIG_FIELDS = ("hold_range", "hold_time", "lidar_offset_x", "side", "sector_half_width",
                  "path_half_width", "side_window", "side_open", "fit_half_length", "min_points",
-                 "min_span", "revolution", "memory_time", "memory_range", "memory_cell")
+                 "min_span", "revolution", "memory_time", "memory_range", "memory_cell",
+                 "memory_match")
 
 
 @jit
@@ -433,7 +434,7 @@ def step_cloud(cloud, memory, pose, distance, rotation, dt, ranges, scan_given, 
     path, beside, beside_other, fit, reach = perceive(
         cloud, config[3], sectors[0], sectors[1], config[4], sectors[2], config[5], config[6],
         config[7], config[8], int(config[9]), config[10], sector_out)
-    path = min(path, memory_path_distance(memory, pose, config[5]))
+    path = memory_path_distance(memory, pose, config[5], cloud, config[15], path)
     return cloud, memory, valid, path, beside, beside_other, fit, reach
 
 
@@ -447,7 +448,7 @@ def warm_up() -> None:
     ranges = np.array([1.0, 0.2, math.nan, 0.0])
     table = np.array([1.0, 0.0, -1.0, 0.0])
     config = np.array([0.3, 0.6, 0.0, -1.0, 0.2, 0.135, 0.03, 0.32, 0.15, 6.0, 0.06, 0.2, 8.0,
-                       0.7, 0.02])
+                       0.7, 0.02, 0.03])
     sectors = np.array([table, table, table])
     cloud = step_cloud(cloud, np.zeros((3, 0)), np.zeros(4), 0.01, 0.01, 0.05, ranges, True,
                        np.zeros(0), table, table, 0.0, math.pi / 2, 0.1, 3.5, config, sectors,

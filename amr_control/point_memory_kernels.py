@@ -16,7 +16,8 @@ sees free space up to the contact; the wall end was in earlier scans, taken from
 The memory is kept in the odometry frame on a grid of `cell` m (one point per cell, the newest):
 a new point replaces only the point of its own cell. Replacing an old point by any new point
 near it instead lets a wall's end creep away scan after scan, as the grazing rays that still
-return hit the wall ever farther from its end.
+return hit the wall ever farther from its end. A remembered point counts only where the current
+cloud has no point within `match` of it (what the scans show now is taken from them).
 
 Numba-compiled through amr_common.jit (the plain functions are the twins); no rclpy import.
 """
@@ -120,16 +121,31 @@ def remember(memory, cloud, n_new, pose, memory_time, memory_range, cell):
 
 
 @jit
-def memory_path_distance(memory, pose, half_width):
-    """Smallest x > 0 of the memory's points in the robot frame with |y| <= half_width; inf."""
+def memory_path_distance(memory, pose, half_width, cloud, match, best):
+    """The swept path's length (see point_cloud_kernels.path_distance) with the memory's points.
+
+    `best`: the path length through the cloud's points. A remembered point shortens it only if
+    no point of the cloud (robot frame) lies within `match` of it: the scans still show that
+    place, and the range noise of 15 scans would otherwise bring every wall closer by their
+    worst draw. Returns min(best, the closest such point's x ahead).
+    """
     c = math.cos(pose[2])
     s = math.sin(pose[2])
-    best = math.inf
+    match_squared = match * match
     for i in range(memory.shape[1]):
         dx = memory[0, i] - pose[0]
         dy = memory[1, i] - pose[1]
         x = c * dx + s * dy
         y = -s * dx + c * dy
-        if x > 0.0 and abs(y) <= half_width and x < best:
+        if not (0.0 < x < best and abs(y) <= half_width):
+            continue
+        explained = False
+        for j in range(cloud.shape[1]):
+            ex = cloud[0, j] - x
+            ey = cloud[1, j] - y
+            if ex * ex + ey * ey <= match_squared:
+                explained = True
+                break
+        if not explained:
             best = x
     return best

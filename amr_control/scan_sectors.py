@@ -69,14 +69,15 @@ class ScanTiming:
       odometry (point_memory_kernels.deskew_point).
     memory_time_s, memory_range_m, memory_cell_m: the scans' points stay obstacles for the
       swept path for memory_time_s after a scan last showed a point in their memory_cell_m
-      cell (odometry frame), within memory_range_m of the robot (0 s: no memory); see
-      point_memory_kernels.
+      cell (odometry frame), within memory_range_m of the robot (0 s: no memory), where
+      the cloud has no point within memory_match_m of them; see point_memory_kernels.
     """
 
     revolution_s: float = 0.0
     memory_time_s: float = 0.0
     memory_range_m: float = 0.0
     memory_cell_m: float = 0.02
+    memory_match_m: float = 0.03
 
 
 class PerceptionSpec:
@@ -144,7 +145,8 @@ class LocalPointCloud:
         values = dict(spec.config, hold_range=hold_range_m, hold_time=hold_time_s,
                       lidar_offset_x=lidar_offset_x_m, revolution=timing.revolution_s,
                       memory_time=timing.memory_time_s, memory_range=timing.memory_range_m,
-                      memory_cell=timing.memory_cell_m)
+                      memory_cell=timing.memory_cell_m,
+                      memory_match=timing.memory_match_m)
         self._config = np.array([values[name] for name in kernels.CONFIG_FIELDS], dtype=float)
         self._spec = spec
         self._sector_out = np.empty(len(spec.sector_names))

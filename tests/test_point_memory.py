@@ -78,8 +78,14 @@ def test_the_memory_keeps_the_newest_point_per_cell_and_forgets_old_and_far_poin
                                      memory_range, cell)
     assert memory.T.tolist() == [[pytest.approx(0.3), pytest.approx(0.3), 2.0]]
     # In the robot frame (heading north from (0.1, 0)) that point is 0.3 m ahead, 0.2 m right.
-    assert memory_kernels.memory_path_distance(memory, pose, 0.135) == math.inf
-    assert memory_kernels.memory_path_distance(memory, pose, 0.25) == pytest.approx(0.3)
+    nothing = np.zeros((3, 0))
+    assert memory_kernels.memory_path_distance(memory, pose, 0.135, nothing, 0.03,
+                                               math.inf) == math.inf
+    assert memory_kernels.memory_path_distance(memory, pose, 0.25, nothing, 0.03,
+                                               math.inf) == pytest.approx(0.3)
+    # The current cloud shows that place (a point within 3 cm): the cloud's figure stands.
+    shown = np.array([[0.32], [-0.21], [0.0]])
+    assert memory_kernels.memory_path_distance(memory, pose, 0.25, shown, 0.03, 0.32) == 0.32
 
 
 def test_memory_off_keeps_nothing():
@@ -103,5 +109,8 @@ def test_compiled_kernels_equal_their_plain_python_twins(seed):
     plain = memory_kernels.remember.py_func(memory, cloud, 250, pose, 3.0, 0.7, 0.02)
     assert compiled.shape[1] > 50
     np.testing.assert_allclose(compiled, plain, atol=0, rtol=0)
-    assert memory_kernels.memory_path_distance(compiled, pose, 0.135) == (
-        memory_kernels.memory_path_distance.py_func(plain, pose, 0.135))
+    for half_width in (0.135, 0.5):
+        assert memory_kernels.memory_path_distance(compiled, pose, half_width, cloud[:, :20],
+                                                   0.03, math.inf) == (
+            memory_kernels.memory_path_distance.py_func(plain, pose, half_width, cloud[:, :20],
+                                                        0.03, math.inf))
