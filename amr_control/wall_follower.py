@@ -31,9 +31,14 @@ States (the `state` attribute):
 Turns are in place (the Burger is round: turning never reduces its clearance), measured by
 integrating the odometry's angular velocity, and aimed relative to the direction of the last
 well-fitted wall so heading errors do not accumulate. Between scans (the LDS-01 refreshes at
-5 Hz, the controller runs at 20 Hz) the scan points are carried along with the odometry.
+5 Hz, the controller runs at 20 Hz) the scan points are carried along with the odometry; each
+ray is de-skewed to the scan's stamp with the odometry (`scan_revolution_s`: a real LiDAR takes
+its rays over 0.2 s), and the points of the last seconds stay obstacles for the swept path
+(`memory_time_s`: a thin wall's end seen end-on returns no ray; point_memory_kernels.py).
+Four outer-corner turns in a row with no wall followed in between (circling an empty junction)
+end in the look-around.
 Input checks and the output limits live in wall_follower_inputs.py; what is left here is the
-one state machine (a little over 400 lines, kept together so its transitions read in one place).
+one state machine (about 450 lines, kept together so its transitions read in one place).
 """
 from __future__ import annotations
 

@@ -360,6 +360,19 @@ def test_params_files_are_ros2_params_files_the_follower_accepts(name, simulatio
     WallFollower(params["dt"], **tuning)
 
 
+@pytest.mark.parametrize("profile, revolution", [
+    ("ideal", 0.0), ("turtlebot3", 0.0), ("turtlebot3_real", 0.2), ("turtlebot3_lds02", 0.2),
+    ("turtlebot3_real:randomized", 0.2), ("turtlebot3_real:off", 0.0),
+    ("turtlebot3_real:off:scan_skew=1", 0.2)])
+def test_the_simulated_robot_tells_the_follower_its_lidar_position_and_scan_time(profile,
+                                                                                 revolution):
+    from amr_evaluation.episode import robot_parameters
+    from amr_sim.profiles import get_profile
+    prof = get_profile(profile)
+    assert robot_parameters(WallFollower, prof) == {"lidar_offset_x_m": prof.lidar_offset_x,
+                                                    "scan_revolution_s": revolution}
+
+
 # ---- in the project's simulator -----------------------------------------------------------
 @pytest.mark.parametrize("profile", ["ideal", "turtlebot3"])
 def test_lab02_outer_corridor_lap_without_touching(profile):
