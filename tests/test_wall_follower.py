@@ -473,6 +473,32 @@ def test_kidnapped_into_a_junction_the_robot_drives_on_instead_of_turning_for_ev
     assert driven > 1.0, f"drove {driven:.2f} m in the last 10 s"
 
 
+def test_a_robot_circling_an_empty_junction_leaves_it():
+    """Outer corners around nothing: twin_maze's open centre, after a kidnapping.
+
+    With a 5 s point memory the kidnapped robot's first decisions went another way and it
+    ended up taking outer corner after outer corner around the empty junction at (1.2, 1.2)
+    (walls seen up to 0.6 m behind look like the end of a followed wall), a 0.3 m square for
+    ever. Four outer turns in a row with no wall followed in between now end in the look-around.
+    """
+    from amr_common.world import World
+    from amr_sim.simulator import Simulator
+
+    sim = Simulator(World.load("twin_maze"), start="north_east", dt=DT, profile="ideal", seed=0)
+    wf = WallFollower(DT, memory_time_s=5.0)
+    z_scan, z_v, z_w = sim.measure()
+    xs, ys = [], []
+    for k in range(int(120.0 / DT)):
+        if k == int(30.0 / DT):
+            sim.teleport((1.4, 1.0, math.pi))
+        z_scan, z_v, z_w = sim.step(*wf.compute_commands(z_scan, z_v, z_w))
+        if k >= int(70.0 / DT):
+            xs.append(sim.pose[0])
+            ys.append(sim.pose[1])
+    assert sim.collisions == 0
+    assert max(max(xs) - min(xs), max(ys) - min(ys)) > 0.6   # the square was 0.3 m
+
+
 def test_look_around_chooses_the_open_wall_direction_or_the_longest_path():
     from amr_control.look_around import LookAround
     from amr_control.scan_sectors import WallFit
