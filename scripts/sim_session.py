@@ -57,7 +57,9 @@ def _robot_parameters(tuning: dict, params_file, profile_name: str) -> dict:
     """The simulated robot's values for the controller (where its LiDAR sits), unless set.
 
     Only those neither the -p overrides nor the params file set (the rehearsal's
-    turtlebot3.yaml sets them itself).
+    turtlebot3.yaml sets them itself), but for the scan time: that is the simulated scanner's
+    (the robot's file states the real LiDAR's 0.2 s, which the clean turtlebot3 profile does
+    not skew: de-skewing its scans would smear them); -p still sets it.
     """
     from amr_common.controller_loader import DEFAULT_CONTROLLER, load_controller_class
     from amr_evaluation.episode import robot_parameters
@@ -70,7 +72,11 @@ def _robot_parameters(tuning: dict, params_file, profile_name: str) -> dict:
     except Exception:  # a bad file or class: the node reports it when it configures
         return {}
     defaults = robot_parameters(controller_class, get_profile(profile_name))
-    return {k: v for k, v in defaults.items() if k not in in_file and k not in tuning}
+    return {k: v for k, v in defaults.items()
+            if k not in tuning and (k not in in_file or k in _SIMULATED_SCANNER)}
+
+
+_SIMULATED_SCANNER = {"scan_revolution_s"}  # robot_parameters' values a params file cannot set
 
 
 class SimSession:
@@ -128,10 +134,11 @@ class SimSession:
             tuning["controller"] = args.controller
         filter_overrides = getattr(args, "pf_overrides", {})
         if self.rehearsal:
+            params_file = args.params_file or ROBOT_PARAMS
+            tuning = {**_robot_parameters(tuning, params_file, args.profile), **tuning}
             self.control_nodes = make_robot_graph(
-                self.context, params_file=args.params_file or ROBOT_PARAMS, dt=args.dt,
-                tuning=tuning, localize_world=map_source if localize else None,
-                filter_overrides=filter_overrides,
+                self.context, params_file=params_file, dt=args.dt, tuning=tuning,
+                localize_world=map_source if localize else None, filter_overrides=filter_overrides,
                 goal=args.goal if self.navigating else None)
             if getattr(args, "no_controller", False):  # the user drives (teleop.py)
                 from launch_slam import without_controller
