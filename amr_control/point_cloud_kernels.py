@@ -21,6 +21,12 @@ import numpy as np
 from amr_common.jit import jit
 from amr_common.robot import arc_displacement_kernel
 from amr_common.scan_returns import is_return
+from amr_control.point_memory_kernels import (
+    advance_pose,
+    deskew_point,
+    memory_path_distance,
+    remember,
+)
 
 TWO_PI = 2.0 * math.pi
 MIN_LATERAL_M = 0.02   # points closer than this to the robot's x axis are on neither side
@@ -66,10 +72,13 @@ def same_readings(last, ranges):
 
 @jit
 def merge_scan(cloud, ranges, ray_cos, ray_sin, angle_min, angle_increment,
-               range_min, range_max, hold_range, hold_time, lidar_offset_x):
+               range_min, range_max, hold_range, hold_time, lidar_offset_x,
+               revolution, speed, turn_rate):
     """The cloud after a new scan: its valid readings (age 0) followed by the held points.
 
-    Held: close points younger than hold_time whose ray in this scan returned nothing.
+    Held: close points younger than hold_time whose ray in this scan returned nothing. Each
+    reading is de-skewed to the scan's stamp (point_memory_kernels.deskew_point: `revolution`
+    s per scan, the odometry twist `speed`, `turn_rate`; revolution 0: rays taken at once).
 
     Returns (new cloud, number of valid readings).
     """
@@ -107,8 +116,10 @@ def merge_scan(cloud, ranges, ray_cos, ray_sin, angle_min, angle_increment,
     k = 0
     for i in range(n_rays):
         if valid[i]:
-            merged[0, k] = ranges[i] * ray_cos[i] + lidar_offset_x
-            merged[1, k] = ranges[i] * ray_sin[i]
+            x, y = deskew_point(ranges[i] * ray_cos[i] + lidar_offset_x, ranges[i] * ray_sin[i],
+                                angle_min + i * angle_increment, revolution, speed, turn_rate)
+            merged[0, k] = x
+            merged[1, k] = y
             merged[2, k] = 0.0
             k += 1
     for m in range(n_keep):
@@ -392,31 +403,39 @@ def perceive(cloud, side, sector_cos, sector_sin, sector_half_width, sector_perc
 # Layout of step_cloud's `config` array (values fixed for a controller's lifetime).
 CONFIG_FIELDS = ("hold_range", "hold_time", "lidar_offset_x", "side", "sector_half_width",
                  "path_half_width", "side_window", "side_open", "fit_half_length", "min_points",
-                 "min_span")
+                 "min_span", "revolution", "memory_time", "memory_range", "memory_cell",
+                 "memory_match")
 
 
 @jit
-def step_cloud(cloud, distance, rotation, dt, ranges, scan_given, last_scan, ray_cos, ray_sin,
-               angle_min, angle_increment, range_min, range_max, config, sectors, sector_out):
-    """One control step in one call: move the cloud, merge the scan, perceive.
+def step_cloud(cloud, memory, pose, distance, rotation, dt, ranges, scan_given, last_scan,
+               ray_cos, ray_sin, angle_min, angle_increment, range_min, range_max, config,
+               sectors, sector_out):
+    """One control step in one call: move the cloud, merge the scan, remember, perceive.
 
-    The cloud moves with the odometry; the scan is merged if it differs from `last_scan`; then
-    perceive (see perceive; `sectors` rows: centre cos, centre
-    sin, percentile). One call instead of several matters inside a ROS loop: every call wakes
-    numba's dispatcher, which costs ~20 us when the caches are cold.
+    The cloud moves with the odometry (and `pose`, the odometry pose [x, y, theta, time], in
+    place); the scan is merged (de-skewed with this step's odometry twist) if it differs from
+    `last_scan`, and its points go into the memory (point_memory_kernels.remember); then
+    perceive (see perceive; `sectors` rows: centre cos, centre sin, percentile), the swept path
+    also through the memory's points. One call instead of several matters inside a ROS loop:
+    every call wakes numba's dispatcher, which costs ~20 us when the caches are cold.
 
-    Returns (cloud, valid readings of the merged scan or -1 if none was merged, then perceive's
-    values).
+    Returns (cloud, memory, valid readings of the merged scan or -1 if none was merged, then
+    perceive's values).
     """
     move_points(cloud, distance, rotation, dt)
+    advance_pose(pose, distance, rotation, dt)
     valid = -1
     if scan_given and not same_readings(last_scan, ranges):
-        cloud, valid = merge_scan(cloud, ranges, ray_cos, ray_sin, angle_min, angle_increment,
-                                  range_min, range_max, config[0], config[1], config[2])
+        cloud, valid = merge_scan(
+            cloud, ranges, ray_cos, ray_sin, angle_min, angle_increment, range_min, range_max,
+            config[0], config[1], config[2], config[11], distance / dt, rotation / dt)
+        memory = remember(memory, cloud, valid, pose, config[12], config[13], config[14])
     path, beside, beside_other, fit, reach = perceive(
         cloud, config[3], sectors[0], sectors[1], config[4], sectors[2], config[5], config[6],
         config[7], config[8], int(config[9]), config[10], sector_out)
-    return cloud, valid, path, beside, beside_other, fit, reach
+    path = memory_path_distance(memory, pose, config[5], cloud, config[15], path)
+    return cloud, memory, valid, path, beside, beside_other, fit, reach
 
 
 def warm_up() -> None:
@@ -428,8 +447,10 @@ def warm_up() -> None:
     cloud = np.array([[0.3, 0.1, -0.2], [0.2, -0.2, 0.25], [0.0, 0.0, 0.0]])
     ranges = np.array([1.0, 0.2, math.nan, 0.0])
     table = np.array([1.0, 0.0, -1.0, 0.0])
-    config = np.array([0.3, 0.6, 0.0, -1.0, 0.2, 0.135, 0.03, 0.32, 0.15, 6.0, 0.06])
+    config = np.array([0.3, 0.6, 0.0, -1.0, 0.2, 0.135, 0.03, 0.32, 0.15, 6.0, 0.06, 0.2, 8.0,
+                       0.7, 0.02, 0.03])
     sectors = np.array([table, table, table])
-    cloud = step_cloud(cloud, 0.01, 0.01, 0.05, ranges, True, np.zeros(0), table, table, 0.0,
-                       math.pi / 2, 0.1, 3.5, config, sectors, np.empty(4))[0]
+    cloud = step_cloud(cloud, np.zeros((3, 0)), np.zeros(4), 0.01, 0.01, 0.05, ranges, True,
+                       np.zeros(0), table, table, 0.0, math.pi / 2, 0.1, 3.5, config, sectors,
+                       np.empty(4))[0]
     side_gap(cloud, -1.0, 0.32, 0.6, np.empty(cloud.shape[1]))

@@ -60,6 +60,26 @@ class WallFit(NamedTuple):
         return self.residual_m < 0.02 and self.span_m >= 0.15
 
 
+@dataclass(frozen=True)
+class ScanTiming:
+    """When a scan's rays were measured, and how long points it no longer shows are kept.
+
+    revolution_s: one scan's rays span this much time, measured clockwise and stamped at the
+      end (the LDS-01 and LDS-02 drivers; 0 = all rays at once): each ray is de-skewed with the
+      odometry (point_memory_kernels.deskew_point).
+    memory_time_s, memory_range_m, memory_cell_m: the scans' points stay obstacles for the
+      swept path for memory_time_s after a scan last showed a point in their memory_cell_m
+      cell (odometry frame), within memory_range_m of the robot (0 s: no memory), where
+      the cloud has no point within memory_match_m of them; see point_memory_kernels.
+    """
+
+    revolution_s: float = 0.0
+    memory_time_s: float = 0.0
+    memory_range_m: float = 0.0
+    memory_cell_m: float = 0.02
+    memory_match_m: float = 0.03
+
+
 class PerceptionSpec:
     """What the controller wants perceived each step: named sectors and the followed side.
 
@@ -120,14 +140,20 @@ class LocalPointCloud:
     """
 
     def __init__(self, hold_time_s: float, hold_range_m: float, lidar_offset_x_m: float,
-                 spec: PerceptionSpec) -> None:
+                 spec: PerceptionSpec, timing: ScanTiming | None = None) -> None:
+        timing = timing or ScanTiming()
         values = dict(spec.config, hold_range=hold_range_m, hold_time=hold_time_s,
-                      lidar_offset_x=lidar_offset_x_m)
+                      lidar_offset_x=lidar_offset_x_m, revolution=timing.revolution_s,
+                      memory_time=timing.memory_time_s, memory_range=timing.memory_range_m,
+                      memory_cell=timing.memory_cell_m,
+                      memory_match=timing.memory_match_m)
         self._config = np.array([values[name] for name in kernels.CONFIG_FIELDS], dtype=float)
         self._spec = spec
         self._sector_out = np.empty(len(spec.sector_names))
         self._ahead = np.empty(720)       # side_gap's output buffer
         self._cloud = np.zeros((3, 0))    # rows: x, y (m, robot frame), age (s)
+        self._memory = np.zeros((3, 0))   # rows: x, y (m, odometry frame), time last seen (s)
+        self._pose = np.zeros(4)          # the odometry pose x, y, theta and time since start
         self._last_scan = np.zeros(0)     # the last merged scan: a held one is not merged again
         self._ray_key: tuple | None = None
         self._ray_cos = self._ray_sin = np.zeros(0)
@@ -138,6 +164,11 @@ class LocalPointCloud:
     def size(self) -> int:
         """Number of points in the cloud."""
         return int(self._cloud.shape[1])
+
+    @property
+    def memory_size(self) -> int:
+        """Number of remembered points (one per cell, see ScanTiming)."""
+        return int(self._memory.shape[1])
 
     def step(self, distance_m: float, rotation_rad: float, dt: float,
              ranges: np.ndarray | None, geometry: ScanGeometry | None
@@ -163,10 +194,11 @@ class LocalPointCloud:
                 self._ray_key = key
         else:
             ranges = self._last_scan
-        (self._cloud, valid, path, beside, beside_other, fit, reach) = kernels.step_cloud(
-            self._cloud, float(distance_m), float(rotation_rad), float(dt), ranges, scan_given,
-            self._last_scan, self._ray_cos, self._ray_sin, *self._geometry, self._config,
-            self._spec.sector_table, self._sector_out)
+        (self._cloud, self._memory, valid, path, beside, beside_other, fit,
+         reach) = kernels.step_cloud(
+            self._cloud, self._memory, self._pose, float(distance_m), float(rotation_rad),
+            float(dt), ranges, scan_given, self._last_scan, self._ray_cos, self._ray_sin,
+            *self._geometry, self._config, self._spec.sector_table, self._sector_out)
         if valid >= 0:
             self._last_scan = ranges   # not copied: the caller hands over a fresh array
         ok, distance, angle, rms, span, inliers = fit

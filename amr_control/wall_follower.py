@@ -31,9 +31,14 @@ States (the `state` attribute):
 Turns are in place (the Burger is round: turning never reduces its clearance), measured by
 integrating the odometry's angular velocity, and aimed relative to the direction of the last
 well-fitted wall so heading errors do not accumulate. Between scans (the LDS-01 refreshes at
-5 Hz, the controller runs at 20 Hz) the scan points are carried along with the odometry.
+5 Hz, the controller runs at 20 Hz) the scan points are carried along with the odometry; each
+ray is de-skewed to the scan's stamp with the odometry (`scan_revolution_s`: a real LiDAR takes
+its rays over 0.2 s), and the points of the last seconds stay obstacles for the swept path
+(`memory_time_s`: a thin wall's end seen end-on returns no ray; point_memory_kernels.py).
+Four outer-corner turns in a row with no wall followed in between (circling an empty junction)
+end in the look-around.
 Input checks and the output limits live in wall_follower_inputs.py; what is left here is the
-one state machine (a little over 400 lines, kept together so its transitions read in one place).
+one state machine (about 450 lines, kept together so its transitions read in one place).
 """
 from __future__ import annotations
 
@@ -45,7 +50,13 @@ from amr_common.geometry import wrap_angle
 from amr_common.python_logging import ThrottledLogger
 from amr_control.look_around import IdleTurns, LookAround
 from amr_control.pose_trail import PoseTrail
-from amr_control.scan_sectors import LocalPointCloud, Perception, PerceptionSpec, ScanGeometry
+from amr_control.scan_sectors import (
+    LocalPointCloud,
+    Perception,
+    PerceptionSpec,
+    ScanGeometry,
+    ScanTiming,
+)
 from amr_control.wall_follower_inputs import as_ranges, checked_odometry, limit_to_free_path
 from amr_control.wall_follower_params import PARAMETERS, check_parameters
 
@@ -78,8 +89,9 @@ class WallFollower:
             path_half_width_m=self.robot_radius_m + self.path_margin_m,
             side_window_m=self.side_window_half_length_m, side_open_m=self.side_open_distance_m,
             fit_half_length_m=self.wall_fit_half_length_m)
+        timing = ScanTiming(self.scan_revolution_s, self.memory_time_s, self.memory_range_m)
         self._cloud = LocalPointCloud(self.invalid_hold_time_s, self.invalid_hold_range_m,
-                                      self.lidar_offset_x_m, spec)
+                                      self.lidar_offset_x_m, spec, timing)
         self._perception: Perception | None = None
         self.state = "follow_wall"
         self.wall_distance_error: float | None = None
@@ -106,6 +118,7 @@ class WallFollower:
         self._odometer = 0.0            # m driven in total (odometry)
         self._wall_end_x = 0.0          # m ahead of the robot where the followed wall ended ...
         self._wall_end_odometer = -math.inf   # ... when the odometer read this
+        self._outer_turns = 0           # outer-corner turns since a wall was last followed
 
     @classmethod
     def parameter_descriptions(cls) -> dict[str, tuple[Any, str]]:
@@ -207,15 +220,7 @@ class WallFollower:
         If the turns lead nowhere, a clearing turn instead (turn_clear).
         """
         if self._idle_turns.lead_nowhere(self._odometer):
-            # The heading memory is wrong, and so are the poses of the loop detection's trail
-            # (the odometry no longer matches the walls): forget both and look around.
-            self._reference_odometer = -math.inf
-            self._trail.clear()
-            self._enter("turn_clear")
-            self._turn_direction = self._side
-            self._turn_goal = self._heading + self._side * 2.0 * math.pi
-            self._look = LookAround()
-            self._last_turn = "turn_clear"
+            self._start_clearing_turn()
             return
         reference = self._reference()
         base = reference if reference is not None else self._heading
@@ -223,6 +228,19 @@ class WallFollower:
         self._turn_goal = base + angle_rad
         self._turn_direction = 1.0 if angle_rad > 0 else -1.0
         self._last_turn = state
+
+    def _start_clearing_turn(self) -> None:
+        """Once around in place, then toward where look_around chooses (turn_clear)."""
+        # The heading memory is wrong, and so are the poses of the loop detection's trail
+        # (the odometry no longer matches the walls): forget both and look around.
+        self._reference_odometer = -math.inf
+        self._trail.clear()
+        self._outer_turns = 0
+        self._enter("turn_clear")
+        self._turn_direction = self._side
+        self._turn_goal = self._heading + self._side * 2.0 * math.pi
+        self._look = LookAround()
+        self._last_turn = "turn_clear"
 
     def _hold_heading(self, speed: float) -> tuple[float, float]:
         """Drive straight at `speed`, steering back to the reference heading if there is one."""
@@ -281,6 +299,13 @@ class WallFollower:
             timed_out = (self._state_time
                          > 3.0 + self._advance_target / max(self.settle_speed_mps, 0.01))
             if front_blocked or self._travelled >= self._advance_target or timed_out:
+                self._outer_turns += 1
+                if self._outer_turns >= OUTER_TURNS_PER_LAP:
+                    # Once around toward the followed side without a wall to follow in between:
+                    # circling a post or an empty junction (walls seen far behind look like
+                    # wall ends). Look around and go where the walls lead.
+                    self._start_clearing_turn()
+                    return None
                 self._start_turn("turn_outer", self._side * 0.5 * math.pi)
                 return None
             return self._hold_heading(self.max_linear_speed_mps)
@@ -404,6 +429,7 @@ class WallFollower:
             error = fit.distance_m - self.wall_distance_m
             rate = side * self.max_linear_speed_mps * math.sin(fit.angle_rad)
             if fit.gives_direction:
+                self._outer_turns = 0
                 self.wall_distance_error = error
                 self._set_reference(self._heading + fit.angle_rad)
                 # Only poses taken beside a well-fitted wall are on the wall's contour.
@@ -425,4 +451,7 @@ class WallFollower:
                              self.track_m)
 
 
+# Outer-corner turns in a row (each a quarter turn toward the followed side) without following a
+# straight wall in between: one full lap around something too small to follow.
+OUTER_TURNS_PER_LAP = 4
 _SECTOR_CENTRES = {"front": 0.0, "left": 0.5 * math.pi, "right": -0.5 * math.pi, "back": math.pi}

@@ -60,6 +60,15 @@ _TABLE: dict[str, tuple[Any, str]] = {
     "lidar_offset_x_m": (0.0, "Forward position of the LiDAR relative to the robot centre [m] "
                               "(-0.032 on a real Burger)."),
     "track_m": (TRACK, "Wheel separation [m], to keep both wheels within max_linear_speed."),
+    "scan_revolution_s": (0.0, "Time one scan's rays span, measured clockwise and stamped at "
+                               "the end as the LDS-01/LDS-02 drivers do: each ray is moved "
+                               "with the odometry to the stamp (de-skew) [s]; 0.2 on a real "
+                               "Burger, 0 when all rays are taken at once (the simulator's "
+                               "ideal and turtlebot3 profiles)."),
+    "memory_time_s": (3.0, "The scans' points stay obstacles for the swept-path check this "
+                           "long after a scan last showed a point in their 2 cm cell (the end "
+                           "of a thin wall seen end-on returns no ray) [s]; 0 = off."),
+    "memory_range_m": (0.7, "Only points this close to the robot centre are remembered [m]."),
 }
 # Numbers >= 0 but for these; speeds above the Burger's limits are clipped (check_parameters).
 PARAMETERS: dict[str, Param] = ruled(

@@ -116,13 +116,18 @@ def default_controller(dt: float, profile: SensorProfile | None = None):
 
 
 def robot_parameters(controller_class: Any, profile: SensorProfile) -> dict[str, Any]:
-    """What the simulated robot fixes for a controller class: where its LiDAR sits.
+    """What the simulated robot fixes for a controller class: its LiDAR's position and timing.
 
-    Only parameters the class lists in `parameter_descriptions()` (`lidar_offset_x_m`). The run
-    scripts apply these unless the user set the parameter (-p or a params file).
+    Only parameters the class lists in `parameter_descriptions()`: `lidar_offset_x_m`, and
+    `scan_revolution_s` (the time a scan's rays span when the profile skews its scans, else 0).
+    The run scripts apply these unless the user set the parameter (-p or a params file).
     """
     names = described_parameters(controller_class) or {}
-    return {"lidar_offset_x_m": profile.lidar_offset_x} if "lidar_offset_x_m" in names else {}
+    skewed = (profile.lidar_model is not None and profile.effects is not None
+              and bool(profile.effects.scan_skew))
+    values = {"lidar_offset_x_m": profile.lidar_offset_x,
+              "scan_revolution_s": profile.lidar_model.revolution_s if skewed else 0.0}
+    return {name: value for name, value in values.items() if name in names}
 
 
 def filter_parameters(profile: SensorProfile, map_is_world: bool = False) -> dict[str, Any]:

@@ -269,7 +269,9 @@ def simulated_robot_parameters(tuning: dict, params_file, profile_name: str) -> 
     """The simulated robot's values for the controller (where its LiDAR sits), unless set.
 
     Only those neither the -p overrides nor the params file set (the rehearsal's
-    turtlebot3.yaml sets them itself).
+    turtlebot3.yaml sets them itself), but for the scan time: that is the simulated scanner's
+    (the robot's file states the real LiDAR's 0.2 s, which the clean turtlebot3 profile does
+    not skew: de-skewing its scans would smear them); -p still sets it.
     """
     from amr_common.controller_loader import DEFAULT_CONTROLLER, load_controller_class
     from amr_evaluation.episode import robot_parameters
@@ -282,7 +284,11 @@ def simulated_robot_parameters(tuning: dict, params_file, profile_name: str) -> 
     except Exception:  # a bad file or class: the node reports it when it configures
         return {}
     defaults = robot_parameters(controller_class, get_profile(profile_name))
-    return {k: v for k, v in defaults.items() if k not in in_file and k not in tuning}
+    return {k: v for k, v in defaults.items()
+            if k not in tuning and (k not in in_file or k in _SIMULATED_SCANNER)}
+
+
+_SIMULATED_SCANNER = {"scan_revolution_s"}  # robot_parameters' values a params file cannot set
 
 
 def localizing_wall_follower(tuning: dict[str, Any]) -> dict[str, Any]:

@@ -149,8 +149,10 @@ class SimSession:
         filter_overrides = getattr(args, "pf_overrides", {})
         links = getattr(args, "links", {})  # --localizer, --planner, --follower
         if self.rehearsal:
+            params_file = args.params_file or ROBOT_PARAMS
+            tuning = {**simulated_robot_parameters(tuning, params_file, args.profile), **tuning}
             control_nodes = make_robot_graph(
-                self.context, params_file=args.params_file or ROBOT_PARAMS, dt=args.dt,
+                self.context, params_file=params_file, dt=args.dt,
                 tuning=tuning, localize_world=map_source if localize else None,
                 filter_overrides=filter_overrides,
                 goal=args.goal if self.navigating else None, links=links)

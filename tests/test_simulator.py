@@ -144,6 +144,10 @@ def test_episode_records_collisions_and_sheet(tmp_path):
                          record_trajectory=False)
     assert result.collisions == 1
     assert result.collision_points[0] == pytest.approx([1.0, 1.2], abs=1e-3)
+    # A wall's end: the point is where it touched in the world (the tip), not robot-relative.
+    tip = run_episode("lab02", (0.25, -0.02, math.pi), duration=3.0,
+                      controller_factory=lambda dt: Rammer(), record_trajectory=False)
+    assert tip.collision_points[0] == pytest.approx([0.0, 0.0], abs=1e-3)   # the first contact
     assert result.first_collision_time_s == pytest.approx((2.2 - 0.105) / 0.22, abs=0.06)
     assert result.trajectory == [] and result.rms_wall_error_m is None and result.laps == 0
     assert result.world == "lab02" and result.start == "outer"
