@@ -40,6 +40,7 @@ for path in (str(REPO), str(SCRIPTS)):
         sys.path.insert(0, path)
 
 import evaluate  # noqa: E402  (the episode-set options and their checks)
+import evaluate_executors  # noqa: E402  (where the trials run)
 
 from amr_evaluation.evaluation import EvaluationError, check_controller  # noqa: E402
 from amr_evaluation.tuning import (  # noqa: E402
@@ -100,7 +101,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         check_options(args, episode_args)
         settings = evaluate.resolve_settings(episode_args)
-        evaluate.check_ray_options(args.ray, settings["jobs"], 0.0)
+        evaluate_executors.check_ray_options(args.ray, settings["jobs"], 0.0)
         specs = evaluate.episode_specs(settings)
         evaluate.check_filter_maps(specs, {})  # navigation episodes run the particle filter
         dims = parse_space(args.space, settings["controller"])
@@ -114,7 +115,8 @@ def main(argv: list[str] | None = None) -> int:
         args.search_seed = args.search_seed or 0
         out = check_output_folder(args.out or Path("out") / f"tune-{started:%Y%m%d-%H%M%S}",
                                   "--out")
-        executor = evaluate.ray_executor(args.ray, settings["jobs"], args.ray_runtime_env)
+        executor = evaluate_executors.ray_executor(args.ray, settings["jobs"],
+                                                   args.ray_runtime_env)
     except ValueError as exc:  # EvaluationError, ControllerSpecError, a bad --out
         print(f"tune: {exc}", file=sys.stderr)
         return 2

@@ -36,6 +36,7 @@ pytestmark = pytest.mark.slow
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO / "scripts"))
 import evaluate  # noqa: E402
+import evaluate_executors  # noqa: E402
 
 
 class SlowStanding:
@@ -201,7 +202,7 @@ def test_an_episode_past_its_time_limit_ends_its_ray_worker_and_the_others_still
     specs = [EpisodeSpec("lab02", "outer", seed=k, duration=1.0,
                          controller="tests.controllers:Misbehaves", params={"how": how})
              for k, how in enumerate(hows)]
-    executor = evaluate.ray_executor(ray_cluster.address, None, None, 0.0, 3.0)
+    executor = evaluate_executors.ray_executor(ray_cluster.address, None, None, 0.0, 3.0)
     try:
         assert executor.episode_timeout_s == 3.0
         seen = []
