@@ -129,7 +129,7 @@ def expand_grid(worlds: str | Sequence[str], starts: str | Sequence[str] = "all"
     what the map and the world disagree on (a start the map lacks, a goal the world blocks) is
     appended to `warnings`. `links`: {"localizer" | "planner" | "follower": MODULE:CLASS}.
     """
-    from amr_common.world import World, WorldError, bundled_worlds
+    from amr_common.world import bundled_worlds
     from amr_sim.profiles import get_profile
 
     world_names = parse_name_list(worlds)
@@ -145,6 +145,33 @@ def expand_grid(worlds: str | Sequence[str], starts: str | Sequence[str] = "all"
         except (KeyError, ValueError) as exc:
             raise EvaluationError(f"profile '{name}': {exc}") from None
     seed_list = parse_seeds(seeds)
+    loaded, goals_of = _starts_and_goals(world_names, starts)
+    goal_names = _given(parse_name_list(goals), goals, "goals", [],
+                        "give 'all' or goal names, or leave them out for wall following")
+    world_goals = {w: _world_goals(w, goals_of[w], goal_names) for w in world_names}
+    missing = [g for g in goal_names if g != "all" and not any(g in v for v in
+                                                                world_goals.values())]
+    if missing:
+        raise EvaluationError(f"goal(s) {', '.join(missing)} exist in none of the worlds "
+                              f"{', '.join(world_names)}")
+    if map is not None:
+        _check_map(map, world_names, loaded, world_goals, warnings)
+    if pose_source not in POSE_SOURCES:
+        raise EvaluationError(f"pose_source must be one of {', '.join(POSE_SOURCES)}, got "
+                              f"{pose_source!r}")
+    specs = [EpisodeSpec(world=w, start=s, profile=p, seed=seed, duration=duration, dt=dt,
+                         controller=controller, params=dict(params or {}), goal=g,
+                         pose_source=pose_source, map=map, **dict(links or {}))
+             for w in world_names for s in loaded[w] for g in world_goals[w]
+             for p in profile_names for seed in seed_list]
+    if len(specs) > MAX_EPISODES:
+        raise EvaluationError(f"{len(specs)} episodes requested; the limit is {MAX_EPISODES}")
+    return specs
+
+
+def _starts_and_goals(world_names: list[str], starts: Any) -> tuple[dict, dict]:
+    """Each world's chosen starts (names and poses, checked) and goal names, one load each."""
+    from amr_common.world import World, WorldError
     start_list = _given(parse_start_list(starts), starts, "starts", ["all"],
                         "give 'all', start names or X,Y,THETA poses")
     poses = [s for s in start_list if not isinstance(s, str)]
@@ -175,27 +202,7 @@ def expand_grid(worlds: str | Sequence[str], starts: str | Sequence[str] = "all"
     if unused:
         raise EvaluationError(f"start(s) {', '.join(unused)} exist in none of the worlds "
                               f"{', '.join(world_names)}")
-    goal_names = _given(parse_name_list(goals), goals, "goals", [],
-                        "give 'all' or goal names, or leave them out for wall following")
-    world_goals = {w: _world_goals(w, goals_of[w], goal_names) for w in world_names}
-    missing = [g for g in goal_names if g != "all" and not any(g in v for v in
-                                                                world_goals.values())]
-    if missing:
-        raise EvaluationError(f"goal(s) {', '.join(missing)} exist in none of the worlds "
-                              f"{', '.join(world_names)}")
-    if map is not None:
-        _check_map(map, world_names, loaded, world_goals, warnings)
-    if pose_source not in POSE_SOURCES:
-        raise EvaluationError(f"pose_source must be one of {', '.join(POSE_SOURCES)}, got "
-                              f"{pose_source!r}")
-    specs = [EpisodeSpec(world=w, start=s, profile=p, seed=seed, duration=duration, dt=dt,
-                         controller=controller, params=dict(params or {}), goal=g,
-                         pose_source=pose_source, map=map, **dict(links or {}))
-             for w in world_names for s in loaded[w] for g in world_goals[w]
-             for p in profile_names for seed in seed_list]
-    if len(specs) > MAX_EPISODES:
-        raise EvaluationError(f"{len(specs)} episodes requested; the limit is {MAX_EPISODES}")
-    return specs
+    return loaded, goals_of
 
 
 def _given(parsed: list, value: Any, what: str, default: list, hint: str) -> list:
