@@ -148,6 +148,14 @@ def filter_parameters(profile: SensorProfile, map_is_world: bool = False) -> dic
             "map_walls": "edges" if map_is_world else "likely"}
 
 
+def checked_duration(duration: Any) -> float:
+    """An episode's duration in simulated seconds; ValueError unless finite and >= 0."""
+    duration = float(duration)
+    if not (math.isfinite(duration) and duration >= 0.0):
+        raise ValueError(f"duration must be a finite number of seconds >= 0, got {duration}")
+    return duration
+
+
 def episode_start_label(start: Any, world: World, sim: Any) -> str | list[float]:
     """How a result names its start.
 
@@ -202,18 +210,14 @@ def run_episode(world: World | str, start=None, profile: str | SensorProfile = "
     `controller_factory(dt)` builds the controller (a class such as WallFollower works);
     `controller` passes a ready one. Neither: the default wall follower.
     """
-    duration = float(duration)
-    if not (math.isfinite(duration) and duration >= 0.0):
-        raise ValueError(f"duration must be a finite number of seconds >= 0, got {duration}")
+    duration = checked_duration(duration)
     world_obj = world if isinstance(world, World) else World.load(world)
     prof = get_profile(profile)
     sim = Simulator(world_obj, start=start, dt=dt, profile=prof, seed=seed)
     if controller is None:
         controller = controller_factory(sim.dt) if controller_factory is not None else \
             default_controller(sim.dt, prof)
-    geometry = sim.scan_geometry
-    tell_scan_geometry(controller, geometry)
-
+    tell_scan_geometry(controller, geometry := sim.scan_geometry)
     n_steps = int(round(duration / sim.dt))
     positions = np.empty((n_steps + 1, 2))
     x, y, th = sim.pose
@@ -234,8 +238,7 @@ def run_episode(world: World | str, start=None, profile: str | SensorProfile = "
         z_scan, z_v, z_w = sim.step(v, w)
         z_scan = as_sent_ranges(z_scan)
         if sim.scan_geometry is not geometry:  # the LDS-02: every scan
-            geometry = sim.scan_geometry
-            tell_scan_geometry(controller, geometry)
+            tell_scan_geometry(controller, geometry := sim.scan_geometry)
         odometry.update(sim.time, z_v, z_w)
         x, y, th = sim.pose
         positions[k] = (x, y)
@@ -243,11 +246,11 @@ def run_episode(world: World | str, start=None, profile: str | SensorProfile = "
             trajectory.append([sim.time, x, y, th])
     wall_time = time.perf_counter() - wall_start
 
-    start_label = episode_start_label(start, world_obj, sim)
     bundled_name = world_obj.name if _is_bundled(world_obj) else world_obj.source
     metrics = trajectory_metrics(world_obj, positions)
     return EpisodeResult(
-        world=bundled_name, start=start_label, profile=prof.name, seed=int(seed), steps=sim.steps,
+        world=bundled_name, start=episode_start_label(start, world_obj, sim), profile=prof.name,
+        seed=int(seed), steps=sim.steps,
         sim_time_s=sim.time, wall_time_s=wall_time, collisions=sim.collisions,
         first_collision_time_s=sim.first_collision_time, min_clearance_m=sim.min_clearance,
         distance_m=sim.distance, explored_fraction=metrics["explored_fraction"],

@@ -59,6 +59,7 @@ from amr_common.world import World
 from amr_control.pure_pursuit import scan_clearance, scan_free_ahead
 from amr_evaluation.episode import (
     as_commanded,
+    checked_duration,
     default_controller,
     episode_start_label,
     tell_scan_geometry,
@@ -191,9 +192,7 @@ def run_navigation_episode(
     localizer, planner_class, follower: the classes (or their MODULE:CLASS) of the links
     (amr_common.interfaces), default the project's; the episode uses only interface members.
     """
-    duration = float(duration)
-    if not (math.isfinite(duration) and duration >= 0.0):
-        raise ValueError(f"duration must be a finite number of seconds >= 0, got {duration}")
+    duration = checked_duration(duration)
     world_obj = world if isinstance(world, World) else World.load(world)
     map_obj = load_map(map, world_obj)
     goal_xy, goal_warning = resolve_goal_on_map(goal, map_obj, world_obj)
