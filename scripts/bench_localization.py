@@ -266,6 +266,41 @@ def bench_callbacks(duration: float, seeds: int) -> dict:
             "episodes": episodes}
 
 
+def _print_callbacks(c: dict, load: float) -> None:
+    """The big map's longest filter calls, per episode and against the target."""
+    longest = max(e["longest_call_s"] for e in c["episodes"])
+    for e in c["episodes"]:
+        localized = "never" if e["time_to_localized_s"] is None else \
+            f"after {e['time_to_localized_s']:.1f} s"
+        print(f"40 x 40 m, {e['start']} seed {e['seed']}: longest call "
+              f"{e['longest_call_s']:.3f} s CPU ({e['calls_over_target']} over "
+              f"{TARGET_CALL_S} s); localized {localized}, {e['false_localizations']} false")
+    whole = c["search_in_one_go_s"]
+    print(f"longest call {longest:.3f} s vs one search in one go ({c['positions']:,} "
+          f"positions) {whole:.2f} s: {whole / longest:.0f}x shorter; target every call "
+          f"within {TARGET_CALL_S} s: "
+          f"{'met' if longest <= TARGET_CALL_S else 'MISSED'}; load average {load:.1f} on "
+          f"{os.cpu_count()} cores")
+
+
+def _print_memory(figures: dict, load: float) -> None:
+    """The big maps' peak memory, against the old table's and the target."""
+    reference = figures["20 x 20 m, the old 2 cm x 360 table"]["peak_mb"]
+    for name, f in figures.items():
+        localized = "never" if f["time_to_localized_s"] is None else \
+            f"after {f['time_to_localized_s']:.1f} s"
+        error = "" if f["tracking_error_mean_m"] is None else \
+            f", tracking error mean {100 * f['tracking_error_mean_m']:.2f} cm"
+        print(f"{name}: peak {f['peak_mb']:.0f} MB ({f['peak_mb'] / reference:.2f}x the old "
+              f"table's on 20 x 20 m), table {f['table']} directions {f['table_mb']:.0f} MB "
+              f"built in {f['build_cpu_s']:.1f} s CPU; localized {localized}, "
+              f"{f['false_localizations']} false{error}; episode {f['episode_cpu_s']:.1f} s "
+              f"CPU")
+    print(f"target: 40 x 40 m within {TARGET_PEAK_MB:.0f} MB: "
+          f"{'met' if figures['40 x 40 m']['peak_mb'] <= TARGET_PEAK_MB else 'MISSED'}; "
+          f"load average {load:.1f} on {os.cpu_count()} cores")
+
+
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true")
@@ -279,36 +314,11 @@ def main(argv=None) -> dict:
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     if args.callbacks:
         c = bench_callbacks(30.0 if args.quick else 60.0, 1 if args.quick else 4)
-        longest = max(e["longest_call_s"] for e in c["episodes"])
-        for e in c["episodes"]:
-            localized = "never" if e["time_to_localized_s"] is None else \
-                f"after {e['time_to_localized_s']:.1f} s"
-            print(f"40 x 40 m, {e['start']} seed {e['seed']}: longest call "
-                  f"{e['longest_call_s']:.3f} s CPU ({e['calls_over_target']} over "
-                  f"{TARGET_CALL_S} s); localized {localized}, {e['false_localizations']} false")
-        whole = c["search_in_one_go_s"]
-        print(f"longest call {longest:.3f} s vs one search in one go ({c['positions']:,} "
-              f"positions) {whole:.2f} s: {whole / longest:.0f}x shorter; target every call "
-              f"within {TARGET_CALL_S} s: "
-              f"{'met' if longest <= TARGET_CALL_S else 'MISSED'}; load average {load:.1f} on "
-              f"{os.cpu_count()} cores")
+        _print_callbacks(c, load)
         return {"callbacks": c, "load": load}
     if args.memory:
         figures = bench_memory(30.0 if args.quick else 60.0)
-        reference = figures["20 x 20 m, the old 2 cm x 360 table"]["peak_mb"]
-        for name, f in figures.items():
-            localized = "never" if f["time_to_localized_s"] is None else \
-                f"after {f['time_to_localized_s']:.1f} s"
-            error = "" if f["tracking_error_mean_m"] is None else \
-                f", tracking error mean {100 * f['tracking_error_mean_m']:.2f} cm"
-            print(f"{name}: peak {f['peak_mb']:.0f} MB ({f['peak_mb'] / reference:.2f}x the old "
-                  f"table's on 20 x 20 m), table {f['table']} directions {f['table_mb']:.0f} MB "
-                  f"built in {f['build_cpu_s']:.1f} s CPU; localized {localized}, "
-                  f"{f['false_localizations']} false{error}; episode {f['episode_cpu_s']:.1f} s "
-                  f"CPU")
-        print(f"target: 40 x 40 m within {TARGET_PEAK_MB:.0f} MB: "
-              f"{'met' if figures['40 x 40 m']['peak_mb'] <= TARGET_PEAK_MB else 'MISSED'}; "
-              f"load average {load:.1f} on {os.cpu_count()} cores")
+        _print_memory(figures, load)
         return {"memory": figures, "load": load}
     m = bench_measurement(50000, 5 if args.quick else 10, 3 if args.quick else 7)
     print(f"measurement update: {m['numba_updates_per_s'] / 1e6:.1f} M particle updates/s at "
