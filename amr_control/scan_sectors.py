@@ -15,6 +15,7 @@ from typing import NamedTuple
 import numpy as np
 
 from amr_control import point_cloud_kernels as kernels
+from amr_control import side_wall_kernels
 
 
 @dataclass(frozen=True)
@@ -135,8 +136,9 @@ class LocalPointCloud:
     `hold_time_s`: an LDS-01 reports 0.0 below 0.12 m, so "no return" next to a wall must not
     look like open space.
 
-    The work is done by the loop kernels of amr_control.point_cloud_kernels (numba-compiled),
-    one call per control step; this class keeps the arrays and the per-geometry ray tables.
+    The work is done by the loop kernels of amr_control.point_cloud_kernels and
+    side_wall_kernels (numba-compiled), one call per control step; this class keeps the arrays
+    and the per-geometry ray tables.
     """
 
     def __init__(self, hold_time_s: float, hold_range_m: float, lidar_offset_x_m: float,
@@ -218,6 +220,6 @@ class LocalPointCloud:
         """
         if self._ahead.size < self._cloud.shape[1]:
             self._ahead = np.empty(2 * self._cloud.shape[1])
-        wall_end, count = kernels.side_gap(self._cloud, float(side_sign), float(max_lateral_m),
-                                           float(lookback_m), self._ahead)
+        wall_end, count = side_wall_kernels.side_gap(
+            self._cloud, float(side_sign), float(max_lateral_m), float(lookback_m), self._ahead)
         return (None if math.isnan(wall_end) else wall_end), self._ahead[:count]

@@ -30,15 +30,17 @@ States (the `state` attribute):
 
 Turns are in place (the Burger is round: turning never reduces its clearance), measured by
 integrating the odometry's angular velocity, and aimed relative to the direction of the last
-well-fitted wall so heading errors do not accumulate. Between scans (the LDS-01 refreshes at
-5 Hz, the controller runs at 20 Hz) the scan points are carried along with the odometry; each
-ray is de-skewed to the scan's stamp with the odometry (`scan_revolution_s`: a real LiDAR takes
-its rays over 0.2 s), and the points of the last seconds stay obstacles for the swept path
-(`memory_time_s`: a thin wall's end seen end-on returns no ray; point_memory_kernels.py).
+well-fitted wall so heading errors do not accumulate (wall_follower_turns.py). Between scans
+(the LDS-01 refreshes at 5 Hz, the controller runs at 20 Hz) the scan points are carried
+along with the odometry; each ray is de-skewed to the scan's stamp with the odometry
+(`scan_revolution_s`: a real LiDAR takes its rays over 0.2 s), and the points of the last
+seconds stay obstacles for the swept path (`memory_time_s`: a thin wall's end seen end-on
+returns no ray; point_memory_kernels.py).
 Four outer-corner turns in a row with no wall followed in between (circling an empty junction)
 end in the look-around.
-Input checks and the output limits live in wall_follower_inputs.py; what is left here is the
-one state machine (about 450 lines, kept together so its transitions read in one place).
+Input checks and the output limits live in wall_follower_inputs.py, the turn states, the
+heading memory and the island check in wall_follower_turns.py; what is left here is the state
+machine's transitions and the wall following itself, kept together so they read in one place.
 """
 from __future__ import annotations
 
@@ -46,7 +48,6 @@ import logging
 import math
 from typing import Any
 
-from amr_common.geometry import wrap_angle
 from amr_common.python_logging import ThrottledLogger
 from amr_control.look_around import IdleTurns, LookAround
 from amr_control.pose_trail import PoseTrail
@@ -59,11 +60,12 @@ from amr_control.scan_sectors import (
 )
 from amr_control.wall_follower_inputs import as_ranges, checked_odometry, limit_to_free_path
 from amr_control.wall_follower_params import PARAMETERS, check_parameters
+from amr_control.wall_follower_turns import InPlaceTurns
 
 _LOG = logging.getLogger(__name__)
 
 
-class WallFollower:
+class WallFollower(InPlaceTurns):
     """Class to safely explore an environment (without crashing) by following walls."""
 
     def __init__(self, dt: float, **params: Any) -> None:
@@ -200,57 +202,6 @@ class WallFollower:
         self._state_time = 0.0
         self._travelled = 0.0
 
-    def _reference(self) -> float | None:
-        """Heading (odometry frame) the robot should be aligned with, or None.
-
-        The last well-fitted wall's direction or the goal of the last turn, if recent enough.
-        """
-        if self._odometer - self._reference_odometer <= self.heading_memory_m:
-            return self._reference_heading
-        return None
-
-    def _set_reference(self, heading: float) -> None:
-        self._reference_heading = heading
-        self._reference_odometer = self._odometer
-
-    def _start_turn(self, state: str, angle_rad: float) -> None:
-        """Turn in place by angle_rad relative to the reference heading.
-
-        So that turns snap back to the walls' directions instead of accumulating heading errors.
-        If the turns lead nowhere, a clearing turn instead (turn_clear).
-        """
-        if self._idle_turns.lead_nowhere(self._odometer):
-            self._start_clearing_turn()
-            return
-        reference = self._reference()
-        base = reference if reference is not None else self._heading
-        self._enter(state)
-        self._turn_goal = base + angle_rad
-        self._turn_direction = 1.0 if angle_rad > 0 else -1.0
-        self._last_turn = state
-
-    def _start_clearing_turn(self) -> None:
-        """Once around in place, then toward where look_around chooses (turn_clear)."""
-        # The heading memory is wrong, and so are the poses of the loop detection's trail
-        # (the odometry no longer matches the walls): forget both and look around.
-        self._reference_odometer = -math.inf
-        self._trail.clear()
-        self._outer_turns = 0
-        self._enter("turn_clear")
-        self._turn_direction = self._side
-        self._turn_goal = self._heading + self._side * 2.0 * math.pi
-        self._look = LookAround()
-        self._last_turn = "turn_clear"
-
-    def _hold_heading(self, speed: float) -> tuple[float, float]:
-        """Drive straight at `speed`, steering back to the reference heading if there is one."""
-        reference = self._reference()
-        if reference is None:
-            return speed, 0.0
-        w = self.heading_gain_per_s * wrap_angle(reference - self._heading)
-        limit = self.follow_max_angular_speed_radps
-        return speed, max(-limit, min(limit, w))
-
     def _step_state_machine(self) -> tuple[float, float]:
         self.wall_distance_error = None
         if not self._scan_had_data:
@@ -271,20 +222,6 @@ class WallFollower:
             if command is not None:
                 return command
         return 0.0, 0.0
-
-    def _closed_loop_around_island(self) -> bool:
-        """Record the odometry pose every few cm while following, and detect a closed loop.
-
-        When the robot is back at a recorded pose with the same heading it has been once around
-        the wall it follows. Seen
-        with the wall on the followed side, that loop turned by +2 pi toward that side for an
-        island and by -2 pi for an enclosing boundary (which it keeps lapping).
-        """
-        if not self.escape_islands:
-            return False
-        turned = self._trail.record_and_close(self._odometer, self._x, self._y, self._heading,
-                                              self._winding)
-        return turned is not None and turned > math.pi
 
     def _front_blocked(self) -> bool:
         return (self.distances["front"] < self.front_turn_distance_m
@@ -332,34 +269,6 @@ class WallFollower:
                 return None
             return self._hold_heading(self.max_linear_speed_mps)
         return self._decide(allow_approach=True)
-
-    def _run_clearing_turn(self) -> tuple[float, float] | None:
-        """Once around toward the followed side, then a turn to where look_around chooses."""
-        self._look.observe(self._heading, self._perception.path_m, self._perception.fit)
-        if self._turn_direction * (self._turn_goal - self._heading) > 0.0:
-            return 0.0, self._turn_direction * self.turn_speed_radps
-        delta = wrap_angle(self._look.choose() - self._heading)
-        self._enter("turn_free")   # an ordinary turn: its goal becomes the heading memory
-        self._turn_goal = self._heading + delta
-        self._turn_direction = 1.0 if delta > 0.0 else -1.0
-        return None
-
-    def _run_turn(self) -> tuple[float, float] | None:
-        if self.state == "turn_clear":
-            return self._run_clearing_turn()
-        direction = self._turn_direction
-        remaining = (direction * (self._turn_goal - self._heading)) % (2.0 * math.pi)
-        if remaining > 1.5 * math.pi:       # overshot the goal
-            remaining = 0.0
-        turn_time_limit = 2.0 * math.pi / max(self.min_turn_speed_radps, 0.05)
-        if remaining <= 0.02 or self._state_time > turn_time_limit:
-            self._set_reference(self._turn_goal)
-            after_turn = {"turn_outer": "approach", "turn_escape": "escape"}
-            self._enter(after_turn.get(self.state, "settle"))
-            return None
-        # Slow down over the last part so that the turn ends on target (force control lags).
-        speed = min(self.turn_speed_radps, max(self.min_turn_speed_radps, 4.0 * remaining))
-        return 0.0, direction * speed
 
     def _decide(self, allow_approach: bool) -> tuple[float, float] | None:
         """Right-hand rule (mirrored for the left).
