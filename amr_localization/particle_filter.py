@@ -49,7 +49,7 @@ from amr_localization.particle_filter_params import (
     WALL_SLACK_M,
     check_parameters,
     check_world,
-    pose_problem,
+    checked_initial_pose,
 )
 from amr_localization.particle_sets import gaussian_poses, sample_free_poses
 from amr_localization.pose_search import PoseSearch, refine
@@ -176,16 +176,8 @@ class ParticleFilter(FilterSearches):
         scans confirm it. Returns the sigma used. ValueError, with the state unchanged, for
         values that are not finite or a pose where the robot cannot be (pose_problem).
         """
-        x, y, theta = (float(v) for v in pose)
         sigma = self.params["initial_pose_sigma"] if sigma is None else sigma
-        wanted = tuple(float(v) for v in sigma)
-        if not all(math.isfinite(v) for v in (x, y, theta)):
-            raise ValueError(f"initial pose ({x}, {y}, {theta}) is not finite")
-        if len(wanted) != 3 or not all(math.isfinite(v) and v >= 0.0 for v in wanted):
-            raise ValueError(f"initial pose sigma {list(wanted)} must be 3 finite numbers >= 0")
-        problem = pose_problem(self.world, x, y)
-        if problem:
-            raise ValueError(f"initial pose {problem}")
+        (x, y, theta), wanted = checked_initial_pose(self.world, pose, sigma)
         used = self.bounded_sigma(wanted)
         if used != wanted:
             log.warning("initial pose sigma %s clamped to the map: %s", _rounded(wanted),
