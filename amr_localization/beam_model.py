@@ -74,6 +74,10 @@ def log_likelihoods_python(particles, count, table, rows, angles, x0, y0, resolu
     scan_beams.BeamReadings; starts, headings (int64), phases (float64) and offsets ((N, 2)
     float64): scratch of at least `count` entries (each particle's table row start, heading
     bin and its fraction, the LiDAR's offset from its cell's centre in mm).
+
+    Long: the measurement update's hot loop, one compiled kernel: its second pass prefetches
+    the table rows its first pass found, two particles ahead (module docstring); and this body is
+    the plain-Python twin of that kernel (tested equal), so helpers would need twins of their own.
     """
     inv_res = 1.0 / resolution
     bins_per_rad = angles / (2.0 * math.pi)

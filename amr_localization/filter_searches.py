@@ -86,9 +86,74 @@ class FilterSearches:
     """ParticleFilter's exhaustive searches: started, resumed a slice per call, then used.
 
     Works on the filter's attributes (params, _scan: the scan taken for the update under way,
-    search, matcher, guard, check, particles, weights, estimate, rng, world, table, _pending)
-    and its _set_particles.
+    search, matcher, guard, check, particles, weights, estimate, rng, world, table, _pending,
+    _seed_pending, _last_doubt, events, total_updates, localized) and its _set_particles,
+    _take_scan and update_due.
     """
+
+    def _scan_to_weigh(self, ranges: np.ndarray, age_s: float, force: bool,
+                       new_scan: bool) -> np.ndarray | None:
+        """The scan's de-skewed ranges if a measurement update happens now, else None.
+
+        A global search's particles wait for the search of its first scan (SEED); otherwise a
+        search in progress scores its next slice, then the update is due or not (update_due).
+        """
+        if self._seed_pending:
+            if self._pending is None:  # the global search's first scan: search it
+                ranges = self._take_scan(ranges, age_s)
+                if self._run_search(SEED, ranges) is None:
+                    return None  # the particles wait for the search of that scan
+                return ranges
+            if self._run_search(None, ranges) is None:
+                return None
+        else:
+            if self._pending is not None:  # a search of an earlier scan: its next slice
+                event = self._run_search(None, ranges)
+                if event:
+                    self.events.append((event, self.total_updates))
+            if not (force or self.update_due(new_scan)):
+                return None
+        return self._take_scan(ranges, age_s)
+
+    def _doubt(self, ranges: np.ndarray) -> None:
+        """Search for rivals (DOUBT) of a converged pose that does not explain the scan.
+
+        If the true pose lost its particles earlier (a symmetric maze), the exhaustive search
+        finds it again; at most once every localize_updates updates.
+        """
+        p = self.params
+        if not self.localized and self.cluster_share >= p["cluster_min_share"] and \
+                self.match_fraction < p["ambiguity_match_fraction"] and \
+                self._pending is None and \
+                self.total_updates - self._last_doubt >= p["localize_updates"]:
+            self._last_doubt = self.total_updates
+            self._run_search(DOUBT, ranges)
+
+    def _switch_to_rival(self, ranges: np.ndarray) -> bool:
+        """True if a rival track explains the scans better: the particles moved to it."""
+        if self.localized or not self.guard.tracks:
+            return False
+        winner = self.guard.observe(self.estimate, self.match_fraction, self.matcher, ranges,
+                                    self._scan.tolerances, self.particles, self.weights,
+                                    self._searcher(ranges))
+        if winner is None:
+            return False
+        self._move_to(winner.pose)
+        self.events.append(("switch", self.total_updates))
+        return True
+
+    def _move_to(self, pose) -> None:
+        """Move every particle to a rival that explains the scans better.
+
+        All particles around `pose` (a rival that explains the scans better than the
+        estimate did), the rival tracks kept: not localized.
+        """
+        count = len(self.particles)
+        self._pending = None  # a search about the particle set it replaces
+        self.particles = gaussian_poses([pose], (0.02, 0.02, 0.03), count, self.rng)
+        self.weights = np.full(count, 1.0 / count)
+        self.check.reset()
+        self.estimate = tuple(float(v) for v in pose)
 
     def _run_search(self, kind: str | None, ranges: np.ndarray) -> str | None:
         """Start a search of this scan (`kind`) or resume the one in progress (None): a slice.

@@ -36,7 +36,7 @@ from amr_common.world import World
 from amr_localization.ambiguity import AmbiguityGuard
 from amr_localization.beam_model import BeamModel
 from amr_localization.expected_ranges import expected_range_table
-from amr_localization.filter_searches import DOUBT, SEED, FilterSearches, PendingSearch
+from amr_localization.filter_searches import FilterSearches, PendingSearch
 from amr_localization.localization_check import (
     CheckSettings,
     LocalizedDecision,
@@ -49,7 +49,7 @@ from amr_localization.particle_filter_params import (
     WALL_SLACK_M,
     check_parameters,
     check_world,
-    pose_problem,
+    checked_initial_pose,
 )
 from amr_localization.particle_sets import gaussian_poses, sample_free_poses
 from amr_localization.pose_search import PoseSearch, refine
@@ -176,16 +176,8 @@ class ParticleFilter(FilterSearches):
         scans confirm it. Returns the sigma used. ValueError, with the state unchanged, for
         values that are not finite or a pose where the robot cannot be (pose_problem).
         """
-        x, y, theta = (float(v) for v in pose)
         sigma = self.params["initial_pose_sigma"] if sigma is None else sigma
-        wanted = tuple(float(v) for v in sigma)
-        if not all(math.isfinite(v) for v in (x, y, theta)):
-            raise ValueError(f"initial pose ({x}, {y}, {theta}) is not finite")
-        if len(wanted) != 3 or not all(math.isfinite(v) and v >= 0.0 for v in wanted):
-            raise ValueError(f"initial pose sigma {list(wanted)} must be 3 finite numbers >= 0")
-        problem = pose_problem(self.world, x, y)
-        if problem:
-            raise ValueError(f"initial pose {problem}")
+        (x, y, theta), wanted = checked_initial_pose(self.world, pose, sigma)
         used = self.bounded_sigma(wanted)
         if used != wanted:
             log.warning("initial pose sigma %s clamped to the map: %s", _rounded(wanted),
@@ -269,8 +261,7 @@ class ParticleFilter(FilterSearches):
     def robot_can_be_at(self, x: float, y: float) -> bool:
         """True if a particle's centre at (x, y) is where the robot can be.
 
-        True if a particle's centre at (x, y) is in the free space, clear of the walls
-        (robot radius, less the grid's slack).
+        That is in the free space, clear of the walls (robot radius, less the grid's slack).
         """
         cell = self.table.cell_index(x, y)
         return cell >= 0 and bool(self._robot_ok[cell])
@@ -310,10 +301,10 @@ class ParticleFilter(FilterSearches):
                 age_s: float = 0.0) -> bool:
         """Weigh the particles with a scan, resample, re-check the localized flag.
 
-        Weigh the particles with the scan (if update_due(new_scan) or force), resample,
-        re-check the localized flag. age_s: how long before the last predict() the scan was
-        stamped (the revolution's end; for de-skewing). Returns True if a measurement update
-        happened.
+        Only if update_due(new_scan) or force. age_s: how long before the last predict() the
+        scan was stamped (the revolution's end; for de-skewing). Returns True if a measurement
+        update happened. Steps: _scan_to_weigh, _weigh, _match_scan, _doubt, _switch_to_rival
+        (filter_searches: the searches and rivals), _decide (check, re-seed or resample).
         """
         if self.matcher is None:
             raise RuntimeError("set_scan_geometry() before correct()")
@@ -321,53 +312,35 @@ class ParticleFilter(FilterSearches):
         if ranges.shape != (self.matcher.rays,):
             raise ValueError(f"scan has {ranges.size} rays, the scan geometry {self.matcher.rays}")
         age_s = float(age_s) if math.isfinite(age_s) else 0.0
-        taken = False
-        if self._seed_pending:
-            if self._pending is None:  # the global search's first scan: search it
-                ranges, taken = self._take_scan(ranges, age_s), True
-                if self._run_search(SEED, ranges) is None:
-                    return False  # the particles wait for the search of that scan
-            elif self._run_search(None, ranges) is None:
-                return False
-        else:
-            if self._pending is not None:  # a search of an earlier scan: its next slice
-                event = self._run_search(None, ranges)
-                if event:
-                    self.events.append((event, self.total_updates))
-            if not (force or self.update_due(new_scan)):
-                return False
-        if not taken:
-            ranges = self._take_scan(ranges, age_s)
+        ranges = self._scan_to_weigh(ranges, age_s, force, new_scan)  # filter_searches
+        if ranges is None:
+            return False
         self._weigh(ranges)
         self._since_update = [0.0, 0.0, 0.0]
         self.updates += 1
         self.total_updates += 1
         self._estimate_from_cluster()
-        tolerance = self._scan.tolerances
+        self._match_scan(ranges)
+        self._doubt(ranges)
+        if self._switch_to_rival(ranges):
+            return True
+        self._decide(ranges)
+        return True
+
+    def _match_scan(self, ranges: np.ndarray) -> None:
+        """match_fraction: how well the estimate explains the scan (scan matcher)."""
+        p, tolerance = self.params, self._scan.tolerances
         self.match_fraction = self.matcher.match_fraction(self.estimate, ranges, tolerance)
-        if not self.localized and self.cluster_share >= self.params["cluster_min_share"] and \
-                0.9 * self.params["localize_match_fraction"] <= self.match_fraction \
-                < self.params["localize_match_fraction"]:
+        if not self.localized and self.cluster_share >= p["cluster_min_share"] and \
+                0.9 * p["localize_match_fraction"] <= self.match_fraction \
+                < p["localize_match_fraction"]:
             # Borderline: the filter's mean carries the table's 2 cm quantization; the best
             # pose within a couple of cm of it decides whether the cluster explains the scan.
             self.match_fraction = refine(self.estimate, self.matcher, ranges,
                                          tolerance).match_fraction
-        if not self.localized and self.cluster_share >= self.params["cluster_min_share"] and \
-                self.match_fraction < self.params["ambiguity_match_fraction"] and \
-                self._pending is None and \
-                self.total_updates - self._last_doubt >= self.params["localize_updates"]:
-            # Converged on a pose that does not explain the scan: if the true pose lost its
-            # particles earlier (a symmetric maze), the exhaustive search finds it again.
-            self._last_doubt = self.total_updates
-            self._run_search(DOUBT, ranges)
-        if not self.localized and self.guard.tracks:
-            winner = self.guard.observe(self.estimate, self.match_fraction, self.matcher, ranges,
-                                        tolerance, self.particles, self.weights,
-                                        self._searcher(ranges))
-            if winner is not None:
-                self._move_to(winner.pose)
-                self.events.append(("switch", self.total_updates))
-                return True
+
+    def _decide(self, ranges: np.ndarray) -> None:
+        """The localized check's step; a lost estimate starts a global search; else resample."""
         event = self.check.update(self.cluster_share, self.match_fraction)
         if event == "candidate":
             event = self._check_ambiguity(ranges)
@@ -377,11 +350,10 @@ class ParticleFilter(FilterSearches):
             log.info("%s: scan match %.2f at (%.2f, %.2f, %.2f): global search", event,
                      self.match_fraction, *self.estimate)
             self.initialize_global()
-            return True
+            return
         if effective_sample_size(self.weights) < self.params["resample_ess_fraction"] * \
                 len(self.weights):
             self._resample()
-        return True
 
     def _take_scan(self, ranges: np.ndarray, age_s: float) -> np.ndarray:
         """Take this scan for the update (scan_input); returns its de-skewed ranges."""
@@ -391,19 +363,6 @@ class ParticleFilter(FilterSearches):
                                self.params["lidar_offset_x_m"], self.table.angles)
         m.set_ray_angles(self._scan.angles)
         return self._scan.ranges
-
-    def _move_to(self, pose) -> None:
-        """Move every particle to a rival that explains the scans better.
-
-        All particles around `pose` (a rival that explains the scans better than the
-        estimate did), the rival tracks kept: not localized.
-        """
-        count = len(self.particles)
-        self._pending = None  # a search about the particle set it replaces
-        self.particles = gaussian_poses([pose], (0.02, 0.02, 0.03), count, self.rng)
-        self.weights = np.full(count, 1.0 / count)
-        self.check.reset()
-        self.estimate = tuple(float(v) for v in pose)
 
     def _weigh(self, ranges: np.ndarray) -> None:
         scores = self.model.scores(self.particles, self._scan.readings(),

@@ -202,6 +202,25 @@ def pose_problem(world: World, x: float, y: float) -> str | None:
     return None
 
 
+
+def checked_initial_pose(world: World, pose, sigma) -> tuple[tuple[float, float, float],
+                                                            tuple[float, ...]]:
+    """((x, y, theta), sigma) as floats; ValueError for an initial pose the filter refuses.
+
+    Refused: values that are not finite, a sigma that is not 3 numbers >= 0, or a pose where
+    the robot cannot be (pose_problem).
+    """
+    x, y, theta = (float(v) for v in pose)
+    wanted = tuple(float(v) for v in sigma)
+    if not all(math.isfinite(v) for v in (x, y, theta)):
+        raise ValueError(f"initial pose ({x}, {y}, {theta}) is not finite")
+    if len(wanted) != 3 or not all(math.isfinite(v) and v >= 0.0 for v in wanted):
+        raise ValueError(f"initial pose sigma {list(wanted)} must be 3 finite numbers >= 0")
+    problem = pose_problem(world, x, y)
+    if problem:
+        raise ValueError(f"initial pose {problem}")
+    return (x, y, theta), wanted
+
 def parameter_descriptions() -> dict[str, tuple[Any, str]]:
     """Name -> (default, description) of every parameter."""
     return dict(PARAMETERS)
