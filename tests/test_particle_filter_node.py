@@ -8,7 +8,7 @@ import pytest
 from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
 from rclpy.parameter import Parameter
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
 
 from amr_common.ros_conversions import (
@@ -133,18 +133,21 @@ def test_a_refused_initialpose_is_said_even_right_after_a_bad_scan(ros):
     # /rosout, as a user would (the real logger, its throttle included).
     from rcl_interfaces.msg import Log
     logged = []
+    # As /rosout is published (reliable, transient local): a line logged before the listener
+    # matched the node's publisher still arrives.
     ros.node("rosout_listener").create_subscription(
         Log, "/rosout",
         lambda msg: logged.append(msg.msg) if msg.name == "particle_filter" else None,
-        QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+        QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+                   durability=DurabilityPolicy.TRANSIENT_LOCAL))
     node = make_node(ros, world="lab02")
     graph = FakeGraph(ros, profile="ideal")
     bring_up(ros, node, graph)
     step_lockstep(ros, graph, 2, ranges=[math.nan] * graph.sim.profile.scan_rays)
-    ros.spin_until(lambda: any("valid readings" in text for text in logged), 5.0,
+    ros.spin_until(lambda: any("valid readings" in text for text in logged), 20.0,
                    "the bad scan's warning")
     graph.initialpose.publish(_initialpose(5.0, 5.0, 0.0, [0.01, 0.01, 0.01]))
-    ros.spin_until(lambda: any("/initialpose ignored" in text for text in logged), 5.0,
+    ros.spin_until(lambda: any("/initialpose ignored" in text for text in logged), 20.0,
                    "the refusal of the /initialpose outside the map")
 
 
