@@ -130,7 +130,8 @@ def robot_parameters(controller_class: Any, profile: SensorProfile) -> dict[str,
     return {name: value for name, value in values.items() if name in names}
 
 
-def filter_parameters(profile: SensorProfile, map_is_world: bool = False) -> dict[str, Any]:
+def filter_parameters(profile: SensorProfile, map_is_world: bool = False,
+                      localizer: Any = None) -> dict[str, Any]:
     """What the simulated robot fixes for the particle filter: its LiDAR and how it scans.
 
     The LiDAR's position; the sensor model (`exact` for the clean profiles, the datasheet's
@@ -138,14 +139,20 @@ def filter_parameters(profile: SensorProfile, map_is_world: bool = False) -> dic
     what the simulator skews); where a map's walls are: on its free cells' edges when the
     simulated world is the filter's own map (map_is_world: the simulator puts them there),
     else inside the occupied cells, as in a real room. The run scripts apply these unless the
-    user set them.
+    user set them. `localizer` (a class): only those it takes, its LiDAR's position always (a
+    user's localizer may know nothing else).
     """
     model = profile.lidar_model
     effects = profile.effects
-    return {"lidar_offset_x_m": profile.lidar_offset_x,
-            "lidar_model": "exact" if model is None else model.name,
-            "deskew": bool(effects is not None and effects.scan_skew),
-            "map_walls": "edges" if map_is_world else "likely"}
+    values = {"lidar_offset_x_m": profile.lidar_offset_x,
+              "lidar_model": "exact" if model is None else model.name,
+              "deskew": bool(effects is not None and effects.scan_skew),
+              "map_walls": "edges" if map_is_world else "likely"}
+    if localizer is None:
+        return values
+    takes = described_parameters(localizer) or {}
+    return {name: value for name, value in values.items()
+            if name in takes or name == "lidar_offset_x_m"}
 
 
 def checked_duration(duration: Any) -> float:

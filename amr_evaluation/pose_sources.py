@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from amr_common.controller_loader import DEFAULT_LOCALIZER, described_parameters, link_class
+from amr_common.controller_loader import DEFAULT_LOCALIZER, link_class
 from amr_common.navigation_behaviour import OdometryClock, ScanNovelty, stamp_ns
 from amr_common.world import World
 from amr_evaluation.episode import filter_parameters, tell_scan_geometry
@@ -54,11 +54,8 @@ class ParticleFilterPose:
         """
         cls = link_class(localizer, "localizer")
         # The simulated LiDAR (position, model, skew, where the map's walls are), as far as
-        # the class takes them: a user's localizer may know only its position.
-        takes = described_parameters(cls) or {}
-        sensor = {name: value for name, value in
-                  filter_parameters(sim.profile, world is sim.world).items()
-                  if name in takes or name == "lidar_offset_x_m"}
+        # the class takes them.
+        sensor = filter_parameters(sim.profile, world is sim.world, cls)
         self.filter = cls(world, **{"seed": seed, **sensor, **filter_params})
         self._geometry = sim.scan_geometry
         tell_scan_geometry(self.filter, self._geometry, with_rays=True)

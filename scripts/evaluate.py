@@ -50,7 +50,7 @@ from evaluate_executors import (  # noqa: E402
     check_ray_options,
     make_executor,
 )
-from link_options import add_link_options  # noqa: E402
+from link_options import add_link_options, check_filter_map  # noqa: E402
 
 from amr_common.controller_loader import (  # noqa: E402
     DEFAULT_LOCALIZER,
@@ -279,16 +279,11 @@ def check_filter_maps(specs, overrides: dict, localize: bool = False) -> None:
     """
     from amr_common.map_vs_world import load_map
     from amr_common.world import World
-    from amr_localization.particle_filter_params import check_parameters, check_world
-    maps = [(spec.map, spec.world) for spec in specs  # the filter runs on the map, if one
-            if (localize or (spec.goal is not None and spec.pose_source == "filter"))
-            and spec.localizer == DEFAULT_LOCALIZER]  # another class checks its map itself
-    if not maps:
-        return
-    values = check_parameters(overrides)
-    for map_source, world in dict.fromkeys(maps):
-        try:
-            check_world(load_map(map_source, World.load(world)), values)
+    maps = [(spec.map, spec.world, spec.localizer) for spec in specs  # on the map, if one
+            if localize or (spec.goal is not None and spec.pose_source == "filter")]
+    for map_source, world, localizer in dict.fromkeys(maps):
+        try:  # (another localizer class checks its map itself)
+            check_filter_map(load_map(map_source, World.load(world)), overrides, localizer)
         except ValueError as exc:
             raise EvaluationError(str(exc)) from None
 

@@ -306,16 +306,13 @@ def make_particle_filter(context, *, world: str, lidar_offset_x_m: float,
     """The particle filter node on `world`, told where the LiDAR sits (overrides win).
 
     localizer: its `localizer` parameter (MODULE:CLASS; None: the node's default).
-    sensor: lidar_model, deskew and map_walls of a simulated run (amr_evaluation.episode.
-    filter_parameters), those the localizer takes; the robot's are the defaults (auto,
+    sensor: lidar_model, deskew and map_walls of a simulated run, those the localizer takes
+    (amr_evaluation.episode.filter_parameters); the robot's are the defaults (auto,
     de-skewed).
     """
-    from amr_common.controller_loader import DEFAULT_LOCALIZER, described_parameters, load_class
     from amr_localization.particle_filter_node import ParticleFilterNode
-    takes = described_parameters(load_class(localizer or DEFAULT_LOCALIZER, "localizer")) or {}
-    values: dict[str, Any] = {"world": str(world), **{
-        name: value for name, value in (sensor or {}).items() if name in takes},
-        "lidar_offset_x_m": float(lidar_offset_x_m)}
+    values: dict[str, Any] = {"world": str(world), **(sensor or {}),
+                              "lidar_offset_x_m": float(lidar_offset_x_m)}
     if localizer:
         values["localizer"] = str(localizer)
     values.update(overrides or {})

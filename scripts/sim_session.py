@@ -174,10 +174,12 @@ class SimSession:
             control_nodes = [make_wall_follower(
                 self.context, params_file=params_file, overrides=tuning)]
             if localize:
+                from amr_common.controller_loader import DEFAULT_LOCALIZER, link_class
                 from amr_evaluation.episode import filter_parameters
                 from amr_sim.profiles import get_profile
-                sensor = filter_parameters(get_profile(args.profile),
-                                           map_is_world=self.map_world is self.world)
+                sensor = filter_parameters(  # those the localizer takes
+                    get_profile(args.profile), self.map_world is self.world,
+                    link_class(links.get("localizer") or DEFAULT_LOCALIZER, "localizer"))
                 lidar_offset_x = sensor.pop("lidar_offset_x_m")
                 # The filter draws from --seed, as the headless episodes' filter does.
                 control_nodes.append(make_particle_filter(
