@@ -101,8 +101,9 @@ def slam_fields(world, profile: str, trajectory: list, estimate: list, raster, m
             hits.add(x + prof.lidar_offset_x * math.cos(theta),
                      y + prof.lidar_offset_x * math.sin(theta), theta)
         figures = mapping_figures(world, (0.0, 0.0, 0.0), truth, est[:, 1:], raster, hits)
-    return {"slam": {**figures, "scans": len(estimate), "keyframes": stats.get("keyframes", 0),
-                     "loop_closures": stats.get("loop_closures", 0),
+    # keyframes, loop closures: None when the mapper does not report them (not 0)
+    return {"slam": {**figures, "scans": len(estimate), "keyframes": stats.get("keyframes"),
+                     "loop_closures": stats.get("loop_closures"),
                      "rejected_scans": stats.get("rejected", {}),
                      "update_ms": stats.get("update_ms"),
                      "loop_closure_ms": stats.get("loop_closed_ms"),
@@ -119,7 +120,8 @@ def slam_line(report: dict) -> str:
         return "; SLAM: nothing mapped"
     return (f"; SLAM: {s['scans']} scans, pose RMSE {100 * s['trajectory_rmse_m']:.2f} cm, max "
             f"{100 * s['trajectory_max_m']:.2f} cm, map precision {100 * s['precision']:.1f} %, "
-            f"recall {100 * s['recall']:.1f} %, {s['loop_closures']} loop closures"
+            f"recall {100 * s['recall']:.1f} %"
+            + ("" if s["loop_closures"] is None else f", {s['loop_closures']} loop closures")
             + (f", map written to {s['map_file']}" if s["map_file"] else ""))
 
 
