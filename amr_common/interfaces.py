@@ -283,8 +283,13 @@ class Mapper(Protocol):
         """Take one scan with the odometry pose at its stamp; the new estimate.
 
         The scan LaserScan-like (ranges, angle_min, angle_increment, range_min,
-        range_max), with the odometry pose (odom frame) at its stamp (s); the new estimate.
-        Called for every new scan; bad input is skipped (status "rejected: ..."), never raised.
+        range_max; its geometry may change from scan to scan, as the LDS-02's), with the
+        odometry pose (odom frame) at its stamp (s); the new estimate. A real LiDAR's scan also
+        carries `scan_time` (s, LaserScan's): its rays were measured clockwise over that time
+        BEFORE the stamp, as the Burger's drivers stamp (amr_common.lidar_models
+        .revolution_ages); a mapper may de-skew them with the odometry poses it gets (the
+        project's does: its `deskew` parameter) or ignore it. Called for every new scan; bad
+        input is skipped (status "rejected: ..."), never raised.
         """
         ...
 

@@ -50,10 +50,21 @@ class LidarModel:
     def ray_ages(self, angles: np.ndarray) -> np.ndarray:
         """How long before the scan's stamp each ray at `angles` (rad) was measured (s).
 
-        Both drivers stamp the END of a clockwise revolution: the ray at angle a (counter-
-        clockwise, taken in [0, 2 pi)) is revolution_s * a / (2 pi) old (ray 0 the newest).
+        Both drivers stamp the END of a clockwise revolution (revolution_ages).
         """
-        return self.revolution_s * np.mod(angles, 2.0 * math.pi) / (2.0 * math.pi)
+        return revolution_ages(angles, self.revolution_s)
+
+
+def revolution_ages(angles: np.ndarray, revolution_s: float) -> np.ndarray:
+    """How long before the stamp (s) each ray at `angles` (rad) of a revolution was measured.
+
+    The one statement of the Burger's drivers' convention (hls_lfcd_lds_driver, ld08_driver;
+    docs/reality-gap.md "Scan skew"): the scanner turns clockwise and the scan is stamped at
+    the END of its revolution, so the ray at angle a (counter-clockwise, taken in [0, 2 pi))
+    is revolution_s * a / (2 pi) old (ray 0 the newest). This holds for any ray count and
+    angle_min (the LDS-02's change from scan to scan).
+    """
+    return revolution_s * np.mod(angles, 2.0 * math.pi) / (2.0 * math.pi)
 
 
 # emanual.robotis.com turtlebot3 appendix_lds_01: accuracy 15 mm (120-499 mm) / 5 % (500-3,500),
@@ -72,4 +83,4 @@ LDS02 = LidarModel(name="LDS-02", revolution_s=0.2, band_edges=(0.3, 6.0),
 
 LIDAR_MODELS: dict[str, LidarModel] = {model.name: model for model in (LDS01, LDS02)}
 
-__all__ = ["LidarModel", "LDS01", "LDS02", "LIDAR_MODELS"]
+__all__ = ["LidarModel", "LDS01", "LDS02", "LIDAR_MODELS", "revolution_ages"]

@@ -123,11 +123,29 @@ def robot_parameters(controller_class: Any, profile: SensorProfile) -> dict[str,
     The run scripts apply these unless the user set the parameter (-p or a params file).
     """
     names = described_parameters(controller_class) or {}
-    skewed = (profile.lidar_model is not None and profile.effects is not None
-              and bool(profile.effects.scan_skew))
     values = {"lidar_offset_x_m": profile.lidar_offset_x,
-              "scan_revolution_s": profile.lidar_model.revolution_s if skewed else 0.0}
+              "scan_revolution_s": profile.lidar_model.revolution_s
+              if scans_skewed(profile) else 0.0}
     return {name: value for name, value in values.items() if name in names}
+
+
+def scans_skewed(profile: SensorProfile) -> bool:
+    """True if the profile's scanner takes its rays over a revolution (the real LiDAR's skew)."""
+    return (profile.lidar_model is not None and profile.effects is not None
+            and bool(profile.effects.scan_skew))
+
+
+def mapper_parameters(profile: SensorProfile, mapper_class: Any = None) -> dict[str, Any]:
+    """What the simulated robot fixes for a mapper: its LiDAR's position and `deskew`.
+
+    De-skew only what the simulator skews (the clean profiles' scans are instantaneous,
+    though they carry a scan_time). `mapper_class`: only the parameters it takes, the LiDAR's
+    position always (amr_common.interfaces.Mapper names it).
+    """
+    values = {"lidar_offset_x_m": profile.lidar_offset_x, "deskew": scans_skewed(profile)}
+    takes = described_parameters(mapper_class) if mapper_class is not None else None
+    return {name: value for name, value in values.items()
+            if takes is None or name in takes or name == "lidar_offset_x_m"}
 
 
 def filter_parameters(profile: SensorProfile, map_is_world: bool = False,
@@ -143,10 +161,9 @@ def filter_parameters(profile: SensorProfile, map_is_world: bool = False,
     user's localizer may know nothing else).
     """
     model = profile.lidar_model
-    effects = profile.effects
     values = {"lidar_offset_x_m": profile.lidar_offset_x,
               "lidar_model": "exact" if model is None else model.name,
-              "deskew": bool(effects is not None and effects.scan_skew),
+              "deskew": scans_skewed(profile),
               "map_walls": "edges" if map_is_world else "likely"}
     if localizer is None:
         return values

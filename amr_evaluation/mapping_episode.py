@@ -5,12 +5,20 @@
 
 Timing as amr_evaluation.episode: the wall follower runs every dt on the newest scan and the
 newest odometry twist; the Mapper gets every NEW scan (5 Hz with `turtlebot3`, every step with
-`ideal`) with the odometry pose at that moment (the profile's /odom) and the scan's stamp.
+`ideal`) with the odometry pose at that moment (the profile's /odom) and the scan's stamp. The
+scan is what the slam node gets from /scan: the scan's own geometry (the LDS-02 changes it
+every scan) and, for a real scanner, its scan_time (the revolution: the rays were measured
+over it before the stamp); the Mapper de-skews only what the simulator skews
+(episode.mapper_parameters).
 
-The simulator's odometry is exact so far (it sees only what the wheels did), which would make
+The clean profiles' odometry is exact (it sees only what the wheels did), which would make
 SLAM look better than on a robot: `drift` adds the errors of a real Burger's /odom (wheel
 radius and gyro scale errors, gyro bias, random walk) to it, seeded by the episode's seed.
-`TYPICAL_DRIFT` is the default; `drift=None` feeds the simulator's odometry as it is.
+The default, AUTO_DRIFT, adds `TYPICAL_DRIFT` to a clean profile and nothing to a profile with
+the reality gap (turtlebot3_real, turtlebot3_lds02): its simulator already drifts its odometry
+(wheel radius and track errors, slip, the IMU's heading drift; drawn per seed when
+randomized), and adding TYPICAL_DRIFT on top would count a Burger's errors twice.
+`drift=None` feeds the simulator's odometry as it is.
 
 Figures (amr_evaluation.mapping_metrics): trajectory RMSE / max against the truth aligned at
 the start, map precision and recall at 3 cm, loop closures, SLAM update times, and the speed
@@ -34,7 +42,7 @@ from amr_common.controller_loader import DEFAULT_MAPPER, described_parameters, l
 from amr_common.geometry import compose, inverse
 from amr_common.navigation_behaviour import OdometryHold, ScanNovelty
 from amr_common.world import World
-from amr_evaluation.episode import default_controller, episode_start_label
+from amr_evaluation.episode import default_controller, episode_start_label, mapper_parameters
 from amr_evaluation.mapping_metrics import RayHits, mapping_figures, trajectory_errors
 from amr_mapping.scan_points import Scan
 from amr_sim.profiles import SensorProfile, get_profile
@@ -61,6 +69,22 @@ class OdometryDrift:
 # random walk of 5 mm and 0.3 deg per sqrt(m).
 TYPICAL_DRIFT = OdometryDrift(distance_scale=0.01, turn_scale=0.005, gyro_bias_rad_s=0.0005,
                               noise_m=0.005, noise_rad=0.005)
+AUTO_DRIFT = "auto"  # TYPICAL_DRIFT for a clean profile, none where the simulator drifts
+
+
+def episode_drift(drift: OdometryDrift | str | None, profile: SensorProfile
+                  ) -> OdometryDrift | None:
+    """The drift an episode adds: `drift` itself, or for AUTO_DRIFT the profile's due.
+
+    A profile with the reality gap drifts its own odometry (wheel errors, slip, IMU heading):
+    nothing is added; a clean profile's exact odometry gets TYPICAL_DRIFT.
+    """
+    if isinstance(drift, str):
+        if drift != AUTO_DRIFT:
+            raise ValueError(f"drift must be an OdometryDrift, None or {AUTO_DRIFT!r}, "
+                             f"not {drift!r}")
+        return None if profile.effects is not None else TYPICAL_DRIFT
+    return drift
 
 
 class DriftingOdometry:
@@ -151,7 +175,8 @@ class MappingResult:
 
 def run_mapping_episode(world: World | str, start=None, profile: str | SensorProfile =
                         "turtlebot3", seed: int = 0, duration: float = 300.0, dt: float = 0.05,
-                        loop_closure: bool = True, drift: OdometryDrift | None = TYPICAL_DRIFT,
+                        loop_closure: bool = True,
+                        drift: OdometryDrift | str | None = AUTO_DRIFT,
                         mapper_params: dict[str, Any] | None = None,
                         record: bool = False, mapper=None, controller=None,
                         world_frame: bool = False) -> MappingResult:
@@ -177,6 +202,7 @@ def run_mapping_episode(world: World | str, start=None, profile: str | SensorPro
         controller.set_scan_geometry(prof.angle_min, prof.angle_increment, prof.range_min,
                                      prof.range_max)
     mapper, closure = _built_mapper(mapper, prof, loop_closure, mapper_params)
+    drift = episode_drift(drift, prof)
     odometry = DriftingOdometry(drift, seed)
     hits = RayHits(world_obj, prof.angle_min, prof.angle_increment, prof.scan_rays,
                    prof.range_min, min(prof.range_max, mapper.max_range_m))
@@ -219,7 +245,7 @@ def _built_mapper(mapper, prof: SensorProfile, loop_closure: bool,
         return mapper, bool(params.get("loop_closure", loop_closure))
     cls = link_class(mapper or DEFAULT_MAPPER, "mapper")
     takes = described_parameters(cls)
-    values: dict[str, Any] = {"lidar_offset_x_m": prof.lidar_offset_x}
+    values: dict[str, Any] = mapper_parameters(prof, cls)
     if takes is None or "loop_closure" in takes:
         values["loop_closure"] = bool(loop_closure)
     values.update(params)
@@ -273,9 +299,12 @@ def _explore(sim: Simulator, controller, mapper, odometry: DriftingOdometry, hit
     novelty = ScanNovelty()  # a new scan as the slam node counts it (skip_repeated_scans)
     novelty.is_new(z_scan, sim.scan_geometry[:2])
 
+    # A real scanner's scan took its revolution (the simulator skews it if the profile says).
+    scan_time = prof.lidar_model.revolution_s if prof.lidar_model is not None else 0.0
+
     def feed(ranges: np.ndarray, stamp: float) -> None:
-        scan = Scan(ranges, prof.angle_min, prof.angle_increment, prof.range_min,
-                    prof.range_max)
+        angle_min, increment, _, range_min, range_max = sim.scan_geometry  # the LDS-02's change
+        scan = Scan(ranges, angle_min, increment, range_min, range_max, scan_time)
         odom = compose(frame, held.held[2])
         started, cpu_started = time.perf_counter(), time.thread_time()
         result = mapper.update(scan, odom, stamp)
@@ -300,5 +329,5 @@ def _explore(sim: Simulator, controller, mapper, odometry: DriftingOdometry, hit
     return run
 
 
-__all__ = ["DriftingOdometry", "MappingResult", "OdometryDrift", "TYPICAL_DRIFT",
-           "run_mapping_episode"]
+__all__ = ["AUTO_DRIFT", "DriftingOdometry", "MappingResult", "OdometryDrift", "TYPICAL_DRIFT",
+           "episode_drift", "run_mapping_episode"]

@@ -23,7 +23,7 @@ import numpy as np
 
 from amr_common.controller_loader import DEFAULT_MAPPER
 from amr_evaluation.executors import TaskLost, local_executor, run_tasks
-from amr_evaluation.mapping_episode import TYPICAL_DRIFT, OdometryDrift, run_mapping_episode
+from amr_evaluation.mapping_episode import AUTO_DRIFT, OdometryDrift, run_mapping_episode
 
 
 @dataclass(frozen=True)
@@ -34,7 +34,7 @@ class MappingSpec:
     seed: int
     duration: float = 300.0
     loop_closure: bool = True
-    drift: OdometryDrift | None = TYPICAL_DRIFT
+    drift: OdometryDrift | str | None = AUTO_DRIFT
     profile: str = "turtlebot3"
     start: Any = None  # a world's named start or [x, y, theta]; None: its first
     mapper_params: dict[str, Any] | None = None  # Mapper parameter overrides
@@ -45,7 +45,7 @@ class MappingSpec:
 
 def mapping_specs(worlds: Iterable[str], seeds: Iterable[int], duration: float = 300.0,
                   loop_closure: Iterable[bool] = (True,), starts: dict[str, Any] | None = None,
-                  drift: OdometryDrift | None = TYPICAL_DRIFT,
+                  drift: OdometryDrift | str | None = AUTO_DRIFT,
                   mapper_params: dict[str, Any] | None = None,
                   mapper: str | None = None) -> list[MappingSpec]:
     """Every world x loop-closure setting x seed; starts: world -> start for worlds without.

@@ -32,6 +32,7 @@ import numpy as np
 
 from amr_common.map_raster import likely_wall_segments
 from amr_common.robot import arc_step
+from amr_common.scan_deskew import MotionHistory
 from amr_common.world import World
 from amr_localization.ambiguity import AmbiguityGuard
 from amr_localization.beam_model import BeamModel
@@ -56,7 +57,6 @@ from amr_localization.pose_search import PoseSearch, refine
 from amr_localization.range_sensor import RangeSensor
 from amr_localization.resampling import KldResampler, effective_sample_size
 from amr_localization.scan_beams import ScanBeams
-from amr_localization.scan_deskew import MotionHistory
 from amr_localization.scan_input import TakenScan, take_scan
 from amr_localization.table_memory import search_stride
 from amr_localization.weighting import updated_weights

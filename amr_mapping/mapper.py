@@ -6,8 +6,10 @@
     mapper.occupancy_raster()                          # amr_common.map_raster.Raster (/map)
     mapper.statistics()                                # keyframes, loop closures, timings
 
-Each update predicts the pose from the odometry since the last one (the motion prior) and
-matches the scan against the local map, a log-odds grid of the latest keyframes
+Each update predicts the pose from the odometry since the last one (the motion prior), moves
+each ray to the robot's pose at the stamp with that odometry (`deskew`: a real LiDAR measures
+its rays over the scan's scan_time before the stamp; amr_common.scan_deskew, as the particle
+filter) and matches the scan against the local map, a log-odds grid of the latest keyframes
 (scan_matcher.CorrelativeMatcher). A scan becomes a keyframe after the robot moved
 `keyframe_distance_m` or turned `keyframe_angle_rad`: it joins the local map (the oldest leaves
 it, exactly: counts are integers), the global map, and the pose graph with a link to the keyframe
@@ -34,15 +36,17 @@ from typing import Any
 import numpy as np
 
 from amr_common.geometry import compose, inverse, wrap_angle
+from amr_common.lidar_models import revolution_ages
 from amr_common.map_raster import Raster
 from amr_common.python_logging import ThrottledLogger
 from amr_common.robot import MAX_PLAUSIBLE_ANGULAR_SPEED, MAX_PLAUSIBLE_LINEAR_SPEED
+from amr_common.scan_deskew import MotionHistory, points_now
 from amr_mapping.log_odds_grid import UNITS, LogOddsGrid
 from amr_mapping.loop_closure import LoopCloser, draw
 from amr_mapping.mapper_params import check_parameters, parameter_descriptions
 from amr_mapping.pose_graph import PoseGraph
 from amr_mapping.scan_matcher import CorrelativeMatcher
-from amr_mapping.scan_points import ScanError, scan_points
+from amr_mapping.scan_points import ScanError, scan_points, scan_revolution_s
 
 _LOG = ThrottledLogger(logging.getLogger(__name__))
 _JUMP_SLACK = (0.05, 0.1)  # m, rad beyond the plausible motion before odometry counts as a jump
@@ -88,13 +92,14 @@ class Mapper:
         self._travelled: list[float] = []
         self._drawn_global: list[tuple[float, float, float] | None] = []
         self._local_members: dict[int, tuple[float, float, float]] = {}  # keyframe -> drawn pose
+        self._history = MotionHistory()  # the odometry's motion over the last scans (de-skew)
         self._pose = (0.0, 0.0, 0.0)
         self._last_odom: tuple[float, float, float] | None = None
         self._last_stamp = -math.inf
         self._distance = 0.0
         self._since_loop_try = 0
         self._stats: dict[str, Any] = {"updates": 0, "matched": 0, "odometry_only": 0,
-                                       "loop_closures": 0, "loop_attempts": 0,
+                                       "loop_closures": 0, "loop_attempts": 0, "bad_scan_time": 0,
                                        "odometry_jumps": 0, "map_full": 0, "rejected": {}}
         # (wall ms, this thread's CPU ms) of every update, loop-closure attempt and closure
         self._times: dict[str, list[tuple[float, float]]] = {"update": [], "loop": [],
@@ -137,7 +142,7 @@ class Mapper:
             return self._reject("out_of_order", f"stamp {stamp:.3f} s is not after the last "
                                 f"one ({self._last_stamp:.3f} s)", stamp)
         try:
-            points = scan_points(scan, self.p["lidar_offset_x_m"], self.p["max_range_m"])
+            points, angles = scan_points(scan, self.p["lidar_offset_x_m"], self.p["max_range_m"])
         except ScanError as exc:
             return self._reject("bad_scan", str(exc), stamp)
         self._stats["updates"] += 1
@@ -157,6 +162,7 @@ class Mapper:
             _LOG.warning("jump", "slam: odometry moved %.2f m / %.2f rad in %.2f s: not trusted, "
                          "matching around the last pose", math.hypot(motion[0], motion[1]),
                          motion[2], dt)
+        points = self._deskewed(scan, points, angles, None if jump else motion, dt)
         predicted = self._pose if jump else compose(self._pose, motion)
         pose, score = self._match(points, predicted, None if jump else motion)
         status = "matched" if score > 0.0 else "odometry"
@@ -168,6 +174,30 @@ class Mapper:
             keyframe = True
             loop_closed = self._add_keyframe(points, odom, pose, score > 0.0)
         return MappingEstimate(self._pose, stamp, status, score, keyframe, loop_closed)
+
+    def _deskewed(self, scan: Any, points: np.ndarray, angles: np.ndarray, motion,
+                  dt: float) -> np.ndarray:
+        """The points moved to the robot's frame at the stamp (`deskew`), or as measured.
+
+        The rays were measured over the scan's scan_time before the stamp, clockwise
+        (lidar_models.revolution_ages); the motion then is the odometry's since the last scan
+        (None after a jump: not trusted, the history restarts at rest). A scan_time that is
+        not a number, negative or over 1 s: as measured (counted in bad_scan_time, logged).
+        """
+        if not self.p["deskew"]:
+            return points
+        if motion is None:
+            self._history.clear()
+        else:
+            self._history.add_motion(motion, dt)
+        revolution = scan_revolution_s(scan)
+        if revolution is None:
+            self._stats["bad_scan_time"] += 1
+            _LOG.warning("bad_scan_time", "slam: scan_time %r is not 0-1 s: scan not "
+                         "de-skewed", getattr(scan, "scan_time", None))
+        if not revolution or len(points) == 0:
+            return points
+        return points_now(points, revolution_ages(angles, revolution), self._history)
 
     def _match(self, points: np.ndarray, predicted, motion) -> tuple[tuple, float]:
         """The matched pose and its score, or (predicted, 0.0) without a trustworthy match.

@@ -24,6 +24,11 @@ _TABLE: dict[str, tuple[Any, str]] = {
                               "(-0.032 on a real Burger; the run scripts set the profile's)."),
     "max_range_m": (3.5, "Returns farther than this are not used [m] (the scan's own "
                          "range_max applies as well)."),
+    "deskew": (True, "Move each ray to the robot's pose at the scan's stamp with the odometry "
+                     "(de-skew): the rays were measured over the scan's scan_time, clockwise, "
+                     "before the stamp (the LDS-01/LDS-02 drivers). False for scans taken at "
+                     "once (the simulator's ideal and turtlebot3 profiles: the run scripts set "
+                     "the profile's)."),
     "min_points": (30, "Scans with fewer valid returns are not matched: the pose follows the "
                        "odometry."),
     # --- occupancy grid

@@ -4,7 +4,9 @@ The scan is any object with `ranges`, `angle_min`, `angle_increment`, `range_min
 `range_max` (sensor_msgs/LaserScan, or `Scan` below). The geometry comes from each scan itself,
 never from a fixed ray count: the LDS-02 changes its count and angles from scan to scan.
 A return is used when it is finite, > 0, within [range_min, range_max] and within max_range
-(0.0 is the LDS-01's "no return", NaN the LDS-02's).
+(0.0 is the LDS-01's "no return", NaN the LDS-02's). `scan_time` (LaserScan's: the time the
+revolution took, its rays measured clockwise before the stamp as the Burger's drivers do) says
+how old each ray is for de-skewing (scan_revolution_s); a scan without one was taken at once.
 """
 from __future__ import annotations
 
@@ -17,6 +19,7 @@ import numpy as np
 from amr_common.scan_returns import return_mask
 
 MAX_RAYS = 100_000  # more rays than any 2D LiDAR gives: refused as malformed
+MAX_SCAN_TIME_S = 1.0  # a revolution longer than this is not a Burger's LiDAR (5 Hz: 0.2 s)
 
 
 @dataclass(frozen=True)
@@ -28,14 +31,31 @@ class Scan:
     angle_increment: float
     range_min: float
     range_max: float
+    scan_time: float = 0.0  # s the revolution took (0: all rays at once)
 
 
 class ScanError(ValueError):
     """A scan whose geometry or ranges cannot be used at all."""
 
 
-def scan_points(scan: Any, lidar_offset_x: float, max_range: float) -> np.ndarray:
-    """(N, 2) float64 points of the usable returns in the robot frame (LiDAR at lidar_offset_x).
+def scan_revolution_s(scan: Any) -> float | None:
+    """The scan's `scan_time` (s): 0.0 when it has none or says 0, None when it is unusable.
+
+    Unusable: not a number, not finite, negative, or longer than MAX_SCAN_TIME_S.
+    """
+    value = getattr(scan, "scan_time", 0.0)
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        return None
+    return value if 0.0 <= value <= MAX_SCAN_TIME_S else None  # NaN fails both
+
+
+def scan_points(scan: Any, lidar_offset_x: float, max_range: float
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """((N, 2) float64 points in the robot frame (LiDAR at lidar_offset_x), (N,) their angles).
+
+    The points and the angles (rad, the LiDAR frame) of the usable returns.
 
     Raises ScanError for a scan that is not a scan: non-numeric or non-finite geometry,
     angle_increment 0, ranges that are not a flat list of numbers, more than MAX_RAYS rays.
@@ -59,7 +79,8 @@ def scan_points(scan: Any, lidar_offset_x: float, max_range: float) -> np.ndarra
     index = np.flatnonzero(return_mask(ranges, range_min, upper))
     angles = angle_min + increment * index
     r = ranges[index]
-    return np.column_stack([lidar_offset_x + r * np.cos(angles), r * np.sin(angles)])
+    return np.column_stack([lidar_offset_x + r * np.cos(angles), r * np.sin(angles)]), angles
 
 
-__all__ = ["MAX_RAYS", "Scan", "ScanError", "scan_points"]
+__all__ = ["MAX_RAYS", "MAX_SCAN_TIME_S", "Scan", "ScanError", "scan_points",
+           "scan_revolution_s"]

@@ -11,8 +11,9 @@ amr_common.interfaces.Mapper, default the Mapper), results become messages.
 - In: every new /scan (best effort; a scan repeating the previous one's ranges is skipped: the
   lockstep simulator re-sends its held scan) with the odometry POSE interpolated at its stamp
   (amr_common.pose_history) from `odometry_topic` (nav_msgs/Odometry, default /odometry); a
-  scan newer than the newest odometry waits for it. The LiDAR position from /tf_static
-  (lidar_offset_x_m until it arrives, if no scan was mapped yet).
+  scan newer than the newest odometry waits for it. The message goes to the mapper as it is
+  (its scan_time: the rays' times for the Mapper's de-skew). The LiDAR position from
+  /tf_static (lidar_offset_x_m until it arrives, if no scan was mapped yet).
 - Out: /map (transient local) when changed, at most every map_update_interval_s of the node's
   clock and on deactivate; map -> odom on /tf with every mapped scan and, between scans, with
   the odometry; /slam_pose (amr_msgs/PoseStamped; localized: matched to the map; not /pose,

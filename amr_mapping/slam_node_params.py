@@ -94,6 +94,8 @@ def configured_line(node: dict[str, Any], mapper_params: dict[str, Any],
             + (f", {100 * p['resolution_m']:g} cm cells" if "resolution_m" in p else "")
             + (f", loop closure {'on' if p['loop_closure'] else 'off'}"
                if "loop_closure" in p else "")
+            + (f", scans {'de-skewed' if p['deskew'] else 'taken as instantaneous'}"
+               if "deskew" in p else "")
             + f", odometry from {node['odometry_topic']}, map start pose {list(start)}, "
             f"LiDAR at x = {lidar_offset_x_m} m until /tf_static says otherwise"
             + (f", saved to {node['output_prefix']}.yaml on the way down"

@@ -18,6 +18,10 @@ tests/test_mapping_kernels.py checks); everything else is the same code, fed the
    all alike. Also the slam node's worst callback (update + loop closure; /map).
 All with the `turtlebot3` profile (LDS-01 at 5 Hz) and the episode's typical odometry drift
 (the ROS graph: the simulator's exact odometry).
+5. De-skew's cost (--deskew alone runs only this): one SLAM update on `turtlebot3_real` (its
+   scans skewed, the Mapper de-skewing them: `deskew` true) against the same session with
+   `deskew` false, lab02, seed 0, alternating; and the de-skew itself (the motion history's
+   step + 360 points moved) in microseconds.
 CPU times are this thread's / process's (time.thread_time / process_time): on a shared machine
 the wall clock also counts waiting for a CPU; wall-clock figures are printed alongside.
 
@@ -42,12 +46,37 @@ TARGET_ROS_REAL_TIME = 15.0
 SEARCHES = ("branch_and_bound", "exhaustive")
 
 
-def _session(world: str, duration: float, search: str):
+def _session(world: str, duration: float, search: str, profile: str = "turtlebot3",
+             **params):
     """A mapping episode with one search; (result, Mapper statistics, wall seconds)."""
     started = time.perf_counter()
-    result = run_mapping_episode(world, profile="turtlebot3", seed=0, duration=duration,
-                                 mapper_params={"correlative_search": search})
+    result = run_mapping_episode(world, profile=profile, seed=0, duration=duration,
+                                 mapper_params={"correlative_search": search, **params})
     return result, result.statistics, time.perf_counter() - started
+
+
+def bench_deskew(duration: float, rounds: int = 2) -> dict:
+    """SLAM update medians (CPU ms) on turtlebot3_real with de-skew on and off; its own cost."""
+    import numpy as np
+
+    from amr_common.lidar_models import revolution_ages
+    from amr_common.scan_deskew import MotionHistory, points_now
+    medians: dict = {True: [], False: []}
+    for _ in range(rounds):  # alternating: a drifting machine speed hits both alike
+        for deskew in (True, False):
+            _, stats, _ = _session("lab02", duration, "branch_and_bound", "turtlebot3_real",
+                                   deskew=deskew)
+            medians[deskew].append(stats["update_cpu_ms"]["median"])
+    angles = np.radians(np.arange(360.0))
+    points = np.column_stack([np.cos(angles), np.sin(angles)])
+    history, repeats = MotionHistory(), 2000
+    started = time.thread_time()
+    for _ in range(repeats):
+        history.add_motion((0.04, 0.001, 0.2), 0.2)
+        points_now(points, revolution_ages(angles, 0.2), history)
+    on, off = float(np.median(medians[True])), float(np.median(medians[False]))
+    return {"on_median": on, "off_median": off, "ratio": on / off,
+            "deskew_us": 1e6 * (time.thread_time() - started) / repeats}
 
 
 def bench_update(duration: float) -> dict:
@@ -131,9 +160,16 @@ def bench_ros_graph(duration: float) -> dict:
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="shorter sessions")
+    parser.add_argument("--deskew", action="store_true", help="only the de-skew's cost (5.)")
     args = parser.parse_args(argv)
     run_mapping_episode("lab02", duration=2.0)  # compile / load the kernels from the cache
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    d = bench_deskew(20.0 if args.quick else 60.0)
+    print(f"SLAM update on turtlebot3_real (skewed scans), lab02: median {d['on_median']:.2f} "
+          f"ms CPU de-skewing vs {d['off_median']:.2f} ms without: {d['ratio']:.2f}x (target "
+          f"<= {TARGET_UPDATE_MS:g} ms); the de-skew itself {d['deskew_us']:.0f} us a scan")
+    if args.deskew:
+        return {"deskew": d, "load": load}
     u = bench_update(20.0 if args.quick else 60.0)
     b, r = u["branch_and_bound"], u["exhaustive"]
     print(f"SLAM update (match + grid), 360 rays, 2 cm, lab02: median {b['cpu_median']:.2f} ms "
@@ -165,7 +201,8 @@ def main(argv=None) -> dict:
           f"{n['real_time']:.1f}x ({100 * g['share_of_no_slam']:.0f} % of it) "
           f"(target >= {TARGET_ROS_REAL_TIME:g}x)")
     print(f"load average {load:.1f} on {os.cpu_count()} cores")
-    return {"update": u, "loop_closure": c, "episode": e, "ros_graph": g, "load": load}
+    return {"update": u, "loop_closure": c, "episode": e, "ros_graph": g, "deskew": d,
+            "load": load}
 
 
 if __name__ == "__main__":

@@ -194,16 +194,21 @@ class SimSession:
         return control_nodes
 
     def _add_slam_node(self, map_prefix: str) -> None:
-        """The slam node, mapping in the world's frame (its start pose), saving to map_prefix."""
+        """The slam node, mapping in the world's frame (its start pose), saving to map_prefix.
+
+        The simulated scanner's LiDAR position and `deskew` (mapper_parameters) or --slam-param.
+        """
+        from amr_evaluation.episode import mapper_parameters
         from amr_sim.profiles import get_profile
         from launch_slam import make_slam_node
         self.map_prefix = map_prefix
         self.slam_estimate: list[list[float]] = []
         self.slam_raster = None  # the map at the end of the run (for the plot)
+        scanner = mapper_parameters(get_profile(self.args.profile))
         self.slam_node = make_slam_node(
-            self.context, lidar_offset_x_m=get_profile(self.args.profile).lidar_offset_x,
+            self.context, lidar_offset_x_m=scanner.pop("lidar_offset_x_m"),
             output_prefix=map_prefix, start_pose=self.world.resolve_start(self.start),
-            overrides=self.args.slam_overrides)
+            overrides={**scanner, **(self.args.slam_overrides or {})})
         self.slam_node.on_estimate.append(
             lambda stamp_ns, estimate, node: self.slam_estimate.append(
                 [round(stamp_ns * 1e-9, 6), *estimate.pose]))

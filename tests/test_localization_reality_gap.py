@@ -16,13 +16,13 @@ import pytest
 from amr_common.lidar_models import LDS01, LDS02
 from amr_common.map_file import world_as_map
 from amr_common.map_raster import FREE, OCCUPIED, Raster, boundary_segments, likely_wall_segments
+from amr_common.scan_deskew import MotionHistory, deskew
 from amr_common.world import World
 from amr_evaluation.localization_episode import run_localization_episode
 from amr_localization.localization_check import ScanMatcher
 from amr_localization.particle_filter import ParticleFilter
 from amr_localization.particle_filter_params import check_parameters
 from amr_localization.range_sensor import RangeSensor, lidar_model_for
-from amr_localization.scan_deskew import MotionHistory, deskew
 
 TRACKING_MEAN_M, TRACKING_MAX_M = 0.02, 0.08  # issue 21's figures under the effects
 

@@ -10,10 +10,13 @@ import pytest
 from amr_common.map_raster import Raster
 from amr_common.occupancy_grid import OccupancyGrid
 from amr_common.world import World
+from amr_evaluation.episode import mapper_parameters
 from amr_evaluation.mapping_episode import (
+    AUTO_DRIFT,
     TYPICAL_DRIFT,
     DriftingOdometry,
     OdometryDrift,
+    episode_drift,
     run_mapping_episode,
 )
 from amr_evaluation.mapping_metrics import (
@@ -22,6 +25,7 @@ from amr_evaluation.mapping_metrics import (
     map_recall,
     trajectory_errors,
 )
+from amr_mapping.mapper import Mapper
 
 LIDAR = (0.0, 2 * math.pi / 360, 360, 0.12, 3.5)
 
@@ -101,3 +105,28 @@ def test_a_short_mapping_episode_meets_the_figures():
     assert result.loop_closures >= 1 and result.collisions == 0
     assert result.scans == 301  # 5 Hz for 60 s, and the first scan
     json.dumps(result.to_dict())  # a report can be written
+
+
+@pytest.mark.parametrize("profile, deskew, drift", [
+    ("turtlebot3", False, TYPICAL_DRIFT), ("ideal", False, TYPICAL_DRIFT),
+    ("turtlebot3_real", True, None), ("turtlebot3_lds02:randomized", True, None),
+    ("turtlebot3_real:off", False, None)])
+def test_the_mapper_deskews_what_the_profile_skews_and_odometry_drifts_once(profile, deskew,
+                                                                            drift):
+    from amr_sim.profiles import get_profile
+    prof = get_profile(profile)
+    assert mapper_parameters(prof, Mapper)["deskew"] is deskew
+    # A profile with the reality gap drifts its own odometry (wheels, slip, IMU): nothing added.
+    assert episode_drift(AUTO_DRIFT, prof) == drift
+    assert episode_drift(None, prof) is None
+    with pytest.raises(ValueError, match="drift"):
+        episode_drift("typical", prof)
+
+
+def test_an_lds02_episode_feeds_each_scans_own_geometry_and_scan_time():
+    result = run_mapping_episode("lab02", profile="turtlebot3_lds02", seed=1, duration=15.0)
+    stats = result.statistics
+    assert result.drift is None and stats["rejected"] == {} and stats["bad_scan_time"] == 0
+    assert result.scans >= 70  # about 5 Hz, none lost (lockstep)
+    # Each scan mapped at its own angles (seen: 12.5 cm off with the profile's nominal ones).
+    assert result.trajectory_max_m < 0.08  # 3.7 cm

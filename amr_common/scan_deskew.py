@@ -3,13 +3,17 @@
 A LiDAR measures its rays one after the other while the robot drives and turns: an LDS scan
 spans 0.2 s, in which the Burger turns up to 0.5 rad, so the pose at the stamp explains the rays
 measured early in the revolution badly (docs/reality-gap.md: the true pose explains 61 % of a
-turning robot's rays within 3 cm). The filter keeps the motion its predictions integrated
-(MotionHistory: the odometry twists over the last second) and, for each ray measured `age`
-seconds ago (range_sensor.RangeSensor.ray_ages: the driver's stamp convention), takes the
-robot's pose at that time relative to now, puts the ray's end point in the frame of the LiDAR
-now, and reports it as a range and an angle from there. The particles, the expected-range table
-and the exact scan match then all see a scan taken from one pose: the particles' pose now.
-Missing returns keep their range (no return) and turn with the robot. No rclpy import.
+turning robot's rays within 3 cm). The user keeps the motion it knows (MotionHistory: odometry
+twists, or odometry poses as steps, over the last second) and, for each ray measured `age`
+seconds ago (lidar_models.revolution_ages: the drivers' stamp convention), takes the robot's
+pose at that time relative to now and puts the ray's end point in the robot's frame now
+(`points_now`). One home for the particle filter (amr_localization.scan_input: `deskew`, which
+reports the moved rays as ranges and angles from the LiDAR now, so the particles, the
+expected-range table and the exact scan match all see a scan taken from one pose; missing
+returns keep their range and turn with the robot) and the SLAM Mapper (amr_mapping.mapper:
+`points_now` on the scan's points before matching and drawing). The wall follower's compiled
+kernel (amr_control.point_memory_kernels.deskew_point) does the same per point with a constant
+twist. No rclpy import.
 """
 from __future__ import annotations
 
@@ -44,6 +48,26 @@ class MotionHistory:
         while len(self._rows) > _MAX_ROWS or \
                 (len(self._rows) > 2 and row[0] - self._rows[1][0] >= HISTORY_S):
             self._rows.popleft()
+
+    def add_motion(self, motion: tuple[float, float, float], dt: float, steps: int = 4) -> None:
+        """Add an odometry step: `motion` (dx, dy, dtheta in the frame of the pose before) in dt s.
+
+        Taken as an arc (the chord's length and the turn) in `steps` equal twists, so that the
+        poses between the two odometry poses lie on the arc, not on the chord. A step that is
+        not finite or not forward in time leaves the history at rest (nothing known).
+        """
+        dx, dy, dtheta = motion
+        if not (dt > 0.0 and math.isfinite(dt) and math.isfinite(dx) and math.isfinite(dy)
+                and math.isfinite(dtheta)):
+            self.clear()
+            return
+        chord = math.hypot(dx, dy)
+        distance = math.copysign(chord, dx) if chord > 0.0 else 0.0
+        # The arc of a turn dtheta whose chord is `chord` (sinc: arc / chord).
+        half = 0.5 * dtheta
+        arc = distance if abs(half) < 1e-9 else distance * half / math.sin(half)
+        for _ in range(steps):
+            self.add(arc / dt, dtheta / dt, dt / steps)
 
     def relative_poses(self, ages: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(x, y, theta) of the robot `ages` seconds ago, in the frame of the robot now.
@@ -82,4 +106,16 @@ def deskew(angles: np.ndarray, ranges: np.ndarray, valid: np.ndarray, ages: np.n
     return new_angles, new_ranges
 
 
-__all__ = ["MotionHistory", "deskew", "HISTORY_S"]
+def points_now(points: np.ndarray, ages: np.ndarray, history: MotionHistory) -> np.ndarray:
+    """(N, 2) points measured `ages` (s) ago in the robot's frame then, in its frame now.
+
+    The same motion as `deskew` (the robot's pose at each age, relative to now), applied to
+    end points already in the robot's frame: the Mapper's scan points.
+    """
+    rx, ry, rtheta = history.relative_poses(ages)
+    c, s = np.cos(rtheta), np.sin(rtheta)
+    x, y = points[:, 0], points[:, 1]
+    return np.column_stack([rx + c * x - s * y, ry + s * x + c * y])
+
+
+__all__ = ["MotionHistory", "deskew", "points_now", "HISTORY_S"]
