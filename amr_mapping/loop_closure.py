@@ -80,6 +80,22 @@ class LoopCloser:
         limit = travelled[current] - 0.5 * p["loop_min_travel_m"]
         chain = [k for k in range(max(candidate - n, 0), min(candidate + n + 1, current))
                  if travelled[k] <= limit]
+        return self.verify(poses, points, chain, candidate, current)
+
+    def anchor(self, poses: np.ndarray, points: list[np.ndarray],
+               current: int) -> LoopClosure | None:
+        """A verified closure of keyframe `current` against the map of the first keyframes."""
+        p = self.p
+        first = min(p["anchor_keyframes"], current)
+        if first < 1 or math.hypot(*(poses[current, :2] - poses[0, :2])) > \
+                p["loop_search_radius_m"]:
+            return None
+        return self.verify(poses, points, list(range(first)), 0, current)
+
+    def verify(self, poses: np.ndarray, points: list[np.ndarray], chain: list[int],
+               candidate: int, current: int) -> LoopClosure | None:
+        """Match keyframe `current` against the map of `chain`; a closure to `candidate`."""
+        p = self.p
         grid = LogOddsGrid(p["resolution_m"], p["max_map_cells"], p["log_odds_hit"],
                            p["log_odds_miss"], p["miss_stop_m"], hit_moments=True)
         for k in chain:

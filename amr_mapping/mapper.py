@@ -258,6 +258,8 @@ class Mapper:
         self._stats["loop_attempts"] += 1
         poses = self._graph.poses
         closure = self._closer.close(poses, np.asarray(self._travelled), self._points, index)
+        if closure is None:
+            closure = self._closer.anchor(poses, self._points, index)
         if closure is not None:
             self._graph.add_loop(closure.earlier, closure.later, closure.relative)
             self._stats["loop_closures"] += 1
