@@ -8,6 +8,15 @@ matched against it over a window much larger than tracking uses, without a prior
 accepted only if it scores at least `loop_min_score` and no pose farther than
 `loop_ambiguity_distance_m` (or turned) scores nearly as well: in a featureless corridor the
 match is ambiguous along it and the closure is refused rather than guessed.
+
+The heading anchor (`anchor`): a keyframe within `loop_search_radius_m` of the first one is
+matched, verified the same way, against the map of the first `anchor_keyframes` keyframes and
+linked to keyframe 0, however little the robot travelled. The first metres are where the map's
+heading is set: each match there is good to about a milliradian, the keyframes pass the error
+on, and without a link back to the start a map 3 m wide ends up turned as a whole (maze_deadends
+seed 4: 5-8 mrad, walls at the far side 2-3 cm off). Karto and Cartographer get such links by
+matching against every earlier scan chain or submap in range; this is the one that matters
+when the robot leaves the start and comes back late or never.
 """
 from __future__ import annotations
 

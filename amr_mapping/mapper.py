@@ -12,10 +12,11 @@ matches the scan against the local map, a log-odds grid of the latest keyframes
 `keyframe_distance_m` or turned `keyframe_angle_rad`: it joins the local map (the oldest leaves
 it, exactly: counts are integers), the global map, and the pose graph with a link to the keyframe
 before. Every few keyframes the loop closer looks for an earlier keyframe near the current one
-(loop_closure.LoopCloser); a verified closure goes into the graph, iSAM2 re-solves it, and every
-keyframe that moved is redrawn: at once in the local map, on the next occupancy_raster() call
-in the global map (taken out at its old pose and drawn at its new one, or all redrawn if most
-moved). The map frame is the odometry frame at the first scan.
+(loop_closure.LoopCloser), and failing that, near the start, matches the keyframe against the
+map of the first keyframes (its heading anchor); a verified closure goes into the graph, iSAM2
+re-solves it, and every keyframe that moved is redrawn: at once in the local map, on the next
+occupancy_raster() call in the global map (taken out at its old pose and drawn at its new one,
+or all redrawn if most moved). The map frame is the odometry frame at the first scan.
 
 Bad input never raises and never puts a NaN into the pose or the map: a scan that is not a scan,
 a non-finite odometry pose or stamp, and a stamp not after the last one are skipped (counted in
