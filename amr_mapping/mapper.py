@@ -96,6 +96,7 @@ class Mapper:
         self._since_loop_try = 0
         self._stats: dict[str, Any] = {"updates": 0, "matched": 0, "odometry_only": 0,
                                        "loop_closures": 0, "loop_attempts": 0,
+                                       "anchor_closures": 0,
                                        "odometry_jumps": 0, "map_full": 0, "rejected": {}}
         # (wall ms, this thread's CPU ms) of every update, loop-closure attempt and closure
         self._times: dict[str, list[tuple[float, float]]] = {"update": [], "loop": [],
@@ -261,6 +262,7 @@ class Mapper:
         closure = self._closer.close(poses, np.asarray(self._travelled), self._points, index)
         if closure is None:
             closure = self._closer.anchor(poses, self._points, index)
+            self._stats["anchor_closures"] += closure is not None
         if closure is not None:
             self._graph.add_loop(closure.earlier, closure.later, closure.relative)
             self._stats["loop_closures"] += 1
@@ -335,6 +337,7 @@ class Mapper:
     def statistics(self) -> dict[str, Any]:
         """Counts (updates, keyframes, loop closures, rejected scans by reason ...) and timings.
 
+        loop_closures counts the heading anchor's closures too (anchor_closures of them).
         Timings (ms: count, median, p90, max, total): update_ms of every update (loop
         closures included), loop_ms of every loop-closure attempt (search, and for a closure
         the optimization and the local map's redraw), loop_closed_ms of the closures alone;

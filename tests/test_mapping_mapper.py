@@ -96,8 +96,9 @@ def test_a_keyframe_back_near_the_start_is_anchored_to_the_first_keyframes():
             ranges = np.where(ranges > 0, ranges + rng.normal(0, 0.01, ranges.size), 0.0)
             mapper.update(lds01(ranges), odom, 0.2 * k)
         errors[closure] = abs(mapper.pose[2])
-        closures[closure] = mapper.statistics()["loop_closures"]
-    assert closures == {False: 0, True: 1}
+        stats = mapper.statistics()
+        closures[closure] = (stats["loop_closures"], stats["anchor_closures"])
+    assert closures == {False: (0, 0), True: (1, 1)}
     # 19 scans x 4 mrad: 76 mrad off without; the link to keyframe 0 takes over half of it away.
     assert errors[False] > 0.06 and errors[True] < 0.5 * errors[False]
 
