@@ -99,7 +99,12 @@ class LoopCloser:
         if first < 1 or math.hypot(*(poses[current, :2] - poses[0, :2])) > \
                 p["loop_search_radius_m"]:
             return None
-        return self.verify(poses, points, list(range(first)), 0, current)
+        # The first keyframe alone is the exact anchor; the next ones widen its view (a robot
+        # that started facing a wall) but bring their own small errors: the first only if needed.
+        closure = self.verify(poses, points, [0], 0, current)
+        if closure is None and first > 1:
+            closure = self.verify(poses, points, list(range(first)), 0, current)
+        return closure
 
     def verify(self, poses: np.ndarray, points: list[np.ndarray], chain: list[int],
                candidate: int, current: int) -> LoopClosure | None:

@@ -83,8 +83,10 @@ _TABLE: dict[str, tuple[Any, str]] = {
                                    "loop_ambiguity_distance_m away must score below this share "
                                    "of it (no closure along a featureless corridor)."),
     "loop_ambiguity_distance_m": (0.1, "See loop_ambiguity_ratio [m]."),
-    "anchor_keyframes": (3, "Keyframes near the first one are also matched against the map of "
-                            "this many first keyframes (a heading anchor)."),
+    "anchor_keyframes": (3, "A loop-closure attempt that finds nothing within "
+                            "loop_search_radius_m of the first keyframe matches the scan against "
+                            "the first keyframe's map, failing that this many first keyframes' "
+                            "(the heading anchor)."),
     "loop_interval_keyframes": (10, "Loop closure is tried every this many keyframes."),
     "sequential_sigma_m": (0.01, "Standard deviation of a chain link between consecutive "
                                  "keyframes, translation [m] ..."),
