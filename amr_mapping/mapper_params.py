@@ -85,8 +85,10 @@ _TABLE: dict[str, tuple[Any, str]] = {
     "loop_ambiguity_distance_m": (0.1, "See loop_ambiguity_ratio [m]."),
     "anchor_keyframes": (3, "A loop-closure attempt that finds nothing within "
                             "loop_search_radius_m of the first keyframe matches the scan against "
-                            "the first keyframe's map, failing that this many first keyframes' "
-                            "(the heading anchor)."),
+                            "the map of this many first keyframes (the heading anchor) ..."),
+    "anchor_max_shift_m": (0.05, "... and links it to the first unless that would move it "
+                                 "more than this [m] ..."),
+    "anchor_max_turn_rad": (0.05, "... or turn it more than this [rad] from its estimate."),
     "loop_interval_keyframes": (10, "Loop closure is tried every this many keyframes."),
     "sequential_sigma_m": (0.01, "Standard deviation of a chain link between consecutive "
                                  "keyframes, translation [m] ..."),
