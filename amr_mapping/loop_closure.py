@@ -8,6 +8,18 @@ matched against it over a window much larger than tracking uses, without a prior
 accepted only if it scores at least `loop_min_score` and no pose farther than
 `loop_ambiguity_distance_m` (or turned) scores nearly as well: in a featureless corridor the
 match is ambiguous along it and the closure is refused rather than guessed.
+
+The heading anchor (`anchor`, tried when the search found nothing): a keyframe within
+`loop_search_radius_m` of the first one is matched, verified the same way, against the map of
+the first `anchor_keyframes` keyframes and linked to keyframe 0, however little the robot
+travelled, unless the match would move it more than `anchor_max_shift_m` or
+`anchor_max_turn_rad` from its estimate (a small map verifies less: that is a false match).
+The first metres are where the map's heading is set: each match there is good to about a
+milliradian, the keyframes pass the error on, and without a link back to the start a map 3 m
+wide ends up turned as a whole (maze_deadends seed 4: 5-8 mrad, walls at the far side 2-3 cm
+off). Karto and Cartographer get such links by matching against every earlier scan chain or
+submap in range; the chain search here skips the start until the robot travelled
+loop_min_travel_m, and a robot that does not come back to the start area never gets one.
 """
 from __future__ import annotations
 
@@ -80,6 +92,34 @@ class LoopCloser:
         limit = travelled[current] - 0.5 * p["loop_min_travel_m"]
         chain = [k for k in range(max(candidate - n, 0), min(candidate + n + 1, current))
                  if travelled[k] <= limit]
+        return self.verify(poses, points, chain, candidate, current)
+
+    def anchor(self, poses: np.ndarray, points: list[np.ndarray],
+               current: int) -> LoopClosure | None:
+        """A verified closure of keyframe `current` against the map of the first keyframes."""
+        p = self.p
+        first = min(p["anchor_keyframes"], current)
+        if first < 1 or math.hypot(*(poses[current, :2] - poses[0, :2])) > \
+                p["loop_search_radius_m"]:
+            return None
+        closure = self.verify(poses, points, list(range(first)), 0, current)
+        if closure is None:
+            return None
+        # The anchor corrects the heading the front end lost near the start, a few mrad and
+        # millimetres; a match that would move the keyframe farther is a false one (a map of
+        # a few scans verifies less than a chain's), and one false link to keyframe 0 bends
+        # the whole map.
+        estimate = compose(inverse(tuple(poses[0])), tuple(poses[current]))
+        shift = compose(inverse(estimate), closure.relative)
+        if math.hypot(shift[0], shift[1]) > p["anchor_max_shift_m"] or \
+                abs(shift[2]) > p["anchor_max_turn_rad"]:
+            return None
+        return closure
+
+    def verify(self, poses: np.ndarray, points: list[np.ndarray], chain: list[int],
+               candidate: int, current: int) -> LoopClosure | None:
+        """Match keyframe `current` against the map of `chain`; a closure to `candidate`."""
+        p = self.p
         grid = LogOddsGrid(p["resolution_m"], p["max_map_cells"], p["log_odds_hit"],
                            p["log_odds_miss"], p["miss_stop_m"], hit_moments=True)
         for k in chain:

@@ -14,10 +14,11 @@ filter) and matches the scan against the local map, a log-odds grid of the lates
 `keyframe_distance_m` or turned `keyframe_angle_rad`: it joins the local map (the oldest leaves
 it, exactly: counts are integers), the global map, and the pose graph with a link to the keyframe
 before. Every few keyframes the loop closer looks for an earlier keyframe near the current one
-(loop_closure.LoopCloser); a verified closure goes into the graph, iSAM2 re-solves it, and every
-keyframe that moved is redrawn: at once in the local map, on the next occupancy_raster() call
-in the global map (taken out at its old pose and drawn at its new one, or all redrawn if most
-moved). The map frame is the odometry frame at the first scan.
+(loop_closure.LoopCloser), and failing that, near the start, matches the keyframe against the
+map of the first keyframes (its heading anchor); a verified closure goes into the graph, iSAM2
+re-solves it, and every keyframe that moved is redrawn: at once in the local map, on the next
+occupancy_raster() call in the global map (taken out at its old pose and drawn at its new one,
+or all redrawn if most moved). The map frame is the odometry frame at the first scan.
 
 Bad input never raises and never puts a NaN into the pose or the map: a scan that is not a scan,
 a non-finite odometry pose or stamp, and a stamp not after the last one are skipped (counted in
@@ -29,7 +30,6 @@ from __future__ import annotations
 
 import logging
 import math
-import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -47,6 +47,7 @@ from amr_mapping.mapper_params import check_parameters, parameter_descriptions
 from amr_mapping.pose_graph import PoseGraph
 from amr_mapping.scan_matcher import CorrelativeMatcher
 from amr_mapping.scan_points import ScanError, scan_points, scan_revolution_s
+from amr_mapping.timings import clocks, elapsed_ms, timing_summary
 
 _LOG = ThrottledLogger(logging.getLogger(__name__))
 _JUMP_SLACK = (0.05, 0.1)  # m, rad beyond the plausible motion before odometry counts as a jump
@@ -100,6 +101,7 @@ class Mapper:
         self._since_loop_try = 0
         self._stats: dict[str, Any] = {"updates": 0, "matched": 0, "odometry_only": 0,
                                        "loop_closures": 0, "loop_attempts": 0, "bad_scan_time": 0,
+                                       "anchor_closures": 0,
                                        "odometry_jumps": 0, "map_full": 0, "rejected": {}}
         # (wall ms, this thread's CPU ms) of every update, loop-closure attempt and closure
         self._times: dict[str, list[tuple[float, float]]] = {"update": [], "loop": [],
@@ -113,11 +115,11 @@ class Mapper:
     # ------------------------------------------------------------------ inputs
     def update(self, scan: Any, odom_pose, stamp: float) -> MappingEstimate:
         """Take one scan with the odometry pose (odom frame) at its stamp (s); the new estimate."""
-        started = _clocks()
+        started = clocks()
         try:
             estimate = self._update(scan, odom_pose, stamp)
         finally:
-            self._times["update"].append(_elapsed(started))
+            self._times["update"].append(elapsed_ms(started))
         return estimate
 
     def _reject(self, reason: str, detail: str, stamp) -> MappingEstimate:
@@ -284,10 +286,13 @@ class Mapper:
             self._draw(self._local, member, drawn)
 
     def _try_loop_closure(self, index: int) -> bool:
-        started = _clocks()
+        started = clocks()
         self._stats["loop_attempts"] += 1
         poses = self._graph.poses
         closure = self._closer.close(poses, np.asarray(self._travelled), self._points, index)
+        if closure is None:
+            closure = self._closer.anchor(poses, self._points, index)
+            self._stats["anchor_closures"] += closure is not None
         if closure is not None:
             self._graph.add_loop(closure.earlier, closure.later, closure.relative)
             self._stats["loop_closures"] += 1
@@ -299,7 +304,7 @@ class Mapper:
                     self._draw(self._local, member, new)
                     self._local_members[member] = new
             self._pose = tuple(poses[index])
-        self._times["loop"].append(_elapsed(started))
+        self._times["loop"].append(elapsed_ms(started))
         if closure is not None:
             self._times["loop_closed"].append(self._times["loop"][-1])
         return closure is not None
@@ -362,6 +367,7 @@ class Mapper:
     def statistics(self) -> dict[str, Any]:
         """Counts (updates, keyframes, loop closures, rejected scans by reason ...) and timings.
 
+        loop_closures counts the heading anchor's closures too (anchor_closures of them).
         Timings (ms: count, median, p90, max, total): update_ms of every update (loop
         closures included), loop_ms of every loop-closure attempt (search, and for a closure
         the optimization and the local map's redraw), loop_closed_ms of the closures alone;
@@ -379,22 +385,4 @@ class Mapper:
         return stats
 
 
-def _clocks() -> tuple[float, float]:
-    return time.perf_counter(), time.thread_time()
-
-
-def _elapsed(started: tuple[float, float]) -> tuple[float, float]:
-    return 1e3 * (time.perf_counter() - started[0]), 1e3 * (time.thread_time() - started[1])
-
-
-def timing_summary(values: list[float]) -> dict[str, float]:
-    """count, median, p90, max and total of a list of timings (zeros when empty)."""
-    if not values:
-        return {"count": 0, "median": 0.0, "p90": 0.0, "max": 0.0, "total": 0.0}
-    array = np.asarray(values)
-    return {"count": int(array.size), "median": float(np.median(array)),
-            "p90": float(np.percentile(array, 90)), "max": float(array.max()),
-            "total": float(array.sum())}
-
-
-__all__ = ["Mapper", "MappingEstimate", "timing_summary"]
+__all__ = ["Mapper", "MappingEstimate"]

@@ -88,6 +88,12 @@ _TABLE: dict[str, tuple[Any, str]] = {
                                    "loop_ambiguity_distance_m away must score below this share "
                                    "of it (no closure along a featureless corridor)."),
     "loop_ambiguity_distance_m": (0.1, "See loop_ambiguity_ratio [m]."),
+    "anchor_keyframes": (3, "A loop-closure attempt that finds nothing within "
+                            "loop_search_radius_m of the first keyframe matches the scan against "
+                            "the map of this many first keyframes (the heading anchor) ..."),
+    "anchor_max_shift_m": (0.05, "... and links it to the first unless that would move it "
+                                 "more than this [m] ..."),
+    "anchor_max_turn_rad": (0.05, "... or turn it more than this [rad] from its estimate."),
     "loop_interval_keyframes": (10, "Loop closure is tried every this many keyframes."),
     "sequential_sigma_m": (0.01, "Standard deviation of a chain link between consecutive "
                                  "keyframes, translation [m] ..."),
@@ -105,7 +111,8 @@ PARAMETERS: dict[str, Param] = ruled(
     _TABLE, above(0.0), lidar_offset_x_m=None, free_log_odds=None,
     correlative_search=one_of("branch_and_bound", "exhaustive"),
     **{name: at_least(1) for name in ("min_points", "max_map_cells", "local_map_keyframes",
-                                      "loop_chain_keyframes", "loop_interval_keyframes")},
+                                      "loop_chain_keyframes", "loop_interval_keyframes",
+                                      "anchor_keyframes")},
     **{name: at_least(0.0) for name in (
         "miss_stop_m", "keyframe_distance_m", "keyframe_angle_rad", "odometry_sigma_per_m",
         "odometry_sigma_per_rad", "loop_min_travel_m", "rerender_tolerance_m",

@@ -48,10 +48,10 @@ from amr_common.parameters import declare_link, declare_parameters, read_paramet
 from amr_common.pose_history import LATER, OLDER, PoseHistory
 from amr_common.qos import LATCHED, RELIABLE_10, scan_qos
 from amr_common.ros_conversions import pose_from_message, time_to_nanoseconds, yaw_to_quaternion
-from amr_mapping.mapper import timing_summary
 from amr_mapping.slam_map_files import read_save_request, write_slam_map
 from amr_mapping.slam_node_params import NODE_PARAMETERS as _NODE_PARAMETERS
 from amr_mapping.slam_node_params import configured_line, node_parameter_problems
+from amr_mapping.timings import timing_summary
 
 _ODOMETRY_HISTORY_S = 5.0  # how far back a scan's stamp may lie behind the newest odometry
 _MAX_WAITING_SCANS = 10  # 2 s of 5 Hz scans

@@ -74,6 +74,39 @@ def test_loop_closure_undoes_the_odometry_drift_when_the_loop_closes():
     assert errors[True][back].min() < 0.012 and errors[True][back].max() < 0.04
 
 
+def test_a_keyframe_back_near_the_start_is_anchored_to_the_first_keyframes():
+    """A gyro drifting 2 mrad a scan, believed by the front end, 1 m along a corridor.
+
+    No earlier keyframe is a loop-closure candidate yet (the robot travelled less than
+    loop_min_travel_m), but the keyframe still sees the start: matched against the map of the
+    first keyframes, it is linked to keyframe 0 and the heading comes back - unless the
+    correction is larger than the anchor may make (a false match, as far as it can tell).
+    """
+    segments = World.load("corridor_loop").segments
+    poses = [(0.3 + 0.05 * k, 0.3, 0.0) for k in range(20)]
+    errors, closures = {}, {}
+    settings = {"off": {"loop_closure": False}, "on": {},
+                "tight": {"anchor_max_turn_rad": 0.02}}  # below the 36 mrad it would correct
+    for name, overrides in settings.items():
+        rng = np.random.default_rng(3)
+        mapper = Mapper({**TRUST_ODOMETRY, **overrides})
+        odom, previous = (0.0, 0.0, 0.0), poses[0]
+        for k, pose in enumerate(poses):
+            dx, dy, dth = compose(inverse(previous), pose)
+            odom = compose(odom, (dx, dy, dth + (0.002 if k else 0.0)))
+            previous = pose
+            ranges = cast(segments, LDS01_360, pose)
+            ranges = np.where(ranges > 0, ranges + rng.normal(0, 0.01, ranges.size), 0.0)
+            mapper.update(lds01(ranges), odom, 0.2 * k)
+        errors[name] = abs(mapper.pose[2])
+        stats = mapper.statistics()
+        closures[name] = (stats["loop_closures"], stats["anchor_closures"])
+    assert closures == {"off": (0, 0), "on": (1, 1), "tight": (0, 0)}
+    # 19 scans x 2 mrad: 38 mrad off without; the link to keyframe 0 takes over half of it away.
+    assert errors["off"] > 0.03 and errors["on"] < 0.5 * errors["off"]
+    assert errors["tight"] == pytest.approx(errors["off"], abs=1e-3)
+
+
 def test_scan_matching_keeps_the_estimate_on_the_truth_despite_drifting_odometry():
     mapper = Mapper()
     errors = drive(mapper, lap_poses(sides=2), scale=1.05, turn_scale=1.03, seed=1)
