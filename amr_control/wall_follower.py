@@ -14,7 +14,9 @@ States (the `state` attribute):
   come from a line fitted to the scan points beside the robot, so the derivative is the rate
   the distance changes at cruise speed given the measured wall angle (no finite difference).
 - outer_corner: the followed wall ended (a gap wide enough for the robot): drive straight until
-  the robot is `outer_corner_advance_m` past the wall's end, then
+  the robot is `outer_corner_advance_m` past the wall's end, slowing down over the last
+  `corner_slowdown_m` (a real drive's latency and lag carry a robot at cruise speed past the
+  turn point, off the new corridor's centre), then
 - turn_outer: turn in place 90 deg toward the followed side, then
 - approach: drive straight until the wall is beside the robot again (a new corridor's wall
   starts ahead after such a turn); if it never comes, take the next outer corner.
@@ -245,7 +247,7 @@ class WallFollower(InPlaceTurns):
                     return None
                 self._start_turn("turn_outer", self._side * 0.5 * math.pi)
                 return None
-            return self._hold_heading(self.max_linear_speed_mps)
+            return self._hold_heading(self._corner_speed())
         if state == "approach":
             if self._side_distance() <= self.side_open_distance_m:
                 self._enter("follow_wall")
@@ -269,6 +271,18 @@ class WallFollower(InPlaceTurns):
                 return None
             return self._hold_heading(self.max_linear_speed_mps)
         return self._decide(allow_approach=True)
+
+    def _corner_speed(self) -> float:
+        """Forward speed toward an outer corner's turn point: down to settle speed near it.
+
+        The robot keeps moving after the turn is commanded (command latency, the motors' lag):
+        at cruise speed it would end the turn several cm past the point, off the new
+        corridor's centre, where the far wall's end clips the swept path.
+        """
+        remaining = self._advance_target - self._travelled
+        ramp = max(0.0, min(1.0, remaining / max(self.corner_slowdown_m, 1e-3)))
+        low = min(self.settle_speed_mps, self.max_linear_speed_mps)
+        return low + (self.max_linear_speed_mps - low) * ramp
 
     def _decide(self, allow_approach: bool) -> tuple[float, float] | None:
         """Right-hand rule (mirrored for the left).

@@ -39,6 +39,10 @@ _TABLE: dict[str, tuple[Any, str]] = {
                               "entered [m]."),
     "outer_corner_advance_m": (0.20, "How far past the end of the followed wall the robot drives "
                                      "before turning around the corner [m]."),
+    "corner_slowdown_m": (0.06, "Over the last this many metres before an outer corner's "
+                                "turn point the forward speed ramps down to settle_speed_mps, "
+                                "so the drive's latency and lag do not carry the robot past "
+                                "it [m]; 0 = cruise up to the turn."),
     "settle_time_s": (0.3, "Straight driving after an in-place turn before following again [s]."),
     "settle_speed_mps": (0.10, "Forward speed while settling or approaching a wall [m/s]."),
     "sector_half_width_rad": (0.1745, "Half-width of the front/left/right/back sectors [rad]."),
