@@ -104,10 +104,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--pose-source", default=None, choices=["filter", "truth"],
                         help="navigation: the particle filter (default) or the true pose")
     parser.add_argument("--profiles", default=None, help="comma-separated sensor profiles: ideal, "
-                        "turtlebot3, turtlebot3_real, turtlebot3_lds02 (default ideal)")
+                        "turtlebot3, turtlebot3_clean, turtlebot3_lds02 (default ideal)")
     parser.add_argument("--randomize", action="store_true", help="draw every reality-gap "
                         "effect within its documented range from each episode's seed "
-                        "(profiles turtlebot3_real, turtlebot3_lds02; listed under the table)")
+                        "(profiles turtlebot3, turtlebot3_lds02; listed under the table)")
     parser.add_argument("--seeds", default=None, help="comma-separated seeds or ranges, e.g. "
                         "0,1,2 or 0-9 (default 0)")
     parser.add_argument("--duration", type=float, default=None,
