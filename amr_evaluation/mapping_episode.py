@@ -1,11 +1,12 @@
 """Headless mapping episodes: the simulator, the wall follower exploring, and the SLAM Mapper.
 
-    result = run_mapping_episode("lab02", profile="turtlebot3", seed=0, duration=300.0)
+    result = run_mapping_episode("lab02", profile="turtlebot3_clean", seed=0, duration=300.0)
     print(result.summary())          # trajectory RMSE / max, precision, recall, loop closures
 
 Timing as amr_evaluation.episode: the wall follower runs every dt on the newest scan and the
-newest odometry twist; the Mapper gets every NEW scan (5 Hz with `turtlebot3`, every step with
-`ideal`) with the odometry pose at that moment (the profile's /odom) and the scan's stamp.
+newest odometry twist; the Mapper gets every NEW scan (5 Hz with the turtlebot3 profiles, every
+step with `ideal`) with the odometry pose at that moment (the profile's /odom) and the scan's
+stamp.
 
 The simulator's odometry is exact so far (it sees only what the wheels did), which would make
 SLAM look better than on a robot: `drift` adds the errors of a real Burger's /odom (wheel
@@ -149,8 +150,9 @@ class MappingResult:
                 f"({self.cpu_real_time_factor:.0f}x per CPU second)")
 
 
-def run_mapping_episode(world: World | str, start=None, profile: str | SensorProfile =
-                        "turtlebot3", seed: int = 0, duration: float = 300.0, dt: float = 0.05,
+def run_mapping_episode(world: World | str, start=None,
+                        profile: str | SensorProfile = "turtlebot3_clean", seed: int = 0,
+                        duration: float = 300.0, dt: float = 0.05,
                         loop_closure: bool = True, drift: OdometryDrift | None = TYPICAL_DRIFT,
                         mapper_params: dict[str, Any] | None = None,
                         record: bool = False, mapper=None, controller=None,

@@ -16,8 +16,8 @@ tests/test_mapping_kernels.py checks); everything else is the same code, fed the
    whose slam node searches exhaustively (the reference) and the graph without SLAM; the
    graphs take turns in segments (bench_ros.round_robin), so a drifting machine speed hits
    all alike. Also the slam node's worst callback (update + loop closure; /map).
-All with the `turtlebot3` profile (LDS-01 at 5 Hz) and the episode's typical odometry drift
-(the ROS graph: the simulator's exact odometry).
+All with the `turtlebot3_clean` profile (LDS-01 at 5 Hz, no reality gap) and the episode's
+typical odometry drift (the ROS graph: the simulator's exact odometry).
 CPU times are this thread's / process's (time.thread_time / process_time): on a shared machine
 the wall clock also counts waiting for a CPU; wall-clock figures are printed alongside.
 
@@ -45,7 +45,7 @@ SEARCHES = ("branch_and_bound", "exhaustive")
 def _session(world: str, duration: float, search: str):
     """A mapping episode with one search; (result, Mapper statistics, wall seconds)."""
     started = time.perf_counter()
-    result = run_mapping_episode(world, profile="turtlebot3", seed=0, duration=duration,
+    result = run_mapping_episode(world, profile="turtlebot3_clean", seed=0, duration=duration,
                                  mapper_params={"correlative_search": search})
     return result, result.statistics, time.perf_counter() - started
 
@@ -100,7 +100,7 @@ def bench_ros_graph(duration: float) -> dict:
 
     def make(name: str, slam):
         def build():
-            graphs[name] = bench_ros.Lockstep(wall_follower, False, f"_{name}", "turtlebot3",
+            graphs[name] = bench_ros.Lockstep(wall_follower, False, f"_{name}", "turtlebot3_clean",
                                               slam)
             return graphs[name]
         return build
