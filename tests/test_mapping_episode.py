@@ -94,7 +94,7 @@ def test_drifting_odometry_is_exact_without_drift_and_seeded_with_it():
 
 @pytest.mark.slow
 def test_a_short_mapping_episode_meets_the_figures():
-    result = run_mapping_episode("lab02", profile="turtlebot3", seed=0, duration=60.0)
+    result = run_mapping_episode("lab02", profile="turtlebot3_clean", seed=0, duration=60.0)
     assert result.odometry_max_error_m > 0.05  # the drift is there to be corrected
     assert result.trajectory_rmse_m <= 0.015 and result.trajectory_max_m <= 0.05
     assert result.precision >= 0.95 and result.recall >= 0.95
