@@ -22,11 +22,11 @@ Examples:
   .venv/bin/python scripts/evaluate.py --worlds lab02,maze_deadends --goals all \
       --profiles ideal,turtlebot3 --seeds 0-2 --duration 300   # navigation to named goals
   .venv/bin/python scripts/evaluate.py --worlds evaluations/worlds/lab02_box.yaml --map lab02 \
-      --goals inner_far --profiles turtlebot3 --seeds 0-4 --duration 200  # a box the map lacks
+      --goals inner_far --profiles turtlebot3_clean --seeds 0-4 --duration 200  # box not on map
   .venv/bin/python scripts/evaluate.py --worlds lab02 --goals all --seeds 0-2 --duration 200 \
       --localizer examples.likelihood_mcl:LikelihoodFieldMcl --out out/mine   # your own link
-  .venv/bin/python scripts/evaluate.py --slam --worlds all --profiles turtlebot3 --seeds 0-4 \
-      --starts south_west,outer,south,south_east --duration 300   # SLAM: mapping figures
+  .venv/bin/python scripts/evaluate.py --slam --worlds all --profiles turtlebot3_clean \
+      --seeds 0-4 --starts south_west,outer,south,south_east --duration 300   # SLAM figures
   .venv/bin/python scripts/evaluate.py --slam --worlds lab02 --profiles turtlebot3 \
       --duration 120 --mapper examples.odometry_mapper:OdometryMapper   # your own mapper
 Options given on the command line override the same keys of --config.

@@ -36,7 +36,7 @@ Examples:
   .venv/bin/python scripts/run_sim.py --profile turtlebot3 --realtime --slam --teleop \
       --map-out maps/mine           # drive with scripts/teleop.py (same ROS_DOMAIN_ID)
   .venv/bin/python scripts/run_sim.py --world evaluations/worlds/lab02_box.yaml --map lab02 \
-      --goal inner_far --profile turtlebot3 --plot out/box.png   # a box the map lacks
+      --goal inner_far --profile turtlebot3_clean --plot out/box.png   # a box the map lacks
 `--map`: the particle filter, the planner and /map use this map while the simulator drives in
 `--world` (default: the world): a map SLAM built, or an old map of a changed room.
 Local runs are isolated: loopback discovery and a free ROS_DOMAIN_ID (printed at startup).
