@@ -11,7 +11,7 @@ from typing import Any
 from amr_common.parameter_table import Param, at_least, between, checked_values, one_of, ruled
 from amr_common.robot import MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED, ROBOT_RADIUS, TRACK
 
-# name: (default, description). Defaults work in the simulator's "ideal" and "turtlebot3" profiles.
+# name: (default, description). Defaults work in the simulator's ideal and turtlebot3 profiles.
 _TABLE: dict[str, tuple[Any, str]] = {
     "follow_side": ("right", "Wall kept on this side: 'right' (right-hand rule) or 'left'."),
     "wall_distance_m": (0.20, "Target distance from the robot centre to the followed wall [m]."),
@@ -68,7 +68,7 @@ _TABLE: dict[str, tuple[Any, str]] = {
                                "the end as the LDS-01/LDS-02 drivers do: each ray is moved "
                                "with the odometry to the stamp (de-skew) [s]; 0.2 on a real "
                                "Burger, 0 when all rays are taken at once (the simulator's "
-                               "ideal and turtlebot3 profiles)."),
+                               "ideal and turtlebot3_clean profiles)."),
     "memory_time_s": (3.0, "The scans' points stay obstacles for the swept-path check this "
                            "long after a scan last showed a point in their 2 cm cell (the end "
                            "of a thin wall seen end-on returns no ray) [s]; 0 = off."),

@@ -10,9 +10,9 @@ angle_increment, range_min, range_max)` it is told the scan geometry first, and 
 it changes (the LDS-02's changes every scan: profile turtlebot3_lds02).
 
 Timing: with `ideal` the loop is the course's lockstep (measure, compute, step, ...). With
-`turtlebot3` it emulates the real robot: the controller still runs every dt, on the newest scan
-(a new one only every scan_period, 0.2 s) and on the newest odometry twist (refreshed every
-odom_period, 0.05 s).
+the turtlebot3 profiles it emulates the real robot: the controller still runs every dt, on the
+newest scan (a new one only every scan_period, 0.2 s) and on the newest odometry twist
+(refreshed every odom_period, 0.05 s).
 
 Metrics:
 - explored_fraction: share of the world's free cells (cell_size grid aligned with the map, see

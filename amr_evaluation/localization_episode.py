@@ -8,9 +8,9 @@ as the ROS nodes, with the figures that say whether the filter can be trusted.
     print(result.time_to_localized_s, result.false_localizations, result.tracking_error_mean_m)
 
 Timing as amr_evaluation.episode: `ideal` is the course's lockstep (a new scan every step);
-`turtlebot3` runs the controller and the filter every dt on the newest odometry twist. The filter
-is fed as its node feeds it (navigation_episode.ParticleFilterPose: a scan is new when its
-readings differ from the previous one's), so the run is the ROS lockstep graph's
+the turtlebot3 profiles run the controller and the filter every dt on the newest odometry
+twist. The filter is fed as its node feeds it (navigation_episode.ParticleFilterPose: a scan
+is new when its readings differ from the previous one's), so the run is the ROS lockstep graph's
 (tests/test_headless_is_the_ros_graph.py). The wall follower keeps exploring once localized
 (stop_when_localized false, as in run_sim.py --localize); with stop_when_localized true it
 commands zero from then on (no planner here).

@@ -1,21 +1,21 @@
 """Headless mapping episodes: the simulator, the wall follower exploring, and the SLAM Mapper.
 
-    result = run_mapping_episode("lab02", profile="turtlebot3", seed=0, duration=300.0)
+    result = run_mapping_episode("lab02", profile="turtlebot3_clean", seed=0, duration=300.0)
     print(result.summary())          # trajectory RMSE / max, precision, recall, loop closures
 
 Timing as amr_evaluation.episode: the wall follower runs every dt on the newest scan and the
-newest odometry twist; the Mapper gets every NEW scan (5 Hz with `turtlebot3`, every step with
-`ideal`) with the odometry pose at that moment (the profile's /odom) and the scan's stamp. The
-scan is what the slam node gets from /scan: the scan's own geometry (the LDS-02 changes it
-every scan) and, for a real scanner, its scan_time (the revolution: the rays were measured
-over it before the stamp); the Mapper de-skews only what the simulator skews
+newest odometry twist; the Mapper gets every NEW scan (5 Hz with the turtlebot3 profiles, every
+step with `ideal`) with the odometry pose at that moment (the profile's /odom) and the scan's
+stamp. The scan is what the slam node gets from /scan: the scan's own geometry (the LDS-02
+changes it every scan) and, for a real scanner, its scan_time (the revolution: the rays were
+measured over it before the stamp); the Mapper de-skews only what the simulator skews
 (episode.mapper_parameters).
 
 The clean profiles' odometry is exact (it sees only what the wheels did), which would make
 SLAM look better than on a robot: `drift` adds the errors of a real Burger's /odom (wheel
 radius and gyro scale errors, gyro bias, random walk) to it, seeded by the episode's seed.
 The default, AUTO_DRIFT, adds `TYPICAL_DRIFT` to a clean profile and nothing to a profile with
-the reality gap (turtlebot3_real, turtlebot3_lds02): its simulator already drifts its odometry
+the reality gap (turtlebot3, turtlebot3_lds02): its simulator already drifts its odometry
 (wheel radius and track errors, slip, the IMU's heading drift; drawn per seed when
 randomized), and adding TYPICAL_DRIFT on top would count a Burger's errors twice.
 `drift=None` feeds the simulator's odometry as it is.
@@ -173,9 +173,9 @@ class MappingResult:
                 f"({self.cpu_real_time_factor:.0f}x per CPU second)")
 
 
-def run_mapping_episode(world: World | str, start=None, profile: str | SensorProfile =
-                        "turtlebot3", seed: int = 0, duration: float = 300.0, dt: float = 0.05,
-                        loop_closure: bool = True,
+def run_mapping_episode(world: World | str, start=None,
+                        profile: str | SensorProfile = "turtlebot3_clean", seed: int = 0,
+                        duration: float = 300.0, dt: float = 0.05, loop_closure: bool = True,
                         drift: OdometryDrift | str | None = AUTO_DRIFT,
                         mapper_params: dict[str, Any] | None = None,
                         record: bool = False, mapper=None, controller=None,

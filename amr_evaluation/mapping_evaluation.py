@@ -35,7 +35,7 @@ class MappingSpec:
     duration: float = 300.0
     loop_closure: bool = True
     drift: OdometryDrift | str | None = AUTO_DRIFT
-    profile: str = "turtlebot3"
+    profile: str = "turtlebot3_clean"
     start: Any = None  # a world's named start or [x, y, theta]; None: its first
     mapper_params: dict[str, Any] | None = None  # Mapper parameter overrides
     controller: str | None = None  # MODULE:CLASS of the explorer; None: the wall follower

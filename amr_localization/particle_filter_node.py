@@ -91,6 +91,7 @@ class ParticleFilterNode(GuardedLifecycleNode):
         self._odometry_clock = OdometryClock()
         self._scan_novelty = ScanNovelty()
         self._last_scan_ns: int | None = None  # newest usable scan
+        self._taken_ns: int | None = None  # stamp of the newest NEW scan (held ones: re-sent)
         self._last_particles_ns: int | None = None
         self._scan_key: tuple | None = None
         self._tf: LocalizationTf | None = None
@@ -202,11 +203,13 @@ class ParticleFilterNode(GuardedLifecycleNode):
         ranges = self._usable_ranges(scan)
         if ranges is not None:
             new_scan = self._scan_novelty.is_new(ranges)  # not the held one again
-            if new_scan:
-                self._last_scan_ns = stamp_ns
-            # The scan's age at the newest odometry the filter predicted to (for de-skewing).
+            if new_scan or self._taken_ns is None:
+                self._last_scan_ns = self._taken_ns = stamp_ns
+            # The scan's age at the newest odometry the filter predicted to (for de-skewing):
+            # a held scan (the lockstep simulator re-sends it with each step's stamp) was taken
+            # when it was first seen, as the headless episodes count it.
             newest = self._odometry_clock.last_ns
-            age_s = 0.0 if newest is None else (newest - stamp_ns) * 1e-9
+            age_s = 0.0 if newest is None else (newest - self._taken_ns) * 1e-9
             try:
                 if self.filter.correct(ranges, new_scan=new_scan, age_s=age_s):
                     self._last_scan_ns = stamp_ns

@@ -1,8 +1,8 @@
 """The filter's idea of its range sensor: how far a reading may be off, and when it was taken.
 
 Three kinds of scan (the `lidar_model` parameter):
-- `exact`: the simulator's clean profiles (ideal, turtlebot3): every ray from the scan's stamp
-  pose, a fixed noise. A reading matches within `match_tolerance_m` and is weighed with
+- `exact`: the simulator's clean profiles (ideal, turtlebot3_clean): every ray from the scan's
+  stamp pose, a fixed noise. A reading matches within `match_tolerance_m` and is weighed with
   `sigma_hit_m`; a missing return where the map expects a wall counts against a pose (the clean
   simulator returns every ray it can).
 - `LDS-01`, `LDS-02` (amr_common.lidar_models: the datasheets' distance bands): the error

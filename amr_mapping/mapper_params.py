@@ -1,7 +1,7 @@
 """The Mapper's parameters: name -> (default, description with units), and their checking.
 
 No rclpy import; the slam node declares each as a ROS parameter. The defaults map the bundled
-worlds with the `turtlebot3` profile (LDS-01: 360 rays, 3.5 m, 1 cm noise, 5 Hz).
+worlds with the `turtlebot3_clean` profile (LDS-01: 360 rays, 3.5 m, 1 cm noise, 5 Hz).
 """
 from __future__ import annotations
 
@@ -27,8 +27,8 @@ _TABLE: dict[str, tuple[Any, str]] = {
     "deskew": (True, "Move each ray to the robot's pose at the scan's stamp with the odometry "
                      "(de-skew): the rays were measured over the scan's scan_time, clockwise, "
                      "before the stamp (the LDS-01/LDS-02 drivers). False for scans taken at "
-                     "once (the simulator's ideal and turtlebot3 profiles: the run scripts set "
-                     "the profile's)."),
+                     "once (the simulator's ideal and turtlebot3_clean profiles: the run scripts "
+                     "set the profile's)."),
     "min_points": (30, "Scans with fewer valid returns are not matched: the pose follows the "
                        "odometry."),
     # --- occupancy grid

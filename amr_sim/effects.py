@@ -1,7 +1,7 @@
 """The reality gap: what makes a real TurtleBot3 run differ from a clean simulation.
 
 `Effects` holds one value per effect; `EFFECTS` says, for each, its unit, its typical value (the
-`turtlebot3_real` and `turtlebot3_lds02` profiles), the range `--randomize` draws it from, the
+`turtlebot3` and `turtlebot3_lds02` profiles), the range `--randomize` draws it from, the
 range a user may set it to, and where the figures come from (docs/reality-gap.md has the
 sources in full). Plain Python, no rclpy.
 

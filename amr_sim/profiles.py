@@ -2,20 +2,22 @@
 
 `ideal` reproduces the course simulator (turtlebot3.md / course-template.md): a 240-ray scan over
 360 deg every step from the robot centre with NaN for no return, and an /odometry twist every
-step. `turtlebot3` imitates the real TurtleBot3 Burger with its LDS-01: 360 rays at 1 deg from
-base_scan, 32 mm behind the robot centre, 0.12-3.5 m, 0.0 for no return, Gaussian range noise
-(sigma 0.01 m), a new scan every 0.2 s (5 Hz), /odom with a pose only at 20 Hz, and commands
-quantised like turtlebot3_node (int(v * 100) / 100) and limited to 0.22 m/s and 2.84 rad/s.
+step. `turtlebot3_clean` imitates the interfaces of the real TurtleBot3 Burger with its LDS-01:
+360 rays at 1 deg from base_scan, 32 mm behind the robot centre, 0.12-3.5 m, 0.0 for no return,
+Gaussian range noise (sigma 0.01 m), a new scan every 0.2 s (5 Hz), /odom with a pose only at
+20 Hz, and commands quantised like turtlebot3_node (int(v * 100) / 100) and limited to 0.22 m/s
+and 2.84 rad/s. It was called `turtlebot3` until issue 21: the figures measured before were
+measured with it.
 
-The reality gap (amr_sim.effects, docs/reality-gap.md): `turtlebot3_real` is `turtlebot3` with
-every effect at its typical value (LDS-01 range error and noise by distance band, scan skew,
-dropouts, command latency, motor acceleration, the firmware's 61 rpm clamp, wheel radius and
-track errors, slip, IMU heading drift, and in real time /scan jitter and loss);
-`turtlebot3_lds02` is the same robot with the newer LDS-02 (LD08 driver: the ray count and
-angles change from scan to scan, NaN for no return, range_min 0 and range_max 100 as published).
-A profile name takes options after colons: `turtlebot3_real:randomized` draws every effect
-within its documented range from the seed; `turtlebot3_real:command_latency_s=0.1` sets one;
-`turtlebot3_real:off:scan_skew=1` starts from every effect off (to see what one effect does).
+`turtlebot3` is the Burger as a user gets it: `turtlebot3_clean` with every reality-gap effect
+at its typical value (amr_sim.effects, docs/reality-gap.md: LDS-01 range error and noise by
+distance band, scan skew, dropouts, command latency, motor acceleration, the firmware's 61 rpm
+clamp, wheel radius and track errors, slip, IMU heading drift, and in real time /scan jitter and
+loss); `turtlebot3_lds02` is the same robot with the newer LDS-02 (LD08 driver: the ray count
+and angles change from scan to scan, NaN for no return, range_min 0 and range_max 100 as
+published). A profile name takes options after colons: `turtlebot3:randomized` draws every
+effect within its documented range from the seed; `turtlebot3:command_latency_s=0.1` sets one;
+`turtlebot3:off:scan_skew=1` starts from every effect off (to see what one effect does).
 """
 from __future__ import annotations
 
@@ -32,7 +34,7 @@ OFF = "off"  # the profile option that turns every effect off (then EFFECT=VALUE
 
 @dataclass(frozen=True)
 class SensorProfile:
-    """What the simulated robot's sensors and command path look like (ideal or turtlebot3)."""
+    """What the simulated robot's sensors and command path look like (ideal, turtlebot3...)."""
 
     name: str
     scan_rays: int  # nominal (turtlebot3_lds02: it changes from scan to scan)
@@ -54,7 +56,7 @@ class SensorProfile:
     clamp_commands: bool = False
     # m, forward position of the LiDAR (the scan's origin) from the robot centre, along its axis.
     lidar_offset_x: float = 0.0
-    # The reality gap: None = the clean model above (ideal, turtlebot3), bit for bit as before.
+    # The reality gap: None = the clean models (ideal, turtlebot3_clean), bit for bit as before.
     effects: Effects | None = None
     lidar_model: LidarModel | None = None
     randomize: bool = False  # draw `effects` from the seed (then apply effect_overrides)
@@ -72,24 +74,31 @@ IDEAL = SensorProfile(
     scan_period=None, odom_period=None, odom_topic="/odometry", command_resolution=None,
     max_linear=MAX_LINEAR_SPEED, max_angular=MAX_ANGULAR_SPEED)
 
-TURTLEBOT3 = SensorProfile(
-    name="turtlebot3", scan_rays=360, angle_min=0.0, angle_increment=2.0 * math.pi / 360,
+TURTLEBOT3_CLEAN = SensorProfile(
+    name="turtlebot3_clean", scan_rays=360, angle_min=0.0, angle_increment=2.0 * math.pi / 360,
     range_min=0.12, range_max=3.5, no_return=0.0, range_noise_sigma=0.01,
     scan_period=0.2, odom_period=0.05, odom_topic="/odom", command_resolution=0.01,
     max_linear=MAX_LINEAR_SPEED, max_angular=MAX_ANGULAR_SPEED, clamp_commands=True,
     lidar_offset_x=LIDAR_OFFSET_X)  # base_scan at (-0.032, 0, 0.172) from base_link
 
-TURTLEBOT3_REAL = replace(TURTLEBOT3, name="turtlebot3_real", range_noise_sigma=0.0,
-                          effects=Effects(), lidar_model=LDS01)
+# The Burger as a user gets it: the clean model with every effect at its typical value (the
+# LDS-01 model's range noise replaces the clean model's 1 cm).
+TURTLEBOT3 = replace(TURTLEBOT3_CLEAN, name="turtlebot3", range_noise_sigma=0.0,
+                     effects=Effects(), lidar_model=LDS01)
 
 # ld08_driver: angle_increment = speed / 2300 samples/s (0.78 deg at 5 Hz, ~460 rays),
 # angle_min/angle_max = the first/last valid sample, range_min 0, range_max 100, NaN = no return.
-TURTLEBOT3_LDS02 = replace(TURTLEBOT3_REAL, name="turtlebot3_lds02", scan_rays=460,
+TURTLEBOT3_LDS02 = replace(TURTLEBOT3, name="turtlebot3_lds02", scan_rays=460,
                            angle_increment=2.0 * math.pi / 460, range_min=0.0, range_max=100.0,
                            no_return=math.nan, lidar_model=LDS02)
 
 PROFILES: dict[str, SensorProfile] = {
-    p.name: p for p in (IDEAL, TURTLEBOT3, TURTLEBOT3_REAL, TURTLEBOT3_LDS02)}
+    p.name: p for p in (IDEAL, TURTLEBOT3_CLEAN, TURTLEBOT3, TURTLEBOT3_LDS02)}
+
+# Names a profile no longer has: what to say instead of "unknown profile".
+RETIRED_PROFILES: dict[str, str] = {
+    "turtlebot3_real": "profile 'turtlebot3_real' is now 'turtlebot3' (every reality-gap effect "
+                       "at its typical value); the clean model is 'turtlebot3_clean'"}
 
 
 def get_profile(name: str | SensorProfile) -> SensorProfile:
@@ -97,13 +106,16 @@ def get_profile(name: str | SensorProfile) -> SensorProfile:
 
     Options follow the name after colons: `randomized` (draw every effect from the seed), `off`
     (every effect off) and EFFECT=VALUE (amr_sim.effects), applied last; e.g.
-    "turtlebot3_real:randomized:command_latency_s=0.1". ValueError names what is wrong.
+    "turtlebot3:randomized:command_latency_s=0.1". ValueError names what is wrong (a retired
+    name, e.g. turtlebot3_real, says what it is called now).
     """
     if isinstance(name, SensorProfile):
         return name
     if not isinstance(name, str):
         raise ValueError(f"unknown profile {name!r}; choose one of {sorted(PROFILES)}")
     base, *options = [part.strip() for part in name.split(":")]
+    if base in RETIRED_PROFILES:
+        raise ValueError(RETIRED_PROFILES[base])
     if base not in PROFILES:
         raise ValueError(f"unknown profile {base!r}; choose one of {sorted(PROFILES)}")
     profile = PROFILES[base]
@@ -121,7 +133,7 @@ def get_profile(name: str | SensorProfile) -> SensorProfile:
                              f"and EFFECT=VALUE (in profile {name!r})")
     if profile.effects is None:
         raise ValueError(f"profile {base!r} has no reality-gap effects to "
-                         f"{'randomize' if randomize else 'set'}; use turtlebot3_real or "
+                         f"{'randomize' if randomize else 'set'}; use turtlebot3 or "
                          f"turtlebot3_lds02")
     if randomize and off:
         raise ValueError(f"profile {name!r}: '{RANDOMIZED}' and '{OFF}' exclude each other")
@@ -137,7 +149,7 @@ def randomized_profile_name(name: str) -> str:
     profile = get_profile(name)
     if profile.effects is None:
         raise ValueError(f"--randomize: profile {profile.name!r} has no reality-gap effects "
-                         f"to draw; use turtlebot3_real or turtlebot3_lds02")
+                         f"to draw; use turtlebot3 or turtlebot3_lds02")
     if profile.randomize:
         return profile.name
     base, _, rest = profile.name.partition(":")

@@ -1,6 +1,6 @@
 """The reality gap inside the Simulator: its drivetrain, scanner and random streams.
 
-A profile with effects (turtlebot3_real, turtlebot3_lds02) gives the Simulator a `RealRobot`:
+A profile with effects (turtlebot3, turtlebot3_lds02) gives the Simulator a `RealRobot`:
 the effects in use (typical, set, or drawn from the seed with `:randomized`), the Drivetrain
 that turns commands into motion and reports encoders and IMU, and the RealLidar. Each has its
 own random stream derived from the seed, so a seed fully determines a run, and changing one

@@ -5,8 +5,8 @@
     z_scan, z_v, z_w = sim.step(v, w)         # advance one dt with the command (v m/s, w rad/s)
 
 Each step: the command is cleaned (NaN/inf -> 0 with a rate-limited warning), quantised and
-clipped as the profile's robot does (turtlebot3 only), and saturated by the wheel-speed limit
-(robot.py: both wheels scaled by one factor, which keeps the curvature). The
+clipped as the profile's robot does (the turtlebot3 profiles only), and saturated by the
+wheel-speed limit (robot.py: both wheels scaled by one factor, which keeps the curvature). The
 executed twist becomes the velocity of a pymunk dynamic body (the chord of the exact unicycle arc
 along the mid-step heading, so free motion equals the exact unicycle solution with no lag).
 Walls stop the robot through a speculative contact constraint (amr_sim.contact): the robot ends
@@ -16,7 +16,7 @@ collisions) and its solver pushes out any deeper overlap.
 Sensors come from the body's actual motion: encoder increments (so z_v/z_w reflect collisions and
 saturation), a dead-reckoned odometry pose, and the LiDAR at the robot centre (lidar.py).
 
-A profile with reality-gap effects (turtlebot3_real, turtlebot3_lds02; amr_sim.reality) replaces
+A profile with reality-gap effects (turtlebot3, turtlebot3_lds02; amr_sim.reality) replaces
 the command path by the real drivetrain (latency, firmware clamps, motors, wheel errors, slip),
 the odometry by encoders + a drifting IMU heading, and the LiDAR by the real scanner (skew,
 range error by band, dropouts, the LDS-02's changing rays). Without effects, nothing changes.
@@ -191,7 +191,8 @@ class Simulator:
         Move the robot to `pose` (x, y, theta) at once, as if kidnapped: no time passes, the
         encoders and the dead-reckoned odometry see no motion, the distance does not grow, and
         the LiDAR reads the new place from its next scan on (every step with `ideal`, the next
-        0.2 s slot with `turtlebot3`). Raises WorldError for a pose inside or touching a wall.
+        0.2 s slot with the turtlebot3 profiles). Raises WorldError for a pose inside or touching
+        a wall.
         """
         x, y, theta = self._world.resolve_start(tuple(float(v) for v in pose))
         body = self._body
@@ -322,7 +323,7 @@ class Simulator:
 
     @property
     def scan_time(self) -> float:
-        """Simulated time (s) at which the newest scan was taken (turtlebot3: every 0.2 s)."""
+        """Simulated time (s) at which the newest scan was taken (turtlebot3*: every 0.2 s)."""
         return self._scan_time
 
     @property
@@ -337,7 +338,7 @@ class Simulator:
 
     @property
     def profile(self) -> SensorProfile:
-        """The sensor profile (ideal or turtlebot3)."""
+        """The sensor profile (ideal, turtlebot3, ...)."""
         return self._profile
 
     @property

@@ -28,11 +28,11 @@ _TABLE: dict[str, tuple[Any, str]] = {
                              "(m, m, rad); '' or the default 'outer' in a world without "
                              "it = the world's first start"),
     "profile": ("ideal", "Sensor profile: 'ideal' (CoppeliaSim robot), 'turtlebot3' (the "
-                         "real Burger: LDS-01 at 5 Hz, /odom pose at 20 Hz), "
-                         "'turtlebot3_real' (+ the reality-gap effects at typical values) or "
-                         "'turtlebot3_lds02' (+ effects, LDS-02); options after colons: "
-                         "':randomized' draws the effects from the seed, ':EFFECT=VALUE' sets "
-                         "one (docs/reality-gap.md)"),
+                         "real Burger: LDS-01 at 5 Hz, /odom pose at 20 Hz, the reality-gap "
+                         "effects at typical values), 'turtlebot3_clean' (the same without "
+                         "effects) or 'turtlebot3_lds02' (+ effects, LDS-02); options after "
+                         "colons: ':randomized' draws the effects from the seed, "
+                         "':EFFECT=VALUE' sets one (docs/reality-gap.md)"),
     "dt": (0.05, "Simulation step in seconds (0 < dt <= 1)"),
     "seed": (0, "Seed of the sensor noise (and of the drawn effects): the same seed gives "
                 "the same run"),

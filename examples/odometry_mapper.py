@@ -6,9 +6,9 @@ pose as the truth and draws every scan into a log-odds grid at that pose, so you
 SLAM is for: as the odometry drifts, the walls it draws again later land beside the first ones
 and the map smears. Run it in place of the project's:
 
-    .venv/bin/python scripts/run_sim.py --world lab02 --profile turtlebot3 --slam \
+    .venv/bin/python scripts/run_sim.py --world lab02 --profile turtlebot3_clean --slam \
         --mapper examples.odometry_mapper:OdometryMapper --map-out out/odometry_map
-    .venv/bin/python scripts/evaluate.py --slam --worlds lab02 --profiles turtlebot3 \
+    .venv/bin/python scripts/evaluate.py --slam --worlds lab02 --profiles turtlebot3_clean \
         --duration 120 --mapper examples.odometry_mapper:OdometryMapper --out out/odometry
 
 The grid is a square of `map_size_m` centred on the map frame's origin (the odometry frame at

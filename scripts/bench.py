@@ -42,7 +42,7 @@ def bench_controller(calls: int) -> dict:
 
     from amr_control.wall_follower import WallFollower
     from amr_sim.simulator import Simulator
-    sim = Simulator("lab02", start="outer", profile="turtlebot3", seed=0)
+    sim = Simulator("lab02", start="outer", profile="turtlebot3_clean", seed=0)
     controller = WallFollower(sim.dt)
     p = sim.profile
     if hasattr(controller, "set_scan_geometry"):

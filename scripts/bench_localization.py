@@ -64,7 +64,7 @@ world = World.load({world!r})
 cpu = time.process_time()
 table = ParticleFilter(world, **{params!r}).table
 build = time.process_time() - cpu
-result = run_localization_episode(world, {start!r}, profile="turtlebot3", seed=0,
+result = run_localization_episode(world, {start!r}, profile="turtlebot3_clean", seed=0,
                                   duration={duration!r}, record=False, filter_params={params!r})
 print(json.dumps({{"peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
                   "table": f"{{100 * table.resolution:g}} cm x {{table.angles}}",
@@ -185,7 +185,7 @@ def bench_episode(duration: float) -> dict:
     world = World.load("twin_maze")
     run_localization_episode(world, "south_west", duration=2.0, record=False)  # warm caches
     figures = {}
-    for profile in ("ideal", "turtlebot3"):
+    for profile in ("ideal", "turtlebot3_clean"):
         cpu = time.process_time()
         result = run_localization_episode(world, "south_west", profile=profile, seed=0,
                                           duration=duration, record=False)
@@ -227,7 +227,7 @@ def bench_callbacks(duration: float, seeds: int) -> dict:
     from amr_evaluation.localization_episode import run_localization_episode
     from amr_sim.profiles import get_profile
     world = World.load(BUILDING_40M)
-    profile = get_profile("turtlebot3")
+    profile = get_profile("turtlebot3_clean")
     pf = ParticleFilter(world, lidar_offset_x_m=profile.lidar_offset_x)  # the table, cached
     pf.set_scan_geometry(profile.angle_min, profile.angle_increment, profile.scan_rays,
                          profile.range_min, profile.range_max)
@@ -254,7 +254,7 @@ def bench_callbacks(duration: float, seeds: int) -> dict:
         for start in ("corridor_west", "corridor_north"):
             for seed in range(seeds):
                 calls.clear()
-                result = run_localization_episode(world, start, profile="turtlebot3",
+                result = run_localization_episode(world, start, profile="turtlebot3_clean",
                                                   seed=seed, duration=duration, record=False)
                 episodes.append({"start": start, "seed": seed, "longest_call_s": max(calls),
                                  "calls_over_target": sum(c > TARGET_CALL_S for c in calls),

@@ -16,9 +16,9 @@ tests/test_mapping_kernels.py checks); everything else is the same code, fed the
    whose slam node searches exhaustively (the reference) and the graph without SLAM; the
    graphs take turns in segments (bench_ros.round_robin), so a drifting machine speed hits
    all alike. Also the slam node's worst callback (update + loop closure; /map).
-All with the `turtlebot3` profile (LDS-01 at 5 Hz) and the episode's typical odometry drift
-(the ROS graph: the simulator's exact odometry).
-5. De-skew's cost (--deskew alone runs only this): one SLAM update on `turtlebot3_real` (its
+All with the `turtlebot3_clean` profile (LDS-01 at 5 Hz, no reality gap) and the episode's
+typical odometry drift (the ROS graph: the simulator's exact odometry).
+5. De-skew's cost (--deskew alone runs only this): one SLAM update on `turtlebot3` (its
    scans skewed, the Mapper de-skewing them: `deskew` true) against the same session with
    `deskew` false, lab02, seed 0, alternating; and the de-skew itself (the motion history's
    step + 360 points moved) in microseconds.
@@ -46,7 +46,7 @@ TARGET_ROS_REAL_TIME = 15.0
 SEARCHES = ("branch_and_bound", "exhaustive")
 
 
-def _session(world: str, duration: float, search: str, profile: str = "turtlebot3",
+def _session(world: str, duration: float, search: str, profile: str = "turtlebot3_clean",
              **params):
     """A mapping episode with one search; (result, Mapper statistics, wall seconds)."""
     started = time.perf_counter()
@@ -56,7 +56,7 @@ def _session(world: str, duration: float, search: str, profile: str = "turtlebot
 
 
 def bench_deskew(duration: float, rounds: int = 2) -> dict:
-    """SLAM update medians (CPU ms) on turtlebot3_real with de-skew on and off; its own cost."""
+    """SLAM update medians (CPU ms) on turtlebot3 with de-skew on and off; its own cost."""
     import numpy as np
 
     from amr_common.lidar_models import revolution_ages
@@ -64,7 +64,7 @@ def bench_deskew(duration: float, rounds: int = 2) -> dict:
     medians: dict = {True: [], False: []}
     for _ in range(rounds):  # alternating: a drifting machine speed hits both alike
         for deskew in (True, False):
-            _, stats, _ = _session("lab02", duration, "branch_and_bound", "turtlebot3_real",
+            _, stats, _ = _session("lab02", duration, "branch_and_bound", "turtlebot3",
                                    deskew=deskew)
             medians[deskew].append(stats["update_cpu_ms"]["median"])
     angles = np.radians(np.arange(360.0))
@@ -129,7 +129,7 @@ def bench_ros_graph(duration: float) -> dict:
 
     def make(name: str, slam):
         def build():
-            graphs[name] = bench_ros.Lockstep(wall_follower, False, f"_{name}", "turtlebot3",
+            graphs[name] = bench_ros.Lockstep(wall_follower, False, f"_{name}", "turtlebot3_clean",
                                               slam)
             return graphs[name]
         return build
@@ -165,7 +165,7 @@ def main(argv=None) -> dict:
     run_mapping_episode("lab02", duration=2.0)  # compile / load the kernels from the cache
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     d = bench_deskew(20.0 if args.quick else 60.0)
-    print(f"SLAM update on turtlebot3_real (skewed scans), lab02: median {d['on_median']:.2f} "
+    print(f"SLAM update on turtlebot3 (skewed scans), lab02: median {d['on_median']:.2f} "
           f"ms CPU de-skewing vs {d['off_median']:.2f} ms without: {d['ratio']:.2f}x (target "
           f"<= {TARGET_UPDATE_MS:g} ms); the de-skew itself {d['deskew_us']:.0f} us a scan")
     if args.deskew:

@@ -71,7 +71,7 @@ def measure(quick: bool = False) -> dict:
     from amr_evaluation.navigation_episode import run_navigation_episode
     sources = ["truth"] + (["filter"] if _have_filter() else [])
     episodes = {}
-    for source, profile in itertools.product(sources, ("ideal", "turtlebot3")):
+    for source, profile in itertools.product(sources, ("ideal", "turtlebot3_clean")):
         runs = [run_navigation_episode(world, "outer", "inner_far", profile=profile,
                                        pose_source=source, planner=planner, duration=300.0,
                                        record_trajectory=False) for _ in range(repeats[3])]

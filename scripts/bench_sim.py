@@ -1,13 +1,14 @@
 #!/usr/bin/env python3
 """Benchmark of the headless simulator core: steps per second on lab02.
 
-A core step = physics + a 360-ray LiDAR scan + encoders (turtlebot3 geometry, scanning every step
-so that each step pays for a full scan). Measured in the same run, with the same commands:
+A core step = physics + a 360-ray LiDAR scan + encoders (turtlebot3_clean: the Burger's geometry
+without the reality gap, scanning every step so that each step pays for a full scan). Measured
+in the same run, with the same commands:
 - the same step with the scan done by pymunk's per-ray space.segment_query_first (the slow
   reference: ~100x slower according to simulation.md),
 - the same step with the scan as a numpy rays x segments matrix,
-- the turtlebot3 profile as configured (a new scan only every 0.2 s, i.e. every 4th step),
-- the reality gap: turtlebot3_real (every effect on) against turtlebot3, both scanning every
+- the turtlebot3_clean profile as configured (a new scan only every 0.2 s, i.e. every 4th step),
+- the reality gap: turtlebot3 (every effect on) against turtlebot3_clean, both scanning every
   step and both as configured, and turtlebot3_lds02 as configured, interleaved run by run.
 Targets: >= 10,000 core steps/s; a step with every effect on costs at most 1.5x a clean step.
 `main()` returns the figures as a dict (scripts/bench.py uses it).
@@ -36,7 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import pymunk  # noqa: E402
 
 from amr_sim.lidar import Lidar  # noqa: E402
-from amr_sim.profiles import TURTLEBOT3, TURTLEBOT3_LDS02, TURTLEBOT3_REAL  # noqa: E402
+from amr_sim.profiles import TURTLEBOT3, TURTLEBOT3_CLEAN, TURTLEBOT3_LDS02  # noqa: E402
 from amr_sim.simulator import Simulator  # noqa: E402
 
 TARGET_STEPS_PER_S = 10_000
@@ -106,10 +107,10 @@ def effects_costs(steps: int, chunks: int = 40) -> dict:
     commands, so a load change on the shared machine hits both alike; the cost ratio is their
     total CPU times' ratio (the range: over the first and second half of the chunks).
     """
-    pairs = {"scan every step": (dataclasses.replace(TURTLEBOT3, scan_period=None),
-                                 dataclasses.replace(TURTLEBOT3_REAL, scan_period=None)),
-             "as configured (5 Hz scans)": (TURTLEBOT3, TURTLEBOT3_REAL),
-             "LDS-02 as configured": (TURTLEBOT3, TURTLEBOT3_LDS02)}
+    pairs = {"scan every step": (dataclasses.replace(TURTLEBOT3_CLEAN, scan_period=None),
+                                 dataclasses.replace(TURTLEBOT3, scan_period=None)),
+             "as configured (5 Hz scans)": (TURTLEBOT3_CLEAN, TURTLEBOT3),
+             "LDS-02 as configured": (TURTLEBOT3_CLEAN, TURTLEBOT3_LDS02)}
     size = max(1, steps // chunks)
     cmds = [(float(v), float(w)) for v, w in commands(size * chunks)]
     out = {}
@@ -143,14 +144,14 @@ def scan_us(scanner, repeats: int = 200) -> float:
 
 def main(steps: int = 20_000, repeats: int = 3, verbose: bool = True) -> dict:
     """Measure, print (unless verbose=False) and return the figures."""
-    every_step = dataclasses.replace(TURTLEBOT3, scan_period=None)  # a full scan in every step
+    every_step = dataclasses.replace(TURTLEBOT3_CLEAN, scan_period=None)  # a full scan each step
     time_steps(every_step, 200, 1)  # warm-up: numba compile / cache load
-    for warm in (TURTLEBOT3_REAL, TURTLEBOT3_LDS02):
+    for warm in (TURTLEBOT3, TURTLEBOT3_LDS02):
         time_steps(warm, 200, 1)
     dt = 0.05
     load_before = os.getloadavg()[0]
     core, core_wall = time_steps(every_step, steps, repeats)
-    configured, configured_wall = time_steps(TURTLEBOT3, steps, repeats)
+    configured, configured_wall = time_steps(TURTLEBOT3_CLEAN, steps, repeats)
     numpy_ref, numpy_wall = time_steps(every_step, max(200, steps // 20), repeats, scanner="numpy")
     pymunk_ref, pymunk_wall = time_steps(every_step, max(100, steps // 100), repeats,
                                          scanner="pymunk")
@@ -175,9 +176,9 @@ def main(steps: int = 20_000, repeats: int = 3, verbose: bool = True) -> dict:
         "core_steps_per_wall_s": core_wall,
         "core_us_per_step": 1e6 / core,
         "core_real_time_factor": core * dt,
-        "turtlebot3_profile_steps_per_s": configured,
-        "turtlebot3_profile_steps_per_wall_s": configured_wall,
-        "turtlebot3_profile_real_time_factor": configured * dt,
+        "turtlebot3_clean_profile_steps_per_s": configured,
+        "turtlebot3_clean_profile_steps_per_wall_s": configured_wall,
+        "turtlebot3_clean_profile_real_time_factor": configured * dt,
         "numpy_scan_steps_per_s": numpy_ref,
         "pymunk_scan_steps_per_s": pymunk_ref,
         "numpy_scan_steps_per_wall_s": numpy_wall,
@@ -214,18 +215,18 @@ def _print(r: dict) -> None:
     print(f"  pymunk per-ray queries    {r['pymunk_scan_steps_per_s']:>11,.0f} "
           f"{r['pymunk_scan_steps_per_wall_s']:>12,.0f}"
           f"   -> amr_sim is {r['speedup_vs_pymunk']:.1f}x faster")
-    print(f"  turtlebot3 profile as configured (scan at 5 Hz): "
-          f"{r['turtlebot3_profile_steps_per_s']:,.0f} steps/CPU-s "
-          f"({r['turtlebot3_profile_steps_per_wall_s']:,.0f}/wall-s) = "
-          f"{r['turtlebot3_profile_real_time_factor']:,.0f}x real time")
+    print(f"  turtlebot3_clean profile as configured (scan at 5 Hz): "
+          f"{r['turtlebot3_clean_profile_steps_per_s']:,.0f} steps/CPU-s "
+          f"({r['turtlebot3_clean_profile_steps_per_wall_s']:,.0f}/wall-s) = "
+          f"{r['turtlebot3_clean_profile_real_time_factor']:,.0f}x real time")
     s = r["scan_us"]
     print(f"  one scan (CPU): numba {s['numba']:.1f} us, numpy {s['numpy']:.0f} us, "
           f"pymunk {s['pymunk']:.0f} us; pymunk and numba agree to "
           f"{r['scan_max_abs_difference_pymunk_vs_numba_m']:.1e} m")
     verdict = "meets" if r["meets_target"] else "MISSES"
     print(f"  target {r['target_steps_per_s']:,} steps/s: {verdict}")
-    print("reality gap (every effect on; turtlebot3_real / turtlebot3_lds02 against "
-          "turtlebot3, same run, CPU time per step):")
+    print("reality gap (every effect on; turtlebot3 / turtlebot3_lds02 against "
+          "turtlebot3_clean, same run, CPU time per step):")
     for name, e in r["effects"].items():
         low, high = e["cost_ratio_range"]
         print(f"  {name:<28} clean {e['clean_steps_per_s']:>7,.0f} steps/s, effects "

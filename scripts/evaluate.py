@@ -22,11 +22,11 @@ Examples:
   .venv/bin/python scripts/evaluate.py --worlds lab02,maze_deadends --goals all \
       --profiles ideal,turtlebot3 --seeds 0-2 --duration 300   # navigation to named goals
   .venv/bin/python scripts/evaluate.py --worlds evaluations/worlds/lab02_box.yaml --map lab02 \
-      --goals inner_far --profiles turtlebot3 --seeds 0-4 --duration 200  # a box the map lacks
+      --goals inner_far --profiles turtlebot3_clean --seeds 0-4 --duration 200  # box not on map
   .venv/bin/python scripts/evaluate.py --worlds lab02 --goals all --seeds 0-2 --duration 200 \
       --localizer examples.likelihood_mcl:LikelihoodFieldMcl --out out/mine   # your own link
-  .venv/bin/python scripts/evaluate.py --slam --worlds all --profiles turtlebot3 --seeds 0-4 \
-      --starts south_west,outer,south,south_east --duration 300   # SLAM: mapping figures
+  .venv/bin/python scripts/evaluate.py --slam --worlds all --profiles turtlebot3_clean \
+      --seeds 0-4 --starts south_west,outer,south,south_east --duration 300   # SLAM figures
   .venv/bin/python scripts/evaluate.py --slam --worlds lab02 --profiles turtlebot3 \
       --duration 120 --mapper examples.odometry_mapper:OdometryMapper   # your own mapper
 Options given on the command line override the same keys of --config.
@@ -104,10 +104,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--pose-source", default=None, choices=["filter", "truth"],
                         help="navigation: the particle filter (default) or the true pose")
     parser.add_argument("--profiles", default=None, help="comma-separated sensor profiles: ideal, "
-                        "turtlebot3, turtlebot3_real, turtlebot3_lds02 (default ideal)")
+                        "turtlebot3, turtlebot3_clean, turtlebot3_lds02 (default ideal)")
     parser.add_argument("--randomize", action="store_true", help="draw every reality-gap "
                         "effect within its documented range from each episode's seed "
-                        "(profiles turtlebot3_real, turtlebot3_lds02; listed under the table)")
+                        "(profiles turtlebot3, turtlebot3_lds02; listed under the table)")
     parser.add_argument("--seeds", default=None, help="comma-separated seeds or ranges, e.g. "
                         "0,1,2 or 0-9 (default 0)")
     parser.add_argument("--duration", type=float, default=None,

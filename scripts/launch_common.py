@@ -270,8 +270,8 @@ def simulated_robot_parameters(tuning: dict, params_file, profile_name: str) -> 
 
     Only those neither the -p overrides nor the params file set (the rehearsal's
     turtlebot3.yaml sets them itself), but for the scan time: that is the simulated scanner's
-    (the robot's file states the real LiDAR's 0.2 s, which the clean turtlebot3 profile does
-    not skew: de-skewing its scans would smear them); -p still sets it.
+    (the robot's file states the real LiDAR's 0.2 s, which turtlebot3_clean does not skew:
+    de-skewing its scans would smear them); -p still sets it.
     """
     from amr_common.controller_loader import DEFAULT_CONTROLLER, load_controller_class
     from amr_evaluation.episode import robot_parameters

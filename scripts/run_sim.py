@@ -36,7 +36,7 @@ Examples:
   .venv/bin/python scripts/run_sim.py --profile turtlebot3 --realtime --slam --teleop \
       --map-out maps/mine           # drive with scripts/teleop.py (same ROS_DOMAIN_ID)
   .venv/bin/python scripts/run_sim.py --world evaluations/worlds/lab02_box.yaml --map lab02 \
-      --goal inner_far --profile turtlebot3 --plot out/box.png   # a box the map lacks
+      --goal inner_far --profile turtlebot3_clean --plot out/box.png   # a box the map lacks
 `--map`: the particle filter, the planner and /map use this map while the simulator drives in
 `--world` (default: the world): a map SLAM built, or an old map of a changed room.
 Local runs are isolated: loopback discovery and a free ROS_DOMAIN_ID (printed at startup).
@@ -106,10 +106,10 @@ def _parser() -> OneLineArgumentParser:
     parser.add_argument("--start", default=None, help="named start, X,Y,THETA (m, m, rad; e.g. "
                         "--start -1.0,-1.0,1.57), or 'all' to run every named start in turn "
                         "(default: the world's first start)")
-    parser.add_argument("--profile", default="ideal", help="ideal (default), turtlebot3, "
-                        "turtlebot3_real or turtlebot3_lds02 (the Burger with the reality-gap "
-                        "effects; options after colons: turtlebot3_real:command_latency_s=0.1, "
-                        "see docs/reality-gap.md)")
+    parser.add_argument("--profile", default="ideal", help="ideal (default), turtlebot3 or "
+                        "turtlebot3_lds02 (the Burger with the reality-gap effects; options "
+                        "after colons: turtlebot3:command_latency_s=0.1, see "
+                        "docs/reality-gap.md) or turtlebot3_clean (the Burger without them)")
     parser.add_argument("--randomize", action="store_true", help="draw every reality-gap "
                         "effect within its documented range from --seed (the report lists the "
                         "drawn values)")

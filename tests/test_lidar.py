@@ -9,7 +9,7 @@ import pytest
 
 from amr_common.world import World
 from amr_sim.lidar import Lidar
-from amr_sim.profiles import IDEAL, TURTLEBOT3, get_profile
+from amr_sim.profiles import IDEAL, TURTLEBOT3, TURTLEBOT3_CLEAN, get_profile
 from amr_sim.simulator import Simulator
 
 ROOM = (4.0, 3.0)  # rectangular room [0, 4] x [0, 3]
@@ -76,7 +76,7 @@ def test_ideal_no_return_is_nan_beyond_8_m(long_corridor):
 
 
 def test_turtlebot3_encoding_zero_beyond_3_5_m_and_below_0_12_m(long_corridor):
-    noiseless = dataclasses.replace(TURTLEBOT3, range_noise_sigma=0.0)
+    noiseless = dataclasses.replace(TURTLEBOT3_CLEAN, range_noise_sigma=0.0)
     sim = Simulator(long_corridor, start=(1.0, 0.11, 0.0), profile=noiseless)
     z = sim.measure()[0]
     assert z.shape == (360,)
@@ -88,11 +88,11 @@ def test_turtlebot3_encoding_zero_beyond_3_5_m_and_below_0_12_m(long_corridor):
     assert not np.isnan(z).any()
 
 
-def test_turtlebot3_noise_sigma_and_reproducibility(room):
+def test_turtlebot3_clean_noise_sigma_and_reproducibility(room):
     pose = (1.3, 1.1, 0.4)
-    a = Simulator(room, start=pose, profile="turtlebot3", seed=3).measure()[0]
-    b = Simulator(room, start=pose, profile="turtlebot3", seed=3).measure()[0]
-    c = Simulator(room, start=pose, profile="turtlebot3", seed=4).measure()[0]
+    a = Simulator(room, start=pose, profile="turtlebot3_clean", seed=3).measure()[0]
+    b = Simulator(room, start=pose, profile="turtlebot3_clean", seed=3).measure()[0]
+    c = Simulator(room, start=pose, profile="turtlebot3_clean", seed=4).measure()[0]
     np.testing.assert_array_equal(a, b)
     assert not np.array_equal(a, c)
     lx, ly = pose[0] - 0.032 * math.cos(pose[2]), pose[1] - 0.032 * math.sin(pose[2])  # base_scan
@@ -120,7 +120,7 @@ def test_turtlebot3_scan_refreshes_at_5_hz(room):
 
 @pytest.mark.parametrize("theta", [0.0, 0.7, -2.4])
 def test_turtlebot3_scans_from_base_scan_32_mm_behind_the_centre(room, theta):
-    noiseless = dataclasses.replace(TURTLEBOT3, range_noise_sigma=0.0)
+    noiseless = dataclasses.replace(TURTLEBOT3_CLEAN, range_noise_sigma=0.0)
     sim = Simulator(room, start=(2.0, 1.5, theta), profile=noiseless)
     lx, ly = sim.lidar_position
     assert (lx, ly) == pytest.approx((2.0 - 0.032 * math.cos(theta),
@@ -144,5 +144,6 @@ def test_profiles():
     assert get_profile("ideal") is IDEAL and get_profile(TURTLEBOT3) is TURTLEBOT3
     assert IDEAL.angle_max == pytest.approx(2 * math.pi - 2 * math.pi / 240)
     assert TURTLEBOT3.angle_max == pytest.approx(math.radians(359))
+    assert get_profile("turtlebot3_clean") is TURTLEBOT3_CLEAN
     with pytest.raises(ValueError, match="unknown profile 'gazebo'"):
         get_profile("gazebo")

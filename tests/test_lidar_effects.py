@@ -1,6 +1,6 @@
 """The real scanner's effects: noise and error by datasheet band, dropouts, scan skew, the LDS-02.
 
-Each effect alone (the others off: `turtlebot3_real:off:...`), measured against the room's
+Each effect alone (the others off: `turtlebot3:off:...`), measured against the room's
 analytic distances.
 """
 from __future__ import annotations
@@ -50,36 +50,36 @@ def readings(room, spec, degrees, scans=2000, seed=0):
 
 def test_noise_sigma_follows_the_datasheet_bands(room):
     near_0, near_1, far = 0.4, LIDAR[0], H - LIDAR[1]
-    r = readings(room, "turtlebot3_real:off:range_noise_share=1", [90.0, 180.0, 270.0])
+    r = readings(room, "turtlebot3:off:range_noise_share=1", [90.0, 180.0, 270.0])
     # LDS-01 precision: 10 mm below 0.5 m, 3.5 % of the range above.
     assert r[:, 1].std() == pytest.approx(0.010, rel=0.06)
     assert r[:, 2].std() == pytest.approx(0.010, rel=0.06)
     assert r[:, 0].std() == pytest.approx(0.035 * far, rel=0.06)
     assert r.mean(axis=0) == pytest.approx([far, near_1, near_0], abs=4e-3)
-    half = readings(room, "turtlebot3_real:off:range_noise_share=0.5", [270.0])
+    half = readings(room, "turtlebot3:off:range_noise_share=0.5", [270.0])
     assert half.std() == pytest.approx(0.005, rel=0.06)
 
 
 def test_range_error_grows_with_distance_by_band(room):
-    r = readings(room, "turtlebot3_real:off:range_bias_share=1", [90.0, 270.0], scans=1)[0]
+    r = readings(room, "turtlebot3:off:range_bias_share=1", [90.0, 270.0], scans=1)[0]
     # LDS-01 accuracy: 15 mm below 0.5 m, 5 % of the range above.
     assert r == pytest.approx([1.05 * (H - LIDAR[1]), 0.4 + 0.015], abs=1e-12)
-    r = readings(room, "turtlebot3_real:off:range_bias_share=-0.5", [90.0, 270.0], scans=1)[0]
+    r = readings(room, "turtlebot3:off:range_bias_share=-0.5", [90.0, 270.0], scans=1)[0]
     assert r == pytest.approx([0.975 * (H - LIDAR[1]), 0.4 - 0.0075], abs=1e-12)
 
 
 def test_dropouts_random_more_at_grazing_incidence_and_long_range(room):
     # 20 full scans: ~6,000 rays in range, the share within 0.02 of the setting.
-    in_range = Simulator(room, start=POSE, profile="turtlebot3_real:off").lidar.scan(0.0) > 0.0
-    sim = Simulator(room, start=POSE, profile="turtlebot3_real:off:dropout_share=0.3", seed=1)
+    in_range = Simulator(room, start=POSE, profile="turtlebot3:off").lidar.scan(0.0) > 0.0
+    sim = Simulator(room, start=POSE, profile="turtlebot3:off:dropout_share=0.3", seed=1)
     shares = [np.mean(sim.lidar.scan(0.0)[in_range] == 0.0) for _ in range(20)]
     assert np.mean(shares) == pytest.approx(0.3, abs=0.02)
-    r = readings(room, "turtlebot3_real:off:dropout_grazing_share=1", [270.0, 350.0])
+    r = readings(room, "turtlebot3:off:dropout_grazing_share=1", [270.0, 350.0])
     grazing = (1.0 - 2.0 * math.cos(math.radians(80.0))) ** 2  # 80 deg incidence: 0.43
     assert np.mean(r[:, 0] == 0.0) == 0.0  # head-on: never
     assert np.mean(r[:, 1] == 0.0) == pytest.approx(grazing, abs=0.03)
     # Long range: (r / 3.5 m)^2 of the setting.
-    r = readings(room, "turtlebot3_real:off:dropout_far_share=0.8", [90.0, 270.0])
+    r = readings(room, "turtlebot3:off:dropout_far_share=0.8", [90.0, 270.0])
     assert np.mean(r[:, 0] == 0.0) == pytest.approx(0.8 * (2.6 / 3.5) ** 2, abs=0.03)
     assert np.mean(r[:, 1] == 0.0) == pytest.approx(0.8 * (0.4 / 3.5) ** 2, abs=0.01)
 
@@ -96,7 +96,7 @@ def test_skewed_scan_equals_each_ray_cast_from_the_pose_at_its_time(room, dt):
     start, v, w = (1.5, 1.5, 0.0), 0.2, 1.5
     scans = {}
     for skew in (1, 0):
-        sim = Simulator(room, start=start, dt=dt, profile=f"turtlebot3_real:off:scan_skew={skew}")
+        sim = Simulator(room, start=start, dt=dt, profile=f"turtlebot3:off:scan_skew={skew}")
         for _ in range(round(0.4 / dt)):  # constant (v, w): a scan at 0.2 s and one at 0.4 s
             z, _, _ = sim.step(v, w)
         assert sim.scan_time == pytest.approx(0.4) and sim.collisions == 0
@@ -143,7 +143,7 @@ def test_lds02_rays_change_from_scan_to_scan_with_nan_for_no_return(room):
 
 
 def test_compiled_scan_equals_its_numpy_twin(room):
-    sim = Simulator("maze_deadends", profile="turtlebot3_real", seed=4)
+    sim = Simulator("maze_deadends", profile="turtlebot3", seed=4)
     for k in range(13):
         sim.step(0.2, 2.0 * math.sin(k))
     lidar = sim.lidar

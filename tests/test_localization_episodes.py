@@ -3,7 +3,9 @@
 End to end without ROS: the wall follower explores, the particle filter localizes (the same
 classes as the nodes). Global localization on every bundled world in both profiles, the exactly
 symmetric world that must never be declared, and kidnapping. The large sweep behind the
-README's figures is `scripts/evaluate.py --localize`; these runs are its small, fixed sample.
+README's figures is `scripts/evaluate.py --localize`; these runs are its small, fixed sample
+(`turtlebot3` here is the Burger with the reality gap's effects; the README's figures were
+measured with the clean model, `turtlebot3_clean`).
 """
 from __future__ import annotations
 

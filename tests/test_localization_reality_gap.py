@@ -163,7 +163,7 @@ def test_the_filter_tracks_a_turning_robot_from_its_skewed_scans():
     """
     from amr_sim.simulator import Simulator
     world = World.load("lab02")
-    sim = Simulator(world, start="inner", profile="turtlebot3_real:off:scan_skew=1", seed=0)
+    sim = Simulator(world, start="inner", profile="turtlebot3:off:scan_skew=1", seed=0)
     pf = ParticleFilter(world, initial_pose=list(sim.pose), lidar_offset_x_m=-0.032,
                         lidar_model="LDS-01", initial_pose_sigma=[0.02, 0.02, 0.03])
     pf.set_scan_geometry(*sim.scan_geometry)
@@ -244,8 +244,8 @@ def _check_episode(result, within_s: float) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("profile, seed", [("turtlebot3_real:randomized", 1),
-                                           ("turtlebot3_real:randomized", 3),
+@pytest.mark.parametrize("profile, seed", [("turtlebot3:randomized", 1),
+                                           ("turtlebot3:randomized", 3),
                                            ("turtlebot3_lds02:randomized", 0)])
 def test_the_filter_localizes_under_the_reality_gap(profile, seed):
     """Every LiDAR effect drawn from the seed: localized, never falsely, tracked within 2/8 cm.
@@ -270,7 +270,7 @@ def test_the_filter_localizes_on_a_slam_map_of_the_world():
     from amr_mapping.mapper import Mapper
     world = World.load("lab02")
     mapper = Mapper({"lidar_offset_x_m": -0.032})
-    run_mapping_episode(world, "inner", profile="turtlebot3", seed=0, duration=100.0,
+    run_mapping_episode(world, "inner", profile="turtlebot3_clean", seed=0, duration=100.0,
                         mapper=mapper, world_frame=True)
     slam_map = World.from_raster(mapper.occupancy_raster(), name="lab02_slam")
     result = run_localization_episode(world, "inner", profile="turtlebot3", seed=2,

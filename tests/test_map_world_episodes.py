@@ -64,7 +64,7 @@ def test_a_slam_like_map_is_ray_marched_with_the_same_scans(lab02_map):
     raster = bench_map_world.slam_like(World.load(lab02_map).raster,
                                        keep_clear=polygon.starts.values())
     world = World.from_raster(raster, starts=polygon.starts)
-    sim = Simulator(world, start="outer", profile="turtlebot3", seed=2)
+    sim = Simulator(world, start="outer", profile="turtlebot3_clean", seed=2)
     assert sim.lidar.grid is not None  # World.march_grid: 1,366 segments
     p = sim.profile
     by_segments = Lidar(world.segments, p.scan_rays, p.angle_min, p.angle_increment,

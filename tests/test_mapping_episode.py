@@ -98,7 +98,7 @@ def test_drifting_odometry_is_exact_without_drift_and_seeded_with_it():
 
 @pytest.mark.slow
 def test_a_short_mapping_episode_meets_the_figures():
-    result = run_mapping_episode("lab02", profile="turtlebot3", seed=0, duration=60.0)
+    result = run_mapping_episode("lab02", profile="turtlebot3_clean", seed=0, duration=60.0)
     assert result.odometry_max_error_m > 0.05  # the drift is there to be corrected
     assert result.trajectory_rmse_m <= 0.015 and result.trajectory_max_m <= 0.05
     assert result.precision >= 0.95 and result.recall >= 0.95
@@ -108,9 +108,9 @@ def test_a_short_mapping_episode_meets_the_figures():
 
 
 @pytest.mark.parametrize("profile, deskew, drift", [
-    ("turtlebot3", False, TYPICAL_DRIFT), ("ideal", False, TYPICAL_DRIFT),
-    ("turtlebot3_real", True, None), ("turtlebot3_lds02:randomized", True, None),
-    ("turtlebot3_real:off", False, None)])
+    ("turtlebot3_clean", False, TYPICAL_DRIFT), ("ideal", False, TYPICAL_DRIFT),
+    ("turtlebot3", True, None), ("turtlebot3_lds02:randomized", True, None),
+    ("turtlebot3:off", False, None)])
 def test_the_mapper_deskews_what_the_profile_skews_and_odometry_drifts_once(profile, deskew,
                                                                             drift):
     from amr_sim.profiles import get_profile

@@ -237,8 +237,8 @@ def test_searches_carry_their_poses_by_the_odometry_since_their_scan():
         assert np.allclose(carried, (x, y, math.remainder(theta, 2 * math.pi)), atol=1e-9)
 
 
-@pytest.mark.parametrize("profile, must_localize", [("turtlebot3", True),
-                                                     ("turtlebot3_real", False)])
+@pytest.mark.parametrize("profile, must_localize", [("turtlebot3_clean", True),
+                                                     ("turtlebot3", False)])
 def test_no_filter_call_searches_more_than_a_slice_and_the_floor_still_localizes(tmp_path,
                                                                                monkeypatch,
                                                                                profile,

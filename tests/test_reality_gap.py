@@ -4,6 +4,7 @@ The scanner's effects (noise by band, dropouts, skew, LDS-02) are in test_lidar_
 """
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
@@ -13,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from amr_common.lidar_models import LDS01
 from amr_common.robot import TRACK, WHEEL_RADIUS
 from amr_sim.drivetrain import (
     FIRMWARE_MAX_ANGULAR,
@@ -30,7 +32,7 @@ DT = 0.05
 
 def drive_only(**on) -> str:
     """A profile with every effect off but `on` (the real drivetrain and scanner code paths)."""
-    return "turtlebot3_real:off" + "".join(f":{k}={v}" for k, v in on.items())
+    return "turtlebot3:off" + "".join(f":{k}={v}" for k, v in on.items())
 
 
 def digest(profile: str, seed: int) -> str:
@@ -47,37 +49,63 @@ def digest(profile: str, seed: int) -> str:
 
 
 @pytest.mark.parametrize("profile, expected", [("ideal", "d34df50ce4018847"),
-                                               ("turtlebot3", "466a69c738c3c327")])
+                                               ("turtlebot3_clean", "466a69c738c3c327")])
 def test_clean_profiles_are_unchanged(profile, expected):
-    # Fingerprints taken on main before the effects existed (3 wall contacts included).
+    # Fingerprints taken on main before the effects existed (3 wall contacts included); the
+    # clean Burger was called `turtlebot3` then.
     assert digest(profile, 3) == expected
+
+
+def test_turtlebot3_clean_is_the_old_turtlebot3_and_turtlebot3_has_every_effect():
+    clean, burger = get_profile("turtlebot3_clean"), get_profile("turtlebot3")
+    # The clean model's fields as `turtlebot3` had them before issue 21 (bar the name).
+    assert dataclasses.asdict(clean) == {
+        "name": "turtlebot3_clean", "scan_rays": 360, "angle_min": 0.0,
+        "angle_increment": 2.0 * math.pi / 360, "range_min": 0.12, "range_max": 3.5,
+        "no_return": 0.0, "range_noise_sigma": 0.01, "scan_period": 0.2, "odom_period": 0.05,
+        "odom_topic": "/odom", "command_resolution": 0.01, "max_linear": 0.22,
+        "max_angular": 2.84, "clamp_commands": True, "lidar_offset_x": -0.032, "effects": None,
+        "lidar_model": None, "randomize": False, "effect_overrides": ()}
+    assert burger == dataclasses.replace(clean, name="turtlebot3", range_noise_sigma=0.0,
+                                         effects=Effects(), lidar_model=LDS01)
+
+
+@pytest.mark.parametrize("spec", ["turtlebot3_real", "turtlebot3_real:randomized"])
+def test_the_retired_turtlebot3_real_says_what_it_is_called_now(spec):
+    with pytest.raises(ValueError, match=r"\A[^\n]*\Z") as error:  # one line
+        get_profile(spec)
+    assert str(error.value) == ("profile 'turtlebot3_real' is now 'turtlebot3' (every "
+                                "reality-gap effect at its typical value); the clean model is "
+                                "'turtlebot3_clean'")
 
 
 # --- profiles, parameters and bad input --------------------------------------------------------
 def test_profile_options_set_draw_and_turn_off_effects():
-    typical = get_profile("turtlebot3_real")
+    typical = get_profile("turtlebot3")
     assert typical.effects == Effects() and not typical.randomize
-    assert get_profile("turtlebot3_real:command_latency_s=0.1").effects.command_latency_s == 0.1
-    off = get_profile("turtlebot3_real:off:scan_skew=on").effects
+    assert get_profile("turtlebot3:command_latency_s=0.1").effects.command_latency_s == 0.1
+    off = get_profile("turtlebot3:off:scan_skew=on").effects
     assert off.scan_skew == 1.0 and off.command_latency_s == 0.0 and off.firmware_clamp == 0.0
     randomized = get_profile("turtlebot3_lds02:randomized:dropout_share=0.2")
     assert randomized.randomize and dict(randomized.effect_overrides) == {"dropout_share": 0.2}
-    assert randomized_profile_name("turtlebot3_real:track_error=0.01") == \
-        "turtlebot3_real:randomized:track_error=0.01"
-    assert get_profile("ideal").effects is None and get_profile("turtlebot3").effects is None
+    assert randomized_profile_name("turtlebot3:track_error=0.01") == \
+        "turtlebot3:randomized:track_error=0.01"
+    assert get_profile("ideal").effects is None
+    assert get_profile("turtlebot3_clean").effects is None
 
 
 @pytest.mark.parametrize("spec, words", [
-    ("turtlebot3_real:command_latency_s=-0.1", "command_latency_s must be a number in [0, 2] s"),
-    ("turtlebot3_real:dropout_share=1.5", "dropout_share must be a number in [0, 1]"),
-    ("turtlebot3_real:wheel_slip_sigma=nan", "wheel_slip_sigma must be a number"),
-    ("turtlebot3_real:scan_jitter_s=fast", "scan_jitter_s must be a number"),
-    ("turtlebot3_real:scan_skew=0.5", "scan_skew must be 0 (off) or 1 (on)"),
-    ("turtlebot3_real:latency=0.1", "unknown effect 'latency'"),
-    ("turtlebot3_real:noisy", "profile option 'noisy'"),
-    ("turtlebot3_real:off:randomized", "exclude each other"),
+    ("turtlebot3:command_latency_s=-0.1", "command_latency_s must be a number in [0, 2] s"),
+    ("turtlebot3:dropout_share=1.5", "dropout_share must be a number in [0, 1]"),
+    ("turtlebot3:wheel_slip_sigma=nan", "wheel_slip_sigma must be a number"),
+    ("turtlebot3:scan_jitter_s=fast", "scan_jitter_s must be a number"),
+    ("turtlebot3:scan_skew=0.5", "scan_skew must be 0 (off) or 1 (on)"),
+    ("turtlebot3:latency=0.1", "unknown effect 'latency'"),
+    ("turtlebot3:noisy", "profile option 'noisy'"),
+    ("turtlebot3:off:randomized", "exclude each other"),
     ("ideal:randomized", "profile 'ideal' has no reality-gap effects"),
-    ("turtlebot3:command_latency_s=0.1", "profile 'turtlebot3' has no reality-gap effects"),
+    ("turtlebot3_clean:command_latency_s=0.1",
+     "profile 'turtlebot3_clean' has no reality-gap effects"),
 ])
 def test_bad_profile_options_are_clear_value_errors(spec, words):
     with pytest.raises(ValueError, match=r"\A[^\n]*\Z") as error:  # one line
@@ -110,7 +138,7 @@ def test_drawn_effects_stay_in_their_documented_ranges():
 
 def test_a_seed_fully_determines_a_randomized_run():
     def run(seed):
-        sim = Simulator("maze_deadends", profile="turtlebot3_real:randomized", seed=seed)
+        sim = Simulator("maze_deadends", profile="turtlebot3:randomized", seed=seed)
         scans = []
         for k in range(200):
             z, v, w = sim.step(0.2, 1.2 * math.sin(0.07 * k))
@@ -221,9 +249,10 @@ SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
 
 
 @pytest.mark.parametrize("argv, words", [
-    (["--profile", "turtlebot3_real:command_latency_s=-1"], "command_latency_s must be"),
-    (["--profile", "turtlebot3_real:dropout_share=1.5"], "dropout_share must be"),
+    (["--profile", "turtlebot3:command_latency_s=-1"], "command_latency_s must be"),
+    (["--profile", "turtlebot3:dropout_share=1.5"], "dropout_share must be"),
     (["--profile", "turtlebot3_lds02:scan_jitter_s=nan"], "scan_jitter_s must be"),
+    (["--profile", "turtlebot3_real"], "profile 'turtlebot3_real' is now 'turtlebot3'"),
     (["--randomize"], "--randomize: profile 'ideal' has no reality-gap effects"),
 ])
 def test_bad_effects_are_one_line_errors_with_exit_code_2(capsys, argv, words):
@@ -243,20 +272,20 @@ def test_evaluate_randomize_lists_the_drawn_effects(capsys, tmp_path):
     sys.path.insert(0, str(SCRIPTS))
     import evaluate
     code = evaluate.main(["--worlds", "lab02", "--starts", "outer", "--profiles",
-                          "turtlebot3_real", "--randomize", "--seeds", "3,4", "--duration", "5",
+                          "turtlebot3", "--randomize", "--seeds", "3,4", "--duration", "5",
                           "--jobs", "1", "--no-sheet", "--out", str(tmp_path / "out")])
     out = capsys.readouterr().out
     assert code == 0
     rows = json.loads((tmp_path / "out" / "results.json").read_text())["episodes"]
     drawn = [draw_effects_of(seed) for seed in (3, 4)]
     assert [row["effects"] for row in rows] == drawn
-    assert [row["profile"] for row in rows] == ["turtlebot3_real:randomized"] * 2
+    assert [row["profile"] for row in rows] == ["turtlebot3:randomized"] * 2
     assert f"seed 3: {Effects(**drawn[0]).summary()}" in out
     assert "latency_s=" in (tmp_path / "out" / "results.csv").read_text()
 
 
 def draw_effects_of(seed: int) -> dict:
-    return Simulator("lab02", profile="turtlebot3_real:randomized", seed=seed).effects.as_dict()
+    return Simulator("lab02", profile="turtlebot3:randomized", seed=seed).effects.as_dict()
 
 
 def test_episodes_retell_the_changing_lds02_geometry_and_record_the_effects():

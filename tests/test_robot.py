@@ -99,7 +99,7 @@ def drive(sim, v, w, seconds):
         sim.step(v, w)
 
 
-@pytest.mark.parametrize("profile", ["ideal", "turtlebot3"])
+@pytest.mark.parametrize("profile", ["ideal", "turtlebot3_clean"])  # equal wheels, no slip
 def test_robot_cannot_pass_through_a_wall(profile):
     # lab02 outer ring, 0.6 m south of the north wall (y = 1.2), driving north at full speed.
     sim = Simulator("lab02", start=(1.0, 0.6, math.pi / 2), profile=profile)
@@ -119,6 +119,17 @@ def test_robot_cannot_pass_through_a_wall(profile):
     assert not sim.in_contact
     drive(sim, 0.2, 0.0, 2.0)
     assert sim.collisions == 2
+
+
+def test_the_burger_with_the_reality_gap_pushes_at_a_wall_without_sinking():
+    # Its right wheel 0.5 % larger: a straight command curves left, so the pushing robot turns
+    # and slides along the wall (5 cm in 5 s) instead of resting; it never sinks into it.
+    sim = Simulator("lab02", start=(1.0, 0.6, math.pi / 2), profile="turtlebot3")
+    for _ in range(200):
+        sim.step(0.22, 0.0)
+        assert sim.pose[1] + robot.ROBOT_RADIUS - 1.2 < 0.005
+        assert sim.min_clearance > -0.005
+    assert sim.in_contact and sim.collisions >= 1
 
 
 def test_corner_and_oblique_contacts_do_not_sink():

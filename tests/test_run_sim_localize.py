@@ -93,15 +93,15 @@ def test_realtime_rehearsal_runs_the_robot_graph_with_the_filter(tmp_path):
 
 
 def test_the_simulated_robot_sets_the_scan_time_even_over_the_robots_params_file():
-    # The rehearsal reads turtlebot3.yaml (the real LiDAR: 0.2 s); the clean turtlebot3
-    # profile does not skew its scans, and de-skewing them smeared the walls: the rehearsal
-    # above drove 0.45 m in 10 s instead of more than 0.5 m. -p still sets it.
+    # The rehearsal reads turtlebot3.yaml (the real LiDAR: 0.2 s); the clean profile
+    # (turtlebot3_clean) does not skew its scans, and de-skewing them smeared the walls: the
+    # rehearsal above drove 0.45 m in 10 s instead of more than 0.5 m. -p still sets it.
     from launch_common import ROBOT_PARAMS, SIM_PARAMS
     from launch_common import simulated_robot_parameters as _robot_parameters
-    assert _robot_parameters({}, ROBOT_PARAMS, "turtlebot3") == {"scan_revolution_s": 0.0}
-    assert _robot_parameters({}, ROBOT_PARAMS, "turtlebot3_real") == {"scan_revolution_s": 0.2}
-    assert _robot_parameters({"scan_revolution_s": 0.1}, ROBOT_PARAMS, "turtlebot3") == {}
-    assert _robot_parameters({}, SIM_PARAMS, "turtlebot3_real") == {
+    assert _robot_parameters({}, ROBOT_PARAMS, "turtlebot3_clean") == {"scan_revolution_s": 0.0}
+    assert _robot_parameters({}, ROBOT_PARAMS, "turtlebot3") == {"scan_revolution_s": 0.2}
+    assert _robot_parameters({"scan_revolution_s": 0.1}, ROBOT_PARAMS, "turtlebot3_clean") == {}
+    assert _robot_parameters({}, SIM_PARAMS, "turtlebot3") == {
         "lidar_offset_x_m": -0.032, "scan_revolution_s": 0.2}
 
 

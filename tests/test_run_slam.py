@@ -34,7 +34,7 @@ pytestmark = pytest.mark.slow
 
 def test_slam_run_writes_the_map_the_report_and_the_plot(tmp_path, capsys):
     maps, report_path = tmp_path / "maps", tmp_path / "run.json"
-    code = run_sim.main(["--profile", "turtlebot3", "--slam", "--map-out", str(maps),
+    code = run_sim.main(["--profile", "turtlebot3_clean", "--slam", "--map-out", str(maps),
                          "--duration", "45", "--report", str(report_path), "--plot",
                          str(tmp_path / "slam.png")])
     out = capsys.readouterr().out
@@ -69,8 +69,8 @@ def _sigint_when(tmp_path, ready, options=(), ros=None) -> tuple[int, str]:
     log_path = tmp_path / "run.log"
     with open(log_path, "w") as log:
         process = subprocess.Popen(
-            [sys.executable, str(SCRIPTS / "run_sim.py"), "--profile", "turtlebot3", "--slam",
-             "--map-out", str(tmp_path / "maps"), "--duration", "3000", "--report",
+            [sys.executable, str(SCRIPTS / "run_sim.py"), "--profile", "turtlebot3_clean",
+             "--slam", "--map-out", str(tmp_path / "maps"), "--duration", "3000", "--report",
              str(tmp_path / "run.json"), *options],
             cwd=REPO, env=dict(os.environ), stdout=log, stderr=subprocess.STDOUT)
         try:
@@ -191,7 +191,7 @@ def test_run_robot_maps_the_emulated_corridor_and_writes_the_map_on_ctrl_c(ros, 
 def test_evaluate_slam_runs_mapping_episodes_with_their_figures(capsys, tmp_path):
     out = tmp_path / "out"
     code = evaluate.main(["--slam", "--worlds", "lab02,twin_maze_small", "--starts",
-                          "outer,south_east", "--profiles", "turtlebot3", "--seeds", "0",
+                          "outer,south_east", "--profiles", "turtlebot3_clean", "--seeds", "0",
                           "--duration", "20", "--jobs", "2", "--out", str(out),
                           "--slam-param", "loop_closure:=false"])
     printed = capsys.readouterr().out
@@ -201,7 +201,7 @@ def test_evaluate_slam_runs_mapping_episodes_with_their_figures(capsys, tmp_path
         ("lab02", "outer", False), ("twin_maze_small", "south_east", False)]
     for e in episodes:
         assert e["trajectory_rmse_m"] < 0.015 and e["precision"] > 0.9 and e["recall"] > 0.8
-    assert "| lab02 | outer | turtlebot3 | 0 | False |" in printed
+    assert "| lab02 | outer | turtlebot3_clean | 0 | False |" in printed
     assert (out / "results.csv").read_text().startswith("world,")
 
 

@@ -26,9 +26,9 @@ def run(profile, seed, steps=120):
 
 
 def test_same_seed_same_run_different_seed_different_noise():
-    scans_a, poses_a, _ = run("turtlebot3", seed=11)
-    scans_b, poses_b, _ = run("turtlebot3", seed=11)
-    scans_c, poses_c, _ = run("turtlebot3", seed=12)
+    scans_a, poses_a, _ = run("turtlebot3_clean", seed=11)
+    scans_b, poses_b, _ = run("turtlebot3_clean", seed=11)
+    scans_c, poses_c, _ = run("turtlebot3_clean", seed=12)
     np.testing.assert_array_equal(scans_a, scans_b)
     np.testing.assert_array_equal(poses_a, poses_b)
     assert not np.array_equal(scans_a, scans_c)
@@ -63,7 +63,7 @@ def test_huge_commands_are_saturated(profile):
 
 
 def test_turtlebot3_commands_are_truncated_to_0_01():
-    sim = Simulator("lab02", start="outer", profile="turtlebot3")
+    sim = Simulator("lab02", start="outer", profile="turtlebot3_clean")  # no latency nor lag
     sim.step(0.157, -0.339)
     assert sim.executed_command == pytest.approx((0.15, -0.33))
     sim.step(-0.009, 0.3)  # int(0.3 * 100) = 30 with the robot's arithmetic
@@ -116,7 +116,8 @@ def open_room(tmp_path_factory):
 
 def test_episode_counts_laps_and_metrics(open_room, tmp_path):
     ctrl = CircleDriver(0.05)
-    result = run_episode(open_room, "east", profile="turtlebot3", duration=70.0, controller=ctrl)
+    result = run_episode(open_room, "east", profile="turtlebot3_clean", duration=70.0,
+                         controller=ctrl)
     assert ctrl.geometry == pytest.approx((0.0, math.radians(1), 0.12, 3.5))
     assert result.steps == 1400 and result.sim_time_s == pytest.approx(70.0)
     assert result.laps == 2  # 70 s at 0.2 rad/s = 2.2 turns around the room centre

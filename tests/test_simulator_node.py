@@ -180,7 +180,7 @@ def test_lockstep_answers_each_command_once_with_stamps_advancing_by_dt(ros):
 
 @pytest.mark.parametrize("profile, rays, no_return, range_limits, odom_topic", [
     ("ideal", 240, "nan", (0.016, 8.0), "odometry"),
-    ("turtlebot3", 360, "zero", (0.12, 3.5), "odometry"),
+    ("turtlebot3_clean", 360, "zero", (0.12, 3.5), "odometry"),
 ])
 def test_laser_scan_fields_follow_the_profile(ros, open_room, profile, rays, no_return,
                                               range_limits, odom_topic):
@@ -250,8 +250,8 @@ def test_inactive_node_publishes_nothing_and_does_not_step(ros):
     ({"start": "nowhere"}, "nowhere"),
     ({"start": "0,0,0"}, "start"),  # lab02's origin lies in a wall or outside: rejected
     ({"profile": "gazebo"}, "gazebo"),
-    ({"profile": "turtlebot3_real:command_latency_s=-1"}, "command_latency_s must be"),
-    ({"profile": "turtlebot3_real:dropout_share=nan"}, "dropout_share must be"),
+    ({"profile": "turtlebot3:command_latency_s=-1"}, "command_latency_s must be"),
+    ({"profile": "turtlebot3:dropout_share=nan"}, "dropout_share must be"),
     ({"mode": "fast"}, "mode"),
     ({"dt": -0.05}, "dt"),
     ({"goal": [1.0]}, "goal"),
@@ -306,7 +306,7 @@ def test_on_step_hooks_see_every_step_and_can_finish_the_run(ros):
 
 def test_realtime_turtlebot3_rates_and_stale_commands(ros):
     probe = Probe(ros, stamped=False)
-    node = start_simulator(ros, probe, mode="realtime", profile="turtlebot3",
+    node = start_simulator(ros, probe, mode="realtime", profile="turtlebot3_clean",
                            cmd_vel_stamped=False, command_timeout=0.3)
     probe.send(0.1, 0.0)  # sent once: the robot drives for command_timeout, then stops
     ros.spin_for(1.5)
@@ -478,7 +478,7 @@ def test_scan_delivery_loses_some_scans_and_delays_the_others():
 def test_realtime_scans_are_lost_or_late_as_configured(ros, loss, jitter):
     probe = Probe(ros, stamped=False)
     node = start_simulator(ros, probe, mode="realtime", cmd_vel_stamped=False,
-                           profile=f"turtlebot3_real:scan_loss_share={loss}:"
+                           profile=f"turtlebot3:scan_loss_share={loss}:"
                                    f"scan_jitter_s={jitter}")
     ros.spin_for(1.2)
     assert node.trigger_deactivate() == TransitionCallbackReturn.SUCCESS

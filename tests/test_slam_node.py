@@ -43,7 +43,7 @@ class Robot:
     5 Hz scan again).
     """
 
-    def __init__(self, ros, world="lab02", start="outer", profile="turtlebot3"):
+    def __init__(self, ros, world="lab02", start="outer", profile="turtlebot3_clean"):
         self.sim = Simulator(world, start=start, profile=profile, seed=2)
         self.controller = default_controller(self.sim.dt, self.sim.profile)
         self.node = ros.node("fake_robot")

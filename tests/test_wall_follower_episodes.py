@@ -16,9 +16,9 @@ DT = 0.05
 
 
 @pytest.mark.parametrize("profile, revolution", [
-    ("ideal", 0.0), ("turtlebot3", 0.0), ("turtlebot3_real", 0.2), ("turtlebot3_lds02", 0.2),
-    ("turtlebot3_real:randomized", 0.2), ("turtlebot3_real:off", 0.0),
-    ("turtlebot3_real:off:scan_skew=1", 0.2)])
+    ("ideal", 0.0), ("turtlebot3_clean", 0.0), ("turtlebot3", 0.2), ("turtlebot3_lds02", 0.2),
+    ("turtlebot3:randomized", 0.2), ("turtlebot3:off", 0.0),
+    ("turtlebot3:off:scan_skew=1", 0.2)])
 def test_the_simulated_robot_tells_the_follower_its_lidar_position_and_scan_time(profile,
                                                                                  revolution):
     from amr_evaluation.episode import robot_parameters
@@ -32,8 +32,12 @@ def test_the_simulated_robot_tells_the_follower_its_lidar_position_and_scan_time
 @pytest.mark.parametrize("profile", ["ideal", "turtlebot3"])
 def test_lab02_outer_corridor_lap_without_touching(profile):
     from amr_evaluation import episode
+    from amr_sim.profiles import get_profile
+
+    def told_follower(dt):  # told where the LiDAR sits and how long a scan takes (de-skew)
+        return WallFollower(dt, **episode.robot_parameters(WallFollower, get_profile(profile)))
     result = episode.run_episode("lab02", "outer", profile=profile, seed=0, duration=60.0,
-                                 controller_factory=WallFollower, record_trajectory=False)
+                                 controller_factory=told_follower, record_trajectory=False)
     assert result.collisions == 0
     assert result.min_clearance_m > 0.03
     assert result.laps >= 1
@@ -50,7 +54,7 @@ def test_the_reality_gap_episodes_that_touched_a_wall_no_longer_do(world, start,
     the walls up to 4 cm off; range error and the drive's lag did the rest.
     """
     from amr_evaluation import episode
-    result = episode.run_episode(world, start, profile="turtlebot3_real:randomized", seed=seed,
+    result = episode.run_episode(world, start, profile="turtlebot3:randomized", seed=seed,
                                  duration=600.0, record_trajectory=False)
     assert result.collisions == 0
     assert result.min_clearance_m > 0.02
@@ -70,7 +74,7 @@ def test_a_late_stopping_drive_still_turns_into_the_side_corridor(start, seed):
     from amr_evaluation import episode
     result = episode.run_episode(
         "twin_maze_small", start, seed=seed, duration=15.0,
-        profile="turtlebot3_real:randomized:command_latency_s=0.1:wheel_acceleration=1")
+        profile="turtlebot3:randomized:command_latency_s=0.1:wheel_acceleration=1")
     # The side corridor leads 0.4 m up from the bottom corridor (down from the top one).
     progress = [y if start == "south_east" else 2.0 - y for _, _, y, _ in result.trajectory]
     assert max(progress) > 0.6, f"got no further than {max(progress):.2f} m into the maze"

@@ -30,7 +30,7 @@ def _plain_kernels(monkeypatch) -> int:
 def _episode():
     from amr_evaluation import episode
     return episode.run_episode("twin_maze_small", "north_west",
-                               profile="turtlebot3_real:randomized", seed=7, duration=12.0,
+                               profile="turtlebot3:randomized", seed=7, duration=12.0,
                                record_trajectory=True)
 
 

@@ -107,16 +107,18 @@ def warm_up() -> None:
     from amr_evaluation.localization_episode import run_localization_episode
     from amr_evaluation.mapping_episode import run_mapping_episode
     from amr_evaluation.navigation_episode import run_navigation_episode
-    for profile, algorithm in (("ideal", "astar"), ("turtlebot3", "wavefront")):
+    for profile, algorithm in (("ideal", "astar"), ("turtlebot3_clean", "wavefront")):
         run_episode("lab02", "outer", profile=profile, duration=3.0, record_trajectory=False)
         run_navigation_episode("lab02", "outer", "inner_far", profile=profile, duration=3.0,
                                pose_source="truth", record_trajectory=False,
                                planner_params={"algorithm": algorithm})
         run_localization_episode("twin_maze_small", None, profile=profile, duration=3.0,
                                  record=False)
-    run_mapping_episode("lab02", "outer", profile="turtlebot3", duration=3.0)
-    for profile in ("turtlebot3_real", "turtlebot3_lds02"):  # the reality gap's kernels
+    run_mapping_episode("lab02", "outer", profile="turtlebot3_clean", duration=3.0)
+    for profile in ("turtlebot3", "turtlebot3_lds02"):  # the reality gap's kernels
         run_episode("lab02", "outer", profile=profile, duration=1.0, record_trajectory=False)
+        run_localization_episode("twin_maze_small", None, profile=profile, duration=1.0,
+                                 record=False)  # the filter's LDS models and de-skew
     map_world = speckled_map_world()
     run_episode(map_world, "outer", profile="ideal", duration=1.0, record_trajectory=False)
     run_localization_episode(map_world, "outer", profile="ideal", duration=1.0, record=False)
