@@ -8,10 +8,12 @@ import pytest
 
 from amr_common.lidar_models import LDS01
 from amr_common.map_raster import OCCUPIED
+from amr_evaluation.episode import mapper_parameters
 from amr_mapping.log_odds_grid import LogOddsGrid
 from amr_mapping.loop_closure import draw
 from amr_mapping.mapper_params import check_parameters
 from amr_mapping.range_error_rays import range_error_rays
+from amr_sim.profiles import get_profile
 
 RES = 0.02
 WALL_X = 1.0
@@ -67,6 +69,14 @@ def test_a_scan_drawn_with_the_model_is_removed_exactly():
     for pose, points in scans:
         draw(grid, pose, points, 0.0, -1)
     assert not grid.counts.any() and not grid.hits.any()
+
+
+@pytest.mark.parametrize("profile, model", [
+    ("ideal", "none"), ("turtlebot3_clean", "none"), ("turtlebot3", "LDS-01"),
+    ("turtlebot3:randomized", "LDS-01"), ("turtlebot3_lds02", "LDS-02"),
+    ("turtlebot3:off:scan_skew=1", "none")])
+def test_episodes_give_the_mapper_the_simulated_lidars_range_error_model(profile, model):
+    assert mapper_parameters(get_profile(profile))["lidar_model"] == model
 
 
 def test_an_unknown_lidar_model_is_refused_naming_the_choices():
