@@ -129,6 +129,13 @@ def robot_parameters(controller_class: Any, profile: SensorProfile) -> dict[str,
     return {name: value for name, value in values.items() if name in names}
 
 
+def ranges_in_error(profile: SensorProfile) -> bool:
+    """True if the profile's scanner adds its datasheet's range noise or bias (reality gap)."""
+    effects = profile.effects
+    return (profile.lidar_model is not None and effects is not None
+            and bool(effects.range_noise_share or effects.range_bias_share))
+
+
 def scans_skewed(profile: SensorProfile) -> bool:
     """True if the profile's scanner takes its rays over a revolution (the real LiDAR's skew)."""
     return (profile.lidar_model is not None and profile.effects is not None
@@ -136,13 +143,16 @@ def scans_skewed(profile: SensorProfile) -> bool:
 
 
 def mapper_parameters(profile: SensorProfile, mapper_class: Any = None) -> dict[str, Any]:
-    """What the simulated robot fixes for a mapper: its LiDAR's position and `deskew`.
+    """What the simulated robot fixes for a mapper: its LiDAR's position, `deskew`, `lidar_model`.
 
     De-skew only what the simulator skews (the clean profiles' scans are instantaneous,
-    though they carry a scan_time). `mapper_class`: only the parameters it takes, the LiDAR's
-    position always (amr_common.interfaces.Mapper names it).
+    though they carry a scan_time); draw rays by the datasheet's range error only where the
+    simulator adds it (the profiles with the reality gap; 'none' for ideal and the clean ones).
+    `mapper_class`: only the parameters it takes, the LiDAR's position always
+    (amr_common.interfaces.Mapper names it).
     """
-    values = {"lidar_offset_x_m": profile.lidar_offset_x, "deskew": scans_skewed(profile)}
+    values = {"lidar_offset_x_m": profile.lidar_offset_x, "deskew": scans_skewed(profile),
+              "lidar_model": profile.lidar_model.name if ranges_in_error(profile) else "none"}
     takes = described_parameters(mapper_class) if mapper_class is not None else None
     return {name: value for name, value in values.items()
             if takes is None or name in takes or name == "lidar_offset_x_m"}

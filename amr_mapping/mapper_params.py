@@ -16,6 +16,7 @@ from amr_common.parameter_table import (
     one_of,
     ruled,
 )
+from amr_mapping.range_error_rays import MODEL_NAMES
 
 # name: (default, description)
 _TABLE: dict[str, tuple[Any, str]] = {
@@ -29,6 +30,16 @@ _TABLE: dict[str, tuple[Any, str]] = {
                      "before the stamp (the LDS-01/LDS-02 drivers). False for scans taken at "
                      "once (the simulator's ideal and turtlebot3_clean profiles: the run scripts "
                      "set the profile's)."),
+    "lidar_model": ("none", "The LiDAR's range-error model: 'none' draws every return as "
+                            "measured (the simulator's ideal and turtlebot3_clean profiles), "
+                            "'LDS-01' or 'LDS-02' draws by the datasheet's error at each range "
+                            "(amr_mapping.range_error_rays; the run scripts set the simulated "
+                            "profile's, run_robot.py the LDS-01)."),
+    "range_hit_max_error_m": (0.04, "With a lidar_model: only returns whose expected range "
+                                    "error (half the datasheet's precision + accuracy) is at "
+                                    "most this mark a wall; farther ones only clear [m] ..."),
+    "range_stop_errors": (2.0, "... and every ray clears cells only up to this many expected "
+                               "errors short of its end (at least miss_stop_m)."),
     "min_points": (30, "Scans with fewer valid returns are not matched: the pose follows the "
                        "odometry."),
     # --- occupancy grid
@@ -110,6 +121,7 @@ _TABLE: dict[str, tuple[Any, str]] = {
 PARAMETERS: dict[str, Param] = ruled(
     _TABLE, above(0.0), lidar_offset_x_m=None, free_log_odds=None,
     correlative_search=one_of("branch_and_bound", "exhaustive"),
+    lidar_model=one_of(*MODEL_NAMES), range_stop_errors=at_least(0.0),
     **{name: at_least(1) for name in ("min_points", "max_map_cells", "local_map_keyframes",
                                       "loop_chain_keyframes", "loop_interval_keyframes",
                                       "anchor_keyframes")},

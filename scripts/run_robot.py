@@ -176,9 +176,11 @@ def _run(args: argparse.Namespace, stop: StopFlag) -> int:
         without_controller(nodes)
     if args.slam:
         from amr_common.robot import LIDAR_OFFSET_X
+        # The Burger's LiDAR is an LDS-01 (LDS-02 owners: --slam-param lidar_model:=LDS-02).
         nodes.append(make_slam_node(None, lidar_offset_x_m=LIDAR_OFFSET_X,
                                     output_prefix=map_prefix(args.map_out),
-                                    overrides=args.slam_overrides))
+                                    overrides={"lidar_model": "LDS-01",
+                                               **(args.slam_overrides or {})}))
     if args.map:
         from launch_common import make_map_publisher
         nodes.insert(0, make_map_publisher(None, args.map))
