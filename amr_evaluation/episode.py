@@ -48,6 +48,8 @@ from amr_common.navigation_behaviour import (
     limit_command,
 )
 from amr_common.world import WORLDS_DIR, World
+from amr_evaluation.lidar_calibration import calibrate_in_simulation
+from amr_mapping.mapper_params import range_error_parameters
 from amr_sim.profiles import SensorProfile, get_profile
 from amr_sim.simulator import Simulator
 
@@ -142,17 +144,24 @@ def scans_skewed(profile: SensorProfile) -> bool:
             and bool(profile.effects.scan_skew))
 
 
-def mapper_parameters(profile: SensorProfile, mapper_class: Any = None) -> dict[str, Any]:
-    """What the simulated robot fixes for a mapper: its LiDAR's position, `deskew`, `lidar_model`.
+def mapper_parameters(profile: SensorProfile, mapper_class: Any = None,
+                      seed: int | None = None) -> dict[str, Any]:
+    """What the simulated robot fixes for a mapper: its LiDAR's position, `deskew`, range error.
 
     De-skew only what the simulator skews (the clean profiles' scans are instantaneous,
-    though they carry a scan_time); draw rays by the datasheet's range error only where the
-    simulator adds it (the profiles with the reality gap; 'none' for ideal and the clean ones).
+    though they carry a scan_time); where the simulator adds the datasheet's range error (the
+    profiles with the reality gap), the LiDAR model's parameters (mapper_params.
+    range_error_parameters) and, with a `seed`, the unit's `range_correction`, calibrated
+    against a wall as its owner would (lidar_calibration); 'none' for ideal and the clean ones.
     `mapper_class`: only the parameters it takes, the LiDAR's position always
     (amr_common.interfaces.Mapper names it).
     """
     values = {"lidar_offset_x_m": profile.lidar_offset_x, "deskew": scans_skewed(profile),
-              "lidar_model": profile.lidar_model.name if ranges_in_error(profile) else "none"}
+              "lidar_model": "none"}
+    if ranges_in_error(profile):
+        values.update(range_error_parameters(profile.lidar_model.name))
+        if seed is not None:  # the unit calibrated against a wall, as an owner would
+            values["range_correction"] = calibrate_in_simulation(profile, seed).as_list()
     takes = described_parameters(mapper_class) if mapper_class is not None else None
     return {name: value for name, value in values.items()
             if takes is None or name in takes or name == "lidar_offset_x_m"}

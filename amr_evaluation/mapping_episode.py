@@ -201,7 +201,7 @@ def run_mapping_episode(world: World | str, start=None,
     if callable(getattr(controller, "set_scan_geometry", None)):
         controller.set_scan_geometry(prof.angle_min, prof.angle_increment, prof.range_min,
                                      prof.range_max)
-    mapper, closure = _built_mapper(mapper, prof, loop_closure, mapper_params)
+    mapper, closure = _built_mapper(mapper, prof, loop_closure, seed, mapper_params)
     drift = episode_drift(drift, prof)
     odometry = DriftingOdometry(drift, seed)
     hits = RayHits(world_obj, prof.angle_min, prof.angle_increment, prof.scan_rays,
@@ -237,7 +237,7 @@ def _count(value: int | None) -> str:
     return "n/a" if value is None else str(value)
 
 
-def _built_mapper(mapper, prof: SensorProfile, loop_closure: bool,
+def _built_mapper(mapper, prof: SensorProfile, loop_closure: bool, seed: int,
                   mapper_params: dict[str, Any] | None) -> tuple[Any, bool]:
     """(the mapper, whether loop closure was asked of it) for run_mapping_episode's `mapper`."""
     params = dict(mapper_params or {})
@@ -245,7 +245,7 @@ def _built_mapper(mapper, prof: SensorProfile, loop_closure: bool,
         return mapper, bool(params.get("loop_closure", loop_closure))
     cls = link_class(mapper or DEFAULT_MAPPER, "mapper")
     takes = described_parameters(cls)
-    values: dict[str, Any] = mapper_parameters(prof, cls)
+    values: dict[str, Any] = mapper_parameters(prof, cls, seed)
     if takes is None or "loop_closure" in takes:
         values["loop_closure"] = bool(loop_closure)
     values.update(params)

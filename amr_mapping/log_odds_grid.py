@@ -143,12 +143,12 @@ class LogOddsGrid:
         return out
 
     def raster(self, occupied_log_odds: float, free_log_odds: float,
-               min_hit_share: float = 0.0) -> Raster:
+               min_hit_share: float = 0.0, peak_cells: int = 1) -> Raster:
         """The map as a Raster (FREE / OCCUPIED / UNKNOWN), cropped to the observed cells + 1.
 
         OCCUPIED: log-odds above occupied_log_odds and at least min_hit_share of the hits of
-        the most-hit cell among its 3 x 3 neighbours (range noise puts a few hits in the cells
-        beside a wall, behind it too, where no ray ever clears them: this keeps them out);
+        the most-hit cell within peak_cells cells of it (range noise puts a few hits in the
+        cells beside a wall, behind it too, where no ray ever clears them: this keeps them out);
         FREE: log-odds below free_log_odds; else UNKNOWN.
         """
         counts = self.counts
@@ -162,15 +162,24 @@ class LogOddsGrid:
         block = counts[r0:r1, c0:c1]
         values = np.full(block.shape, UNKNOWN, dtype=np.int8)
         hits = self.hits[r0:r1, c0:c1]
-        padded = np.pad(hits, 1)
-        most = hits.copy()
-        for dr in range(3):
-            for dc in range(3):
-                np.maximum(most, padded[dr:dr + hits.shape[0], dc:dc + hits.shape[1]], out=most)
+        most = _square_maximum(hits, peak_cells)
         values[(block > occupied_log_odds * UNITS) & (hits >= min_hit_share * most)] = OCCUPIED
         values[block < free_log_odds * UNITS] = FREE
         res = self.resolution
         return Raster(values, res, ((self.col0 + c0) * res, (self.row0 + r0) * res))
+
+
+def _square_maximum(array: np.ndarray, radius: int) -> np.ndarray:
+    """Each cell's maximum over the (2 radius + 1)^2 square around it (rows, then columns)."""
+    rows, cols = array.shape
+    most = array.copy()
+    padded = np.pad(array, ((radius, radius), (0, 0)))
+    for dr in range(2 * radius + 1):
+        np.maximum(most, padded[dr:dr + rows], out=most)
+    padded = np.pad(most, ((0, 0), (radius, radius)))
+    for dc in range(2 * radius + 1):
+        np.maximum(most, padded[:, dc:dc + cols], out=most)
+    return most
 
 
 def _grown(array: np.ndarray, shape: tuple[int, ...], row: int, col: int) -> np.ndarray:

@@ -47,6 +47,7 @@ from amr_mapping.mapper_params import check_parameters, parameter_descriptions
 from amr_mapping.pose_graph import PoseGraph
 from amr_mapping.range_error_rays import range_error_rays
 from amr_mapping.scan_matcher import CorrelativeMatcher
+from amr_mapping.scan_smoothing import ranges_filter
 from amr_mapping.scan_points import ScanError, scan_points, scan_revolution_s
 from amr_mapping.timings import clocks, elapsed_ms, timing_summary
 
@@ -79,6 +80,7 @@ class Mapper:
         self.p = p = check_parameters(params)
         self._occupied_units = p["occupied_log_odds"] * UNITS
         self._rays = range_error_rays(p)
+        self._ranges_filter = ranges_filter(p)  # calibration and smoothing, or None
         self._global = self._new_grid(hit_moments=False)
         self._local = self._new_grid(hit_moments=True)
         # The local map changes by one keyframe in local_map_keyframes (two grid versions: one
@@ -146,7 +148,8 @@ class Mapper:
             return self._reject("out_of_order", f"stamp {stamp:.3f} s is not after the last "
                                 f"one ({self._last_stamp:.3f} s)", stamp)
         try:
-            points, angles = scan_points(scan, self.p["lidar_offset_x_m"], self.p["max_range_m"])
+            points, angles = scan_points(scan, self.p["lidar_offset_x_m"], self.p["max_range_m"],
+                                         self._ranges_filter)
         except ScanError as exc:
             return self._reject("bad_scan", str(exc), stamp)
         self._stats["updates"] += 1
@@ -365,7 +368,9 @@ class Mapper:
         """The map so far (FREE 0 / OCCUPIED 100 / UNKNOWN -1) at the optimized poses."""
         self._refresh_global()
         return self._global.raster(self.p["occupied_log_odds"], self.p["free_log_odds"],
-                                   self.p["occupied_min_hit_share"])
+                                   self.p["occupied_min_hit_share"],
+                                   max(1, round(self.p["occupied_peak_radius_m"]
+                                                / self.p["resolution_m"])))
 
     def statistics(self) -> dict[str, Any]:
         """Counts (updates, keyframes, loop closures, rejected scans by reason ...) and timings.

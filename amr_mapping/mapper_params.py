@@ -15,7 +15,9 @@ from amr_common.parameter_table import (
     checked_values,
     one_of,
     ruled,
+    vector,
 )
+from amr_common.range_calibration import RangeCorrection
 from amr_mapping.range_error_rays import MODEL_NAMES
 
 # name: (default, description)
@@ -40,6 +42,15 @@ _TABLE: dict[str, tuple[Any, str]] = {
                                     "most this mark a wall; farther ones only clear [m] ..."),
     "range_stop_errors": (2.0, "... and every ray clears cells only up to this many expected "
                                "errors short of its end (at least miss_stop_m)."),
+    "range_correction": ([], "The unit's range calibration: [measured range, correction, ...] "
+                             "in m, true = measured + correction, piecewise linear "
+                             "(amr_common.range_calibration; scripts/calibrate_lidar.py measures "
+                             "it). [] = as measured."),
+    "smooth_half_window": (0, "Range noise smoothing: each return moves onto the line through "
+                              "this many neighbours on each side, the straightest such window "
+                              "nearest its centre (amr_mapping.scan_smoothing; 0: off)."),
+    "smooth_straightness": (1.5, "... only where that window is straight within this many "
+                                 "times the scan's typical window (else as measured)."),
     "min_points": (30, "Scans with fewer valid returns are not matched: the pose follows the "
                        "odometry."),
     # --- occupancy grid
@@ -52,9 +63,11 @@ _TABLE: dict[str, tuple[Any, str]] = {
     "occupied_log_odds": (0.6, "A cell is occupied above this log-odds (0.6 = p 0.65, "
                                "map_saver's occupied_thresh)."),
     "occupied_min_hit_share": (0.2, "... and has at least this share of the hits of the "
-                                    "most-hit cell around it (3 x 3): range noise spreads a few "
-                                    "hits beside each wall, also behind it where no ray clears "
-                                    "them."),
+                                    "most-hit cell around it (within occupied_peak_radius_m): "
+                                    "range noise spreads a few hits beside each wall, also "
+                                    "behind it where no ray clears them."),
+    "occupied_peak_radius_m": (0.02, "How far around a cell its most-hit neighbour is looked for "
+                                     "[m] (0.02: the 3 x 3 cells at 2 cm)."),
     "free_log_odds": (-0.4, "A cell is free below this log-odds; between the two: unknown."),
     "miss_stop_m": (0.02, "Rays clear cells only up to this far short of their end [m]: "
                           "grazing rays then do not erode the wall they end on."),
@@ -122,6 +135,8 @@ PARAMETERS: dict[str, Param] = ruled(
     _TABLE, above(0.0), lidar_offset_x_m=None, free_log_odds=None,
     correlative_search=one_of("branch_and_bound", "exhaustive"),
     lidar_model=one_of(*MODEL_NAMES), range_stop_errors=at_least(0.0),
+    smooth_half_window=at_least(0), occupied_peak_radius_m=at_least(0.0),
+    range_correction=vector(*range(0, 17, 2)),
     **{name: at_least(1) for name in ("min_points", "max_map_cells", "local_map_keyframes",
                                       "loop_chain_keyframes", "loop_interval_keyframes",
                                       "anchor_keyframes")},
@@ -148,9 +163,31 @@ def check_parameters(overrides: dict[str, Any] | None = None) -> dict[str, Any]:
     if values["smear_sigma_m"] > 10.0 * values["resolution_m"]:
         problems.append(f"smear_sigma_m ({values['smear_sigma_m']}) must be at most 10 cells "
                         f"({10.0 * values['resolution_m']:g} m)")
+    try:
+        RangeCorrection.from_list(values["range_correction"])
+    except ValueError as exc:
+        problems.append(str(exc))
     if problems:
         raise ValueError("Mapper: " + "; ".join(problems))
     return values
+
+
+def range_error_parameters(lidar_model: str) -> dict[str, Any]:
+    """The parameters for a LiDAR whose range error grows with the range (its datasheet's).
+
+    Smooth the noise along straight walls by the model's precision, and keep only each wall's
+    most-hit cells within 8 cm as occupied: measured under the simulator's reality gap
+    (README "Mapping figures"). 'none': {} (the defaults: exact ranges). The unit's own
+    calibration, range_correction, comes on top.
+    """
+    if lidar_model == "none":
+        return {}
+    if lidar_model not in MODEL_NAMES:
+        raise ValueError(f"lidar_model must be one of {', '.join(MODEL_NAMES)}, got "
+                         f"{lidar_model!r}")
+    return {"lidar_model": lidar_model, "smooth_half_window": 7, "occupied_min_hit_share": 0.5,
+            "occupied_peak_radius_m": 0.08, "range_hit_max_error_m": 1.0,
+            "range_stop_errors": 0.0}
 
 
 def parameter_descriptions() -> dict[str, tuple[Any, str]]:
@@ -158,4 +195,5 @@ def parameter_descriptions() -> dict[str, tuple[Any, str]]:
     return dict(PARAMETERS)
 
 
-__all__ = ["PARAMETERS", "check_parameters", "parameter_descriptions"]
+__all__ = ["PARAMETERS", "check_parameters", "parameter_descriptions",
+           "range_error_parameters"]

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -51,11 +51,16 @@ def scan_revolution_s(scan: Any) -> float | None:
     return value if 0.0 <= value <= MAX_SCAN_TIME_S else None  # NaN fails both
 
 
-def scan_points(scan: Any, lidar_offset_x: float, max_range: float
-                ) -> tuple[np.ndarray, np.ndarray]:
+RangesFilter = Callable[[np.ndarray, np.ndarray, float], np.ndarray]
+
+
+def scan_points(scan: Any, lidar_offset_x: float, max_range: float,
+                ranges_filter: RangesFilter | None = None) -> tuple[np.ndarray, np.ndarray]:
     """((N, 2) float64 points in the robot frame (LiDAR at lidar_offset_x), (N,) their angles).
 
-    The points and the angles (rad, the LiDAR frame) of the usable returns.
+    The points and the angles (rad, the LiDAR frame) of the usable returns; `ranges_filter`
+    (usable ranges, their angles, the scan's angle_increment) -> ranges changes them first
+    (amr_mapping.scan_smoothing.ranges_filter: the unit's calibration, noise smoothing).
 
     Raises ScanError for a scan that is not a scan: non-numeric or non-finite geometry,
     angle_increment 0, ranges that are not a flat list of numbers, more than MAX_RAYS rays.
@@ -79,8 +84,10 @@ def scan_points(scan: Any, lidar_offset_x: float, max_range: float
     index = np.flatnonzero(return_mask(ranges, range_min, upper))
     angles = angle_min + increment * index
     r = ranges[index]
+    if ranges_filter is not None and r.size:
+        r = ranges_filter(r, angles, increment)
     return np.column_stack([lidar_offset_x + r * np.cos(angles), r * np.sin(angles)]), angles
 
 
-__all__ = ["MAX_RAYS", "MAX_SCAN_TIME_S", "Scan", "ScanError", "scan_points",
+__all__ = ["MAX_RAYS", "RangesFilter", "MAX_SCAN_TIME_S", "Scan", "ScanError", "scan_points",
            "scan_revolution_s"]

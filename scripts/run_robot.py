@@ -176,11 +176,15 @@ def _run(args: argparse.Namespace, stop: StopFlag) -> int:
         without_controller(nodes)
     if args.slam:
         from amr_common.robot import LIDAR_OFFSET_X
-        # The Burger's LiDAR is an LDS-01 (LDS-02 owners: --slam-param lidar_model:=LDS-02).
+        from amr_mapping.mapper_params import range_error_parameters
+        # The Burger's LiDAR is an LDS-01 (LDS-02 owners: --slam-param lidar_model:=LDS-02);
+        # its unit's calibration: --slam-param range_correction:=[...] (calibrate_lidar.py).
+        slam_overrides = args.slam_overrides or {}
+        model = str(slam_overrides.get("lidar_model", "LDS-01"))
         nodes.append(make_slam_node(None, lidar_offset_x_m=LIDAR_OFFSET_X,
                                     output_prefix=map_prefix(args.map_out),
-                                    overrides={"lidar_model": "LDS-01",
-                                               **(args.slam_overrides or {})}))
+                                    overrides={**range_error_parameters(model),
+                                               **slam_overrides}))
     if args.map:
         from launch_common import make_map_publisher
         nodes.insert(0, make_map_publisher(None, args.map))

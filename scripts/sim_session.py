@@ -196,7 +196,8 @@ class SimSession:
     def _add_slam_node(self, map_prefix: str) -> None:
         """The slam node, mapping in the world's frame (its start pose), saving to map_prefix.
 
-        The simulated scanner's LiDAR position and `deskew` (mapper_parameters) or --slam-param.
+        The simulated scanner's LiDAR position, `deskew`, its range error and the unit's
+        calibration (mapper_parameters) or --slam-param.
         """
         from amr_evaluation.episode import mapper_parameters
         from amr_sim.profiles import get_profile
@@ -204,7 +205,7 @@ class SimSession:
         self.map_prefix = map_prefix
         self.slam_estimate: list[list[float]] = []
         self.slam_raster = None  # the map at the end of the run (for the plot)
-        scanner = mapper_parameters(get_profile(self.args.profile))
+        scanner = mapper_parameters(get_profile(self.args.profile), seed=self.args.seed)
         self.slam_node = make_slam_node(
             self.context, lidar_offset_x_m=scanner.pop("lidar_offset_x_m"),
             output_prefix=map_prefix, start_pose=self.world.resolve_start(self.start),

@@ -1,0 +1,65 @@
+"""Calibrating a simulated LiDAR unit's ranges the way a Burger's owner calibrates a real one.
+
+The simulated robot stands facing a flat wall at tape-measured distances (from the LiDAR's
+centre), the unit takes `scans` scans at each, and amr_common.range_calibration turns the
+readings into the `range_correction` the Mapper applies. The unit is the one a run with the
+same profile and seed drives (the reality-gap effects are drawn from the seed); nothing is
+read from the simulator but its scans.
+
+    correction = calibrate_in_simulation("turtlebot3:randomized", seed=3)
+    correction.as_list()   # the Mapper's range_correction parameter
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+
+from amr_common.range_calibration import RangeCorrection, fit_correction, wall_distance, wall_points
+from amr_common.world import World
+from amr_sim.profiles import SensorProfile, get_profile
+from amr_sim.simulator import Simulator
+
+CALIBRATION_DISTANCES_M = (0.3, 1.0, 2.0)  # one below the LDS-01's 0.5 m band edge, two above
+CALIBRATION_SCANS = 25
+_WALL_X = 3.0  # the calibration room: 3.2 m x 2 m, the wall at x = 3 m, the robot facing it
+
+
+def calibration_world() -> World:
+    """A bare room whose wall at x = 3 m the robot faces (its other walls are farther)."""
+    boundary = np.array([[-0.2, -1.0], [_WALL_X, -1.0], [_WALL_X, 1.0], [-0.2, 1.0],
+                         [-0.2, -1.0]])
+    segments = np.hstack([boundary[:-1], boundary[1:]]).astype(np.float64)
+    return World(name="calibration", source="calibration", segments=segments,
+                 boundary=boundary)
+
+
+def wall_reading(profile: str | SensorProfile, seed: int, distance: float,
+                 scans: int = CALIBRATION_SCANS) -> float | None:
+    """wall_distance() of `scans` scans with the LiDAR `distance` from the wall."""
+    prof = get_profile(profile)
+    start = (_WALL_X - distance - prof.lidar_offset_x, 0.0, 0.0)
+    sim = Simulator(calibration_world(), start=start, dt=0.05, profile=prof, seed=seed)
+    angle_min, increment = sim.scan_geometry[:2]
+    points, last = [], sim.scan_time
+    while len(points) < scans:
+        ranges = sim.step(0.0, 0.0)[0]
+        if sim.scan_time == last:
+            continue
+        last = sim.scan_time
+        if prof.effects is not None:  # the LDS-02 changes its geometry every scan
+            angle_min, increment = sim.lidar.geometry[:2]
+        points.append(wall_points(ranges, angle_min, increment))
+    return wall_distance(np.vstack(points))
+
+
+@lru_cache(maxsize=64)
+def calibrate_in_simulation(profile: str, seed: int,
+                            distances: tuple[float, ...] = CALIBRATION_DISTANCES_M,
+                            scans: int = CALIBRATION_SCANS) -> RangeCorrection:
+    """The unit's range correction from its readings at `distances` (see the module docstring)."""
+    return fit_correction({d: wall_reading(profile, seed, d, scans) for d in distances})
+
+
+__all__ = ["CALIBRATION_DISTANCES_M", "calibrate_in_simulation", "calibration_world",
+           "wall_reading"]
