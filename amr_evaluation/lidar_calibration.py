@@ -15,7 +15,12 @@ from functools import lru_cache
 
 import numpy as np
 
-from amr_common.range_calibration import RangeCorrection, fit_correction, wall_distance, wall_points
+from amr_common.range_calibration import (
+    RangeCorrection,
+    fit_correction,
+    wall_distance,
+    wall_points,
+)
 from amr_common.world import World
 from amr_sim.profiles import SensorProfile, get_profile
 from amr_sim.simulator import Simulator

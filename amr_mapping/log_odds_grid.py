@@ -20,7 +20,6 @@ import numpy as np
 
 from amr_common.map_raster import FREE, OCCUPIED, UNKNOWN, Raster
 from amr_mapping.grid_kernels import trace_rays
-from amr_mapping.range_error_rays import RangeErrorRays
 
 GROWTH_CELLS = 64  # cells added at a time on a side that needs them
 UNITS = 100.0  # log-odds units per 1.0
@@ -31,10 +30,8 @@ class LogOddsGrid:
     """Int32 log-odds counts on global cells, grown on demand (see the module docstring)."""
 
     def __init__(self, resolution: float, max_cells: int, hit: float, miss: float,
-                 miss_stop: float = 0.0, hit_moments: bool = False,
-                 rays: RangeErrorRays | None = None) -> None:
+                 miss_stop: float = 0.0, hit_moments: bool = False) -> None:
         self.resolution = float(resolution)
-        self.rays = rays  # the LiDAR's range error (range_error_rays), None: drawn as returned
         self.max_cells = int(max_cells)
         self.hit_units = int(round(hit * UNITS))
         self.miss_units = -int(round(miss * UNITS))
@@ -113,15 +110,8 @@ class LogOddsGrid:
         ends[:, 0] = points[:, 0] * inv - self.col0
         ends[:, 1] = points[:, 1] * inv - self.row0
         sx, sy = sensor_xy[0] * inv - self.col0, sensor_xy[1] * inv - self.row0
-        if self.rays is None:
-            trace_rays(self.counts, sx, sy, ends, sign * self.hit_units, sign * self.miss_units,
-                       self.miss_stop_cells, sign, self.hits, self.sums)
-        else:
-            ranges = np.hypot(points[:, 0] - sensor_xy[0], points[:, 1] - sensor_xy[1])
-            for index, stop, hit in self.rays.split(ranges, self.miss_stop_cells,
-                                                    self.resolution):
-                trace_rays(self.counts, sx, sy, ends[index], sign * self.hit_units * hit,
-                           sign * self.miss_units, stop, sign * hit, self.hits, self.sums)
+        trace_rays(self.counts, sx, sy, ends, sign * self.hit_units, sign * self.miss_units,
+                   self.miss_stop_cells, sign, self.hits, self.sums)
         self.version += 1
         return fits
 

@@ -30,7 +30,6 @@ import numpy as np
 
 from amr_common.geometry import compose, inverse
 from amr_mapping.log_odds_grid import UNITS, LogOddsGrid
-from amr_mapping.range_error_rays import range_error_rays
 from amr_mapping.scan_matcher import CorrelativeMatcher
 
 _AMBIGUITY_ANGLE = 0.1  # rad: poses turned more than this count as "elsewhere"
@@ -122,8 +121,7 @@ class LoopCloser:
         """Match keyframe `current` against the map of `chain`; a closure to `candidate`."""
         p = self.p
         grid = LogOddsGrid(p["resolution_m"], p["max_map_cells"], p["log_odds_hit"],
-                           p["log_odds_miss"], p["miss_stop_m"], hit_moments=True,
-                           rays=range_error_rays(p))
+                           p["log_odds_miss"], p["miss_stop_m"], hit_moments=True)
         for k in chain:
             draw(grid, poses[k], points[k], p["lidar_offset_x_m"])
         occupied = p["occupied_log_odds"] * UNITS

@@ -45,10 +45,9 @@ from amr_mapping.log_odds_grid import UNITS, LogOddsGrid
 from amr_mapping.loop_closure import LoopCloser, draw
 from amr_mapping.mapper_params import check_parameters, parameter_descriptions
 from amr_mapping.pose_graph import PoseGraph
-from amr_mapping.range_error_rays import range_error_rays
 from amr_mapping.scan_matcher import CorrelativeMatcher
-from amr_mapping.scan_smoothing import ranges_filter
 from amr_mapping.scan_points import ScanError, scan_points, scan_revolution_s
+from amr_mapping.scan_smoothing import ranges_filter
 from amr_mapping.timings import clocks, elapsed_ms, timing_summary
 
 _LOG = ThrottledLogger(logging.getLogger(__name__))
@@ -79,7 +78,6 @@ class Mapper:
     def __init__(self, params: dict[str, Any] | None = None) -> None:
         self.p = p = check_parameters(params)
         self._occupied_units = p["occupied_log_odds"] * UNITS
-        self._rays = range_error_rays(p)
         self._ranges_filter = ranges_filter(p)  # calibration and smoothing, or None
         self._global = self._new_grid(hit_moments=False)
         self._local = self._new_grid(hit_moments=True)
@@ -240,8 +238,7 @@ class Mapper:
     def _new_grid(self, hit_moments: bool) -> LogOddsGrid:
         p = self.p
         return LogOddsGrid(p["resolution_m"], p["max_map_cells"], p["log_odds_hit"],
-                           p["log_odds_miss"], p["miss_stop_m"], hit_moments=hit_moments,
-                           rays=self._rays)
+                           p["log_odds_miss"], p["miss_stop_m"], hit_moments=hit_moments)
 
     def _draw(self, grid: LogOddsGrid, index: int, pose, sign: int = 1) -> None:
         if not draw(grid, pose, self._points[index], self.p["lidar_offset_x_m"], sign):

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from amr_common.lidar_models import LIDAR_MODELS
 from amr_common.parameter_table import (
     Param,
     above,
@@ -18,7 +19,8 @@ from amr_common.parameter_table import (
     vector,
 )
 from amr_common.range_calibration import RangeCorrection
-from amr_mapping.range_error_rays import MODEL_NAMES
+
+MODEL_NAMES = ("none",) + tuple(LIDAR_MODELS)
 
 # name: (default, description)
 _TABLE: dict[str, tuple[Any, str]] = {
@@ -32,16 +34,12 @@ _TABLE: dict[str, tuple[Any, str]] = {
                      "before the stamp (the LDS-01/LDS-02 drivers). False for scans taken at "
                      "once (the simulator's ideal and turtlebot3_clean profiles: the run scripts "
                      "set the profile's)."),
-    "lidar_model": ("none", "The LiDAR's range-error model: 'none' draws every return as "
-                            "measured (the simulator's ideal and turtlebot3_clean profiles), "
-                            "'LDS-01' or 'LDS-02' draws by the datasheet's error at each range "
-                            "(amr_mapping.range_error_rays; the run scripts set the simulated "
-                            "profile's, run_robot.py the LDS-01)."),
-    "range_hit_max_error_m": (0.04, "With a lidar_model: only returns whose expected range "
-                                    "error (half the datasheet's precision + accuracy) is at "
-                                    "most this mark a wall; farther ones only clear [m] ..."),
-    "range_stop_errors": (2.0, "... and every ray clears cells only up to this many expected "
-                               "errors short of its end (at least miss_stop_m)."),
+    "lidar_model": ("none", "The LiDAR's range-error model: 'none' for exact ranges (the "
+                            "simulator's ideal and turtlebot3_clean profiles); 'LDS-01' or "
+                            "'LDS-02': how its noise grows with the range (the datasheet's "
+                            "precision), for smooth_half_window. The run scripts set the "
+                            "simulated profile's, run_robot.py the LDS-01, each with the "
+                            "parameters that go with it (range_error_parameters)."),
     "range_correction": ([], "The unit's range calibration: [measured range, correction, ...] "
                              "in m, true = measured + correction, piecewise linear "
                              "(amr_common.range_calibration; scripts/calibrate_lidar.py measures "
@@ -134,7 +132,7 @@ _TABLE: dict[str, tuple[Any, str]] = {
 PARAMETERS: dict[str, Param] = ruled(
     _TABLE, above(0.0), lidar_offset_x_m=None, free_log_odds=None,
     correlative_search=one_of("branch_and_bound", "exhaustive"),
-    lidar_model=one_of(*MODEL_NAMES), range_stop_errors=at_least(0.0),
+    lidar_model=one_of(*MODEL_NAMES),
     smooth_half_window=at_least(0), occupied_peak_radius_m=at_least(0.0),
     range_correction=vector(*range(0, 17, 2)),
     **{name: at_least(1) for name in ("min_points", "max_map_cells", "local_map_keyframes",
@@ -186,8 +184,7 @@ def range_error_parameters(lidar_model: str) -> dict[str, Any]:
         raise ValueError(f"lidar_model must be one of {', '.join(MODEL_NAMES)}, got "
                          f"{lidar_model!r}")
     return {"lidar_model": lidar_model, "smooth_half_window": 7, "occupied_min_hit_share": 0.5,
-            "occupied_peak_radius_m": 0.08, "range_hit_max_error_m": 1.0,
-            "range_stop_errors": 0.0}
+            "occupied_peak_radius_m": 0.08}
 
 
 def parameter_descriptions() -> dict[str, tuple[Any, str]]:

@@ -1,12 +1,15 @@
 """Smoothing a scan's range noise along the walls it sees (edge-preserving line fits).
 
 A datasheet LiDAR's range noise grows with the range (LDS-01: up to 3.5 % beyond 0.5 m), each
-ray on its own. Neighbouring rays that land on one straight wall tell where the wall is far
-better than any one of them: each return is moved along its own ray onto a line fitted (total
-least squares) through a window of `2 * half_window + 1` neighbouring returns. Of the windows
-that contain the return, the straightest is used (so a window never reaches round a corner);
-when even that one is not straight within `straightness` times the expected noise, the return
-stays as measured (an obstacle's corner, clutter).
+ray on its own: drawn as measured, a wall seen from 2 m lands several cells deep. Neighbouring
+rays that land on one straight wall tell where it is far better than any one of them: each
+return moves along its own ray onto a line fitted (total least squares) through a window of
+`2 * half_window + 1` neighbouring returns. Of the windows that contain it, the most central
+one that is straight (within `straightness` times the scan's typical window) is used, else the
+straightest: a window never reaches round a corner, and a line is known best at its middle. A
+return stays as measured when even that window is not straight within `straightness` times the
+datasheet's noise (an obstacle's corner, clutter), when it grazes the line (within 60 deg), or
+when the line would move it more than two sigmas. Vectorized numpy: ~0.5 ms for 360 rays.
 """
 from __future__ import annotations
 
@@ -23,54 +26,71 @@ MAX_MOVE_SIGMAS = 2.0  # ... and one the line would move more than 2 expected si
 
 def smooth_ranges(ranges: np.ndarray, angles: np.ndarray, increment: float, half_window: int,
                   sigma: np.ndarray, straightness: float = 1.5) -> np.ndarray:
-    """Ranges moved onto the straightest window's line (see the module docstring).
+    """Ranges moved onto their window's line (see the module docstring).
 
     ranges, angles: the usable returns (LiDAR frame), in scan order; increment: the scan's
     angle step (rays further apart than 1.5 steps are not neighbours); sigma: each return's
-    expected noise (m).
+    expected noise (m), the datasheet's.
     """
     n = ranges.size
     width = 2 * half_window + 1
     if half_window <= 0 or n < width:
         return ranges
-    x, y = ranges * np.cos(angles), ranges * np.sin(angles)
+    cos_a, sin_a = np.cos(angles), np.sin(angles)
     gap = np.abs(np.diff(angles)) > 1.5 * abs(increment)
-    # prefix sums: window [j, j + width) has statistics from S[j + width] - S[j]
-    def windows(values: np.ndarray) -> np.ndarray:
-        s = np.concatenate([[0.0], np.cumsum(values)])
-        return s[width:] - s[:-width]
-    gaps = windows(np.concatenate([gap.astype(np.float64), [0.0]]))
-    # a window [j, j + width) is contiguous when none of the gaps j .. j + width - 2 is set
-    gaps = gaps - np.concatenate([gap.astype(np.float64), [0.0]])[width - 1:]
-    mx, my = windows(x) / width, windows(y) / width
-    cxx = windows(x * x) / width - mx * mx
-    cyy = windows(y * y) / width - my * my
-    cxy = windows(x * y) / width - mx * my
-    half_trace = 0.5 * (cxx + cyy)
-    root = np.sqrt(np.maximum(0.25 * (cxx - cyy) ** 2 + cxy * cxy, 0.0))
-    residual = np.maximum(half_trace - root, 0.0)  # mean squared distance from the line
-    # the line's normal: the eigenvector of the smaller eigenvalue
-    nx, ny = cxy, residual - cxx
-    alt = np.abs(nx) + np.abs(ny) < 1e-15
-    nx, ny = np.where(alt, residual - cyy, nx), np.where(alt, cxy, ny)
-    norm = np.hypot(nx, ny)
-    norm[norm == 0.0] = 1.0
-    nx, ny = nx / norm, ny / norm
-    windows_count = n - width + 1
-    sigma_window = windows(sigma) / width
-    score = residual / (sigma_window * sigma_window)
-    score[gaps > 0.5] = np.inf
-    # for return i, the windows starting at i - width + 1 .. i: the most central straight one
-    # (its line is known best at its centre), else the straightest
+    mx, my, nx, ny, score = _window_lines(ranges * cos_a, ranges * sin_a, sigma, gap, width)
     finite = np.isfinite(score)
     typical = float(np.median(score[finite])) if finite.any() else 1.0
-    limit = straightness * straightness * typical
+    best, w = _chosen_windows(score, n, half_window, straightness * straightness * typical)
+    along = nx[w] * cos_a + ny[w] * sin_a
+    with np.errstate(divide="ignore", invalid="ignore"):
+        fitted = (nx[w] * mx[w] + ny[w] * my[w]) / along
+    use = (best <= straightness * straightness) & (np.abs(along) > MIN_INCIDENCE_COS) \
+        & np.isfinite(fitted) & (fitted > 0.0) \
+        & (np.abs(fitted - ranges) <= MAX_MOVE_SIGMAS * sigma)
+    return np.where(use, fitted, ranges)
+
+
+def _window_lines(x: np.ndarray, y: np.ndarray, sigma: np.ndarray, gap: np.ndarray,
+                  width: int) -> tuple[np.ndarray, ...]:
+    """Per window [j, j + width): centroid (mx, my), unit normal (nx, ny), and its score.
+
+    score: the mean squared distance from the line over the mean sigma squared; inf for a
+    window with a gap between its rays.
+    """
+    def sums(values: np.ndarray) -> np.ndarray:  # prefix sums: one subtraction per window
+        s = np.concatenate([[0.0], np.cumsum(values)])
+        return s[width:] - s[:-width]
+    gaps = np.append(gap.astype(np.float64), 0.0)
+    gaps_inside = sums(gaps) - gaps[width - 1:]  # the gaps j .. j + width - 2
+    mx, my = sums(x) / width, sums(y) / width
+    cxx = sums(x * x) / width - mx * mx
+    cyy = sums(y * y) / width - my * my
+    cxy = sums(x * y) / width - mx * my
+    root = np.sqrt(np.maximum(0.25 * (cxx - cyy) ** 2 + cxy * cxy, 0.0))
+    residual = np.maximum(0.5 * (cxx + cyy) - root, 0.0)  # the smaller eigenvalue
+    nx, ny = cxy, residual - cxx  # its eigenvector, or the other form where that vanishes
+    degenerate = np.abs(nx) + np.abs(ny) < 1e-15
+    nx, ny = np.where(degenerate, residual - cyy, nx), np.where(degenerate, cxy, ny)
+    norm = np.hypot(nx, ny)
+    norm[norm == 0.0] = 1.0
+    mean_sigma = sums(sigma) / width
+    score = residual / (mean_sigma * mean_sigma)
+    score[gaps_inside > 0.5] = np.inf
+    return mx, my, nx / norm, ny / norm, score
+
+
+def _chosen_windows(score: np.ndarray, n: int, half_window: int,
+                    limit: float) -> tuple[np.ndarray, np.ndarray]:
+    """(score, start) of each return's window: the most central within limit, else the best."""
+    width = 2 * half_window + 1
     best = np.full(n, np.inf)
     best_window = np.zeros(n, dtype=np.int64)
     chosen = np.zeros(n, dtype=bool)
+    index = np.arange(n)
     for k in sorted(range(width), key=lambda k: abs(k - half_window)):
-        start = np.arange(n) - k
-        valid = (start >= 0) & (start < windows_count)
+        start = index - k  # the window starting here holds return i at its k-th place
+        valid = (start >= 0) & (start < score.size)
         candidate = np.full(n, np.inf)
         candidate[valid] = score[start[valid]]
         take = ~chosen & (candidate <= limit)
@@ -78,15 +98,7 @@ def smooth_ranges(ranges: np.ndarray, angles: np.ndarray, increment: float, half
         best[better] = candidate[better]
         best_window[better] = start[better]
         chosen |= take
-    w = best_window
-    cos_a, sin_a = np.cos(angles), np.sin(angles)
-    along = nx[w] * cos_a + ny[w] * sin_a
-    offset = nx[w] * mx[w] + ny[w] * my[w]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        fitted = offset / along
-    use = (best <= straightness * straightness) & (np.abs(along) > MIN_INCIDENCE_COS) \
-        & np.isfinite(fitted) & (fitted > 0.0) & (np.abs(fitted - ranges) <= MAX_MOVE_SIGMAS * sigma)
-    return np.where(use, fitted, ranges)
+    return best, best_window
 
 
 def ranges_filter(params: dict[str, Any]
