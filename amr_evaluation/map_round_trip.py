@@ -42,9 +42,9 @@ MAP_DURATION_S = 300.0
 NAVIGATION_DURATION_S = 300.0
 GOAL_WITHIN_M = 0.05
 MIN_TRIP_M = 1.0  # a goal nearer the start is no trip (some worlds name a start's place a goal)
-# The Burger without the reality gap (its figures were measured so): the mapping episode adds
-# its own typical odometry drift.
-PROFILE = "turtlebot3_clean"
+# The Burger as it is (the reality gap at its typical values); turtlebot3_clean: without it
+# (the mapping episode then adds a typical odometry drift of its own).
+PROFILE = "turtlebot3"
 
 
 class RecordedFilterPose:
@@ -65,14 +65,18 @@ class RecordedFilterPose:
         return pose, localized
 
 
-def build_map(world: World, seed: int, prefix: Path, duration: float = MAP_DURATION_S
-              ) -> tuple[World, dict[str, Any]]:
-    """Map `world` from its first start; write PREFIX.yaml + .pgm; (the map world, figures)."""
+def build_map(world: World, seed: int, prefix: Path, duration: float = MAP_DURATION_S,
+              profile: str = PROFILE) -> tuple[World, dict[str, Any]]:
+    """Map `world` from its first start; write PREFIX.yaml + .pgm; (the map world, figures).
+
+    The Mapper as the run scripts set it for the profile (and the unit's calibration).
+    """
+    from amr_evaluation.episode import mapper_parameters
     from amr_evaluation.mapping_episode import run_mapping_episode
     from amr_mapping.mapper import Mapper
     from amr_sim.profiles import get_profile
-    mapper = Mapper({"lidar_offset_x_m": get_profile(PROFILE).lidar_offset_x})
-    result = run_mapping_episode(world, profile=PROFILE, seed=seed, duration=duration,
+    mapper = Mapper(mapper_parameters(get_profile(profile), Mapper, seed))
+    result = run_mapping_episode(world, profile=profile, seed=seed, duration=duration,
                                  mapper=mapper, world_frame=True)
     yaml_path, _ = write_map(mapper.occupancy_raster(), prefix,
                              extras={"name": f"{world.name}_slam",
@@ -110,20 +114,21 @@ def start_and_goal(world: World, map_world: World):
 def run_round_trip(world_name: str, seed: int, folder: str | Path,
                    map_duration: float = MAP_DURATION_S,
                    navigation_duration: float = NAVIGATION_DURATION_S,
-                   filter_params: dict[str, Any] | None = None) -> dict[str, Any]:
+                   filter_params: dict[str, Any] | None = None,
+                   profile: str = PROFILE) -> dict[str, Any]:
     """One world and seed: map, save, navigate on the map (see the module docstring)."""
     from amr_evaluation.localization_episode import metrics_from_rows
     from amr_evaluation.navigation_episode import run_navigation_episode
     world = World.load(world_name)
     map_world, mapping = build_map(world, seed, Path(folder) / f"{world.name}-seed{seed}",
-                                   map_duration)
+                                   map_duration, profile)
     row: dict[str, Any] = {"world": world.name, "seed": seed, **mapping}
     chosen = start_and_goal(world, map_world)
     if chosen is None:
         return {**row, "error": "no named start and goal with a path on the map"}
     start, goal, planner = chosen
     source = RecordedFilterPose(map_world, seed, **(filter_params or {}))
-    result = run_navigation_episode(world, start, goal, profile=PROFILE, seed=seed,
+    result = run_navigation_episode(world, start, goal, profile=profile, seed=seed,
                                     duration=navigation_duration, pose_source=source,
                                     planner=planner)
     localization = metrics_from_rows(result.trajectory, source.rows)
@@ -137,10 +142,10 @@ def run_round_trip(world_name: str, seed: int, folder: str | Path,
 
 
 def _run_spec(spec: tuple) -> dict[str, Any]:
-    world, seed, folder, map_duration, navigation_duration, filter_params = spec
+    world, seed, folder, map_duration, navigation_duration, filter_params, profile = spec
     try:
         return run_round_trip(world, seed, folder, map_duration, navigation_duration,
-                              filter_params)
+                              filter_params, profile)
     except Exception as exc:  # noqa: BLE001 - reported per episode, the batch goes on
         return {"world": world, "seed": seed, "error": f"{type(exc).__name__}: {exc}",
                 "traceback": traceback.format_exc()}
@@ -150,11 +155,11 @@ def run_round_trips(worlds: list[str], seeds: list[int], folder: str | Path,
                     jobs: int | None = None, map_duration: float = MAP_DURATION_S,
                     navigation_duration: float = NAVIGATION_DURATION_S,
                     filter_params: dict[str, Any] | None = None,
-                    progress: Callable[[int, int, Any], None] | None = None
-                    ) -> list[dict[str, Any]]:
+                    progress: Callable[[int, int, Any], None] | None = None,
+                    profile: str = PROFILE) -> list[dict[str, Any]]:
     """Every world x seed on `jobs` local processes; rows in that order."""
-    specs = [(w, int(s), str(folder), map_duration, navigation_duration, filter_params)
-             for w in worlds for s in seeds]
+    specs = [(w, int(s), str(folder), map_duration, navigation_duration, filter_params,
+              profile) for w in worlds for s in seeds]
 
     def lost(spec: tuple, loss: TaskLost) -> dict[str, Any]:
         return {"world": spec[0], "seed": spec[1], "error": loss.error}

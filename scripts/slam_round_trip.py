@@ -2,7 +2,7 @@
 """The SLAM round trip, headless: map each world, save the map, localize and navigate on it.
 
 For every world x seed: 300 s of wall-following exploration map the TRUE world (the Mapper,
-the odometry drifting like a real Burger's, turtlebot3_clean profile); the map is saved as Nav2 map
+the turtlebot3 profile: the reality gap, the LiDAR calibrated; --profile); the map is saved as Nav2 map
 files (OUT/WORLD-seedN.yaml + .pgm) and read back; then the simulator drives the true world
 while the particle filter (global localization) and the planner work on the SLAM map, from a
 named start to a named goal (amr_evaluation.map_round_trip). Prints one line per episode and
@@ -38,6 +38,9 @@ def parse_args(argv=None) -> argparse.Namespace:
                         default=300.0, help="simulated seconds of mapping (default 300)")
     parser.add_argument("--duration", type=number_argument(float, 0.0, above=True),
                         default=300.0, help="simulated seconds of navigation (default 300)")
+    parser.add_argument("--profile", default="turtlebot3",
+                        help="the simulated Burger (default turtlebot3: the reality gap at its "
+                        "typical values, the LiDAR calibrated; turtlebot3_clean: without it)")
     parser.add_argument("--pf-param", action="append", default=[], metavar="NAME:=VALUE",
                         help="particle filter parameter (default: the filter's own "
                         "defaults, as on the world)")
@@ -53,6 +56,8 @@ def parse_args(argv=None) -> argparse.Namespace:
         for world in args.worlds:
             World.load(world)
         args.seeds = parse_seeds(args.seeds)
+        from amr_sim.profiles import get_profile
+        get_profile(args.profile)
         args.out = check_output_folder(args.out, "--out")
         args.filter_params = parse_overrides(args.pf_param)
         if args.filter_params:
@@ -67,15 +72,17 @@ def main(argv=None) -> int:
     args = parse_args(argv)
     from amr_evaluation.map_round_trip import round_trip_line, round_trip_summary, run_round_trips
     params = args.filter_params
-    print(f"slam_round_trip: {len(args.worlds) * len(args.seeds)} episodes, filter "
-          f"{params or 'defaults'}", flush=True)
+    print(f"slam_round_trip: {len(args.worlds) * len(args.seeds)} episodes, {args.profile}, "
+          f"filter {params or 'defaults'}", flush=True)
     rows = run_round_trips(args.worlds, args.seeds, args.out, args.jobs, args.map_duration,
                            args.duration, params,
                            progress=lambda done, total, row: print(
-                               f"[{done}/{total}] {round_trip_line(row)}", flush=True))
+                               f"[{done}/{total}] {round_trip_line(row)}", flush=True),
+                           profile=args.profile)
     summary = round_trip_summary(rows)
     (args.out / "results.json").write_text(json.dumps(
-        {"summary": summary, "filter_params": params, "episodes": rows}, indent=1,
+        {"summary": summary, "profile": args.profile, "filter_params": params,
+         "episodes": rows}, indent=1,
         default=float))
     print(json.dumps(summary, indent=1, default=float))
     if summary["failed"]:
