@@ -1,9 +1,9 @@
 #!/usr/bin/env python3
 """The SLAM round trip, headless: map each world, save the map, localize and navigate on it.
 
-For every world x seed: 300 s of wall-following exploration map the TRUE world (the Mapper,
-the turtlebot3 profile: the reality gap, the LiDAR calibrated; --profile); the map is saved as Nav2 map
-files (OUT/WORLD-seedN.yaml + .pgm) and read back; then the simulator drives the true world
+For every world x seed: 300 s of wall-following exploration map the TRUE world (the Mapper;
+--profile, by default turtlebot3: the reality gap, the LiDAR calibrated); the map is saved as
+Nav2 map files (OUT/WORLD-seedN.yaml + .pgm) and read back; then the simulator drives the true world
 while the particle filter (global localization) and the planner work on the SLAM map, from a
 named start to a named goal (amr_evaluation.map_round_trip). Prints one line per episode and
 the summary; writes OUT/results.json.
