@@ -4,9 +4,9 @@
 For every world x seed: 300 s of wall-following exploration map the TRUE world (the Mapper;
 --profile, by default turtlebot3: the reality gap, the LiDAR calibrated); the map is saved as
 Nav2 map files (OUT/WORLD-seedN.yaml + .pgm) and read back; then the simulator drives the
-true world while the particle filter (global localization) and the planner work on the SLAM map, from a
-named start to a named goal (amr_evaluation.map_round_trip). Prints one line per episode and
-the summary; writes OUT/results.json.
+true world while the particle filter (global localization) and the planner work on the SLAM
+map, from a named start to a named goal (amr_evaluation.map_round_trip). Prints one line per
+episode and the summary; writes OUT/results.json.
 Exit code: 0 no false localization, no collision and goals reached within 5 cm in >= 95 % of
 the episodes (corridor_loop, exactly symmetric, left out of that share); 1 otherwise; 2 bad
 options; 3 an episode failed to run.
