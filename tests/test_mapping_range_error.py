@@ -138,3 +138,22 @@ def test_slam_on_a_real_lidar_needs_the_units_calibration():
     assert calibrated.trajectory_rmse_m <= 0.015 and calibrated.trajectory_max_m <= 0.05
     assert calibrated.precision >= 0.95 and calibrated.recall >= 0.95
     assert uncalibrated.precision < 0.8 and uncalibrated.trajectory_max_m > 0.05
+
+
+def test_the_compiled_smoothing_gives_what_its_plain_twin_gives():
+    from amr_mapping.scan_smoothing import smooth_ranges_kernel, smooth_ranges_python
+    assert hasattr(smooth_ranges_kernel, "py_func")  # compiled (numba is a pinned dependency)
+    rng = np.random.default_rng(3)
+    angles = np.arange(360) * INCREMENT
+    square = 1.2 / np.maximum(np.abs(np.cos(angles)), np.abs(np.sin(angles)))  # a room, corners
+    for noise in (0.0, 0.01, 0.03):
+        ranges = square * (1.0 + noise * rng.standard_normal(360))
+        keep = rng.uniform(size=360) > 0.05  # dropouts: gaps between neighbours
+        r, a = ranges[keep], angles[keep]
+        sigma = LDS01.bounds(r)[1]
+        compiled, plain = np.empty_like(r), np.empty_like(r)
+        smooth_ranges_kernel(r, a, INCREMENT, 7, sigma, 1.5, compiled)
+        smooth_ranges_python(r, a, INCREMENT, 7, sigma, 1.5, plain)
+        assert np.allclose(compiled, plain, rtol=0.0, atol=1e-12)
+        if noise:
+            assert np.count_nonzero(compiled != r) > 0.5 * r.size  # most returns smoothed
