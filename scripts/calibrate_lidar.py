@@ -71,7 +71,17 @@ def distances_argument(text: str) -> tuple[float, ...]:
             f"give at least 2 distances (a scale needs two), got '{text}'")
     if len(set(distances)) < len(distances):
         raise argparse.ArgumentTypeError(f"a distance is given twice in '{text}'")
+    most = max_distances()
+    if len(distances) > most:
+        raise argparse.ArgumentTypeError(f"at most {most} distances (the slam node's "
+                                         f"range_correction takes {most} pairs), got '{text}'")
     return distances
+
+
+def max_distances() -> int:
+    """How many calibration points the Mapper's range_correction takes (its rule's lengths)."""
+    from amr_mapping.mapper_params import PARAMETERS
+    return max(PARAMETERS["range_correction"].rule.lengths) // 2
 
 
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
@@ -313,8 +323,10 @@ def params_yaml(values: Sequence[float], readings: Mapping[float, float], source
 def report(readings: Mapping[float, float], args: argparse.Namespace, source: str) -> None:
     """Print the correction and the ways to give it to the slam node; write --out."""
     from amr_common.range_calibration import fit_correction
+    from amr_mapping.mapper_params import check_parameters
     try:
         values = fit_correction(readings).as_list()
+        check_parameters({"range_correction": values})  # what the slam node will check
     except ValueError as exc:  # readings not ascending with the distances
         raise CalibrationError(f"the readings do not fit one correction: {exc}") from None
     print(f"range_correction (m; true = measured + correction): {values}")

@@ -25,7 +25,7 @@ from amr_mapping.mapper_params import check_parameters
 from tests.processes import REPO, terminate, wait_for
 
 sys.path.insert(0, str(REPO / "scripts"))
-from calibrate_lidar import main, parse_args  # noqa: E402
+from calibrate_lidar import CalibrationError, main, parse_args, report  # noqa: E402
 from run_robot import SLAM_SET  # noqa: E402
 
 from launch_slam import slam_overrides  # noqa: E402
@@ -84,15 +84,17 @@ class Robot:
 class User:
     """The stdin of the script: at each prompt, puts the robot at the next distance, Enter."""
 
-    def __init__(self, robot: Robot | None, distances: list[float]) -> None:
+    def __init__(self, robot: Robot | None, distances: list[float],
+                 misplaced: dict[float, float] | None = None) -> None:
         self.robot, self.distances = robot, list(distances)
+        self.misplaced = misplaced or {}  # asked for -> where the user puts it
 
     def readline(self) -> str:
         if not self.distances:
             return ""  # the end of the input
         distance = self.distances.pop(0)
         if self.robot is not None:
-            self.robot.distance = distance
+            self.robot.distance = self.misplaced.get(distance, distance)
         return "\n"
 
     def isatty(self) -> bool:
@@ -100,9 +102,10 @@ class User:
 
 
 def run_robot_mode(ros, monkeypatch, topic: str, distances: list[float], *options: str,
-                   shapes: dict[float, str] | None = None) -> int:
+                   shapes: dict[float, str] | None = None,
+                   misplaced: dict[float, float] | None = None) -> int:
     robot = Robot(ros, topic, shapes)
-    monkeypatch.setattr(sys, "stdin", User(robot, distances))
+    monkeypatch.setattr(sys, "stdin", User(robot, distances, misplaced))
     try:
         return main(["--topic", topic, "--scans", "5", *options])
     finally:
@@ -171,6 +174,21 @@ def test_a_wall_not_seen_exits_1_and_writes_nothing(ros, monkeypatch, tmp_path, 
     assert not path.exists()
 
 
+def test_a_reading_beyond_any_lidars_error_exits_1_and_writes_nothing(ros, monkeypatch,
+                                                                     tmp_path, capsys):
+    path = tmp_path / "lds01.yaml"
+    code = run_robot_mode(ros, monkeypatch, "/calib_misplaced", [0.3, 2.0], "--distances",
+                          "0.3,2", "--out", str(path), misplaced={2.0: 1.0})
+    assert code == 1
+    assert "the wall 2 m away reads 1.030 m: more than any LiDAR's error" in \
+        capsys.readouterr().err
+    assert not path.exists()
+    args = parse_args(["--out", str(path)])
+    with pytest.raises(CalibrationError, match="the readings do not fit one correction"):
+        report({1.0: 1.05, 1.1: 1.04}, args, "two readings the wrong way round")
+    assert not path.exists()
+
+
 def test_no_scan_is_a_clear_timeout_and_an_early_end_of_input_an_error(monkeypatch, capsys):
     monkeypatch.setattr(sys, "stdin", User(None, [0.3]))
     assert main(["--topic", "/calib_silent", "--timeout", "0.5"]) == 1
@@ -220,6 +238,8 @@ def test_ctrl_c_at_the_prompt_or_while_collecting_exits_130_without_a_traceback(
     (["--distances", "0,1"], "must be > 0 (got '0')"),
     (["--distances", "1,nan"], "must be > 0 (got 'nan')"),
     (["--distances", "1,2,1"], "a distance is given twice"),
+    (["--distances", ",".join(str(0.2 * n) for n in range(1, 10))],
+     "at most 8 distances (the slam node's range_correction takes 8 pairs)"),
     (["--scans", "0"], "--scans: must be >= 1"),
     (["--timeout", "0"], "--timeout: must be > 0"),
     (["--seed", "3"], "--seed needs --simulate"),
