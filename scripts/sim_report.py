@@ -76,12 +76,13 @@ def report_before_start(args, world, start, map_world=None) -> dict:
 
 
 def slam_fields(world, profile: str, trajectory: list, estimate: list, raster, mapper,
-                timings: dict, map_file=None) -> dict:
+                timings: dict, map_file=None, range_correction=None) -> dict:
     """The report's SLAM figures and every SLAM pose ([t, x, y, theta], map = world frame).
 
     The headless mapping episode's figures (amr_evaluation.mapping_metrics): trajectory RMSE /
     max against the truth at each scan's stamp, map precision and recall (noise-free rays from
-    the true poses); loop closures, Mapper and node timings (wall ms), the map file written.
+    the true poses); loop closures, Mapper and node timings (wall ms), the map file written,
+    the simulated LiDAR unit's calibration given to the slam node (None: none).
     None for the figures when nothing was mapped.
     """
     figures: dict = dict.fromkeys(("trajectory_rmse_m", "trajectory_max_m", "heading_rmse_rad",
@@ -108,7 +109,8 @@ def slam_fields(world, profile: str, trajectory: list, estimate: list, raster, m
                      "update_ms": stats.get("update_ms"),
                      "loop_closure_ms": stats.get("loop_closed_ms"),
                      "node_scan_ms": timings.get("scan_ms"), "node_map_ms": timings.get("map_ms"),
-                     "map_file": None if map_file is None else str(map_file)},
+                     "map_file": None if map_file is None else str(map_file),
+                     "range_correction": range_correction},
             "estimate": estimate}
 
 

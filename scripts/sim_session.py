@@ -206,10 +206,13 @@ class SimSession:
         self.slam_estimate: list[list[float]] = []
         self.slam_raster = None  # the map at the end of the run (for the plot)
         scanner = mapper_parameters(get_profile(self.args.profile), seed=self.args.seed)
+        lidar_offset_x_m = scanner.pop("lidar_offset_x_m")
+        overrides = {**scanner, **(self.args.slam_overrides or {})}
+        self.slam_range_correction = overrides.get("range_correction")
         self.slam_node = make_slam_node(
-            self.context, lidar_offset_x_m=scanner.pop("lidar_offset_x_m"),
+            self.context, lidar_offset_x_m=lidar_offset_x_m,
             output_prefix=map_prefix, start_pose=self.world.resolve_start(self.start),
-            overrides={**scanner, **(self.args.slam_overrides or {})})
+            overrides=overrides)
         self.slam_node.on_estimate.append(
             lambda stamp_ns, estimate, node: self.slam_estimate.append(
                 [round(stamp_ns * 1e-9, 6), *estimate.pose]))
@@ -356,7 +359,8 @@ class SimSession:
                 except ValueError as exc:  # the folder was checked; a full disk is possible
                     print(f"run_sim: the map could not be written: {exc}", file=sys.stderr)
         return slam_fields(self.world, self.args.profile, self.trajectory, self.slam_estimate,
-                           self.slam_raster, node.mapper, node.timings(), map_file)
+                           self.slam_raster, node.mapper, node.timings(), map_file,
+                           self.slam_range_correction)
 
     def _localization_report(self) -> dict:
         if self.particle_filter is None:

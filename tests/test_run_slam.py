@@ -34,7 +34,7 @@ pytestmark = pytest.mark.slow
 
 def test_slam_run_writes_the_map_the_report_and_the_plot(tmp_path, capsys):
     maps, report_path = tmp_path / "maps", tmp_path / "run.json"
-    code = run_sim.main(["--profile", "turtlebot3_clean", "--slam", "--map-out", str(maps),
+    code = run_sim.main(["--profile", "turtlebot3", "--slam", "--map-out", str(maps),
                          "--duration", "45", "--report", str(report_path), "--plot",
                          str(tmp_path / "slam.png")])
     out = capsys.readouterr().out
@@ -43,6 +43,9 @@ def test_slam_run_writes_the_map_the_report_and_the_plot(tmp_path, capsys):
     slam = report["slam"]
     assert "slam" in report["nodes"] and report["interrupted"] is False
     assert slam["map_file"] == str(maps / "map.yaml") and "map written to" in out
+    # The simulated LDS-01 unit was calibrated against a wall (it reads 2.5 % long at 1 m).
+    assert len(slam["range_correction"]) == 6
+    assert slam["range_correction"][3] == pytest.approx(-0.025, abs=0.002)
     # 45 s of 5 Hz scans, each mapped once (the lockstep simulator re-sends each 3 times).
     estimate = np.array(report["estimate"])
     assert slam["scans"] == len(estimate) and 220 <= len(estimate) <= 226
