@@ -199,13 +199,16 @@ class SimSession:
         The simulated scanner's LiDAR position, `deskew`, its range error and the unit's
         calibration (mapper_parameters) or --slam-param.
         """
+        from amr_common.controller_loader import DEFAULT_MAPPER, link_class
         from amr_evaluation.episode import mapper_parameters
         from amr_sim.profiles import get_profile
         from launch_slam import make_slam_node
         self.map_prefix = map_prefix
         self.slam_estimate: list[list[float]] = []
         self.slam_raster = None  # the map at the end of the run (for the plot)
-        scanner = mapper_parameters(get_profile(self.args.profile), seed=self.args.seed)
+        mapper_class = link_class(getattr(self.args, "mapper", None) or DEFAULT_MAPPER, "mapper")
+        scanner = mapper_parameters(get_profile(self.args.profile), mapper_class,
+                                    seed=self.args.seed)  # only those the mapper takes
         lidar_offset_x_m = scanner.pop("lidar_offset_x_m")
         overrides = {**scanner, **(self.args.slam_overrides or {})}
         self.slam_range_correction = overrides.get("range_correction")
