@@ -119,6 +119,31 @@ def slam_overrides(items: list[str], set_by_script: dict[str, str],
     return {**overrides, "mapper": mapper} if mapper else overrides
 
 
+def lidar_parameters(args: Any, profile: Any = None) -> dict[str, Any]:
+    """The slam node's LiDAR parameters, --slam-param's on top; only those its mapper takes.
+
+    profile: a simulated run's (amr_evaluation.episode.mapper_parameters: the LiDAR's place,
+    de-skew, range error and the unit calibrated with --seed); None: the Burger's LDS-01
+    (LDS-02 owners: --slam-param lidar_model:=LDS-02), its place, and the calibration the user
+    gives (--slam-param range_correction:=[...], scripts/calibrate_lidar.py).
+    """
+    from amr_common.controller_loader import DEFAULT_MAPPER, described_parameters, link_class
+    from amr_mapping.mapper_params import range_error_parameters
+    given = args.slam_overrides or {}
+    mapper = link_class(getattr(args, "mapper", None) or DEFAULT_MAPPER, "mapper")
+    if profile is not None:
+        from amr_evaluation.episode import mapper_parameters
+        from amr_sim.profiles import get_profile
+        values = mapper_parameters(get_profile(profile), mapper, seed=args.seed)
+    else:
+        from amr_common.robot import LIDAR_OFFSET_X
+        takes = described_parameters(mapper)
+        values = {name: value for name, value in range_error_parameters(
+            str(given.get("lidar_model", "LDS-01"))).items() if takes is None or name in takes}
+        values["lidar_offset_x_m"] = LIDAR_OFFSET_X
+    return {**values, **given}
+
+
 def map_prefix(map_out: Path | None, label: str | None = None) -> str:
     """DIR/map (DIR/map-LABEL for one start of several), or '' without --map-out."""
     if map_out is None:

@@ -58,6 +58,7 @@ from launch_common import (  # noqa: E402
 from launch_slam import (  # noqa: E402
     add_slam_options,
     check_slam_options,
+    lidar_parameters,
     make_slam_node,
     map_prefix,
     without_controller,
@@ -175,21 +176,9 @@ def _run(args: argparse.Namespace, stop: StopFlag) -> int:
     if args.no_controller:  # the user drives (scripts/teleop.py)
         without_controller(nodes)
     if args.slam:
-        from amr_common.controller_loader import DEFAULT_MAPPER, described_parameters, link_class
-        from amr_common.robot import LIDAR_OFFSET_X
-        from amr_mapping.mapper_params import range_error_parameters
-        # The Burger's LiDAR is an LDS-01 (LDS-02 owners: --slam-param lidar_model:=LDS-02);
-        # its unit's calibration: --slam-param range_correction:=[...] (calibrate_lidar.py).
-        # A --mapper of your own gets only the parameters it takes.
-        slam_overrides = args.slam_overrides or {}
-        takes = described_parameters(link_class(getattr(args, "mapper", None) or DEFAULT_MAPPER,
-                                                "mapper"))
-        lidar = {name: value for name, value in range_error_parameters(
-            str(slam_overrides.get("lidar_model", "LDS-01"))).items()
-            if takes is None or name in takes}
-        nodes.append(make_slam_node(None, lidar_offset_x_m=LIDAR_OFFSET_X,
-                                    output_prefix=map_prefix(args.map_out),
-                                    overrides={**lidar, **slam_overrides}))
+        overrides = lidar_parameters(args)  # the LDS-01, its calibration from --slam-param
+        nodes.append(make_slam_node(None, lidar_offset_x_m=overrides.pop("lidar_offset_x_m"),
+                                    output_prefix=map_prefix(args.map_out), overrides=overrides))
     if args.map:
         from launch_common import make_map_publisher
         nodes.insert(0, make_map_publisher(None, args.map))

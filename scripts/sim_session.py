@@ -197,25 +197,18 @@ class SimSession:
         """The slam node, mapping in the world's frame (its start pose), saving to map_prefix.
 
         The simulated scanner's LiDAR position, `deskew`, its range error and the unit's
-        calibration (mapper_parameters) or --slam-param.
+        calibration (launch_slam.lidar_parameters) or --slam-param.
         """
-        from amr_common.controller_loader import DEFAULT_MAPPER, link_class
-        from amr_evaluation.episode import mapper_parameters
-        from amr_sim.profiles import get_profile
-        from launch_slam import make_slam_node
+        from launch_slam import lidar_parameters, make_slam_node
         self.map_prefix = map_prefix
         self.slam_estimate: list[list[float]] = []
         self.slam_raster = None  # the map at the end of the run (for the plot)
-        mapper_class = link_class(getattr(self.args, "mapper", None) or DEFAULT_MAPPER, "mapper")
-        scanner = mapper_parameters(get_profile(self.args.profile), mapper_class,
-                                    seed=self.args.seed)  # only those the mapper takes
-        lidar_offset_x_m = scanner.pop("lidar_offset_x_m")
-        overrides = {**scanner, **(self.args.slam_overrides or {})}
+        overrides = lidar_parameters(self.args, self.args.profile)
+        offset = overrides.pop("lidar_offset_x_m")
         self.slam_range_correction = overrides.get("range_correction")
-        self.slam_node = make_slam_node(
-            self.context, lidar_offset_x_m=lidar_offset_x_m,
-            output_prefix=map_prefix, start_pose=self.world.resolve_start(self.start),
-            overrides=overrides)
+        self.slam_node = make_slam_node(self.context, lidar_offset_x_m=offset,
+                                        output_prefix=map_prefix, overrides=overrides,
+                                        start_pose=self.world.resolve_start(self.start))
         self.slam_node.on_estimate.append(
             lambda stamp_ns, estimate, node: self.slam_estimate.append(
                 [round(stamp_ns * 1e-9, 6), *estimate.pose]))

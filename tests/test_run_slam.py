@@ -240,3 +240,23 @@ def test_the_report_leaves_out_counts_a_mapper_does_not_give():
     assert slam["keyframes"] is None and slam["loop_closures"] is None  # not "0": not reported
     line = sim_report.slam_line(report)
     assert "pose RMSE 0.00 cm" in line and "loop closures" not in line
+
+
+def test_the_slam_node_gets_the_lidars_parameters_and_only_those_its_mapper_takes():
+    from types import SimpleNamespace
+
+    from launch_slam import lidar_parameters
+
+    def args(mapper=None, **given):
+        return SimpleNamespace(slam_overrides=given, mapper=mapper, seed=3)
+    robot = lidar_parameters(args())  # the Burger: its LDS-01, calibrated by the user
+    assert robot["lidar_model"] == "LDS-01" and robot["smooth_half_window"] == 7
+    assert robot["lidar_offset_x_m"] == pytest.approx(-0.032) and "range_correction" not in robot
+    given = lidar_parameters(args(lidar_model="LDS-02", range_correction=[1.0, -0.02]))
+    assert given["lidar_model"] == "LDS-02" and given["range_correction"] == [1.0, -0.02]
+    simulated = lidar_parameters(args(), "turtlebot3:randomized")  # the unit of --seed 3
+    assert simulated["range_correction"][3] == pytest.approx(-0.031, abs=0.002)
+    assert lidar_parameters(args(), "turtlebot3_clean")["lidar_model"] == "none"
+    own = lidar_parameters(args("examples.odometry_mapper:OdometryMapper"), "turtlebot3")
+    assert "smooth_half_window" not in own and "lidar_offset_x_m" in own
+    assert "lidar_model" not in lidar_parameters(args("examples.odometry_mapper:OdometryMapper"))

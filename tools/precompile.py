@@ -119,6 +119,7 @@ def warm_up() -> None:
         run_episode("lab02", "outer", profile=profile, duration=1.0, record_trajectory=False)
         run_localization_episode("twin_maze_small", None, profile=profile, duration=1.0,
                                  record=False)  # the filter's LDS models and de-skew
+    run_mapping_episode("lab02", "outer", profile="turtlebot3", duration=2.0)  # the smoothing
     map_world = speckled_map_world()
     run_episode(map_world, "outer", profile="ideal", duration=1.0, record_trajectory=False)
     run_localization_episode(map_world, "outer", profile="ideal", duration=1.0, record=False)
