@@ -133,7 +133,7 @@ class LogOddsGrid:
         return out
 
     def raster(self, occupied_log_odds: float, free_log_odds: float,
-               min_hit_share: float = 0.0, peak_cells: int = 1) -> Raster:
+               min_hit_share: float = 0.0, peak_cells: int = 1, min_hits: int = 1) -> Raster:
         """The map as a Raster (FREE / OCCUPIED / UNKNOWN), cropped to the observed cells + 1.
 
         OCCUPIED: log-odds above occupied_log_odds and at least min_hit_share of the hits of
@@ -153,7 +153,8 @@ class LogOddsGrid:
         values = np.full(block.shape, UNKNOWN, dtype=np.int8)
         hits = self.hits[r0:r1, c0:c1]
         most = _square_maximum(hits, peak_cells)
-        values[(block > occupied_log_odds * UNITS) & (hits >= min_hit_share * most)] = OCCUPIED
+        values[(block > occupied_log_odds * UNITS) & (hits >= min_hit_share * most)
+               & (hits >= min_hits)] = OCCUPIED
         values[block < free_log_odds * UNITS] = FREE
         res = self.resolution
         return Raster(values, res, ((self.col0 + c0) * res, (self.row0 + r0) * res))

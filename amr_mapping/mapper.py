@@ -367,7 +367,8 @@ class Mapper:
         return self._global.raster(self.p["occupied_log_odds"], self.p["free_log_odds"],
                                    self.p["occupied_min_hit_share"],
                                    max(1, round(self.p["occupied_peak_radius_m"]
-                                                / self.p["resolution_m"])))
+                                                / self.p["resolution_m"])),
+                                   self.p["occupied_min_hits"])
 
     def statistics(self) -> dict[str, Any]:
         """Counts (updates, keyframes, loop closures, rejected scans by reason ...) and timings.

@@ -64,6 +64,8 @@ _TABLE: dict[str, tuple[Any, str]] = {
                                     "most-hit cell around it (within occupied_peak_radius_m): "
                                     "range noise spreads a few hits beside each wall, also "
                                     "behind it where no ray clears them."),
+    "occupied_min_hits": (1, "... and was hit at least this often (a far return's noise leaves "
+                             "lone hits behind the walls, where no ray clears them)."),
     "occupied_peak_radius_m": (0.02, "How far around a cell its most-hit neighbour is looked for "
                                      "[m] (0.02: the 3 x 3 cells at 2 cm)."),
     "free_log_odds": (-0.4, "A cell is free below this log-odds; between the two: unknown."),
@@ -137,7 +139,7 @@ PARAMETERS: dict[str, Param] = ruled(
     range_correction=vector(*range(0, 17, 2)),
     **{name: at_least(1) for name in ("min_points", "max_map_cells", "local_map_keyframes",
                                       "loop_chain_keyframes", "loop_interval_keyframes",
-                                      "anchor_keyframes")},
+                                      "anchor_keyframes", "occupied_min_hits")},
     **{name: at_least(0.0) for name in (
         "miss_stop_m", "keyframe_distance_m", "keyframe_angle_rad", "odometry_sigma_per_m",
         "odometry_sigma_per_rad", "loop_min_travel_m", "rerender_tolerance_m",
@@ -184,7 +186,7 @@ def range_error_parameters(lidar_model: str) -> dict[str, Any]:
         raise ValueError(f"lidar_model must be one of {', '.join(MODEL_NAMES)}, got "
                          f"{lidar_model!r}")
     return {"lidar_model": lidar_model, "smooth_half_window": 7, "occupied_min_hit_share": 0.5,
-            "occupied_peak_radius_m": 0.08}
+            "occupied_peak_radius_m": 0.08, "occupied_min_hits": 3}
 
 
 def parameter_descriptions() -> dict[str, tuple[Any, str]]:

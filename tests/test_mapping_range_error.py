@@ -157,3 +157,24 @@ def test_the_compiled_smoothing_gives_what_its_plain_twin_gives():
         assert np.allclose(compiled, plain, rtol=0.0, atol=1e-12)
         if noise:
             assert np.count_nonzero(compiled != r) > 0.5 * r.size  # most returns smoothed
+
+
+def test_lone_far_returns_behind_a_wall_are_not_walls():
+    # A wall hit by many rays, and a few far returns whose noise put them 10-30 cm behind it,
+    # where no ray clears them: one hit each.
+    grid = LogOddsGrid(RES, 10_000_000, 0.9, 0.4, 0.02)
+    ys = np.linspace(-0.5, 0.5, 41)
+    for x in np.linspace(0.0, 0.5, 10):
+        draw(grid, (x, 0.0, 0.0), np.column_stack([np.full(ys.size, WALL_X - x), ys]), 0.0)
+    lone = np.array([[WALL_X + 0.15, 0.3], [WALL_X + 0.25, -0.2], [WALL_X + 0.12, 0.0]])
+    draw(grid, (0.0, 0.0, 0.0), lone, 0.0)
+
+    def occupied_x(min_hits):
+        p = check_parameters({**range_error_parameters("LDS-01"), "occupied_min_hits": min_hits})
+        raster = grid.raster(p["occupied_log_odds"], p["free_log_odds"],
+                             p["occupied_min_hit_share"], 4, p["occupied_min_hits"])
+        _, cols = np.nonzero(raster.values == OCCUPIED)
+        return raster.origin[0] + (cols + 0.5) * RES
+    assert np.sum(occupied_x(1) > WALL_X + 0.05) == 3  # each lone hit its own wall
+    kept = occupied_x(range_error_parameters("LDS-01")["occupied_min_hits"])
+    assert np.all(kept < WALL_X + 0.05) and len(kept) >= 40  # the wall, all of it
