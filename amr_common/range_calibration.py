@@ -75,6 +75,7 @@ class RangeCorrection:
             slope = (c[-1] - c[-2]) / (r[-1] - r[-2])
             correction = np.where(ranges > r[-1], c[-1] + slope * (ranges - r[-1]), correction)
         usable = np.isfinite(ranges) & (ranges > 0.0)
+        # inf + the extrapolated -inf would warn: no correction is added to a no-return value
         return np.where(usable, ranges + np.where(usable, correction, 0.0), ranges)
 
 

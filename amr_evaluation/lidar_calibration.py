@@ -45,15 +45,13 @@ def wall_reading(profile: str | SensorProfile, seed: int, distance: float,
     prof = get_profile(profile)
     start = (_WALL_X - distance - prof.lidar_offset_x, 0.0, 0.0)
     sim = Simulator(calibration_world(), start=start, dt=0.05, profile=prof, seed=seed)
-    angle_min, increment = sim.scan_geometry[:2]
     points, last = [], sim.scan_time
     while len(points) < scans:
         ranges = sim.step(0.0, 0.0)[0]
         if sim.scan_time == last:
             continue
         last = sim.scan_time
-        if prof.effects is not None:  # the LDS-02 changes its geometry every scan
-            angle_min, increment = sim.lidar.geometry[:2]
+        angle_min, increment = sim.scan_geometry[:2]  # the newest scan's (the LDS-02 changes it)
         points.append(wall_points(ranges, angle_min, increment))
     return wall_distance(np.vstack(points))
 

@@ -45,8 +45,9 @@ _TABLE: dict[str, tuple[Any, str]] = {
                              "(amr_common.range_calibration; scripts/calibrate_lidar.py measures "
                              "it). [] = as measured."),
     "smooth_half_window": (0, "Range noise smoothing: each return moves onto the line through "
-                              "this many neighbours on each side, the straightest such window "
-                              "nearest its centre (amr_mapping.scan_smoothing; 0: off)."),
+                              "a window of this many neighbours on each side, the most central "
+                              "straight one, else the straightest (amr_mapping.scan_smoothing; "
+                              "0: off)."),
     "smooth_straightness": (1.5, "... only where that window is straight within this many "
                                  "times the scan's typical window (else as measured)."),
     "min_points": (30, "Scans with fewer valid returns are not matched: the pose follows the "
@@ -176,7 +177,8 @@ def range_error_parameters(lidar_model: str) -> dict[str, Any]:
     """The parameters for a LiDAR whose range error grows with the range (its datasheet's).
 
     Smooth the noise along straight walls by the model's precision, and keep only each wall's
-    most-hit cells within 8 cm as occupied: measured under the simulator's reality gap
+    most-hit cells within 8 cm, hit at least 3 times, as occupied: measured under the
+    simulator's reality gap
     (README "Mapping figures"). 'none': {} (the defaults: exact ranges). The unit's own
     calibration, range_correction, comes on top.
     """

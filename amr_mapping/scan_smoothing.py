@@ -15,7 +15,7 @@ functions are the plain twins.
 from __future__ import annotations
 
 import math
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -23,6 +23,7 @@ from amr_common.jit import jit
 from amr_common.lidar_models import LIDAR_MODELS
 from amr_common.range_calibration import RangeCorrection
 from amr_mapping.line_kernels import _small_eigen
+from amr_mapping.scan_points import RangesFilter
 
 MIN_INCIDENCE_COS = 0.5  # a return within 60 deg of grazing its line stays as measured
 MAX_MOVE_SIGMAS = 2.0  # ... and one the line would move more than 2 expected sigmas
@@ -123,8 +124,7 @@ _chosen_window = jit(_chosen_window_python)
 smooth_ranges_kernel = jit(smooth_ranges_python)
 
 
-def ranges_filter(params: dict[str, Any]
-                  ) -> Callable[[np.ndarray, np.ndarray, float], np.ndarray] | None:
+def ranges_filter(params: dict[str, Any]) -> RangesFilter | None:
     """The Mapper's filter of a scan's usable ranges: calibration, then smoothing (or None).
 
     Parameters `range_correction`, `smooth_half_window`, `smooth_straightness`, `lidar_model`

@@ -154,17 +154,17 @@ def _check_args(args: argparse.Namespace) -> None:
 def pooled_wall_points(scans: Sequence[Any]) -> Any:
     """The returns within +-10 deg ahead of every LaserScan in `scans`, pooled: (N, 2) metres.
 
-    Ranges outside each scan's [range_min, range_max] are no returns (the LDS-01 sends 0).
+    Readings that are not returns (amr_common.scan_returns: 0.0, the LDS-01's "none", NaN,
+    outside the scan's [range_min, range_max]) are left out.
     """
     import numpy as np
 
     from amr_common.range_calibration import wall_points
+    from amr_common.scan_returns import return_mask
     pooled = [np.empty((0, 2))]
     for scan in scans:
         ranges = np.asarray(scan.ranges, dtype=np.float64)
-        low = scan.range_min if scan.range_min > 0.0 else 0.0
-        high = scan.range_max if scan.range_max > 0.0 else np.inf
-        ranges = np.where((ranges >= low) & (ranges <= high), ranges, np.nan)
+        ranges = np.where(return_mask(ranges, scan.range_min, scan.range_max), ranges, np.nan)
         pooled.append(wall_points(ranges, scan.angle_min, scan.angle_increment))
     return np.vstack(pooled)
 
