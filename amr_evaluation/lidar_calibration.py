@@ -21,6 +21,7 @@ from amr_common.range_calibration import (
     wall_distance,
     wall_points,
 )
+from amr_common.robot import ROBOT_RADIUS
 from amr_common.world import World
 from amr_sim.profiles import SensorProfile, get_profile
 from amr_sim.simulator import Simulator
@@ -28,15 +29,28 @@ from amr_sim.simulator import Simulator
 CALIBRATION_DISTANCES_M = (0.3, 1.0, 2.0)  # one below the LDS-01's 0.5 m band edge, two above
 CALIBRATION_SCANS = 25
 _WALL_X = 3.0  # the calibration room: 3.2 m x 2 m, the wall at x = 3 m, the robot facing it
+_BACK_X = -0.2  # the room's wall behind the robot
 
 
 def calibration_world() -> World:
     """A bare room whose wall at x = 3 m the robot faces (its other walls are farther)."""
-    boundary = np.array([[-0.2, -1.0], [_WALL_X, -1.0], [_WALL_X, 1.0], [-0.2, 1.0],
-                         [-0.2, -1.0]])
+    boundary = np.array([[_BACK_X, -1.0], [_WALL_X, -1.0], [_WALL_X, 1.0], [_BACK_X, 1.0],
+                         [_BACK_X, -1.0]])
     segments = np.hstack([boundary[:-1], boundary[1:]]).astype(np.float64)
     return World(name="calibration", source="calibration", segments=segments,
                  boundary=boundary)
+
+
+def distance_limits(profile: str | SensorProfile) -> tuple[float, float]:
+    """(closest, farthest) distances from the LiDAR's centre to the wall it can calibrate at.
+
+    Closer, the robot's body would touch the wall (or the wall would lie within the LiDAR's
+    range_min); farther, its back would be through the calibration room's back wall.
+    """
+    prof = get_profile(profile)
+    body = ROBOT_RADIUS + 0.001  # a millimetre off the walls, so rounding cannot touch them
+    return (round(max(body - prof.lidar_offset_x, prof.range_min), 6),
+            round(_WALL_X - _BACK_X - body - prof.lidar_offset_x, 6))
 
 
 def wall_reading(profile: str | SensorProfile, seed: int, distance: float,
@@ -65,4 +79,4 @@ def calibrate_in_simulation(profile: str, seed: int,
 
 
 __all__ = ["CALIBRATION_DISTANCES_M", "calibrate_in_simulation", "calibration_world",
-           "wall_reading"]
+           "distance_limits", "wall_reading"]

@@ -162,8 +162,14 @@ def check_parameters(overrides: dict[str, Any] | None = None) -> dict[str, Any]:
         problems.append(f"free_log_odds ({values['free_log_odds']}) must be below "
                         f"occupied_log_odds ({values['occupied_log_odds']})")
     if values["smear_sigma_m"] > 10.0 * values["resolution_m"]:
-        problems.append(f"smear_sigma_m ({values['smear_sigma_m']}) must be at most 10 cells "
-                        f"({10.0 * values['resolution_m']:g} m)")
+        # Named by the one changed: a tiny resolution_m is not smear_sigma_m's fault.
+        if values["smear_sigma_m"] != PARAMETERS["smear_sigma_m"][0]:
+            problems.append(f"smear_sigma_m ({values['smear_sigma_m']}) must be at most 10 "
+                            f"cells ({10.0 * values['resolution_m']:g} m)")
+        else:
+            problems.append(f"resolution_m ({values['resolution_m']}) must be at least "
+                            f"smear_sigma_m / 10 ({values['smear_sigma_m'] / 10.0:g} m): the "
+                            "matcher smooths the map over at most 10 cells")
     try:
         RangeCorrection.from_list(values["range_correction"])
     except ValueError as exc:

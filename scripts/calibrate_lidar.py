@@ -78,6 +78,20 @@ def distances_argument(text: str) -> tuple[float, ...]:
     return distances
 
 
+# 200 s of scans per wall at the LDS-01's 5 Hz; the default 25 already pool about 1,200 returns.
+MAX_SCANS = 1000
+
+
+def scans_argument(text: str) -> int:
+    """The argparse type of --scans: an integer from 1 to MAX_SCANS."""
+    scans = number_argument(int, 1)(text)
+    if scans > MAX_SCANS:
+        raise argparse.ArgumentTypeError(
+            f"at most {MAX_SCANS} (got '{text}'): that is {MAX_SCANS / 5:.0f} s of scans per "
+            "wall at the LDS-01's 5 Hz, and the default 25 already pool about 1,200 returns")
+    return scans
+
+
 def max_distances() -> int:
     """How many calibration points the Mapper's range_correction takes (its rule's lengths)."""
     from amr_mapping.mapper_params import PARAMETERS
@@ -96,8 +110,9 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
                         help=f"tape distances (m) from the LiDAR's centre to the wall, at least "
                         f"two (default {default_distances}: one below the LDS-01's 0.5 m, two "
                         f"above)")
-    parser.add_argument("--scans", type=number_argument(int, 1), default=CALIBRATION_SCANS,
-                        help=f"scans pooled at each distance (default {CALIBRATION_SCANS})")
+    parser.add_argument("--scans", type=scans_argument, default=CALIBRATION_SCANS,
+                        help=f"scans pooled at each distance, 1-{MAX_SCANS} (default "
+                        f"{CALIBRATION_SCANS})")
     parser.add_argument("--out", default=None, metavar="FILE.yaml", help="also write a ROS "
                         f"params file for the slam node ('{SLAM_NODE}': range_correction)")
     parser.add_argument("--simulate", default=None, metavar="PROFILE", help="calibrate a "
@@ -135,6 +150,7 @@ def _check_args(args: argparse.Namespace) -> None:
             get_profile(args.simulate)
         except ValueError as exc:
             raise ValueError(f"--simulate: {exc}") from None
+        _check_simulated_distances(args.simulate, args.distances)
         args.seed = 0 if args.seed is None else args.seed
     else:
         if args.seed is not None:
@@ -147,6 +163,19 @@ def _check_args(args: argparse.Namespace) -> None:
         if Path(args.out).suffix.lower() not in (".yaml", ".yml"):
             raise ValueError(f"--out '{args.out}': a ROS params file is YAML: name it .yaml")
         args.out = check_output_file(args.out, "--out")
+
+
+def _check_simulated_distances(profile: str, distances: Sequence[float]) -> None:
+    """Each distance one the simulated robot can stand at (lidar_calibration.distance_limits)."""
+    from amr_evaluation.lidar_calibration import distance_limits
+    closest, farthest = distance_limits(profile)
+    for distance in distances:
+        if distance < closest:
+            raise ValueError(f"--distances {distance:g}: too close: the simulated Burger's body "
+                             f"keeps its LiDAR's centre at least {closest:g} m from the wall")
+        if distance > farthest:
+            raise ValueError(f"--distances {distance:g}: too far for the simulated calibration "
+                             f"room (at most {farthest:g} m)")
 
 
 # --- one wall -------------------------------------------------------------------------------
@@ -203,13 +232,8 @@ def measure_simulated(args: argparse.Namespace) -> dict[float, float]:
     """The simulated unit's readings at args.distances (amr_evaluation.lidar_calibration)."""
     from amr_evaluation.lidar_calibration import wall_reading
     raw = {}
-    for distance in args.distances:
-        try:
-            raw[distance] = wall_reading(args.simulate, args.seed, distance, args.scans)
-        except ValueError as exc:  # WorldError: the robot does not fit in the calibration room
-            print(f"{PROG}.py: error: --distances {distance:g}: too far for the simulated "
-                  f"calibration room ({exc}) (--help lists the options)", file=sys.stderr)
-            raise SystemExit(2) from None
+    for distance in args.distances:  # each where the robot fits (_check_simulated_distances)
+        raw[distance] = wall_reading(args.simulate, args.seed, distance, args.scans)
     print(f"Simulated unit: profile {args.simulate}, seed {args.seed}")
     readings = {}
     for distance, reading in raw.items():

@@ -9,7 +9,8 @@
 
 --slam with --localize or --goal is refused: the particle filter and the planner need the map
 SLAM is still building; map first, then localize and navigate on the saved map
-(`--world DIR/map.yaml`). Every check runs before anything starts (one line, exit code 2).
+(run_sim.py `--world DIR/map.yaml`, run_robot.py `--map DIR/map.yaml`). Every check runs
+before anything starts (one line, exit code 2).
 """
 from __future__ import annotations
 
@@ -55,9 +56,10 @@ def check_slam_options(args, script: str, set_by_script: dict[str, str]) -> None
         return
     for option in ("localize", "goal", "enable_localization"):
         if getattr(args, option, None):
+            on_map = "--map" if script == "run_robot" else "--world"  # the robot's is its map
             raise ValueError(f"--slam and --{option.replace('_', '-')} exclude each other: "
                              "map first, then localize and navigate on the saved map "
-                             "(--world DIR/map.yaml)")
+                             f"({on_map} DIR/{MAP_NAME}.yaml)")
     if getattr(args, "map", None):
         raise ValueError("--slam and --map exclude each other: both would publish /map")
     if args.map_out is not None:

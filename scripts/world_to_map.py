@@ -14,29 +14,42 @@ option read the result. Bad input: one line on stderr, exit code 2, nothing writ
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from amr_common.map_file import CONVERT_RESOLUTION, world_as_map, write_map  # noqa: E402
 from amr_common.world import World  # noqa: E402
+from cli_checks import OneLineArgumentParser  # noqa: E402
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog=__doc__.split("\n\n", 1)[1])
+    parser = OneLineArgumentParser(prog="world_to_map.py", description=__doc__.split("\n\n")[0],
+                                   formatter_class=argparse.RawDescriptionHelpFormatter,
+                                   epilog=__doc__.split("\n\n", 1)[1])
     parser.add_argument("world", help="bundled world name, world YAML, course map JSON or map "
                                       "YAML")
     parser.add_argument("-o", "--output", help="path prefix of the two files (PREFIX.yaml and "
                                                "PREFIX.pgm/.png; default: the world's name in "
-                                               "the current directory)")
+                                               "the current directory); an existing folder "
+                                               "(or a path ending in '/'): the files go into "
+                                               "it, named after the world")
     parser.add_argument("--resolution", type=float, default=CONVERT_RESOLUTION,
                         help=f"cell size in metres (default {CONVERT_RESOLUTION})")
     parser.add_argument("--format", choices=("pgm", "png"), default="pgm",
                         help="image format (default pgm, as map_saver)")
     return parser.parse_args(argv)
+
+
+def output_prefix(output: str | None, name: str) -> Path:
+    """The files' path prefix: -o as given, inside it when it is a folder, else `name`."""
+    if not output:
+        return Path(name)
+    prefix = Path(output).expanduser()
+    if prefix.is_dir() or output.endswith(("/", os.sep)):
+        return prefix / name
+    return prefix
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -46,7 +59,8 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError(f"--resolution must be in [0.005, 1] m, got {args.resolution!r}")
         world = World.load(args.world)
         raster, extras = world_as_map(world, args.resolution)
-        yaml_path, image_path = write_map(raster, args.output or world.name, args.format, extras)
+        yaml_path, image_path = write_map(raster, output_prefix(args.output, world.name),
+                                          args.format, extras)
     except ValueError as exc:  # WorldError, MapFileError, GridTooLargeError
         print(f"world_to_map: {exc}", file=sys.stderr)
         return 2

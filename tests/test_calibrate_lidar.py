@@ -241,6 +241,13 @@ def test_ctrl_c_at_the_prompt_or_while_collecting_exits_130_without_a_traceback(
     (["--distances", ",".join(str(0.2 * n) for n in range(1, 10))],
      "at most 8 distances (the slam node's range_correction takes 8 pairs)"),
     (["--scans", "0"], "--scans: must be >= 1"),
+    (["--scans", "100000000"], "--scans: at most 1000 (got '100000000'): that is 200 s of scans "
+                               "per wall at the LDS-01's 5 Hz"),
+    (["--simulate", "turtlebot3", "--distances", "0.05,1"],
+     "--distances 0.05: too close: the simulated Burger's body keeps its LiDAR's centre at "
+     "least 0.138 m from the wall"),
+    (["--simulate", "ideal", "--distances", "1,3.1"],
+     "--distances 3.1: too far for the simulated calibration room (at most 3.094 m)"),
     (["--timeout", "0"], "--timeout: must be > 0"),
     (["--seed", "3"], "--seed needs --simulate"),
     (["--simulate", "nope"], "--simulate: unknown profile 'nope'"),
@@ -255,6 +262,17 @@ def test_command_line_mistakes(options, message, capsys):
     assert exit_info.value.code == 2
     err = capsys.readouterr().err
     assert message in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("profile", ["turtlebot3_clean", "ideal"])
+def test_the_simulated_robot_stands_at_every_distance_the_checks_let_through(profile):
+    from amr_evaluation.lidar_calibration import distance_limits, wall_reading
+    closest, farthest = distance_limits(profile)
+    for distance in (closest, farthest):  # the robot fits there and sees the wall
+        assert wall_reading(profile, 0, distance, 2) == pytest.approx(distance, abs=0.05)
+    for distance in (closest - 0.002, farthest + 0.002):  # the body would be in a wall
+        with pytest.raises(ValueError, match="touches a wall"):
+            wall_reading(profile, 0, distance, 2)
 
 
 def test_an_out_folder_or_a_distance_outside_the_simulated_room_is_a_command_line_mistake(

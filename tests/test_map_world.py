@@ -258,4 +258,22 @@ def test_a_bad_map_is_a_one_line_error_before_anything_runs(tmp_path, capsys):
     assert capsys.readouterr().err.strip() == f"world_to_map: {message}"
     assert world_to_map.main(["lab02", "--resolution", "0", "-o", str(tmp_path / "x")]) == 2
     assert "--resolution must be in [0.005, 1] m" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exit_info:  # one line, not the whole usage
+        world_to_map.main(["lab02", "--format", "jpg", "-o", str(tmp_path / "x")])
+    err = capsys.readouterr().err
+    assert exit_info.value.code == 2 and err.splitlines() == [
+        "world_to_map.py: error: argument --format: invalid choice: 'jpg' (choose from 'pgm', "
+        "'png') (--help lists the options)"]
     assert not list(tmp_path.glob("x*"))
+
+
+def test_world_to_map_writes_into_an_existing_folder(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "maps").mkdir()
+    assert world_to_map.main(["lab02", "-o", "maps"]) == 0
+    assert world_to_map.main(["twin_maze", "-o", "new/"]) == 0  # a folder to be
+    assert world_to_map.main(["corridor_loop", "-o", "maps/loop"]) == 0  # a prefix, as before
+    assert sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*.*")) == [
+        "maps/lab02.pgm", "maps/lab02.yaml", "maps/loop.pgm", "maps/loop.yaml",
+        "new/twin_maze.pgm", "new/twin_maze.yaml"]
+    assert World.load("maps/lab02.yaml").name == "lab02"

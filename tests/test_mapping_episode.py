@@ -130,3 +130,17 @@ def test_an_lds02_episode_feeds_each_scans_own_geometry_and_scan_time():
     assert result.scans >= 70  # about 5 Hz, none lost (lockstep)
     # Each scan mapped at its own angles (seen: 12.5 cm off with the profile's nominal ones).
     assert result.trajectory_max_m < 0.08  # 3.7 cm
+
+
+def test_the_loop_closure_benchmark_refuses_a_session_without_closures():
+    """Its line timed closures that never happened ('median 0.0 ms ... 0 closures ... 0x')."""
+    import sys
+    from pathlib import Path
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "scripts"))
+    import bench_mapping
+    # twin_maze: the wall follower comes back after loop_min_travel_m only after ~100 s.
+    with pytest.raises(RuntimeError, match="loop closure: none in 60 s on twin_maze with the "
+                                           "branch_and_bound search"):
+        bench_mapping.bench_loop_closure(60.0)
+    assert min(bench_mapping.LOOP_SESSION_S) >= 200.0
+

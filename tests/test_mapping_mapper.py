@@ -205,6 +205,11 @@ def test_a_full_map_drops_rays_with_a_count_instead_of_growing():
     ({"free_log_odds": 0.7}, "free_log_odds (0.7) must be below occupied_log_odds"),
     ({"loop_min_score": 1.5}, "loop_min_score must be in (0, 1]"),
     ({"smear_sigma_m": 1.0}, "smear_sigma_m (1.0) must be at most 10 cells"),
+    # The relation is blamed on the parameter that was changed, not on its default partner.
+    ({"resolution_m": 1e-6}, "resolution_m (1e-06) must be at least smear_sigma_m / 10 "
+                             "(0.003 m)"),
+    ({"resolution_m": 1e-6, "smear_sigma_m": 0.05}, "smear_sigma_m (0.05) must be at most 10 "
+                                                    "cells (1e-05 m)"),
     ({"no_such_thing": 1}, "unknown parameter"),
 ])
 def test_parameters_are_checked(overrides, message):

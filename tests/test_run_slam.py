@@ -124,7 +124,9 @@ def test_ctrl_c_while_the_slam_graph_starts_writes_the_interrupted_report(tmp_pa
     (["--map-out", "x"], "--map-out needs --slam"),
     (["--slam-param", "loop_closure:=false"], "--slam-param needs --slam"),
     (["--slam", "--localize"], "--slam and --localize exclude each other"),
-    (["--slam", "--goal", "inner_far"], "--slam and --goal exclude each other"),
+    (["--slam", "--goal", "inner_far"],
+     "--slam and --goal exclude each other: map first, then localize and navigate on the saved "
+     "map (--world DIR/map.yaml)"),
     (["--slam", "--slam-param", "no_such:=1"], "--slam-param no_such: no such slam parameter"),
     (["--slam", "--slam-param", "resolution_m:=-0.02"], "resolution_m must be > 0"),
     (["--slam", "--slam-param", "map_update_interval_s:=0"],
@@ -151,6 +153,7 @@ def test_map_out_must_be_a_writable_folder(capsys, tmp_path):
 @pytest.mark.parametrize("argv, message", [
     (["--slam", "--map", "lab02"], "--slam and --map exclude each other"),
     (["--slam", "--localize", "--world", "lab02"], "--slam and --localize exclude each other"),
+    (["--slam", "--goal", "-1.0,0.6"], "navigate on the saved map (--map DIR/map.yaml)"),
     (["--slam", "--slam-param", "output_prefix:=x"], "sets it from --map-out"),
     (["--slam", "--slam-param", "lidar_offset_x_m:=0.1"], "lidar_offset_x_m: the script"),
     (["--teleop", "--world", "lab02", "--goal", "-1.0,0.6"], "--no-controller and --goal"),
