@@ -350,6 +350,18 @@ def start_label(start: str | tuple | list | None) -> str:
     return ",".join(f"{float(v):g}" for v in start)
 
 
+def map_label(name: str, source: str) -> str:
+    """A world's or map's name for titles and legends: its name, or its folder and file.
+
+    The folder and file ('lab02/map.yaml') for a map named 'map': a saved map's DIR/map.yaml
+    (map_saver's habit), which would read 'map map'.
+    """
+    path = Path(source)
+    if name != "map" or path.suffix.lower() not in (".yaml", ".yml"):
+        return name
+    return f"{path.parent.name}/{path.name}" if path.parent.name else path.name
+
+
 # WorldError, bundled_worlds and WORLDS_DIR live in world_file.py; they are imported from here.
 __all__ = ["GOAL_CLEARANCE", "SAFETY_MARGIN", "WORLDS_DIR", "World", "WorldError",
-           "bundled_worlds", "parse_start", "start_label"]
+           "bundled_worlds", "map_label", "parse_start", "start_label"]

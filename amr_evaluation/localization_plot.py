@@ -15,7 +15,7 @@ from matplotlib.figure import Figure
 
 from amr_common.world import World
 from amr_evaluation.localization_episode import FALSE_POSITION_M, pose_errors
-from amr_evaluation.plot import draw_navigation, draw_world
+from amr_evaluation.plot import draw_navigation, draw_world, fitted_title
 
 
 def plot_localization(world: World | str, report: dict[str, Any], path: str | Path,
@@ -53,7 +53,11 @@ def plot_localization(world: World | str, report: dict[str, Any], path: str | Pa
             label="start")
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=8,
               frameon=False)
-    ax.set_title(title or world.name, fontsize=10)
+    # The run's title spans both panels (beside each other, one panel's long title would be
+    # clipped at the figure's edge and run into the other's).
+    fig.suptitle(fitted_title(title or world.name, 11.5, 10), fontsize=10)
+    ax.set_title("truth and estimate" + (" on the filter's map" if map_world is not None
+                                         and map_world is not world else ""), fontsize=9)
     _plot_errors(fig.add_subplot(1, 2, 2), truth, estimate, localized,
                  report.get("localization") or {})
     fig.tight_layout()

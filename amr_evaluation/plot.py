@@ -6,6 +6,7 @@ touch the backend of a notebook or GUI that imports it.
 from __future__ import annotations
 
 import math
+import textwrap
 from pathlib import Path
 from typing import Any, Iterable, Sequence
 
@@ -16,7 +17,7 @@ from matplotlib.figure import Figure
 
 from amr_common.geometry import polyline_length
 from amr_common.robot import ROBOT_RADIUS
-from amr_common.world import World
+from amr_common.world import World, map_label
 
 _WALL_COLOUR = "#222222"
 _MAP_COLOUR = "#66c2a5"  # the map's walls when it is not the world (teal: not an estimate colour)
@@ -93,13 +94,27 @@ def _draw_map(ax, map_world: World) -> None:
     """The map of the filter and the planner, under the world: its cells, else its walls."""
     if map_world.raster is not None:
         _draw_cells(ax, map_world, zorder=0.5)
-        ax.fill([], [], color="0.35", label=f"map {map_world.name} (occupied cells)")
+        ax.fill([], [], color="0.35", label=f"map {_map_name(map_world)} (occupied cells)")
         return
     for hole in map_world.holes:
         ax.fill(hole[:, 0], hole[:, 1], color=_MAP_COLOUR, alpha=0.25, zorder=0.5)
     ax.add_collection(LineCollection(map_world.segments.reshape(-1, 2, 2), colors=_MAP_COLOUR,
                                      linewidths=4.0, alpha=0.6, zorder=0.6,
-                                     label=f"map {map_world.name} (walls)"))
+                                     label=f"map {_map_name(map_world)} (walls)"))
+
+
+def _map_name(map_world: World) -> str:
+    return map_label(map_world.name, map_world.source)
+
+
+def fitted_title(text: str, width_in: float, fontsize: float) -> str:
+    """`text` broken between words into lines that fit `width_in` inches at `fontsize` points.
+
+    A title wider than its axes is clipped at the figure's edge or runs into its neighbour's.
+    """
+    chars = max(20, int(width_in * 72.0 / (0.6 * fontsize)))  # 0.6 em: a wide average glyph
+    return "\n".join(textwrap.fill(line, chars, break_on_hyphens=False) or line
+                     for line in text.split("\n"))
 
 
 def draw_navigation(ax, planned_path: Any = None, goal: Sequence[float] | None = None) -> None:
@@ -241,7 +256,7 @@ def plot_episode(world: World | str, trajectory: Any, collision_points: Iterable
     traj, points, result = _episode_parts(trajectory, collision_points)
     figures = draw_episode(ax, world, traj, points, planned_path=planned_path, goal=goal,
                            map_world=map_world)
-    ax.set_title(_title(world, result, figures, title), fontsize=10)
+    ax.set_title(fitted_title(_title(world, result, figures, title), 6.0, 10), fontsize=10)
     return _save(fig, path)
 
 

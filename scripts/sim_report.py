@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from amr_common.geometry import polyline_length
-from amr_common.world import start_label
+from amr_common.world import map_label, start_label
 from amr_evaluation.episode import trajectory_metrics
 
 
@@ -158,7 +158,7 @@ def world_label(report: dict) -> str:
     """'lab02', or 'lab02_box on map lab02' when the filter and the planner had their own map."""
     if report["map_source"] == report["world_source"]:
         return report["world"]
-    return f"{report['world']} on map {report['map']}"
+    return f"{report['world']} on map {map_label(report['map'], report['map_source'])}"
 
 
 def localization_line(report: dict) -> str:
