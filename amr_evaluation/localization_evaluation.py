@@ -264,6 +264,10 @@ def evaluate_main(specs, settings: dict[str, Any], args, out: Path, executor=Non
     summary["wall_time_s"] = round(time.monotonic() - started, 1)
     summary["map"] = settings.get("map")  # the filter's map; None: each world's own
     summary["localizer"] = local[0].localizer if local else None
+    # What the set ran, for compare.py: every link, the project's included.
+    summary.update(kind="localization", controller=settings["controller"],
+                   links=settings.get("links_ran") or {"controller": settings["controller"],
+                                                       "localizer": summary["localizer"]})
     rows = [outcome_row(o) for o in outcomes]
     out.mkdir(parents=True, exist_ok=True)
     (out / "results.json").write_text(json.dumps({"summary": summary, "episodes": rows},

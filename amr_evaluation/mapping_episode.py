@@ -33,13 +33,14 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
 from amr_common.controller_loader import DEFAULT_MAPPER, described_parameters, link_class
 from amr_common.geometry import compose, inverse
+from amr_common.map_raster import Raster
 from amr_common.navigation_behaviour import OdometryHold, ScanNovelty
 from amr_common.world import World
 from amr_evaluation.episode import default_controller, episode_start_label, mapper_parameters
@@ -154,10 +155,15 @@ class MappingResult:
     cpu_real_time_factor: float = 0.0  # ... per CPU second
     statistics: dict[str, Any] = field(default_factory=dict)
     estimate: list[list[float]] = field(default_factory=list)  # [t, x, y, theta] per scan
+    # With record: the true pose at each estimate row, [t, x, y, theta], and the map built
+    trajectory: list[list[float]] = field(default_factory=list)
+    raster: Raster | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain JSON-serialisable dict."""
-        return asdict(self)
+        """Plain JSON-serialisable dict (without the map)."""
+        data = asdict(replace(self, raster=None))
+        del data["raster"]
+        return data
 
     def summary(self) -> str:
         """One line with the setup and the figures."""
@@ -182,6 +188,7 @@ def run_mapping_episode(world: World | str, start=None,
                         world_frame: bool = False) -> MappingResult:
     """Explore `world` with the wall follower for `duration` s while the mapper maps it.
 
+    record: the result also carries the SLAM poses, the true ones and the map (_recorded).
     mapper: the mapper's class as "MODULE:CLASS" or a class (amr_common.interfaces.Mapper;
     None: amr_mapping.mapper:Mapper), built with the profile's LiDAR offset, `loop_closure`
     (if the class has that parameter) and `mapper_params`; or a ready object with the
@@ -229,7 +236,17 @@ def run_mapping_episode(world: World | str, start=None,
         **_timings(run.update_cpu_ms, stats), statistics=stats,
         real_time_factor=sim.time / run.wall_time if run.wall_time > 0 else math.inf,
         cpu_real_time_factor=sim.time / run.cpu_time if run.cpu_time > 0 else math.inf,
-        estimate=rows.tolist() if record else [])
+        **(_recorded(rows, run.truth, raster) if record else {}))
+
+
+def _recorded(rows: np.ndarray, truth: list, raster: Raster) -> dict[str, Any]:
+    """What record adds to a MappingResult: estimate, trajectory and raster.
+
+    estimate: [t, x, y, theta] of the SLAM pose per mapped scan; trajectory: the true pose at
+    each of their stamps; raster: the map built.
+    """
+    return {"estimate": rows.tolist(), "raster": raster,
+            "trajectory": [[float(t), *map(float, pose)] for t, pose in zip(rows[:, 0], truth)]}
 
 
 def _count(value: int | None) -> str:

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import json
 import math
+import re
+import sys
 import time
 import traceback
 from dataclasses import asdict, dataclass
@@ -41,6 +43,8 @@ class MappingSpec:
     controller: str | None = None  # MODULE:CLASS of the explorer; None: the wall follower
     controller_params: tuple[tuple[str, Any], ...] = ()
     mapper: str | None = None  # MODULE:CLASS of the mapper; None: amr_mapping.mapper:Mapper
+    world_frame: bool = False  # the map in the world's frame (run_mapping_episode)
+    record: bool = False  # the result carries the map ("raster") and both trajectories
 
 
 def mapping_specs(worlds: Iterable[str], seeds: Iterable[int], duration: float = 300.0,
@@ -65,11 +69,12 @@ def run_mapping_spec(spec: MappingSpec) -> dict[str, Any]:
                                      seed=spec.seed, duration=spec.duration,
                                      loop_closure=spec.loop_closure, drift=spec.drift,
                                      mapper_params=spec.mapper_params, mapper=spec.mapper,
-                                     controller=_controller(spec))
+                                     controller=_controller(spec), record=spec.record,
+                                     world_frame=spec.world_frame)
     except Exception as exc:  # noqa: BLE001 - reported per episode, the batch goes on
         return {**asdict(spec), "error": f"{type(exc).__name__}: {exc}",
                 "traceback": traceback.format_exc()}
-    return result.to_dict()
+    return {**result.to_dict(), "raster": result.raster} if spec.record else result.to_dict()
 
 
 def _controller(spec: MappingSpec):
@@ -167,25 +172,29 @@ def _cell(result: dict[str, Any], column: tuple) -> str:
 
 
 def evaluate_main(specs, settings: dict[str, Any], mapper_params: dict[str, Any], out: Path,
-                  executor=None) -> int:
+                  executor=None, sheet: bool = True) -> int:
     """evaluate.py --slam: mapping episodes for evaluate.py's grid (EpisodeSpecs).
 
-    Writes results.json (per world summary + one row per episode, the Mapper's statistics
-    included) and results.csv to `out`, prints the table; exit code 3 if an episode failed to
-    run, 1 if one collided, else 0.
+    Each episode maps in the world's frame; its map goes to out/maps/ (Nav2 map YAML + PGM:
+    a --map or --world of later runs). Writes results.json (what the set ran, per world summary
+    + one row per episode, the Mapper's statistics and the map's file included), results.csv
+    and, with `sheet`, sheet.png (every episode's map under the true walls, with the true and
+    SLAM trajectories) to `out`, prints the table; exit code 3 if an episode failed to run or
+    its map could not be written, 1 if one collided, else 0.
     """
-    import csv
     controller = settings["controller"]
     mapper = settings.get("links", {}).get("mapper")
     mapping = [MappingSpec(s.world, s.seed, s.duration,
                            bool(mapper_params.get("loop_closure", True)), profile=s.profile,
                            start=list(s.start) if isinstance(s.start, tuple) else s.start,
                            mapper_params=dict(mapper_params) or None,
-                           controller=controller, controller_params=s.params, mapper=mapper)
+                           controller=controller, controller_params=s.params, mapper=mapper,
+                           world_frame=True, record=True)
                for s in specs]
-    print(f"evaluate: {len(mapping)} mapping episodes of {settings['duration']:g} s, mapper "
-          f"{mapper or DEFAULT_MAPPER}" + (f" {mapper_params}" if mapper_params else ""),
-          flush=True)
+    described = f"mapper {mapper or DEFAULT_MAPPER}" + (f" {mapper_params}" if mapper_params
+                                                        else "")
+    print(f"evaluate: {len(mapping)} mapping episodes of {settings['duration']:g} s, "
+          f"{described}", flush=True)
     started = time.monotonic()
 
     def progress(done: int, total: int, result: dict[str, Any]) -> None:
@@ -198,23 +207,92 @@ def evaluate_main(specs, settings: dict[str, Any], mapper_params: dict[str, Any]
     failed = sum("error" in r for r in results)
     collided = sum(r.get("collisions", 0) > 0 for r in results)
     out.mkdir(parents=True, exist_ok=True)
-    summary = {"mapper": mapper or DEFAULT_MAPPER, "episodes": len(results), "failed": failed,
-               "collided": collided,
+    unsaved = save_maps(results, out, mapper or DEFAULT_MAPPER)
+    summary = {"kind": "mapping", "controller": controller,
+               "links": settings.get("links_ran") or {"controller": controller,
+                                                      "mapper": mapper or DEFAULT_MAPPER},
+               "mapper": mapper or DEFAULT_MAPPER, "episodes": len(results), "failed": failed,
+               "collided": collided, "maps_not_saved": unsaved,
                "wall_time_s": round(time.monotonic() - started, 1),
                "per_world": summary_rows(results)}
-    (out / "results.json").write_text(json.dumps({"summary": summary, "episodes": results},
+    rows = [{k: v for k, v in r.items() if k not in ("raster", "estimate", "trajectory")}
+            for r in results]
+    _write_results(out, summary, rows)
+    if sheet:
+        _draw_sheet(mapping, results, out / "sheet.png", described)
+    print(mapping_table(results))
+    print(f"evaluate: {len(results)} mapping episodes, {failed} failed, {collided} collided"
+          + (f", {unsaved} map(s) NOT saved" if unsaved else "")
+          + f", in {summary['wall_time_s']:.1f} s; results and maps in {out}")
+    return 3 if failed or unsaved else 1 if collided else 0
+
+
+def save_maps(results: list[dict[str, Any]], out: Path, mapper: str) -> int:
+    """Each result's "raster" as out/maps/WORLD-START-PROFILE-seedN.yaml + .pgm (write_map).
+
+    Sets each row's "map_file" (relative to `out`), or "map_error" with why it could not be
+    written (also printed); returns how many could not.
+    """
+    from amr_common.map_file import write_map
+    unsaved, used = 0, set()
+    for result in results:
+        if result.get("raster") is None:
+            continue
+        stem = _file_stem(result)
+        while stem in used:  # the same episode twice in a grid
+            stem += "_again"
+        used.add(stem)
+        truth = result.get("trajectory") or []
+        extras = {"name": stem, "description": f"built by {mapper} in evaluate.py --slam "
+                  f"({result['sim_time_s']:g} s, seed {result['seed']})"}
+        if truth:  # where the robot started, in the world's frame (the map's too)
+            extras["starts"] = {"slam_start": [float(v) for v in truth[0][1:4]]}
+        try:
+            write_map(result["raster"], out / "maps" / stem, "pgm", extras)
+            result["map_file"] = f"maps/{stem}.yaml"
+        except ValueError as exc:  # MapFileError: disk full, permissions, ...
+            result["map_file"], result["map_error"] = None, str(exc)
+            unsaved += 1
+            print(f"evaluate: map NOT saved: {exc}", file=sys.stderr, flush=True)
+    return unsaved
+
+
+def _file_stem(result: dict[str, Any]) -> str:
+    """WORLD-START-PROFILE-seedN with only letters, digits, '.', '_', ',' and '-'."""
+    from amr_common.world import start_label
+    text = (f"{result['world']}-{start_label(result['start'])}-{result['profile']}-seed"
+            f"{result['seed']}")
+    return re.sub(r"[^\w.,-]+", "_", text)
+
+
+def _write_results(out: Path, summary: dict[str, Any], rows: list[dict[str, Any]]) -> None:
+    """results.json (summary and rows) and results.csv (the rows' flat columns)."""
+    import csv
+    (out / "results.json").write_text(json.dumps({"summary": summary, "episodes": rows},
                                                  indent=1, default=float))
     with open(out / "results.csv", "w", newline="") as handle:
-        keys = list(dict.fromkeys(k for r in results for k in r
-                                  if k not in ("statistics", "estimate", "drift",
-                                               "mapper_params", "traceback")))
+        keys = list(dict.fromkeys(k for r in rows for k in r
+                                  if k not in ("statistics", "drift", "mapper_params",
+                                               "traceback")))
         writer = csv.DictWriter(handle, fieldnames=keys, extrasaction="ignore")
         writer.writeheader()
-        writer.writerows(results)
-    print(mapping_table(results))
-    print(f"evaluate: {len(results)} mapping episodes, {failed} failed, {collided} collided, "
-          f"in {summary['wall_time_s']:.1f} s; results in {out}")
-    return 3 if failed else 1 if collided else 0
+        writer.writerows(rows)
+
+
+def _draw_sheet(specs: list[MappingSpec], results: list[dict[str, Any]], path: Path,
+                title: str) -> None:
+    """sheet.png of the episodes that ran (each world loaded once)."""
+    import textwrap
+
+    from amr_common.world import World
+    from amr_evaluation.mapping_plot import plot_mapping_sheet
+    ran = [(spec.world, result) for spec, result in zip(specs, results) if "error" not in result]
+    worlds = {source: World.load(source) for source in dict.fromkeys(s for s, _ in ran)}
+    episodes = [(worlds[source], result) for source, result in ran]
+    if episodes:
+        sheet = plot_mapping_sheet(episodes, path, textwrap.shorten(title, width=150,
+                                                                    placeholder=" ..."))
+        print(f"evaluate: maps drawn in {sheet}")
 
 
 def _summary_line(result: dict[str, Any]) -> str:
@@ -227,4 +305,4 @@ def _summary_line(result: dict[str, Any]) -> str:
 
 
 __all__ = ["MappingSpec", "evaluate_main", "mapping_specs", "mapping_table", "run_mapping_grid",
-           "run_mapping_spec", "summary_rows"]
+           "run_mapping_spec", "save_maps", "summary_rows"]

@@ -5,11 +5,13 @@ Each episode runs headless with the same Simulator and controller class as the R
 (amr_evaluation.episode.run_episode). With --goals, navigation episodes (worlds x starts x goals
 x profiles x seeds): the controller explores until the particle filter is localized, then the
 planner and the pure pursuit drive to the goal (amr_evaluation.navigation_episode). Writes
-results.json, results.csv and sheet.png (every episode's trajectory) to --out, prints a table and
+results.json (with the set's kind and links, for compare.py), results.csv and sheet.png (every
+episode's trajectory; --slam: every map, each also saved in maps/) to --out, prints a table and
 a one-line verdict.
 Exit code: 0 no collision (and every goal reached), 1 some episode collided, commanded
 NaN/inf/non-numbers or missed its goal, 2 bad options, 3 some episode failed to run (an
-exception, sys.exit, its worker process died, or it ran past --episode-timeout).
+exception, sys.exit, its worker process died, or it ran past --episode-timeout) or its map could
+not be saved.
 
 Examples:
   .venv/bin/python scripts/evaluate.py --worlds lab02 --seeds 0,1,2 --duration 120
@@ -50,7 +52,7 @@ from evaluate_executors import (  # noqa: E402
     check_ray_options,
     make_executor,
 )
-from link_options import add_link_options, check_filter_map  # noqa: E402
+from link_options import add_link_options, check_filter_map, links_ran  # noqa: E402
 
 from amr_common.controller_loader import (  # noqa: E402
     DEFAULT_LOCALIZER,
@@ -188,6 +190,10 @@ def resolve_settings(args: argparse.Namespace) -> dict:
     settings["episode_timeout"] = timeout
     check_option_pairs(args, settings)
     settings["links"] = check_links(args, settings)
+    kind = settings["kind"] = ("localization" if args.localize else "mapping" if args.slam
+                               else "navigation" if settings["goals"] else "wall_following")
+    settings["links_ran"] = links_ran(kind, {"controller": settings["controller"],  # compare.py
+                                             **settings["links"]}, settings["pose_source"])
     if args.slam:
         args.mapper_params = check_slam_params(args.slam_param, settings["links"].get("mapper"))
     return settings
@@ -340,7 +346,8 @@ def run_and_report(args, settings: dict, specs, executor, out: Path, started) ->
         return evaluate_main(specs, settings, args, out, executor=executor)
     if args.slam:
         from amr_evaluation.mapping_evaluation import evaluate_main as evaluate_mapping
-        return evaluate_mapping(specs, settings, args.mapper_params, out, executor=executor)
+        return evaluate_mapping(specs, settings, args.mapper_params, out, executor=executor,
+                                sheet=not args.no_sheet)
     print(f"evaluate: {len(specs)} episodes of {settings['duration']:g} s on "
           f"{executor.describe()}, controller {settings['controller']}"
           + (f" {settings['params']}" if settings["params"] else ""), flush=True)
@@ -359,7 +366,8 @@ def run_and_report(args, settings: dict, specs, executor, out: Path, started) ->
 
     meta = {"started_utc": started.isoformat(timespec="seconds"), "wall_time_s": round(wall, 2),
             "jobs": executor.workers(len(specs)), "executor": executor.describe(),
-            "controller": settings["controller"], "links": settings["links"],
+            "kind": settings["kind"], "controller": settings["controller"],
+            "links": settings["links_ran"],
             "params": settings["params"], "params_file": settings["params_file"],
             "duration_s": settings["duration"], "dt_s": settings["dt"],
             "episode_timeout_s": settings["episode_timeout"],

@@ -63,6 +63,26 @@ def check_links(given: dict[str, str | None], runs: dict[str, bool],
     return given
 
 
+# The kinds of evaluate.py result sets and the links their episodes run (the navigation
+# episodes' localizer only on the filter's pose).
+RESULT_KINDS = {"wall_following": ("controller",),
+                "localization": ("controller", "localizer"),
+                "navigation": ("controller", "localizer", "planner", "follower"),
+                "mapping": ("controller", "mapper")}
+
+
+def links_ran(kind: str, given: dict[str, str | None], pose_source: str = "filter"
+              ) -> dict[str, str]:
+    """{link: MODULE:CLASS} of every link a `kind` of episodes ran: the given, else the project's.
+
+    `given`: the user's classes by link (the controller's included), missing or None for the
+    project's.
+    """
+    from amr_common.controller_loader import LINKS
+    return {link: given.get(link) or LINKS[link][1] for link in RESULT_KINDS[kind]
+            if not (link == "localizer" and kind == "navigation" and pose_source != "filter")}
+
+
 def check_link_options(args, needs: dict[str, bool]) -> dict[str, str]:
     """Load every --localizer / --planner / --follower class now; ValueError (one line).
 

@@ -303,6 +303,8 @@ def test_two_episodes_in_two_processes_write_readable_results(tmp_path):
     assert [(e["start"], e["error"]) for e in episodes] == [("outer", None), ("inner", None)]
     assert data["meta"]["jobs"] == 2
     assert data["meta"]["controller"] == "amr_control.wall_follower:WallFollower"
+    assert data["meta"]["kind"] == "wall_following"  # for compare.py: what the set ran
+    assert data["meta"]["links"] == {"controller": "amr_control.wall_follower:WallFollower"}
     for e in episodes:
         assert e["sim_time_s"] == pytest.approx(20.0)
         assert 0.5 < e["distance_m"] < 20.0 * 0.22 + 1e-6  # it moved, within the speed limit

@@ -113,7 +113,9 @@ def test_evaluate_runs_the_examples_and_compare_sets_them_side_by_side(tmp_path,
     assert evaluate.main([*grid, "--pose-source", "truth", "--out", str(tmp_path / "a")]) == 0
     assert evaluate.main([*grid, *EXAMPLES, "--out", str(tmp_path / "b")]) == 0
     meta = json.loads((tmp_path / "b" / "results.json").read_text())["meta"]
-    assert meta["links"] == {"localizer": MCL, "planner": WAVEFRONT, "follower": PURSUIT}
+    assert meta["kind"] == "navigation" and meta["links"] == {
+        "controller": "amr_control.wall_follower:WallFollower", "localizer": MCL,
+        "planner": WAVEFRONT, "follower": PURSUIT}
     assert evaluate.main(["--localize", "--worlds", "lab02", "--starts", "inner", "--profiles",
                           "turtlebot3", "--duration", "5", "--jobs", "1", "--localizer", MCL,
                           "--out", str(tmp_path / "c")]) == 0
@@ -124,7 +126,13 @@ def test_evaluate_runs_the_examples_and_compare_sets_them_side_by_side(tmp_path,
     assert row.split()[:5] == ["lab02", "inner", "north_west", "turtlebot3", "1|1"]
     assert "1/1 | 1/1" in row and "0 | 0" in row  # both reached the goal, neither was false
     assert f"follower {PURSUIT}" in out
-    assert compare.main([str(tmp_path / "a"), str(tmp_path / "c")]) == 0  # a --localize set
+    # A: the true pose, no localizer ran; B: every link named, the project's included.
+    assert "planner amr_planning.planner:Planner" in out and "localizer" not in \
+        out.splitlines()[1]
+    summary = json.loads((tmp_path / "c" / "results.json").read_text())["summary"]
+    assert summary["kind"] == "localization" and summary["links"]["localizer"] == MCL
+    assert compare.main([str(tmp_path / "a"), str(tmp_path / "c")]) == 2  # a --localize set
+    assert "compare two sets of one kind" in capsys.readouterr().err
 
 
 def test_compare_refuses_what_is_not_a_result_set(tmp_path, capsys):

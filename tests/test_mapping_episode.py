@@ -144,3 +144,24 @@ def test_the_loop_closure_benchmark_refuses_a_session_without_closures():
         bench_mapping.bench_loop_closure(60.0)
     assert min(bench_mapping.LOOP_SESSION_S) >= 200.0
 
+
+def test_a_map_that_cannot_be_saved_is_said_and_counted(tmp_path, capsys):
+    from amr_common.map_file import world_as_map
+    from amr_evaluation.mapping_evaluation import save_maps
+    raster, _ = world_as_map(World.load("lab02"), 0.02)
+    episode = {"world": "lab02", "start": [1.0, -1.0, 1.57], "profile": "turtlebot3_clean",
+               "seed": 3, "sim_time_s": 20.0, "raster": raster,
+               "trajectory": [[0.0, 1.0, -1.0, 1.57]]}
+    results = [dict(episode), {**episode, "seed": 4}, {"world": "lab02", "error": "boom"}]
+    assert save_maps(results, tmp_path, "amr_mapping.mapper:Mapper") == 0
+    assert [r.get("map_file") for r in results] == [
+        "maps/lab02-1,-1,1.57-turtlebot3_clean-seed3.yaml",
+        "maps/lab02-1,-1,1.57-turtlebot3_clean-seed4.yaml", None]
+    saved = World.load(str(tmp_path / results[0]["map_file"]))
+    assert saved.starts == {"slam_start": (1.0, -1.0, 1.57)}
+    (tmp_path / "blocked").mkdir()
+    (tmp_path / "blocked" / "maps").write_text("a file where the folder would go")
+    results = [dict(episode)]
+    assert save_maps(results, tmp_path / "blocked", "amr_mapping.mapper:Mapper") == 1
+    assert results[0]["map_file"] is None and "cannot write the map" in results[0]["map_error"]
+    assert "evaluate: map NOT saved:" in capsys.readouterr().err

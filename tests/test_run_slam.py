@@ -209,6 +209,16 @@ def test_evaluate_slam_runs_mapping_episodes_with_their_figures(capsys, tmp_path
         assert e["trajectory_rmse_m"] < 0.015 and e["precision"] > 0.9 and e["recall"] > 0.8
     assert "| lab02 | outer | turtlebot3_clean | 0 | False |" in printed
     assert (out / "results.csv").read_text().startswith("world,")
+    # Each episode's map, as Nav2 map files in the world's frame: its walls on the true ones,
+    # and it reads back as a map (its start in a free cell).
+    for e in episodes:
+        assert e["map_file"].startswith("maps/") and "raster" not in e
+        saved = World.load(str(out / e["map_file"]))
+        assert saved.raster is not None and len(saved.starts) == 1
+        world = World.load(e["world"])
+        near_a_wall = world.clearances(occupied_centres(saved.raster)) <= 0.03
+        assert near_a_wall.mean() > 0.9, e["map_file"]
+    assert (out / "sheet.png").stat().st_size > 10_000 and "maps drawn in" in printed
 
 
 @pytest.mark.parametrize("argv, message", [
