@@ -40,7 +40,7 @@ class LifecycleStartupError(RuntimeError):
 
 
 class StartupInterrupted(RuntimeError):
-    """The stop flag (Ctrl-C, SIGTERM) was set during start-up: no further transition."""
+    """The stop flag (Ctrl-C, SIGTERM, SIGHUP) was set during start-up: no further transition."""
 
 
 class LifecycleManager(Node):
@@ -157,13 +157,13 @@ class LifecycleManager(Node):
 
 def run_managed(manager: LifecycleManager, stop: StopFlag,
                 nodes: Sequence[LifecycleNode] = ()) -> int:
-    """Spin `manager` and the in-process `nodes`, bring the graph up, run until Ctrl-C/SIGTERM.
+    """Spin `manager` and the in-process `nodes`, bring the graph up, run until stopped.
 
     Then the in-process nodes go through their shutdown transition in reverse startup order
     (controllers first: their final zero command goes out while DDS is still up), everything is
     destroyed and rclpy shut down. The caller has run rclpy.init(signal_handler_options=NO) and
-    installed `stop`; a stop during start-up ends it there (no further transition). Returns the
-    process exit code (0 after a stop: the caller knows it from `stop`).
+    installed `stop` (Ctrl-C, SIGTERM, SIGHUP); a stop during start-up ends it there (no further
+    transition). Returns the process exit code (0 after a stop: the caller knows it from `stop`).
     """
     executor = make_executor()
     for node in [*nodes, manager]:

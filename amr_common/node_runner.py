@@ -2,8 +2,9 @@
 
 `run_lifecycle_node(NodeClass)` is each console script's main: it accepts `--ros-args ...` like
 `ros2 run`, honours `-p autostart:=true` (configure + activate without a manager), spins with the
-fastest executor available, and on Ctrl-C or SIGTERM drives the node through its shutdown
-transition BEFORE the context goes away, so nodes that command a robot can send a final zero.
+fastest executor available, and on Ctrl-C, SIGTERM or SIGHUP (the terminal closed, the SSH
+session dropped) drives the node through its shutdown transition BEFORE the context goes away,
+so nodes that command a robot can send a final zero.
 """
 from __future__ import annotations
 

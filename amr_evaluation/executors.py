@@ -198,8 +198,11 @@ def _context(preload: Sequence[str]) -> multiprocessing.context.BaseContext:
 
 def _worker_main(connection: Connection, task: Task, preload: Sequence[str]) -> None:
     """A worker process: runs each (index, spec) it receives until it receives None."""
-    # Ctrl-C goes to the whole process group: only the parent handles it (and ends the pool).
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # Ctrl-C and a closed terminal's SIGHUP go to the whole process group: only the parent
+    # handles them (and ends the pool).
+    for signum in (signal.SIGINT, getattr(signal, "SIGHUP", None)):
+        if signum is not None:
+            signal.signal(signum, signal.SIG_IGN)
     _preload(preload)
     while True:
         try:

@@ -78,6 +78,7 @@ class SlamNode(GuardedLifecycleNode):
         # after every mapped scan (in-process observation without a subscription).
         self.on_estimate: list = []
         self.saved_maps: list[Path] = []  # every map file written, kept after shutdown
+        self.map_save_error: str | None = None  # why the way down's save failed, kept too
         self._reset_runtime()
 
     # --- lifecycle -------------------------------------------------------------------------
@@ -379,8 +380,10 @@ class SlamNode(GuardedLifecycleNode):
             return  # saved already, and unchanged since
         try:
             path = self.save_map(prefix)
+            self.map_save_error = None
             self.get_logger().info(f"{transition}: map saved to {path}")
         except (ValueError, OSError) as exc:
+            self.map_save_error = str(exc)
             self.get_logger().error(f"{transition}: the map could not be saved: {exc}")
 
     # --- figures ---------------------------------------------------------------------------

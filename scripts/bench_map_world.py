@@ -117,4 +117,6 @@ def main(argv: list[str] | None = None) -> dict:
 
 
 if __name__ == "__main__":
+    from script_endings import guard_output  # a closed output loses nothing
+    guard_output()
     main()

@@ -151,5 +151,7 @@ def main(argv=None) -> dict:
 
 
 if __name__ == "__main__":
+    from script_endings import guard_output  # a closed output loses nothing
+    guard_output()
     main()
     sys.exit(0)

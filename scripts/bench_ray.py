@@ -167,4 +167,5 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from script_endings import run_script  # a closed output loses nothing
+    sys.exit(run_script(main))

@@ -237,6 +237,8 @@ def _print(r: dict) -> None:
 
 
 if __name__ == "__main__":
+    from script_endings import guard_output  # a closed output loses nothing
+    guard_output()
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=20_000)
     parser.add_argument("--repeats", type=int, default=3)

@@ -19,7 +19,8 @@ not a terminal, each line is an Enter). Discovery is left to you (the robot's ne
 run_robot.py) unless --local: loopback only and the --domain-id given, else $ROS_DOMAIN_ID if
 not 0, else a free one (printed).
 Exit codes: 0 calibrated, 1 a wall not measured (no /scan, no straight wall ahead, an absurd
-reading: nothing is written), 130 after Ctrl-C, 2 for a mistake in the command line.
+reading: nothing is written), 130 after Ctrl-C or SIGTERM, 129 after SIGHUP (the terminal
+closed), 2 for a mistake in the command line.
 """
 from __future__ import annotations
 
@@ -32,6 +33,8 @@ from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from script_endings import interruptible, run_script  # noqa: E402
+
 from amr_common.ros_env import (  # noqa: E402
     describe_graph_settings,
     environment_domain_id,
@@ -362,6 +365,10 @@ def report(readings: Mapping[float, float], args: argparse.Namespace, source: st
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Calibrate; the exit code (module docstring)."""
+    return interruptible(f"\n{PROG}: interrupted; nothing written", lambda: _calibrate(argv))
+
+
+def _calibrate(argv: Sequence[str] | None) -> int:
     try:
         args = parse_args(argv)
         if args.simulate is not None:
@@ -375,15 +382,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except CalibrationError as exc:
         print(f"{PROG}: {exc}; nothing written", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
-        print(f"\n{PROG}: interrupted; nothing written", file=sys.stderr)
-        return INTERRUPTED
 
 
 if __name__ == "__main__":
-    import signal
-    signal.signal(signal.SIGTERM, signal.default_int_handler)  # as Ctrl-C: a clean exit
     try:
-        sys.exit(main())
+        sys.exit(run_script(main))
     except KeyboardInterrupt:  # in the instant before main() answers it
         sys.exit(INTERRUPTED)

@@ -11,7 +11,7 @@ a one-line verdict.
 Exit code: 0 no collision (and every goal reached), 1 some episode collided, commanded
 NaN/inf/non-numbers or missed its goal, 2 bad options, 3 some episode failed to run (an
 exception, sys.exit, its worker process died, or it ran past --episode-timeout) or its map could
-not be saved.
+not be saved, 130 / 129 stopped by Ctrl-C or SIGTERM / SIGHUP (the terminal closed).
 
 Examples:
   .venv/bin/python scripts/evaluate.py --worlds lab02 --seeds 0,1,2 --duration 120
@@ -53,6 +53,7 @@ from evaluate_executors import (  # noqa: E402
     make_executor,
 )
 from link_options import add_link_options, check_filter_map, links_ran  # noqa: E402
+from script_endings import interruptible, run_script  # noqa: E402
 
 from amr_common.controller_loader import (  # noqa: E402
     DEFAULT_LOCALIZER,
@@ -311,6 +312,10 @@ def episode_specs(settings: dict) -> list:
 
 
 def main(argv: list[str] | None = None) -> int:
+    return interruptible("evaluate: interrupted", lambda: _evaluate(argv))
+
+
+def _evaluate(argv: list[str] | None) -> int:
     args = parse_args(argv)
     try:
         settings = resolve_settings(args)
@@ -359,8 +364,7 @@ def run_and_report(args, settings: dict, specs, executor, out: Path, started) ->
                                 trajectory=not args.no_sheet)
     except KeyboardInterrupt:
         bar.finish()
-        print("evaluate: interrupted", file=sys.stderr)
-        return 130
+        raise
     bar.finish()
     wall = (dt_module.datetime.now(dt_module.timezone.utc) - started).total_seconds()
 
@@ -395,4 +399,4 @@ def run_and_report(args, settings: dict, specs, executor, out: Path, started) ->
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

@@ -2,7 +2,7 @@
 
     --slam                  the slam node maps (amr_mapping.slam_node) while the robot explores
     --map-out DIR           ... and writes DIR/map.yaml + DIR/map.pgm (Nav2 map files) at the
-                            end, on Ctrl-C too
+                            end, on Ctrl-C too (run_robot without it: maps/DATE-TIME/)
     --slam-param NAME:=VALUE  a slam node / Mapper parameter (repeatable)
     --mapper MODULE:CLASS   the slam node's mapper (amr_common.interfaces.Mapper)
     --no-controller         no controller runs: drive with scripts/teleop.py (alias --teleop)
@@ -11,13 +11,16 @@
 SLAM is still building; map first, then localize and navigate on the saved map
 (run_sim.py `--world DIR/map.yaml`, run_robot.py `--map DIR/map.yaml`). Every check runs
 before anything starts (one line, exit code 2).
+A map that could not be written (the folder gone, a full disk) fails the run: MAP_NOT_WRITTEN.
 """
 from __future__ import annotations
 
+import datetime
 from pathlib import Path
 from typing import Any
 
 MAP_NAME = "map"  # DIR/map.yaml + DIR/map.pgm, as map_saver_cli -f DIR/map
+MAP_NOT_WRITTEN = 3  # exit code of a run whose map could not be written
 
 
 def add_slam_options(parser, script: str) -> None:
@@ -26,7 +29,9 @@ def add_slam_options(parser, script: str) -> None:
                         "while the robot explores (/map, map -> odom, /slam_pose)")
     parser.add_argument("--map-out", default=None, metavar="DIR", help="with --slam: write the "
                         "map as DIR/map.yaml + DIR/map.pgm (Nav2 map files) when the run ends, "
-                        "Ctrl-C included")
+                        "Ctrl-C included" + (" (default: maps/DATE-TIME/ in the current folder, "
+                                             "named at start-up)" if script == "run_robot"
+                                             else ""))
     parser.add_argument("--slam-param", action="append", default=[], metavar="NAME:=VALUE",
                         help="slam node or Mapper parameter override (repeatable), e.g. "
                         "--slam-param loop_closure:=false")
@@ -63,13 +68,31 @@ def check_slam_options(args, script: str, set_by_script: dict[str, str]) -> None
     if getattr(args, "map", None):
         raise ValueError("--slam and --map exclude each other: both would publish /map")
     if args.map_out is not None:
-        from cli_checks import check_output_file, check_output_folder
-        folder = check_output_folder(args.map_out, "--map-out")
-        for suffix in (".yaml", ".pgm"):
-            check_output_file(folder / f"{MAP_NAME}{suffix}", "--map-out")
-        args.map_out = folder
+        if not str(args.map_out).strip():
+            raise ValueError(f"--map-out {args.map_out!r}: give a folder (an empty name would "
+                             "write into the current folder)")
+        args.map_out = check_map_folder(args.map_out)
     args.slam_overrides = slam_overrides(args.slam_param, set_by_script,
                                          getattr(args, "mapper", None))
+
+
+def check_map_folder(path: str | Path) -> Path:
+    """`path` as a folder the map files can be written to (created); ValueError if not."""
+    from cli_checks import check_output_file, check_output_folder
+    folder = check_output_folder(path, "--map-out")
+    for suffix in (".yaml", ".pgm"):
+        check_output_file(folder / f"{MAP_NAME}{suffix}", "--map-out")
+    return folder
+
+
+def default_map_folder(now: datetime.datetime | None = None) -> Path:
+    """maps/<YYYY-MM-DD>-<HHMMSS>/ in the current folder (-2, -3 ... if it exists already)."""
+    base = Path.cwd() / "maps" / f"{now or datetime.datetime.now():%Y-%m-%d-%H%M%S}"
+    folder, count = base, 1
+    while folder.exists():
+        count += 1
+        folder = base.with_name(f"{base.name}-{count}")
+    return folder
 
 
 def slam_overrides(items: list[str], set_by_script: dict[str, str],

@@ -139,4 +139,5 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from script_endings import run_script  # a closed output loses nothing
+    sys.exit(run_script(main))

@@ -18,9 +18,12 @@ stop there. (--world is an old name of --map: on the robot there is no simulated
   .venv/bin/python scripts/run_robot.py --domain-id 30 --slam --map-out ~/maps/room  # map it
   .venv/bin/python scripts/run_robot.py --domain-id 30 --slam --teleop --map-out ~/maps/room
 With --slam: the slam node maps while the wall follower explores (or, with --teleop, while you
-drive with scripts/teleop.py); --map-out DIR writes DIR/map.yaml + DIR/map.pgm on Ctrl-C.
-Ctrl-C stops the robot: the controllers publish a zero command before exiting (exit code 130),
-at any moment, start-up included.
+drive with scripts/teleop.py); --map-out DIR writes DIR/map.yaml + DIR/map.pgm on Ctrl-C; without
+it the map goes to maps/<YYYY-MM-DD>-<HHMMSS>/ in the current folder (named at start-up and at
+the end): a mapping session is never thrown away.
+Ctrl-C (or SIGTERM) stops the robot: the controllers publish a zero command before exiting (exit
+code 130), at any moment, start-up included; a dropped SSH session or a closed terminal (SIGHUP)
+too, exit code 129. Exit code 3: the map could not be written (said, with the reason).
 """
 from __future__ import annotations
 
@@ -31,7 +34,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from amr_common.stop_flag import StopFlag  # noqa: E402
 
-# Run as a script, Ctrl-C (or SIGTERM) only sets a flag from the first moment on: see main().
+# Run as a script, Ctrl-C (SIGTERM, SIGHUP) only sets a flag from the first moment on: see main().
 _STOP = StopFlag().install() if __name__ == "__main__" else None
 
 from link_options import (  # noqa: E402
@@ -39,6 +42,7 @@ from link_options import (  # noqa: E402
     add_localization_options,
     check_filter_map,
 )
+from script_endings import run_script  # noqa: E402
 
 from amr_common.ros_env import describe_graph_settings, environment_domain_id  # noqa: E402
 from cli_checks import (  # noqa: E402
@@ -56,15 +60,17 @@ from launch_common import (  # noqa: E402
     make_viewer_nodes,
 )
 from launch_slam import (  # noqa: E402
+    MAP_NOT_WRITTEN,
     add_slam_options,
+    check_map_folder,
     check_slam_options,
+    default_map_folder,
     lidar_parameters,
     make_slam_node,
     map_prefix,
     without_controller,
 )
 
-INTERRUPTED = 130  # exit code after Ctrl-C / SIGTERM, as a shell reports it
 # Node parameters run_robot sets itself: a -p / --pf-param would contradict them.
 WALL_FOLLOWER_SET = {"simulation": "(robot mode)", "dt": "from --dt",
                      "cmd_vel_stamped": "from --cmd-vel", "controller": "from --controller"}
@@ -135,8 +141,8 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 
 def main(argv=None) -> int:
-    # Ctrl-C (or SIGTERM) only sets the flag, whenever it comes (own signal handling: the final
-    # zero command must go out before the context shuts down): before any node exists the
+    # Ctrl-C (SIGTERM, SIGHUP) only sets the flag, whenever it comes (own signal handling: the
+    # final zero command must go out before the context shuts down): before any node exists the
     # script just ends; once nodes exist the manager stops starting them and every node is
     # shut down (a configured controller sends a zero command), instead of a KeyboardInterrupt
     # tearing through imports or callbacks.
@@ -146,12 +152,20 @@ def main(argv=None) -> int:
         if args.deprecated_world:
             print("run_robot: --world is deprecated: use --map (the map of the filter, the "
                   "planner and /map; the robot has no simulated world)", file=sys.stderr)
-        code = INTERRUPTED if stop.requested else _run(args, stop)
+        if args.slam and args.map_out is None:
+            try:
+                args.map_out = check_map_folder(default_map_folder())
+            except ValueError as exc:  # the current folder is not writable
+                print(f"run_robot: no --map-out, and {exc}", file=sys.stderr)
+                return 2
+            print(f"run_robot: no --map-out: the map will be written to "
+                  f"{map_prefix(args.map_out)}.yaml when the run ends", flush=True)
+        code = 0 if stop.requested else _run(args, stop)
     finally:
         stop.uninstall()
     if stop.requested:
         print("run_robot: interrupted", file=sys.stderr)
-        return INTERRUPTED if code == 0 else code
+        return stop.exit_code if code == 0 else code  # 130 (Ctrl-C, SIGTERM), 129 (SIGHUP)
     return code
 
 
@@ -175,18 +189,35 @@ def _run(args: argparse.Namespace, stop: StopFlag) -> int:
                              links=args.links)
     if args.no_controller:  # the user drives (scripts/teleop.py)
         without_controller(nodes)
+    slam_node = None
     if args.slam:
         overrides = lidar_parameters(args)  # the LDS-01, its calibration from --slam-param
-        nodes.append(make_slam_node(None, lidar_offset_x_m=overrides.pop("lidar_offset_x_m"),
-                                    output_prefix=map_prefix(args.map_out), overrides=overrides))
+        slam_node = make_slam_node(None, lidar_offset_x_m=overrides.pop("lidar_offset_x_m"),
+                                   output_prefix=map_prefix(args.map_out), overrides=overrides)
+        nodes.append(slam_node)
     if args.map:
         from launch_common import make_map_publisher
         nodes.insert(0, make_map_publisher(None, args.map))
     nodes = make_viewer_nodes(None, args) + nodes  # shut down last (reverse order)
     manager = LifecycleManager([node.get_name() for node in nodes])
     manager.get_logger().info(f"run_robot: {describe_graph_settings()}; Ctrl-C stops the robot")
-    return run_managed(manager, stop, nodes)
+    code = run_managed(manager, stop, nodes)  # the slam node saves its map on the way down
+    ending = 0 if slam_node is None else map_ending(slam_node)
+    return code or ending
+
+
+def map_ending(slam_node) -> int:
+    """Say where the map went (or why it did not); MAP_NOT_WRITTEN if it could not be written."""
+    if slam_node.map_save_error is not None:
+        print(f"run_robot: the map was NOT written: {slam_node.map_save_error}",
+              file=sys.stderr)
+        return MAP_NOT_WRITTEN
+    if slam_node.saved_maps:
+        print(f"run_robot: map written to {slam_node.saved_maps[-1]}")
+    else:
+        print("run_robot: no map written: no scan was mapped")
+    return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

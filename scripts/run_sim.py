@@ -40,8 +40,11 @@ Examples:
 `--map`: the particle filter, the planner and /map use this map while the simulator drives in
 `--world` (default: the world): a map SLAM built, or an old map of a changed room.
 Local runs are isolated: loopback discovery and a free ROS_DOMAIN_ID (printed at startup).
-Ctrl-C ends the whole run: the controller commands zero and the partial report is written,
-marked "interrupted": true (exit code 130).
+Ctrl-C (or SIGTERM) ends the whole run: the controller commands zero and the partial report is
+written, marked "interrupted": true (exit code 130); a closed terminal (SIGHUP) likewise, exit
+code 129. A closed output (`| head`, `| tee` ended first) drops the rest of the output and
+loses nothing else. Exit code 1: a collision or no path to the goal; 3: the map of --slam
+--map-out could not be written (said, and `map_saved: false` with the reason in the report).
 """
 from __future__ import annotations
 
@@ -54,7 +57,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from amr_common.stop_flag import StopFlag  # noqa: E402
 
-# Run as a script, Ctrl-C (or SIGTERM) only sets a flag from the first moment on: see main().
+# Run as a script, Ctrl-C (SIGTERM, SIGHUP) only sets a flag from the first moment on: see main().
 _STOP = StopFlag().install() if __name__ == "__main__" else None
 
 from link_options import (  # noqa: E402
@@ -62,6 +65,7 @@ from link_options import (  # noqa: E402
     add_localization_options,
     check_filter_map,
 )
+from script_endings import run_script  # noqa: E402
 
 from amr_common.ros_env import describe_graph_settings, isolate_local_graph  # noqa: E402
 from cli_checks import (  # noqa: E402
@@ -80,9 +84,13 @@ from launch_common import (  # noqa: E402
     add_foxglove_options,
     check_common_options,
 )
-from launch_slam import add_slam_options, check_slam_options, map_prefix  # noqa: E402
+from launch_slam import (  # noqa: E402
+    MAP_NOT_WRITTEN,
+    add_slam_options,
+    check_slam_options,
+    map_prefix,
+)
 
-INTERRUPTED = 130  # exit code after Ctrl-C / SIGTERM, as a shell reports it
 # Node parameters run_sim sets from its own options: a -p / --pf-param would contradict them.
 WALL_FOLLOWER_SET = {"dt": "from --dt", "simulation": "from --realtime and --profile",
                      "enable_localization": "from --enable-localization, --localize and --goal",
@@ -220,7 +228,7 @@ def _check_simulator_options(parser, args) -> None:
 
 
 def main(argv=None) -> int:
-    # Ctrl-C (or SIGTERM) only sets the flag, whenever it comes: the options are still checked,
+    # Ctrl-C (SIGTERM, SIGHUP) only sets the flag, whenever it comes: the options are checked,
     # then the run ends at its next check and writes what it has (if it came before the graph
     # ran, a report of the start pose, marked interrupted), instead of a KeyboardInterrupt
     # tearing through imports or ROS callbacks.
@@ -280,7 +288,7 @@ def _prepare(args):
 
 def _simulate(args, world, map_world, starts, outputs, stop) -> int:
     """Run each start in turn until done or stopped; write the outputs; the exit code."""
-    from sim_report import report_before_start
+    from sim_report import map_lost, report_before_start
     from sim_session import SimSession
 
     from amr_common.world import start_label
@@ -307,7 +315,13 @@ def _simulate(args, world, map_world, starts, outputs, stop) -> int:
                    rasters=rasters)
     if stop.requested:
         print("run_sim: interrupted", file=sys.stderr)
-        return INTERRUPTED
+    lost = [report["slam"]["map_error"] for report in reports if map_lost(report)]
+    for reason in lost:
+        print(f"run_sim: the map was not written: {reason}", file=sys.stderr)
+    if lost:  # a mapping session lost: above everything else
+        return MAP_NOT_WRITTEN
+    if stop.requested:
+        return stop.exit_code  # 130 after Ctrl-C or SIGTERM, 129 after SIGHUP
     # 1: a run collided, or its goal had no path (the planner said why; the run ended then).
     return 1 if any(report["collisions"] > 0 or report.get("planning_error")
                     for report in reports) else 0
@@ -369,4 +383,4 @@ def _write_outputs(world, map_world, reports, outputs, several_starts: bool,
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

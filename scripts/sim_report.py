@@ -71,19 +71,23 @@ def report_before_start(args, world, start, map_world=None) -> dict:
             "goal_reached_time_s": None, "stopped_time_s": None,
             "final_position_error_m": math.hypot(x - goal[0], y - goal[1])}, None, [], None)
     if getattr(args, "slam", False):
-        report |= slam_fields(world, args.profile, trajectory, [], None, None, {})
+        report |= slam_fields(world, args.profile, trajectory, [], None, None, {},
+                              map_error="no scan was mapped" if getattr(args, "map_out", None)
+                              else None)
     return report
 
 
 def slam_fields(world, profile: str, trajectory: list, estimate: list, raster, mapper,
-                timings: dict, map_file=None, range_correction=None) -> dict:
+                timings: dict, map_file=None, range_correction=None,
+                map_error: str | None = None) -> dict:
     """The report's SLAM figures and every SLAM pose ([t, x, y, theta], map = world frame).
 
     The headless mapping episode's figures (amr_evaluation.mapping_metrics): trajectory RMSE /
     max against the truth at each scan's stamp, map precision and recall (noise-free rays from
-    the true poses); loop closures, Mapper and node timings (wall ms), the map file written,
-    the simulated LiDAR unit's calibration given to the slam node (None: none).
-    None for the figures when nothing was mapped.
+    the true poses); loop closures, Mapper and node timings (wall ms), the map file written
+    (map_saved: True; False with map_error, why, when --map-out's map was not written; None
+    without --map-out), the simulated LiDAR unit's calibration given to the slam node (None:
+    none). None for the figures when nothing was mapped.
     """
     figures: dict = dict.fromkeys(("trajectory_rmse_m", "trajectory_max_m", "heading_rmse_rad",
                                    "precision", "recall", "seen_wall_m"))
@@ -110,6 +114,9 @@ def slam_fields(world, profile: str, trajectory: list, estimate: list, raster, m
                      "loop_closure_ms": stats.get("loop_closed_ms"),
                      "node_scan_ms": timings.get("scan_ms"), "node_map_ms": timings.get("map_ms"),
                      "map_file": None if map_file is None else str(map_file),
+                     "map_saved": True if map_file is not None else
+                     False if map_error is not None else None,
+                     "map_error": map_error,
                      "range_correction": range_correction},
             "estimate": estimate}
 
@@ -124,7 +131,14 @@ def slam_line(report: dict) -> str:
             f"{100 * s['trajectory_max_m']:.2f} cm, map precision {100 * s['precision']:.1f} %, "
             f"recall {100 * s['recall']:.1f} %"
             + ("" if s["loop_closures"] is None else f", {s['loop_closures']} loop closures")
-            + (f", map written to {s['map_file']}" if s["map_file"] else ""))
+            + (f", map written to {s['map_file']}" if s["map_file"] else "")
+            + (f", map NOT written ({s['map_error']})" if s.get("map_saved") is False else ""))
+
+
+def map_lost(report: dict) -> bool:
+    """Scans were mapped, --map-out was given, and the map could not be written there."""
+    slam = report.get("slam") or {}
+    return slam.get("map_saved") is False and slam.get("scans", 0) > 0
 
 
 def localization_fields(args, trajectory: list, estimate: list, particles: list) -> dict:

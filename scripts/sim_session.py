@@ -346,17 +346,17 @@ class SimSession:
         node = self.slam_node
         if node is None:
             return {}
-        map_file = None
+        map_file, map_error = None, "no scan was mapped" if self.map_prefix else None
         if node.mapper is not None and node.mapped_scans:
             self.slam_raster = node.mapper.occupancy_raster()
             if self.map_prefix:
                 try:
-                    map_file = node.save_map(self.map_prefix)
-                except ValueError as exc:  # the folder was checked; a full disk is possible
-                    print(f"run_sim: the map could not be written: {exc}", file=sys.stderr)
+                    map_file, map_error = node.save_map(self.map_prefix), None
+                except (ValueError, OSError) as exc:  # checked, but it may go (run_sim says)
+                    map_error = str(exc)
         return slam_fields(self.world, self.args.profile, self.trajectory, self.slam_estimate,
                            self.slam_raster, node.mapper, node.timings(), map_file,
-                           self.slam_range_correction)
+                           self.slam_range_correction, map_error)
 
     def _localization_report(self) -> dict:
         if self.particle_filter is None:

@@ -9,7 +9,8 @@ map, from a named start to a named goal (amr_evaluation.map_round_trip). Prints 
 episode and the summary; writes OUT/results.json.
 Exit code: 0 no false localization, no collision and goals reached within 5 cm in >= 95 % of
 the episodes (corridor_loop, exactly symmetric, left out of that share); 1 otherwise; 2 bad
-options; 3 an episode failed to run.
+options; 3 an episode failed to run; 130 after Ctrl-C or SIGTERM, 129 after SIGHUP (the terminal
+closed): the maps of the episodes that ended are in OUT, no results.json.
 
   .venv/bin/python scripts/slam_round_trip.py --worlds all --seeds 0-4 --out out/round_trip
 """
@@ -23,6 +24,8 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
+
+from script_endings import interruptible, run_script  # noqa: E402
 
 from cli_checks import OneLineArgumentParser, check_output_folder, number_argument  # noqa: E402
 
@@ -69,6 +72,10 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 
 def main(argv=None) -> int:
+    return interruptible("slam_round_trip: interrupted", lambda: _round_trips(argv))
+
+
+def _round_trips(argv) -> int:
     args = parse_args(argv)
     from amr_evaluation.map_round_trip import round_trip_line, round_trip_summary, run_round_trips
     params = args.filter_params
@@ -92,4 +99,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

@@ -25,14 +25,13 @@ Examples:
   .venv/bin/python scripts/teleop.py --local --domain-id 42        # a local simulation
 Discovery is left to you (the robot's network, like run_robot.py) unless --local: loopback only
 and the --domain-id given, else $ROS_DOMAIN_ID if not 0, else a free one (printed).
-Exit codes: 0 after q or the end of input, 130 after a signal, 1 after an error, 2 for a
-mistake in the command line.
+Exit codes: 0 after q or the end of input, 130 after Ctrl-C or SIGTERM, 129 after SIGHUP, 1
+after an error, 2 for a mistake in the command line.
 """
 from __future__ import annotations
 
 import argparse
 import os
-import signal
 import sys
 import time
 from dataclasses import dataclass
@@ -40,6 +39,7 @@ from pathlib import Path
 from typing import Callable
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from script_endings import run_script  # noqa: E402
 from terminal_keys import KeyReader, StatusLine  # noqa: E402
 
 from amr_common.robot import MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED  # noqa: E402
@@ -62,7 +62,7 @@ LINEAR_ACCELERATION = LINEAR_STEP / 2 / 0.1  # 0.05 m/s^2
 ANGULAR_ACCELERATION = ANGULAR_STEP / 2 / 0.1  # 0.5 rad/s^2
 FINAL_ZEROS = 3  # zero commands sent on the way out
 ACK_TIMEOUT = 3.5  # s: Fast DDS's default heartbeat period is 3 s (see teleop_fastdds.xml)
-INTERRUPTED = 130  # exit code after a signal, as a shell reports Ctrl-C
+INTERRUPTED = 130  # exit code after Ctrl-C or SIGTERM, as a shell reports Ctrl-C
 QUIT_KEYS = {"q", "\x03", "\x04", "\x1c"}  # q, Ctrl-C, Ctrl-D, Ctrl-\ (raw mode: no signals)
 STOP_KEYS = {" ", "s"}
 STAMPED, TWIST = "geometry_msgs/msg/TwistStamped", "geometry_msgs/msg/Twist"
@@ -315,12 +315,12 @@ def main(argv=None) -> int:
         return 1
     use_fast_heartbeats()
     # Our own signal handling: rclpy's would shut the context down before the final zeros.
-    stop = StopFlag().install()
-    signal.signal(signal.SIGHUP, lambda signum, frame: setattr(stop, "requested", True))
+    stop = StopFlag().install()  # Ctrl-C, SIGTERM, SIGHUP
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node("teleop_keyboard")
     try:
-        return _run(node, args, stop)
+        code = _run(node, args, stop)
+        return stop.exit_code if code == INTERRUPTED else code  # 129 after SIGHUP
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
@@ -358,4 +358,4 @@ def _run(node, args: argparse.Namespace, stop) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

@@ -10,7 +10,8 @@ Types are resolved at run time from the graph; the subscription's QoS is matched
 publishers (best effort for a LiDAR, transient local for maps). Set ROS_DOMAIN_ID (or
 --domain-id) and, for a robot on the LAN, leave discovery at its default. Exit code 1 when the
 topic does not appear within --timeout; 2 for a mistake in the command line, including a --type
-that is not the topic's.
+that is not the topic's; 141 when echo or hz ends because its output closed (`| head`), quietly
+as `yes | head` does.
 """
 from __future__ import annotations
 
@@ -22,6 +23,8 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from script_endings import OUTPUT_CLOSED, run_script, stdout_closed  # noqa: E402
+
 from amr_tools.introspection import (  # noqa: E402
     GraphProbe,
     UnknownTypeError,
@@ -204,9 +207,9 @@ def run_echo(graph: Graph, args) -> int:
 
     qos = matched_qos(graph.node.get_publishers_info_by_topic(args.topic))
     graph.node.create_subscription(msg_type, args.topic, show, qos)
-    while graph.ok() and not (limit is not None and printed >= limit):
+    while graph.ok() and not (limit is not None and printed >= limit) and not stdout_closed():
         graph.executor.spin_once(timeout_sec=0.1)
-    return 0
+    return OUTPUT_CLOSED if stdout_closed() else 0
 
 
 def rate_statistics(arrivals: list[float]) -> tuple[float, float, float, float] | None:
@@ -230,7 +233,7 @@ def run_hz(graph: Graph, args) -> int:
     qos = matched_qos(graph.node.get_publishers_info_by_topic(args.topic))
     graph.node.create_subscription(msg_type, args.topic, arrived, qos, raw=True)
     next_report = time.monotonic() + args.period
-    while graph.ok():
+    while graph.ok() and not stdout_closed():
         graph.executor.spin_once(timeout_sec=0.05)
         if time.monotonic() < next_report:
             continue
@@ -244,7 +247,7 @@ def run_hz(graph: Graph, args) -> int:
               f"{std:.5f}s window: {len(arrivals)}", flush=True)
         if args.once:
             return 0
-    return 0
+    return OUTPUT_CLOSED if stdout_closed() else 0
 
 
 def main(argv=None) -> int:
@@ -264,4 +267,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

@@ -16,7 +16,9 @@ Search space (--space, repeatable): NAME=a,b,c (values), NAME=LOW:HIGH:N (N even
 values), NAME=LOW:HIGH (a continuous range: random and optuna only). Objective: safe-exploration
 (default: fewest episodes with a collision, an invalid command or an error; then the most
 explored; then the largest worst clearance) or MODULE:FUNCTION (f(rows, params) -> score).
-Exit code: 0 a best parameter set was written, 2 bad options, 3 every trial failed.
+Exit code: 0 a best parameter set was written, 2 bad options, 3 every trial failed; stopped:
+130 after SIGTERM (or a Ctrl-C that Ray Tune does not answer itself), 129 after SIGHUP (the
+terminal closed).
 
 Examples:
   .venv/bin/python scripts/tune.py --worlds lab02,maze_deadends --profiles turtlebot3 \
@@ -41,6 +43,7 @@ for path in (str(REPO), str(SCRIPTS)):
 
 import evaluate  # noqa: E402  (the episode-set options and their checks)
 import evaluate_executors  # noqa: E402  (where the trials run)
+from script_endings import interruptible, run_script  # noqa: E402
 
 from amr_evaluation.evaluation import EvaluationError, check_controller  # noqa: E402
 from amr_evaluation.tuning import (  # noqa: E402
@@ -96,6 +99,11 @@ def check_options(args: argparse.Namespace, episode_args: argparse.Namespace) ->
 
 
 def main(argv: list[str] | None = None) -> int:
+    # (Ray Tune answers Ctrl-C itself while the search runs.)
+    return interruptible("tune: interrupted", lambda: _tune(argv))
+
+
+def _tune(argv: list[str] | None) -> int:
     args, episode_args = parse_args(argv)
     started = dt_module.datetime.now(dt_module.timezone.utc)
     try:
@@ -138,13 +146,9 @@ def search_and_write(args, settings: dict, specs, dims, executor, out: Path) -> 
                                          if k not in ("trial_wall_time_s",))
         print(f"[{done}/{total}] {values}: {shown}", flush=True)
 
-    try:
-        trials = run_search(specs, dims, args.search, args.samples, args.search_seed,
-                            args.objective, storage=out / "ray_results", progress=progress,
-                            episode_timeout_s=settings["episode_timeout"])
-    except KeyboardInterrupt:
-        print("tune: interrupted", file=sys.stderr)
-        return 130
+    trials = run_search(specs, dims, args.search, args.samples, args.search_seed,
+                        args.objective, storage=out / "ray_results", progress=progress,
+                        episode_timeout_s=settings["episode_timeout"])
     _write_trials(out / "trials.csv", trials)
     ran = [t for t in trials if t.error is None and t.score > float("-inf")]
     if not ran:
@@ -193,4 +197,4 @@ def _write_trials(path: Path, trials) -> None:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

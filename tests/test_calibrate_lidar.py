@@ -200,33 +200,41 @@ def test_no_scan_is_a_clear_timeout_and_an_early_end_of_input_an_error(monkeypat
         capsys.readouterr().err
 
 
-def test_ctrl_c_at_the_prompt_or_while_collecting_exits_130_without_a_traceback(tmp_path):
-    """Two runs side by side: one waits for Enter, one for scans that never come."""
+def test_ctrl_c_or_a_hang_up_at_the_prompt_or_while_collecting_exits_without_a_traceback(
+        tmp_path):
+    """Runs side by side: one waits for Enter, two for scans that never come.
+
+    Ctrl-C: exit code 130. A hang-up (the terminal closed, SIGHUP) killed it at once; now it
+    ends as Ctrl-C does, with exit code 129.
+    """
+    signals = [signal.SIGINT, signal.SIGINT, signal.SIGHUP]
     runs = [subprocess.Popen([sys.executable, str(SCRIPT), "--topic", "/calib_ctrl_c", "--out",
                               str(tmp_path / f"{i}.yaml")], stdin=subprocess.PIPE,
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=REPO)
-             for i in range(2)]
-    outputs = [bytearray(), bytearray()]  # read as it comes: the prompt ends without a newline
+            for i in range(len(signals))]
+    outputs = [bytearray() for _ in runs]  # read as it comes: the prompt ends without a newline
     readers = [threading.Thread(target=lambda r=r, o=o: [
         o.extend(chunk) for chunk in iter(lambda: os.read(r.stdout.fileno(), 4096), b"")],
         daemon=True) for r, o in zip(runs, outputs)]
     try:
         for reader in readers:
             reader.start()
-        runs[1].stdin.write(b"\n")
-        runs[1].stdin.flush()
+        for run in runs[1:]:
+            run.stdin.write(b"\n")
+            run.stdin.flush()
         wait_for(lambda: b"Put the Burger" in outputs[0], STARTUP, "the prompt")
-        wait_for(lambda: b"collecting 25 scans" in outputs[1], STARTUP, "the scans wait")
+        for output in outputs[1:]:
+            wait_for(lambda: b"collecting 25 scans" in output, STARTUP, "the scans wait")
         time.sleep(0.3)
-        for run in runs:
-            run.send_signal(signal.SIGINT)
+        for run, signum in zip(runs, signals):
+            run.send_signal(signum)
         codes = [run.wait(timeout=10) for run in runs]
     finally:
         for run in runs:
             terminate(run, 2.0)
-    for run, code in zip(runs, codes):
+    for run, code, signum in zip(runs, codes, signals):
         err = run.stderr.read().decode()
-        assert code == 130, err
+        assert code == (129 if signum == signal.SIGHUP else 130), err
         assert "interrupted; nothing written" in err and "Traceback" not in err
     assert not list(tmp_path.iterdir())
 

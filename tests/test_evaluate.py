@@ -172,3 +172,44 @@ def test_navigation_on_the_true_pose_runs_no_filter(big_floor):
     evaluate.check_filter_maps(specs, {})  # no filter: no refusal
     with pytest.raises(ValueError, match="too big"):
         evaluate.check_filter_maps([replace(spec, pose_source="filter") for spec in specs], {})
+
+
+@pytest.mark.slow
+def test_a_closed_terminal_or_sigterm_ends_evaluate_as_ctrl_c_does(tmp_path):
+    """SIGHUP and SIGTERM end it as Ctrl-C does: "interrupted", exit code 129 / 130.
+
+    SIGHUP (the terminal closed) and SIGTERM killed it at once (-1, -15); Ctrl-C during --slam
+    episodes ended in a traceback.
+    """
+    import os
+    import signal
+    import subprocess
+
+    from tests.processes import terminate, wait_for
+    runs = {}
+    for signum, options in ((signal.SIGHUP, []), (signal.SIGTERM, ["--slam"]),
+                            (signal.SIGINT, ["--slam"])):
+        log = tmp_path / f"{signum.name}.log"
+        with open(log, "w") as stream:
+            runs[signum] = (subprocess.Popen(
+                [sys.executable, str(SCRIPTS / "evaluate.py"), "--worlds", "lab02", "--starts",
+                 "outer", "--profiles", "ideal", "--seeds", "0", "--duration", "3000",
+                 "--jobs", "1", "--no-sheet", "--out", str(tmp_path / signum.name), *options],
+                stdout=stream, stderr=subprocess.STDOUT, cwd=SCRIPTS.parent,
+                env=dict(os.environ)), log)
+    try:
+        for process, log in runs.values():
+            wait_for(lambda: "episodes of" in log.read_text() or process.poll() is not None,
+                     60.0, "the episodes to start")
+        for signum, (process, log) in runs.items():
+            assert process.poll() is None, log.read_text()
+            process.send_signal(signum)
+        for process, _ in runs.values():
+            process.wait(30.0)
+    finally:
+        for process, _ in runs.values():
+            terminate(process, 5.0)
+    for signum, (process, log) in runs.items():
+        output = log.read_text()
+        assert process.returncode == (129 if signum == signal.SIGHUP else 130), output
+        assert "evaluate: interrupted" in output and "Traceback" not in output, output

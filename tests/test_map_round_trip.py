@@ -51,3 +51,38 @@ def test_round_trip_option_mistakes_are_one_line_errors(capsys, tmp_path, argv, 
     err = capsys.readouterr().err
     assert exit_info.value.code == 2 and len(err.strip().splitlines()) == 1, err
     assert message in err, err
+
+
+@pytest.mark.slow
+def test_ctrl_c_or_a_closed_terminal_ends_the_round_trips_without_a_traceback(tmp_path):
+    """Ctrl-C printed a KeyboardInterrupt traceback; SIGHUP (the terminal closed) killed it."""
+    import os
+    import signal
+    import subprocess
+
+    from tests.processes import terminate, wait_for
+    runs = {}
+    for signum in (signal.SIGINT, signal.SIGHUP):
+        log = tmp_path / f"{signum.name}.log"
+        with open(log, "w") as stream:
+            runs[signum] = (subprocess.Popen(
+                [sys.executable, str(SCRIPTS / "slam_round_trip.py"), "--worlds", "lab02",
+                 "--seeds", "0", "--jobs", "1", "--map-duration", "3000", "--out",
+                 str(tmp_path / signum.name)], stdout=stream, stderr=subprocess.STDOUT,
+                env=dict(os.environ)), log)
+    try:
+        for process, log in runs.values():
+            wait_for(lambda: "1 episodes" in log.read_text() or process.poll() is not None,
+                     60.0, "the episodes to start")
+        for signum, (process, log) in runs.items():
+            assert process.poll() is None, log.read_text()
+            process.send_signal(signum)
+        for process, _ in runs.values():
+            process.wait(30.0)
+    finally:
+        for process, _ in runs.values():
+            terminate(process, 5.0)
+    for signum, (process, log) in runs.items():
+        output = log.read_text()
+        assert process.returncode == (129 if signum == signal.SIGHUP else 130), output
+        assert "slam_round_trip: interrupted" in output and "Traceback" not in output, output

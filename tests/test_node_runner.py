@@ -1,7 +1,8 @@
 """amr_common.node_runner, the main of every lifecycle executable.
 
 `-p autostart:=true` configures and activates, a failing transition gives exit code 1, and
-Ctrl-C / SIGTERM end the spin and run the node's shutdown transition before the process exits.
+Ctrl-C / SIGTERM / SIGHUP end the spin and run the node's shutdown transition before the process
+exits (a node on the robot whose SSH session dropped still sends its final zero).
 
 The executable tests run a small journaling node as its own process, as a user starts one.
 """
@@ -107,7 +108,7 @@ def _finish(process: subprocess.Popen, timeout: float = 20.0) -> str:
             process.communicate()
 
 
-@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
 def test_autostart_activates_and_a_signal_runs_the_shutdown_transition(tmp_path, signum):
     process, journal = _start(tmp_path, "autostart:=true")
     try:
@@ -203,14 +204,54 @@ def test_shutdown_node_runs_the_shutdown_transition_once(ros, steps, expected):
     assert node.journal == [*steps, expected] and _state(node) == "finalized"
 
 
-def test_stop_flag_is_set_by_sigint_and_sigterm():
-    previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+def _harmless_signals() -> dict:
+    """Handlers that ignore SIGTERM and SIGHUP (one the flag missed fails the test, not pytest).
+
+    Returns the handlers to restore.
+    """
+    previous = {s: signal.getsignal(s) for s in _STOP_SIGNALS}
+    for signum in (signal.SIGTERM, signal.SIGHUP):
+        signal.signal(signum, lambda *_: None)
+    return previous
+
+
+def test_stop_flag_is_set_by_sigint_sigterm_and_sighup_and_remembers_which_came():
+    previous = _harmless_signals()
+    codes = {}
     try:
-        for signum in previous:
+        for signum in _STOP_SIGNALS:
+            before = signal.getsignal(signum)
             stop = StopFlag().install()
             assert stop.requested is False
             os.kill(os.getpid(), signum)
             wait_for(lambda: stop.requested, 2.0, "the signal handler")
+            os.kill(os.getpid(), signal.SIGINT)  # a second signal: the first one stopped it
+            time.sleep(0.05)
+            assert stop.signum == signum
+            codes[signum] = stop.exit_code
+            stop.uninstall()
+            assert signal.getsignal(signum) is before
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+    # As a shell reports them (128 + the signal), SIGTERM as the scripts document it.
+    assert codes == {signal.SIGINT: 130, signal.SIGTERM: 130, signal.SIGHUP: 129}
+
+
+def test_a_stop_flag_that_raises_interrupts_like_ctrl_c_for_each_signal():
+    previous = _harmless_signals()
+    try:
+        for signum in _STOP_SIGNALS:
+            stop = StopFlag(raise_interrupt=True).install()
+            with pytest.raises(KeyboardInterrupt):
+                os.kill(os.getpid(), signum)
+                time.sleep(2.0)  # the handler raises here, at once
+            assert stop.requested and stop.exit_code == (129 if signum == signal.SIGHUP
+                                                         else 130)
+            stop.uninstall()
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)

@@ -295,6 +295,41 @@ def test_ctrl_c_during_startup_ends_at_once_and_cleanly(ros, tmp_path, moment):
     assert len(reports) == 1 and reports[0]["interrupted"] is True, output
 
 
+@pytest.mark.parametrize("buffering", ["unbuffered", "buffered"])
+def test_a_script_endings_loses_neither_the_report_nor_the_plot(ros, tmp_path, buffering):
+    """`run_sim.py ... | tee log`, then Ctrl-C: tee is gone when the run says it was stopped.
+
+    Unbuffered (python -u) it died there on a BrokenPipeError: no report, no plot, a traceback;
+    buffered, the flush at exit failed: "Exception ignored ... BrokenPipeError", exit code 120.
+    """
+    commands = []
+    ros.node("cmd_vel_listener").create_subscription(TwistStamped, "/cmd_vel", commands.append,
+                                                     RELIABLE_10)
+    with open(tmp_path / "stderr.log", "w") as stderr:
+        process = subprocess.Popen(
+            [sys.executable, str(SCRIPTS / "run_sim.py"), "--duration", "3000", "--report",
+             str(tmp_path / "run.json"), "--plot", str(tmp_path / "run.png")],
+            cwd=REPO, env=dict(os.environ, PYTHONUNBUFFERED="1" if buffering == "unbuffered"
+                               else ""),
+            stdout=subprocess.PIPE, stderr=stderr)
+    try:
+        ros.spin_until(lambda: commands or process.poll() is not None, 60.0, "commands")
+        assert process.poll() is None, (tmp_path / "stderr.log").read_text()
+        process.stdout.close()  # tee ended with the Ctrl-C
+        process.send_signal(signal.SIGINT)
+        ros.spin_until(lambda: process.poll() is not None, 30.0, "run_sim to end")
+        ros.spin_for(0.3)  # the last commands in flight
+    finally:
+        terminate(process, 5.0)
+    errors = (tmp_path / "stderr.log").read_text()
+    assert process.returncode == 130, errors
+    assert "Traceback" not in errors and "Exception" not in errors, errors
+    assert json.loads((tmp_path / "run.json").read_text())["interrupted"] is True
+    assert (tmp_path / "run.png").read_bytes()[:4] == b"\x89PNG"
+    last = commands[-1].twist
+    assert (last.linear.x, last.angular.z) == (0.0, 0.0), errors
+
+
 # Ctrl-C at any moment of start-up, in each graph: exit code 130 and the report, marked
 # interrupted (during the node start-up of a --goal run it once ended in a KeyError, exit 1 and
 # no report). The moments: fixed delays (imports, option checks), the graph settings line (the

@@ -43,6 +43,7 @@ def test_slam_run_writes_the_map_the_report_and_the_plot(tmp_path, capsys):
     slam = report["slam"]
     assert "slam" in report["nodes"] and report["interrupted"] is False
     assert slam["map_file"] == str(maps / "map.yaml") and "map written to" in out
+    assert slam["map_saved"] is True and slam["map_error"] is None
     # The simulated LDS-01 unit was calibrated against a wall (it reads 2.5 % long at 1 m).
     assert len(slam["range_correction"]) == 6
     assert slam["range_correction"][3] == pytest.approx(-0.025, abs=0.002)
@@ -120,6 +121,85 @@ def test_ctrl_c_while_the_slam_graph_starts_writes_the_interrupted_report(tmp_pa
         assert report["slam"]["map_file"] is None and report["estimate"] == []
 
 
+# The terminal closed or the SSH session dropped: SIGHUP to the run, and every later write to
+# its terminal fails. It died at once (exit 129): no map, no report, no zero command.
+TERMINAL_OF_ITS_OWN = ("import fcntl, os, sys, termios; fcntl.ioctl(0, termios.TIOCSCTTY, 0); "
+                       "os.execv(sys.executable, [sys.executable, *sys.argv[1:]])")
+
+
+def test_a_closed_terminal_ends_the_slam_run_as_ctrl_c_does_with_exit_code_129(ros, tmp_path):
+    import pty
+
+    from geometry_msgs.msg import TwistStamped
+    from rosgraph_msgs.msg import Clock
+
+    from amr_common.qos import RELIABLE_10, scan_qos
+    clock, commands = [], []
+    listener = ros.node("listener")
+    listener.create_subscription(
+        Clock, "/clock", lambda msg: clock.append(msg.clock.sec + 1e-9 * msg.clock.nanosec),
+        scan_qos())
+    listener.create_subscription(TwistStamped, "/cmd_vel", commands.append, RELIABLE_10)
+    terminal, its_side = pty.openpty()
+    with open(tmp_path / "stderr.log", "w") as stderr:
+        # Its own session, the terminal its controlling one: closing it hangs the run up.
+        process = subprocess.Popen(
+            [sys.executable, "-c", TERMINAL_OF_ITS_OWN, str(SCRIPTS / "run_sim.py"),
+             "--domain-id", os.environ["ROS_DOMAIN_ID"], "--profile", "turtlebot3_clean",
+             "--slam", "--map-out", str(tmp_path / "maps"), "--duration", "3000", "--report",
+             str(tmp_path / "run.json"), "--plot", str(tmp_path / "slam.png")],
+            cwd=REPO, stdin=its_side, stdout=its_side, stderr=stderr, start_new_session=True)
+    os.close(its_side)
+    try:
+        ros.spin_until(lambda: (clock and clock[-1] >= 8.0) or process.poll() is not None,
+                       120.0, "8 s of mapping")
+        assert process.poll() is None, (tmp_path / "stderr.log").read_text()
+        os.close(terminal)
+        ros.spin_until(lambda: process.poll() is not None, 30.0, "run_sim to end")
+        ros.spin_for(0.3)  # the last commands in flight
+    finally:
+        terminate(process, 5.0)
+    errors = (tmp_path / "stderr.log").read_text()
+    assert process.returncode == 129, errors
+    assert "Traceback" not in errors, errors
+    report = json.loads((tmp_path / "run.json").read_text())
+    assert report["interrupted"] is True and report["slam"]["map_saved"] is True
+    assert (read_map(tmp_path / "maps" / "map.yaml").raster.values == OCCUPIED).any()
+    assert (tmp_path / "slam.png").read_bytes()[:4] == b"\x89PNG"
+    last = commands[-1].twist
+    assert (last.linear.x, last.angular.z) == (0.0, 0.0), errors
+
+
+def test_a_map_that_cannot_be_written_fails_the_run_and_says_why(tmp_path, capsys,
+                                                                  monkeypatch):
+    """The --map-out folder became a file during the run: exit code 3, said, in the report."""
+    import sim_session
+    maps = tmp_path / "maps"
+    report_of = sim_session.SimSession._slam_report
+
+    def folder_replaced(session):
+        maps.rmdir()
+        maps.write_text("")
+        return report_of(session)
+
+    monkeypatch.setattr(sim_session.SimSession, "_slam_report", folder_replaced)
+    code = run_sim.main(["--profile", "turtlebot3_clean", "--slam", "--map-out", str(maps),
+                         "--duration", "4", "--report", str(tmp_path / "run.json")])
+    captured = capsys.readouterr()
+    assert code == 3, captured
+    slam = json.loads((tmp_path / "run.json").read_text())["slam"]
+    assert slam["map_saved"] is False and slam["map_file"] is None
+    assert "cannot write the map" in slam["map_error"]
+    summary = next(line for line in captured.out.splitlines() if "SLAM:" in line)
+    assert "map NOT written" in summary and "map written" not in summary, summary
+    assert "run_sim: the map was not written" in captured.err, captured.err
+
+
+def test_an_empty_map_out_is_refused(capsys):
+    _fails_with(capsys, ["--slam", "--map-out", ""], "--map-out '': give a folder")
+    _robot_fails_with(capsys, ["--slam", "--map-out", ""], "--map-out '': give a folder")
+
+
 @pytest.mark.parametrize("argv, message", [
     (["--map-out", "x"], "--map-out needs --slam"),
     (["--slam-param", "loop_closure:=false"], "--slam-param needs --slam"),
@@ -192,6 +272,60 @@ def test_run_robot_maps_the_emulated_corridor_and_writes_the_map_on_ctrl_c(ros, 
     centres = occupied_centres(saved.raster)
     distance = np.minimum(np.abs(np.abs(centres[:, 1]) - 0.4), np.abs(centres[:, 0] - 0.9))
     assert len(centres) > 50 and np.mean(distance <= 0.03) >= 0.95, output
+
+
+def test_a_robot_mapping_session_without_map_out_survives_a_dropped_ssh_session(ros, tmp_path):
+    """run_robot.py --slam without --map-out, hung up: the map is kept, the robot stopped.
+
+    The map goes to maps/DATE-TIME/ of the current folder (named at start and at the end), the
+    robot gets its zero, exit code 129. The map was thrown away without a word; SIGHUP killed
+    the script at once, leaving the Burger on its last command.
+    """
+    import re
+
+    from amr_msgs.msg import PoseStamped
+    from tests.emulator_process import commands_in
+    poses = []
+    ros.node("listener").create_subscription(PoseStamped, "/slam_pose", poses.append, 50)
+    with running_emulator(tmp_path, "--wall-ahead-at", "0.9", "--corridor-width", "0.8",
+                          "--range-noise", "0.01", "--seed", "1") as (_, emulator_log):
+        with open(tmp_path / "run_robot.log", "w") as log:
+            robot = subprocess.Popen(
+                [sys.executable, str(SCRIPTS / "run_robot.py"), "--domain-id",
+                 os.environ["ROS_DOMAIN_ID"], "--cmd-vel", "stamped", "--slam"],
+                cwd=tmp_path, stdout=log, stderr=subprocess.STDOUT)
+            try:
+                ros.spin_until(lambda: len(poses) >= 25 or robot.poll() is not None, 60.0,
+                               "25 SLAM poses")
+                assert robot.poll() is None, (tmp_path / "run_robot.log").read_text()
+                robot.send_signal(signal.SIGHUP)
+                robot.wait(30.0)
+            finally:
+                terminate(robot, 5.0)
+        commands = commands_in(emulator_log)
+    output = (tmp_path / "run_robot.log").read_text()
+    assert robot.returncode == 129, output
+    assert "Traceback" not in output, output
+    folders = list((tmp_path / "maps").iterdir())
+    assert len(folders) == 1 and re.fullmatch(r"\d{4}-\d{2}-\d{2}-\d{6}", folders[0].name)
+    map_yaml = folders[0] / "map.yaml"
+    assert f"the map will be written to {map_yaml}" in output, output  # at start-up
+    assert f"run_robot: map written to {map_yaml}" in output, output  # at the end
+    assert len(occupied_centres(read_map(map_yaml).raster)) > 50
+    assert commands and commands[-1]["linear"][0] == commands[-1]["angular"][2] == 0.0
+
+
+def test_run_robot_says_where_the_map_went_and_fails_when_it_was_not_written(capsys):
+    """A map the slam node could not write on the way down: exit code 3 (it was 130 or 0)."""
+    from types import SimpleNamespace
+
+    import run_robot
+    full = "maps/x/map.yaml: cannot write the map: [Errno 28] No space left on device"
+    assert run_robot.map_ending(SimpleNamespace(map_save_error=full, saved_maps=[])) == 3
+    assert f"run_robot: the map was NOT written: {full}" in capsys.readouterr().err
+    saved = SimpleNamespace(map_save_error=None, saved_maps=[Path("maps/x/map.yaml")])
+    assert run_robot.map_ending(saved) == 0
+    assert "run_robot: map written to maps/x/map.yaml" in capsys.readouterr().out
 
 
 def test_evaluate_slam_runs_mapping_episodes_with_their_figures(capsys, tmp_path):

@@ -196,6 +196,19 @@ def test_map_saved_on_deactivate_and_on_shutdown(ros, tmp_path):
     assert node.saved_maps == [prefix.with_suffix(".yaml")] * 2
 
 
+def test_a_map_that_could_not_be_saved_on_the_way_down_is_remembered(ros, tmp_path):
+    """The run scripts' exit code says it (it was only logged)."""
+    robot = Robot(ros)
+    folder = tmp_path / "session"
+    node = make_node(ros, map_start_pose=start_pose(robot), output_prefix=str(folder / "map"))
+    bring_up(ros, node, robot)
+    robot.drive(ros, node, 40)
+    folder.rmdir()
+    folder.write_text("")  # the folder became a file during the run
+    assert node.trigger_shutdown().name == "SUCCESS"
+    assert node.saved_maps == [] and "cannot write the map" in node.map_save_error
+
+
 def test_nothing_mapped_nothing_saved_and_a_bad_prefix_fails_configure(ros, tmp_path):
     prefix = tmp_path / "empty" / "map"
     node = make_node(ros, output_prefix=str(prefix))

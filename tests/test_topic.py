@@ -71,6 +71,39 @@ def test_topic_echo_hz_list_and_info_on_known_publishers(ros, talker):
     assert "best effort, volatile" in out
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("command", [["echo", "/probe_odom"], ["echo", "/probe_odom", "--csv"],
+                                     ["hz", "/probe_odom", "--period", "0.2"]])
+def test_a_script_endings_ends_the_tool_quietly(ros, talker, command):
+    """`topic.py echo /odom | head`: a traceback (BrokenPipeError) when head had its lines.
+
+    It ends as `yes | head` does: no message, exit code 141 (128 + SIGPIPE).
+    """
+    import os
+    process = subprocess.Popen([sys.executable, "scripts/topic.py", *command],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=REPO)
+    os.set_blocking(process.stdout.fileno(), False)
+    heard = bytearray()
+
+    def read() -> bytes:
+        try:
+            heard.extend(os.read(process.stdout.fileno(), 65536) or b"")
+        except BlockingIOError:
+            pass
+        return bytes(heard)
+
+    try:
+        ros.spin_until(lambda: read().count(b"\n") >= 10 or process.poll() is not None, 30.0,
+                       "ten lines")
+        process.stdout.close()  # head has its lines
+        ros.spin_until(lambda: process.poll() is not None, 10.0, "topic.py to end")
+    finally:
+        terminate(process, 2.0)
+    err = process.stderr.read().decode()
+    assert process.returncode == 141, err
+    assert err == "", err
+
+
 def test_rate_statistics():
     assert rate_statistics([0.0]) is None
     rate, low, high, std = rate_statistics([0.0, 0.1, 0.2, 0.4])

@@ -189,3 +189,44 @@ def test_bad_tune_options_are_one_line_errors(capsys, tmp_path, big_floor):
         err = capsys.readouterr().err
         assert code == 2 and len(err.strip().splitlines()) == 1 and message in err, (argv, err)
         assert not (tmp_path / "out").exists()  # nothing ran
+
+
+def test_a_closed_terminal_or_sigterm_ends_the_search_as_ctrl_c_does(tmp_path, capsys,
+                                                                     monkeypatch):
+    """SIGHUP and SIGTERM end the search: "interrupted", Ray shut down, exit code 129 / 130.
+
+    SIGHUP (the terminal closed) and SIGTERM killed tune.py at once.
+    """
+    import os
+    import signal
+    import time
+
+    closed = []
+
+    class Executor:
+        def describe(self) -> str:
+            return "a stand-in for Ray"
+
+        def close(self) -> None:
+            closed.append(True)
+
+    previous = {s: signal.getsignal(s) for s in (signal.SIGTERM, signal.SIGHUP)}
+    for signum in previous:  # a signal tune.py missed must fail this test, not end pytest
+        signal.signal(signum, lambda *_: None)
+    codes = {}
+    try:
+        for signum in previous:
+            def search(*args, signum=signum, **kwargs):
+                os.kill(os.getpid(), signum)
+                time.sleep(2.0)  # interrupted here
+                return []
+            monkeypatch.setattr(tune, "run_search", search)
+            monkeypatch.setattr(tune.evaluate_executors, "ray_executor",
+                                lambda *args: Executor())
+            codes[signum] = tune.main(["--worlds", "lab02", "--duration", "1", "--space",
+                                       "kp=4,12", "--out", str(tmp_path / signum.name)])
+            assert "tune: interrupted" in capsys.readouterr().err
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+    assert codes == {signal.SIGTERM: 130, signal.SIGHUP: 129} and closed == [True, True]
