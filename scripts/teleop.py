@@ -49,6 +49,7 @@ from amr_common.ros_env import (  # noqa: E402
     isolate_local_graph,
 )
 from cli_checks import (  # noqa: E402
+    OneLineArgumentParser,
     add_domain_id_option,
     number_argument,
     ros_name_argument,
@@ -70,7 +71,7 @@ ARROWS = {"up": "w", "down": "x", "left": "a", "right": "d"}
 
 
 def parse_args(argv=None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+    parser = OneLineArgumentParser(description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter,
                                      epilog=__doc__.split("\n\n", 1)[1])
     kind = parser.add_mutually_exclusive_group()
