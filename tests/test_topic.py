@@ -144,7 +144,7 @@ def test_the_tools_command_line_never_reaches_rcl(monkeypatch, capfd):
 
 
 def test_echo_prints_fixed_size_arrays_as_plain_numbers():
-    """rclpy keeps float64[36] as a numpy array: echo printed 'np.float64(0.0)' 36 times."""
+    """A covariance (float64[36], a numpy array in rclpy) printed 'np.float64(0.0)' 36 times."""
     from geometry_msgs.msg import PoseWithCovarianceStamped
 
     from amr_tools.introspection import flatten, to_data, to_yaml
