@@ -190,6 +190,30 @@ def test_fifty_idle_clients_and_silent_sockets_leave_the_bridge_serving(ros, bri
             raw.close()
 
 
+def test_a_client_that_quits_without_closing_is_no_error(ros, bridge, caplog, capfd):
+    """A viewer's connection reset (a closed laptop lid, a killed app) is said at debug level.
+
+    It ends without the WebSocket close handshake: normal for a viewer, yet the SDK logged
+    'Connection reset without closing handshake' as an ERROR, once per such client.
+    """
+    import logging
+    client = FoxgloveClient(ros, bridge.port)
+    client.wait_for_server_info()
+    raw = client.socket.socket
+    raw.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))  # reset
+    raw.close()
+
+    def said() -> list:
+        return [r for r in caplog.records if "without closing handshake" in r.getMessage()]
+
+    ros.spin_until(lambda: said(), timeout=10.0, message="the SDK's word on the reset")
+    assert [r.levelno for r in said()] == [logging.DEBUG]
+    assert "without closing handshake" not in capfd.readouterr().err
+    second = FoxgloveClient(ros, bridge.port)  # still serving
+    second.wait_for_server_info()
+    second.close()
+
+
 def initial_pose(x: float, y: float) -> PoseWithCovarianceStamped:
     pose = PoseWithCovarianceStamped()
     pose.header.frame_id = "map"
