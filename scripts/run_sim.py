@@ -141,9 +141,9 @@ def _parser() -> OneLineArgumentParser:
     parser.add_argument("--plot", default=None, help="write a picture of the trajectory here "
                         "(PNG unless the name says .svg, .pdf, ...; one per start with --start "
                         "all)")
-    parser.add_argument("--record", default=None, help="record topics to this .mcap file (one "
-                        "file per start with --start all: NAME-START.mcap; .mcap is added to a "
-                        "name without a suffix)")
+    parser.add_argument("--record", default=None, help="record every topic to this .mcap file, "
+                        "as `ros2 bag record -a` (one file per start with --start all: "
+                        "NAME-START.mcap; .mcap is added to a name without a suffix)")
     parser.add_argument("--gui", action="store_true", help="live view window (pygame)")
     add_foxglove_options(parser)
     add_domain_id_option(parser, "ROS_DOMAIN_ID, 0-232 (default: $ROS_DOMAIN_ID if set and not "
@@ -303,6 +303,8 @@ def _simulate(args, world, map_world, starts, outputs, stop) -> int:
         reports.append(report)
         rasters[report["start"]] = getattr(session, "slam_raster", None)
         print(session.summary_line(report))
+        if session.recording_line() is not None:
+            print(f"run_sim: {session.recording_line()}")
     _write_outputs(world, map_world, reports, outputs, several_starts=len(starts) > 1,
                    rasters=rasters)
     if stop.requested:
