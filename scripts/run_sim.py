@@ -48,6 +48,8 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
+import shlex
 import sys
 from pathlib import Path
 
@@ -247,7 +249,7 @@ def _prepare(args):
     from amr_common.map_vs_world import load_map, resolve_goal_on_map, start_warning
     from amr_common.world import World, WorldError, start_label
     try:
-        isolate_local_graph(args.domain_id)
+        isolate_local_graph(args.domain_id, program="run_sim")  # teleop.py --local finds it
         world = World.load(args.world)
         try:
             map_world = load_map(args.map, world)
@@ -285,6 +287,9 @@ def _simulate(args, world, map_world, starts, outputs, stop) -> int:
 
     from amr_common.world import start_label
     print(f"run_sim: {describe_graph_settings()}", flush=True)  # the graph starts now
+    if args.no_controller:
+        print(f"run_sim: no controller runs: drive from another terminal with "
+              f"{teleop_command()}", flush=True)
     reports, rasters = [], {}  # rasters: the SLAM map of each start (for the plot)
     for start in starts:
         if stop.requested:
@@ -313,6 +318,16 @@ def _simulate(args, world, map_world, starts, outputs, stop) -> int:
     # 1: a run collided, or its goal had no path (the planner said why; the run ended then).
     return 1 if any(report["collisions"] > 0 or report.get("planning_error")
                     for report in reports) else 0
+
+
+def teleop_command() -> str:
+    """The command line of scripts/teleop.py that drives this run (paths as typed from here)."""
+    def typed(path: str) -> str:
+        relative = os.path.relpath(path)
+        return shlex.quote(path if relative.startswith("..") else relative)
+
+    return (f"{typed(sys.executable)} {typed(str(Path(__file__).with_name('teleop.py')))} "
+            f"--local --domain-id {os.environ['ROS_DOMAIN_ID']}")
 
 
 def _check_outputs(args, labels: list[str]) -> dict:

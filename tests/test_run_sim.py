@@ -176,6 +176,19 @@ def test_record_with_every_start_writes_one_file_per_start(tmp_path, capsys):
         assert 20 <= len(_log_times(path)["/scan"]) <= 21
 
 
+def test_a_run_without_controller_says_the_teleop_command_that_drives_it(capsys):
+    import shlex
+    assert run_sim.main(["--profile", "turtlebot3", "--realtime", "--teleop",
+                         "--duration", "1"]) == 0
+    said = [line for line in capsys.readouterr().out.splitlines()
+            if line.startswith("run_sim: no controller runs: drive from another terminal with ")]
+    assert len(said) == 1, said
+    argv = shlex.split(said[0].split(" with ", 1)[1])
+    assert Path(argv[0]).resolve() == Path(sys.executable).resolve()
+    assert Path(argv[1]).resolve() == SCRIPTS / "teleop.py"
+    assert argv[2:] == ["--local", "--domain-id", os.environ["ROS_DOMAIN_ID"]]
+
+
 def test_gui_runs_headless(tmp_path, monkeypatch):
     monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
     report = tmp_path / "gui.json"
