@@ -313,7 +313,8 @@ class SimSession:
             return
         self.graph_recorder.discover()
         deadline = time.monotonic() + RECORDER_MATCH_TIMEOUT_S
-        while not self.graph_recorder.matched() and time.monotonic() < deadline:
+        while not (self.graph_recorder.matched() or self._stop_requested()) and \
+                time.monotonic() < deadline:
             self.executor.spin_once(timeout_sec=0.01)
 
     def recording_line(self) -> str | None:
