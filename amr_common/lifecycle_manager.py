@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import sys
 import time
-from typing import Sequence
+from typing import Callable, Sequence
 
 import rclpy
 from lifecycle_msgs.msg import State, Transition
@@ -71,11 +71,14 @@ class LifecycleManager(Node):
         self._lifecycle_clients: dict[str, tuple] = {}
         self._stop: StopFlag | None = None
 
-    def startup(self, executor: Executor, stop: StopFlag | None = None) -> None:
+    def startup(self, executor: Executor, stop: StopFlag | None = None,
+                before_activation: Callable[[], None] | None = None) -> None:
         """Configure, then activate, every node in order. Raises LifecycleStartupError.
 
         With `stop`: StartupInterrupted as soon as it is set (between transitions, or while
-        waiting for a node), the nodes left in the states they reached.
+        waiting for a node), the nodes left in the states they reached. `before_activation`
+        runs once every node is configured, before the first activation (the publishers exist,
+        nothing was published yet: e.g. a recorder subscribes then).
         """
         if not self.node_startup_order:
             raise LifecycleStartupError("node_startup_order is empty: nothing to start")
@@ -83,6 +86,8 @@ class LifecycleManager(Node):
         for name in self.node_startup_order:
             self._wait_for_services(name, executor)
         for transition in (Transition.TRANSITION_CONFIGURE, Transition.TRANSITION_ACTIVATE):
+            if transition == Transition.TRANSITION_ACTIVATE and before_activation is not None:
+                before_activation()
             for name in self.node_startup_order:
                 self._transition(name, transition, executor)
         self.get_logger().info("all nodes active: " + ", ".join(self.node_startup_order))

@@ -22,6 +22,7 @@ in on_activate/on_deactivate/on_cleanup/on_shutdown, as with rclpy's LifecycleNo
 """
 from __future__ import annotations
 
+import logging
 import math
 import time
 from typing import Callable
@@ -117,13 +118,15 @@ class GuardedLifecycleNode(LifecycleNode):
         was never configured.
         """
 
-    def forward_python_logging(self, logger_name: str) -> Callable[[], None]:
+    def forward_python_logging(self, logger_name: str,
+                               record_filter: logging.Filter | None = None) -> Callable[[], None]:
         """Send Python logger `logger_name`'s records to this node's logger.
 
         For the node's plain-Python algorithm (its warnings then reach rosout and the node's
-        log). Returns a function that stops the forwarding; destroy_node() stops it too.
+        log), or a library's; `record_filter` as forward_to_ros_logger's. Returns a function
+        that stops the forwarding; destroy_node() stops it too.
         """
-        stop = forward_to_ros_logger(logger_name, self.get_logger())
+        stop = forward_to_ros_logger(logger_name, self.get_logger(), record_filter)
         self._log_forwardings.append(stop)
 
         def stop_once() -> None:

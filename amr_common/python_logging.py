@@ -84,14 +84,18 @@ class RosLoggerHandler(logging.Handler):
             self.handleError(record)
 
 
-def forward_to_ros_logger(logger_name: str, ros_logger: Any) -> Callable[[], None]:
+def forward_to_ros_logger(logger_name: str, ros_logger: Any,
+                          record_filter: logging.Filter | None = None) -> Callable[[], None]:
     """Send the records of Python logger `logger_name` (and its children) to `ros_logger`.
 
-    Returns a function that stops the forwarding (call it when the node releases its
-    algorithm, e.g. on cleanup).
+    `record_filter` sees each record first (it may drop it, or change its level). Returns a
+    function that stops the forwarding (call it when the node releases its algorithm, e.g. on
+    cleanup).
     """
     python_logger = logging.getLogger(logger_name)
     handler = RosLoggerHandler(ros_logger)
+    if record_filter is not None:
+        handler.addFilter(record_filter)
     python_logger.addHandler(handler)
 
     def stop() -> None:

@@ -308,7 +308,7 @@ class SimulatorNode(GuardedLifecycleNode):
                 f"({x:.2f}, {y:.2f}, {math.degrees(th):.1f} deg) | error {position_error:.3f} m, "
                 f"{math.degrees(heading_error):+.1f} deg")
         if not was_localized:
-            self.get_logger().warning(f"Localized: {text}")
+            self.get_logger().info(f"Localized: {text}")
         else:
             self.get_logger().info(text, throttle_duration_sec=1.0)
 
@@ -323,7 +323,7 @@ class SimulatorNode(GuardedLifecycleNode):
         was_reached = check.reached_time is not None
         done = check.update(now, pose, self.localized, resting, self.simulator.dt)
         if not was_reached and check.reached_time is not None:
-            self.get_logger().warning(
+            self.get_logger().info(
                 f"Congratulations, you reached the goal! (t = {now:.2f} s; the run ends once "
                 f"the robot has rested {self.params['goal_rest_time']:g} s)")
         return done

@@ -21,6 +21,7 @@ timer in the executor's thread (rclpy entities are created and destroyed there o
 """
 from __future__ import annotations
 
+import logging
 import queue
 import sys
 from typing import Any
@@ -104,6 +105,8 @@ class FoxgloveBridgeNode(GuardedLifecycleNode):
         self.port = self.sdk_port = None
         self._requests: queue.SimpleQueue = queue.SimpleQueue()
         self._reset()
+        # The SDK's own log (Python logging, "foxglove.*") under this node's name.
+        self.forward_python_logging("foxglove", _AbruptDisconnectIsNormal())
 
     def _reset(self) -> None:
         self._channels: dict[str, tuple[Any, str]] = {}   # topic -> (foxglove Channel, type)
@@ -334,6 +337,20 @@ class FoxgloveBridgeNode(GuardedLifecycleNode):
                                       throttle_duration_sec=2.0)
             return
         publisher.publish(message)
+
+
+class _AbruptDisconnectIsNormal(logging.Filter):
+    """A client ending without the WebSocket close handshake is said at debug level.
+
+    The SDK logs an ERROR for each; for a viewer it is normal (a closed laptop lid, a killed
+    app, a dropped Wi-Fi).
+    """
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.levelno > logging.DEBUG and \
+                "without closing handshake" in record.getMessage():
+            record.levelno, record.levelname = logging.DEBUG, "DEBUG"
+        return True
 
 
 class _Listener:

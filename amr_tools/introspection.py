@@ -13,6 +13,7 @@ import os
 import time
 from typing import Any, Iterable
 
+import numpy as np
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 
@@ -70,14 +71,22 @@ def describe_qos(qos: QoSProfile) -> str:
 
 
 def to_data(message: Any) -> Any:
-    """A message as nested dicts, lists and numbers (field order kept)."""
+    """A message as nested dicts, lists and plain Python numbers (field order kept).
+
+    rclpy holds fixed-size arrays (a covariance's float64[36]) as numpy arrays: their elements
+    become Python floats and ints, printed as `ros2 topic echo` prints them.
+    """
     if hasattr(message, "get_fields_and_field_types"):
         return {name: to_data(getattr(message, name))
                 for name in message.get_fields_and_field_types()}
-    if isinstance(message, (list, tuple, array.array)) or type(message).__name__ == "ndarray":
+    if isinstance(message, np.ndarray):
+        return message.tolist()
+    if isinstance(message, (list, tuple, array.array)):
         return [to_data(v) for v in message]
     if isinstance(message, bytes):
         return list(message)
+    if isinstance(message, np.generic):
+        return message.item()
     return message
 
 

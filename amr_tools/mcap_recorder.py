@@ -1,12 +1,16 @@
 """Record ROS 2 messages into an MCAP file that Foxglove, `ros2 bag` and `rosbags` can open.
 
-The file follows what rosbag2's MCAP storage plugin writes: profile "ros2", one schema per message
-type with encoding "ros2msg" holding the complete message definition (the type's .msg text, then
-every dependency once, each preceded by a line of 80 '=' and "MSG: pkg/Type"), channels with
-message encoding "cdr" and the offered QoS in their metadata, and messages serialized by rclpy.
-Definitions are read from the .msg files installed under <prefix>/share/<pkg>/msg/.
+The file follows what rosbag2's (Jazzy) MCAP storage plugin writes: profile "ros2", one schema per
+message type with encoding "ros2msg" holding the complete message definition (the type's .msg
+text, then every dependency once, each preceded by a line of 80 '=' and "MSG: pkg/Type"),
+channels with message encoding "cdr" and, in their metadata, `offered_qos_profiles` (the QoS each
+publisher offered, the YAML text of rosbag2_storage's serialize_rclcpp_qos_vector: `ros2 bag
+play` offers it again, so latched topics stay latched) and `topic_type_hash`, and messages
+serialized by rclpy. Definitions are read from the .msg files installed under
+<prefix>/share/<pkg>/msg/.
 
-rclpy is imported lazily (only when a message is serialized or a node attached), so this module can
+amr_tools.graph_recorder records every topic of a graph into it, as `ros2 bag record -a` does.
+rclpy is imported lazily (only when a message is serialized or a QoS named), so this module can
 be imported where ROS is absent.
 """
 from __future__ import annotations
@@ -17,7 +21,7 @@ import struct
 import sys
 import threading
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Iterable, Mapping
 
 from mcap.writer import CompressionType, Writer
 
@@ -29,13 +33,59 @@ _PRIMITIVE_TYPES = frozenset({
 _DELIMITER = "=" * 80 + "\n"
 _MAX_DEPTH = 50
 
-# The QoS rosbag2 (Jazzy) writes for a default reliable publisher; replays with a profile every
-# subscriber (reliable or best effort) accepts.
+# The QoS rosbag2 (Jazzy) writes for a default reliable publisher, for messages written without a
+# graph (write()): replays with a profile every subscriber (reliable or best effort) accepts.
 _INFINITE = "    sec: 9223372036\n    nsec: 854775807\n"
 DEFAULT_OFFERED_QOS_YAML = (
     "- history: keep_last\n  depth: 10\n  reliability: reliable\n  durability: volatile\n"
     f"  deadline:\n{_INFINITE}  lifespan:\n{_INFINITE}  liveliness: automatic\n"
-    f"  liveliness_lease_duration:\n{_INFINITE}  avoid_ros_namespace_conventions: false\n")
+    f"  liveliness_lease_duration:\n{_INFINITE}  avoid_ros_namespace_conventions: false")
+
+
+def _policy_name(policy_enum: type, value: Any) -> str:
+    # rclpy's enum names are rmw's strings in upper case (rmw_qos_*_policy_to_str).
+    try:
+        return policy_enum(value).name.lower()
+    except ValueError:
+        return "unknown"
+
+
+def _duration_yaml(duration: Any) -> str:
+    # RMW_DURATION_INFINITE (2^63 - 1 ns) comes out as rosbag2's {9223372036, 854775807}.
+    nanoseconds = int(duration.nanoseconds)
+    return (f"    sec: {nanoseconds // 1_000_000_000}\n"
+            f"    nsec: {nanoseconds % 1_000_000_000}\n")
+
+
+def offered_qos_yaml(profiles: Iterable[Any]) -> str:
+    """The `offered_qos_profiles` text rosbag2 (Jazzy) writes for publishers offering `profiles`.
+
+    `profiles`: rclpy QoSProfile, e.g. TopicEndpointInfo.qos_profile of each publisher. The text
+    of yaml-cpp's dump of rosbag2_storage's QoS vector, metadata version 9: policies by name (a
+    remote publisher's history is "unknown", depth 0), durations as sec/nsec; "[]" for none.
+    """
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, ReliabilityPolicy
+    entries = []
+    for qos in profiles:
+        entries.append(
+            f"- history: {_policy_name(HistoryPolicy, qos.history)}\n"
+            f"  depth: {int(qos.depth)}\n"
+            f"  reliability: {_policy_name(ReliabilityPolicy, qos.reliability)}\n"
+            f"  durability: {_policy_name(DurabilityPolicy, qos.durability)}\n"
+            f"  deadline:\n{_duration_yaml(qos.deadline)}"
+            f"  lifespan:\n{_duration_yaml(qos.lifespan)}"
+            f"  liveliness: {_policy_name(LivelinessPolicy, qos.liveliness)}\n"
+            f"  liveliness_lease_duration:\n{_duration_yaml(qos.liveliness_lease_duration)}"
+            f"  avoid_ros_namespace_conventions: "
+            f"{'true' if qos.avoid_ros_namespace_conventions else 'false'}")
+    return "\n".join(entries) if entries else "[]"
+
+
+def common_type_hash(publishers: Iterable[Any]) -> str:
+    """The publishers' type hash ("RIHS01_..."), "" if none is known or they disagree (rosbag2)."""
+    hashes = {str(info.topic_type_hash) for info in publishers
+              if getattr(info.topic_type_hash, "version", 0) > 0}  # 0, -1: not known
+    return hashes.pop() if len(hashes) == 1 else ""
 
 
 def _chunk_compression() -> CompressionType:
@@ -139,7 +189,7 @@ def cdr_header_stamp_ns(data: bytes, in_sequence: bool = False,
     return ns if ns > 0 or (ns == 0 and not zero_is_unset) else None
 
 
-def _stamp_layout(msg_type: type) -> bool | None:
+def stamp_layout(msg_type: type) -> bool | None:
     """Where a message type's first header is; None if it has none.
 
     False: its own (its first field); True: the first element's of its first field, a sequence
@@ -162,9 +212,9 @@ def _stamp_layout(msg_type: type) -> bool | None:
 class McapRecorder:
     """Write rclpy messages to a ROS 2 MCAP file.
 
-    `write(topic, msg, log_time_ns)` records one message; `attach(node, topics)` records what a
-    node receives. Use as a context manager or call `close()`: the file index is written on close,
-    and a file left unclosed is unreadable by most tools.
+    `write(topic, msg, log_time_ns)` records one message; amr_tools.graph_recorder records what
+    a node's graph carries. Use as a context manager or call `close()`: the file index is written
+    on close, and a file left unclosed is unreadable by most tools. Thread-safe.
     """
 
     def __init__(self, path: str | os.PathLike, metadata: Mapping[str, Any] | None = None,
@@ -182,7 +232,7 @@ class McapRecorder:
         self._channels: dict[str, tuple[int, str]] = {}  # topic -> (channel id, type name)
         self._sequence: dict[int, int] = {}
         self._message_counts: dict[str, int] = {}
-        self._subscriptions: list[tuple[Any, Any]] = []
+        self._log_time_range: tuple[int, int] | None = None  # first, last (ns)
         self._serialize: Callable[[Any], bytes] | None = None
         self._closed = False
         if metadata:
@@ -193,12 +243,36 @@ class McapRecorder:
         """Messages written so far, per topic."""
         return dict(self._message_counts)
 
+    @property
+    def duration_s(self) -> float:
+        """Seconds from the first message's log time to the last's (0 with fewer than two)."""
+        span = self._log_time_range
+        return 0.0 if span is None else (span[1] - span[0]) * 1e-9
+
+    @property
+    def closed(self) -> bool:
+        """True once close() has run: messages are no longer taken."""
+        return self._closed
+
     def write_metadata(self, name: str, values: Mapping[str, Any]) -> None:
         """Add an MCAP metadata record (values are stored as strings; None as "")."""
         data = {str(k): "" if v is None else str(v) for k, v in values.items()}
         with self._lock:
             self._check_open()
             self._writer.add_metadata(name, data)
+
+    def add_topic(self, topic: str, type_name: str, offered_qos: str = DEFAULT_OFFERED_QOS_YAML,
+                  type_hash: str = "") -> None:
+        """Register `topic` before its first message, with what its publishers offer.
+
+        `offered_qos`: offered_qos_yaml() of its publishers; `type_hash`: theirs ("RIHS01_...").
+        MessageDefinitionError if the type's .msg files are missing; TypeError if the topic is
+        already recorded with another type. A topic registered already keeps its metadata.
+        """
+        self._check_topic(topic)
+        with self._lock:
+            self._check_open()
+            self._channel_for(topic, type_name, offered_qos, type_hash)
 
     def write(self, topic: str, msg: Any, log_time_ns: int) -> None:
         """Record `msg` (an rclpy message instance) on `topic` at `log_time_ns` (ns, >= 0)."""
@@ -209,9 +283,11 @@ class McapRecorder:
         self.write_serialized(topic, type_name, self._serialize(msg), log_time_ns)
 
     def write_serialized(self, topic: str, type_name: str, data: bytes, log_time_ns: int) -> None:
-        """Record an already CDR-serialized message of type `type_name` ("pkg/msg/Type")."""
-        if not isinstance(topic, str) or not topic.startswith("/"):
-            raise ValueError(f"topic must be an absolute name like '/scan', got {topic!r}")
+        """Record an already CDR-serialized message of type `type_name` ("pkg/msg/Type").
+
+        A topic not registered with add_topic() gets the default publisher's QoS.
+        """
+        self._check_topic(topic)
         log_time_ns = int(log_time_ns)
         if log_time_ns < 0:
             raise ValueError(f"log time must be >= 0 ns, got {log_time_ns}")
@@ -223,56 +299,17 @@ class McapRecorder:
             self._writer.add_message(channel_id=channel_id, log_time=log_time_ns, data=data,
                                      publish_time=log_time_ns, sequence=sequence)
             self._message_counts[topic] += 1
+            span = self._log_time_range
+            self._log_time_range = (log_time_ns, log_time_ns) if span is None else \
+                (min(span[0], log_time_ns), max(span[1], log_time_ns))
 
-    def attach(self, node: Any, topics: Mapping[str, type], qos: Any = None, *,
-               log_time: str = "receive", clock: Callable[[], int] | None = None) -> None:
-        """Subscribe `node` to `topics` ({name: message class}) and record every message.
+    @staticmethod
+    def _check_topic(topic: Any) -> None:
+        if not isinstance(topic, str) or not topic.startswith("/"):
+            raise ValueError(f"topic must be an absolute name like '/scan', got {topic!r}")
 
-        Messages arrive serialized (raw subscriptions) and are written as they are: no Python
-        deserialization, so recording barely slows the graph. Every message of a file is logged on
-        one time base:
-        - log_time "receive" (default, as `ros2 bag record`): when it arrived, on `clock`;
-        - log_time "header": its header stamp (a zero stamp included; for /tf the first
-          transform's), `clock` for types without a header. For graphs whose every publisher
-          stamps on `clock`'s time base, e.g. a lockstep simulation stamping with simulated
-          time: the log time is then exact.
-        `clock` returns nanoseconds; default the node's clock (simulated time with use_sim_time).
-        The default QoS is best effort, depth 100: it matches reliable and best-effort publishers
-        alike. `qos` may be one QoSProfile or a {topic: QoSProfile} dict.
-        """
-        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-
-        if log_time not in ("receive", "header"):
-            raise ValueError(f"log_time must be 'receive' or 'header', got {log_time!r}")
-        if clock is None:
-            def clock() -> int:
-                return node.get_clock().now().nanoseconds
-        default_qos = QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST,
-                                 reliability=ReliabilityPolicy.BEST_EFFORT)
-        for topic, msg_type in topics.items():
-            topic_qos = (qos.get(topic, default_qos) if isinstance(qos, Mapping)
-                         else (qos or default_qos))
-            type_name = ros_type_name(msg_type)
-            with self._lock:
-                self._check_open()
-                # A missing definition fails now, not in a callback.
-                self._channel_for(topic, type_name)
-            layout = _stamp_layout(msg_type) if log_time == "header" else None
-            callback = self._make_callback(topic, type_name, layout, clock)
-            subscription = node.create_subscription(msg_type, topic, callback, topic_qos, raw=True)
-            self._subscriptions.append((node, subscription))
-
-    def _make_callback(self, topic: str, type_name: str, layout: bool | None,
-                       clock: Callable[[], int]) -> Callable[[bytes], None]:
-        def record(data: bytes) -> None:
-            if self._closed:
-                return
-            stamp = None if layout is None else \
-                cdr_header_stamp_ns(data, in_sequence=layout, zero_is_unset=False)
-            self.write_serialized(topic, type_name, data, clock() if stamp is None else stamp)
-        return record
-
-    def _channel_for(self, topic: str, type_name: str) -> int:
+    def _channel_for(self, topic: str, type_name: str,
+                     offered_qos: str = DEFAULT_OFFERED_QOS_YAML, type_hash: str = "") -> int:
         known = self._channels.get(topic)
         if known is not None:
             if known[1] != type_name:
@@ -286,7 +323,7 @@ class McapRecorder:
             self._schemas[type_name] = schema_id
         channel_id = self._writer.register_channel(
             topic=topic, message_encoding="cdr", schema_id=schema_id,
-            metadata={"offered_qos_profiles": DEFAULT_OFFERED_QOS_YAML})
+            metadata={"offered_qos_profiles": offered_qos, "topic_type_hash": type_hash})
         self._channels[topic] = (channel_id, type_name)
         self._sequence[channel_id] = 0
         self._message_counts[topic] = 0
@@ -297,16 +334,10 @@ class McapRecorder:
             raise RuntimeError(f"MCAP recorder for {self.path} is closed")
 
     def close(self) -> None:
-        """Stop recording, destroy the subscriptions and write the file's index. Idempotent."""
-        if self._closed:
-            return
-        for node, subscription in self._subscriptions:
-            try:
-                node.destroy_subscription(subscription)
-            except Exception:  # the node may already be destroyed; the file still gets closed
-                pass
-        self._subscriptions.clear()
+        """Stop recording and write the file's index. Idempotent."""
         with self._lock:
+            if self._closed:
+                return
             self._closed = True
             try:
                 self._writer.finish()

@@ -51,6 +51,8 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
+import shlex
 import sys
 from pathlib import Path
 
@@ -149,9 +151,9 @@ def _parser() -> OneLineArgumentParser:
     parser.add_argument("--plot", default=None, help="write a picture of the trajectory here "
                         "(PNG unless the name says .svg, .pdf, ...; one per start with --start "
                         "all)")
-    parser.add_argument("--record", default=None, help="record topics to this .mcap file (one "
-                        "file per start with --start all: NAME-START.mcap; .mcap is added to a "
-                        "name without a suffix)")
+    parser.add_argument("--record", default=None, help="record every topic to this .mcap file, "
+                        "as `ros2 bag record -a` (one file per start with --start all: "
+                        "NAME-START.mcap; .mcap is added to a name without a suffix)")
     parser.add_argument("--gui", action="store_true", help="live view window (pygame)")
     add_foxglove_options(parser)
     add_domain_id_option(parser, "ROS_DOMAIN_ID, 0-232 (default: $ROS_DOMAIN_ID if set and not "
@@ -255,7 +257,7 @@ def _prepare(args):
     from amr_common.map_vs_world import load_map, resolve_goal_on_map, start_warning
     from amr_common.world import World, WorldError, start_label
     try:
-        isolate_local_graph(args.domain_id)
+        isolate_local_graph(args.domain_id, program="run_sim")  # teleop.py --local finds it
         world = World.load(args.world)
         try:
             map_world = load_map(args.map, world)
@@ -293,6 +295,9 @@ def _simulate(args, world, map_world, starts, outputs, stop) -> int:
 
     from amr_common.world import start_label
     print(f"run_sim: {describe_graph_settings()}", flush=True)  # the graph starts now
+    if args.no_controller:
+        print(f"run_sim: no controller runs: drive from another terminal with "
+              f"{teleop_command()}", flush=True)
     reports, rasters = [], {}  # rasters: the SLAM map of each start (for the plot)
     for start in starts:
         if stop.requested:
@@ -311,6 +316,8 @@ def _simulate(args, world, map_world, starts, outputs, stop) -> int:
         reports.append(report)
         rasters[report["start"]] = getattr(session, "slam_raster", None)
         print(session.summary_line(report))
+        if session.recording_line() is not None:
+            print(f"run_sim: {session.recording_line()}")
     _write_outputs(world, map_world, reports, outputs, several_starts=len(starts) > 1,
                    rasters=rasters)
     if stop.requested:
@@ -325,6 +332,16 @@ def _simulate(args, world, map_world, starts, outputs, stop) -> int:
     # 1: a run collided, or its goal had no path (the planner said why; the run ended then).
     return 1 if any(report["collisions"] > 0 or report.get("planning_error")
                     for report in reports) else 0
+
+
+def teleop_command() -> str:
+    """The command line of scripts/teleop.py that drives this run (paths as typed from here)."""
+    def typed(path: str) -> str:
+        relative = os.path.relpath(path)
+        return shlex.quote(path if relative.startswith("..") else relative)
+
+    return (f"{typed(sys.executable)} {typed(str(Path(__file__).with_name('teleop.py')))} "
+            f"--local --domain-id {os.environ['ROS_DOMAIN_ID']}")
 
 
 def _check_outputs(args, labels: list[str]) -> dict:

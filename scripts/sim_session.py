@@ -50,6 +50,7 @@ from launch_common import (
 )
 
 STALL_TIMEOUT_S = 10.0  # lockstep: no step for this long (wall clock) means the loop broke
+RECORDER_MATCH_TIMEOUT_S = 2.0  # in one process the recorder matches its publishers in ms
 
 
 def _simulator_values(args, start: str, own_map: bool, localize: bool, slam: bool) -> dict:
@@ -136,6 +137,7 @@ class SimSession:
         self.wall_errors: list[float] = []
         self.view = None
         self.recorder = None
+        self.graph_recorder = None
 
     def _make_control_nodes(self, map_source: str, localize: bool) -> list:
         """The wall follower, with the filter, planner and pursuit when they run.
@@ -249,13 +251,13 @@ class SimSession:
                 "start": start_label(self.start),
                 "profile": args.profile, "seed": str(args.seed), "dt": str(args.dt),
                 "mode": "realtime" if args.realtime else "lockstep"})
-            self._attach_recorder()
+            self._record_graph()
         self.simulator_node.on_step.append(self._on_step)
         self.stop_requested = False
         if self._stop_requested():  # stopped while the nodes were being built: none started
             return report_before_start(args, self.world, self.start, self.map_world)
         try:
-            self.manager.startup(self.executor)
+            self.manager.startup(self.executor, before_activation=self._before_activation)
         except LifecycleStartupError as exc:
             raise SystemExit(f"run_sim: {exc}")
         sim = self.simulator_node.simulator
@@ -293,40 +295,34 @@ class SimSession:
         while time.monotonic() < end:
             self.executor.spin_once(timeout_sec=0.05)
 
-    def _attach_recorder(self) -> None:
-        from geometry_msgs.msg import Twist, TwistStamped
-        from nav_msgs.msg import OccupancyGrid, Odometry
-        from sensor_msgs.msg import LaserScan
-        from tf2_msgs.msg import TFMessage
-        from visualization_msgs.msg import MarkerArray
-
-        from amr_common.tf import TF_STATIC_LISTENER_QOS
-        topics = {"/scan": LaserScan, "/ground_truth": Odometry, "/odometry": Odometry,
-                  "/tf": TFMessage, "/tf_static": TFMessage, "/map": OccupancyGrid,
-                  "/map_markers": MarkerArray}
-        latched = {topic: TF_STATIC_LISTENER_QOS for topic in ("/tf_static", "/map",
-                                                                "/map_markers")}
-        if self.rehearsal:  # the simulated robot's pose-only /odom, before amr_odometry
-            topics["/odom"] = Odometry
-        stamped = not self.rehearsal or self.wall_follower is None or \
-            self.wall_follower.get_parameter("cmd_vel_stamped").value
-        topics["/cmd_vel"] = TwistStamped if stamped else Twist
-        if self.slam_node is not None:
-            from amr_msgs.msg import PoseStamped
-            topics["/slam_pose"] = PoseStamped
-        if self.particle_filter is not None:
-            from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
-
-            from amr_msgs.msg import PoseStamped
-            topics.update({"/pose": PoseStamped, "/particles": PoseArray,
-                           "/amcl_pose": PoseWithCovarianceStamped})
+    def _record_graph(self) -> None:
+        """Record every topic of the graph into self.recorder, as `ros2 bag record -a`."""
+        from amr_tools.graph_recorder import GraphRecorder
         recorder_node = rclpy.create_node("mcap_recorder", context=self.context)
         self.executor.add_node(recorder_node)  # destroyed with the others in close()
         # One time base per file, simulated time. In lockstep every message is stamped with it
         # (exact log times; /tf by its first transform); in real time the controller stamps
         # with the wall clock, so each message is logged when it arrives, on the simulated clock.
-        self.recorder.attach(recorder_node, topics, qos=latched, clock=lambda: self._sim_time_ns,
-                             log_time="receive" if self.args.realtime else "header")
+        self.graph_recorder = GraphRecorder(
+            self.recorder, recorder_node, clock=lambda: self._sim_time_ns,
+            log_time="receive" if self.args.realtime else "header")
+
+    def _before_activation(self) -> None:
+        """All configured, nothing published: record from the first measurement on (matched)."""
+        if self.graph_recorder is None:
+            return
+        self.graph_recorder.discover()
+        deadline = time.monotonic() + RECORDER_MATCH_TIMEOUT_S
+        while not (self.graph_recorder.matched() or self._stop_requested()) and \
+                time.monotonic() < deadline:
+            self.executor.spin_once(timeout_sec=0.01)
+
+    def recording_line(self) -> str | None:
+        """'recording written: F (N messages, T s)' once the recording is closed, else None."""
+        recorder = self.recorder
+        return None if recorder is None or not recorder.closed else (
+            f"recording written: {recorder.path} ({sum(recorder.message_counts.values())} "
+            f"messages, {recorder.duration_s:.1f} s)")
 
     def _report(self, sim, wall_time: float) -> dict:
         follower = self.wall_follower
@@ -388,6 +384,8 @@ class SimSession:
             self._spin_for(0.1)  # the recording ends with that zero command
         for node in [self.simulator_node, *self.viewer_nodes]:
             shutdown_node(node)
+        if self.graph_recorder is not None:
+            self.graph_recorder.close()
         if self.recorder is not None:
             self.recorder.close()
         if self.view is not None:

@@ -22,9 +22,10 @@ Examples:
   .venv/bin/python scripts/teleop.py --domain-id 30                # Jazzy bringup on the LAN
   .venv/bin/python scripts/teleop.py --domain-id 30 --twist        # Humble bringup
   .venv/bin/python scripts/teleop.py --domain-id 30 --auto --hold-timeout 1 --ramp
-  .venv/bin/python scripts/teleop.py --local --domain-id 42        # a local simulation
+  .venv/bin/python scripts/teleop.py --local                       # the local simulation
 Discovery is left to you (the robot's network, like run_robot.py) unless --local: loopback only
-and the --domain-id given, else $ROS_DOMAIN_ID if not 0, else a free one (printed).
+and the --domain-id given, else $ROS_DOMAIN_ID if not 0, else the domain of the one run_sim.py
+running on this machine (with none or several, say which with --domain-id).
 Exit codes: 0 after q or the end of input, 130 after Ctrl-C or SIGTERM, 129 after SIGHUP, 1
 after an error, 2 for a mistake in the command line.
 """
@@ -47,8 +48,10 @@ from amr_common.ros_env import (  # noqa: E402
     describe_graph_settings,
     environment_domain_id,
     isolate_local_graph,
+    local_graphs,
 )
 from cli_checks import (  # noqa: E402
+    OneLineArgumentParser,
     add_domain_id_option,
     number_argument,
     ros_name_argument,
@@ -70,7 +73,7 @@ ARROWS = {"up": "w", "down": "x", "left": "a", "right": "d"}
 
 
 def parse_args(argv=None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+    parser = OneLineArgumentParser(description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter,
                                      epilog=__doc__.split("\n\n", 1)[1])
     kind = parser.add_mutually_exclusive_group()
@@ -98,8 +101,9 @@ def parse_args(argv=None) -> argparse.Namespace:
                         "turtlebot3_teleop has no such timeout: it republishes the last command "
                         "until a stop key, and the robot keeps it even after the teleop dies "
                         "(default: none, as the original)")
-    parser.add_argument("--local", action="store_true", help="loopback discovery on a private "
-                        "domain (a local simulation) instead of the environment's settings")
+    parser.add_argument("--local", action="store_true", help="loopback discovery (a local "
+                        "simulation) instead of the environment's settings; without --domain-id "
+                        "or $ROS_DOMAIN_ID, the domain of the one run_sim.py running here")
     add_domain_id_option(parser, "ROS_DOMAIN_ID shared with the robot, 0-232 (default: "
                          "$ROS_DOMAIN_ID)")
     args = parser.parse_args(argv)
@@ -297,11 +301,29 @@ def make_sender(node, topic: str, stamped: bool) -> tuple[Callable[[float, float
     return send, publisher
 
 
+def simulator_domain_id() -> int:
+    """The ROS_DOMAIN_ID of the one run_sim.py running here; LookupError (one line) if not one."""
+    simulators = local_graphs("run_sim")
+    if len(simulators) == 1:
+        return simulators[0][0]
+    if not simulators:
+        raise LookupError("no local simulator runs (run_sim.py --realtime --teleop prints the "
+                          "command that drives it): give --domain-id")
+    running = ", ".join(f"{domain} (pid {pid})" for domain, pid in simulators)
+    raise LookupError(f"{len(simulators)} local simulators run, on ROS_DOMAIN_ID {running}: "
+                      f"say which with --domain-id")
+
+
 def main(argv=None) -> int:
     args = parse_args(argv)
     try:
         if args.local:
-            isolate_local_graph(args.domain_id)
+            domain_id = args.domain_id
+            if domain_id is None and not environment_domain_id():
+                domain_id = simulator_domain_id()
+                print(f"teleop: driving the local simulator on ROS_DOMAIN_ID {domain_id}",
+                      file=sys.stderr)
+            isolate_local_graph(domain_id)
         else:
             use_domain_id(args)
         import rclpy
@@ -310,6 +332,9 @@ def main(argv=None) -> int:
         from amr_common.node_runner import StopFlag
     except KeyboardInterrupt:
         return INTERRUPTED
+    except LookupError as exc:  # not one local simulator: the user says which
+        print(f"teleop: {exc}", file=sys.stderr)
+        return 2
     except RuntimeError as exc:  # no free local domain
         print(f"teleop: {exc}", file=sys.stderr)
         return 1

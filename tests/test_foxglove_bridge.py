@@ -17,6 +17,7 @@ import ssl
 import struct
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -188,6 +189,30 @@ def test_fifty_idle_clients_and_silent_sockets_leave_the_bridge_serving(ros, bri
             connection.close()
         for raw in silent:
             raw.close()
+
+
+def test_a_client_that_quits_without_closing_is_no_error(ros, bridge, caplog, capfd):
+    """A viewer's connection reset (a closed laptop lid, a killed app) is said at debug level.
+
+    It ends without the WebSocket close handshake: normal for a viewer, yet the SDK logged
+    'Connection reset without closing handshake' as an ERROR, once per such client.
+    """
+    import logging
+    client = FoxgloveClient(ros, bridge.port)
+    client.wait_for_server_info()
+    raw = client.socket.socket
+    raw.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))  # reset
+    raw.close()
+
+    def said() -> list:
+        return [r for r in caplog.records if "without closing handshake" in r.getMessage()]
+
+    ros.spin_until(lambda: said(), timeout=10.0, message="the SDK's word on the reset")
+    assert [r.levelno for r in said()] == [logging.DEBUG]
+    assert "without closing handshake" not in capfd.readouterr().err
+    second = FoxgloveClient(ros, bridge.port)  # still serving
+    second.wait_for_server_info()
+    second.close()
 
 
 def initial_pose(x: float, y: float) -> PoseWithCovarianceStamped:
@@ -514,11 +539,62 @@ def test_run_sim_starts_the_bridge_before_the_simulation(tmp_path):
         "foxglove_bridge", "wall_follower", "amr_simulator"]
 
 
-def test_shipped_layout_shows_the_map_frame_and_the_simulators_topics():
+# What Foxglove's 3D panel draws, by ROS 2 type name (its ThreeDeeRender/ros.ts): TF, markers,
+# occupancy grids, point clouds, laser scans, poses (stamped, with covariance, arrays), paths,
+# camera info, images and polygons. Not nav_msgs/Odometry, nor a package's own types such as
+# amr_msgs/PoseStamped.
+FOXGLOVE_3D_TYPES = {f"{package}/msg/{name}" for package, names in {
+    "tf2_msgs": ["TFMessage"], "visualization_msgs": ["Marker", "MarkerArray"],
+    "nav_msgs": ["OccupancyGrid", "Path"],
+    "sensor_msgs": ["PointCloud2", "LaserScan", "CameraInfo", "Image", "CompressedImage"],
+    "geometry_msgs": ["TransformStamped", "PoseStamped", "PoseWithCovarianceStamped",
+                      "PoseArray", "PolygonStamped"]}.items() for name in names}
+
+
+def _goal_run_topic_types() -> dict[str, list[str]]:
+    """{topic: types} of run_sim.py --goal's graph (every node configured: all topics exist)."""
+    import run_sim
+    from sim_session import SimSession
+    args = run_sim.parse_args(["--world", "lab02", "--goal", "inner_far"])
+    world, map_world, starts, _ = run_sim._prepare(args)
+    session = SimSession(args, world, starts[0], map_world=map_world)
+    try:
+        for node in [*session.viewer_nodes, *session.control_nodes, session.simulator_node]:
+            assert node.trigger_configure() == TransitionCallbackReturn.SUCCESS, node.get_name()
+        outputs = {"/amcl_pose", "/particles", "/path", "/scan", "/map", "/tf"}
+        deadline = time.monotonic() + 10.0
+        while time.monotonic() < deadline:
+            topics = dict(session.manager.get_topic_names_and_types())
+            if outputs <= set(topics):
+                return topics
+            session.executor.spin_once(timeout_sec=0.05)
+        pytest.fail(f"the --goal graph lacks {sorted(outputs - set(topics))}")
+    finally:
+        session.close()
+
+
+def test_every_topic_of_the_shipped_layout_is_one_foxglove_draws():
+    """The 3D panel showed /pose (amr_msgs/PoseStamped), which Foxglove cannot draw."""
+    from amr_tools.introspection import message_class
     layout = json.loads((Path(__file__).resolve().parent.parent / "docs" /
                          "foxglove-layout.json").read_text())
     panel = layout["configById"]["3D!amr"]
     assert panel["followTf"] == "map"
-    assert {"/map", "/map_markers", "/scan"} <= set(panel["topics"])
     assert panel["publish"]["poseEstimateTopic"] == "/initialpose"
     assert panel["publish"]["poseTopic"] == "/goal_pose"
+    graph = _goal_run_topic_types()
+    drawn = {topic: graph.get(topic) for topic in panel["topics"]}
+    assert {t: types for t, types in drawn.items()
+            if types is None or len(types) != 1 or types[0] not in FOXGLOVE_3D_TYPES} == {}
+    # The filter's estimate (as AMCL's), the path, the map, the scan and the particles.
+    assert {"/amcl_pose", "/path", "/map", "/map_markers", "/scan", "/particles"} <= set(drawn)
+    for panel_id, config in layout["configById"].items():  # the other panels' topics
+        if "topicPath" in config:
+            assert config["topicPath"] in graph, panel_id
+        for path in (p["value"] for p in config.get("paths", [])):  # a plot: to a number
+            topic, *fields = path.split(".")
+            assert topic in graph, (panel_id, path)
+            message = message_class(graph[topic][0])()
+            for field in fields:
+                message = getattr(message, field)
+            assert isinstance(message, float), (panel_id, path)

@@ -39,8 +39,10 @@ def test_manager_configures_all_then_activates_all_in_order(ros):
     controller = ros.add(RecordingNode("controller", journal, ros.context))
     simulator = ros.add(RecordingNode("simulator", journal, ros.context))
     manager = _manager(ros, ["controller", "simulator"])
-    manager.startup(ros.executor)
+    manager.startup(ros.executor,
+                    before_activation=lambda: journal.append(("all configured", "hook")))
     assert journal == [("controller", "configure"), ("simulator", "configure"),
+                       ("all configured", "hook"),
                        ("controller", "activate"), ("simulator", "activate")]
     assert manager.get_state("controller", ros.executor) == "active"
     assert manager.get_state("simulator", ros.executor) == "active"

@@ -14,6 +14,7 @@ from rosbags.highlevel import AnyReader
 from sensor_msgs.msg import LaserScan
 
 from amr_msgs.msg import PoseStamped as GroundTruthPose
+from amr_tools.graph_recorder import GraphRecorder
 from amr_tools.mcap_recorder import McapRecorder, cdr_header_stamp_ns, full_message_definition
 
 DT_NS = 50_000_000  # 0.05 s
@@ -194,16 +195,16 @@ def test_bad_input_gives_clear_errors(tmp_path):
         assert sum(1 for _ in reader.messages()) == 1
 
 
-def _attached_recording(ros, path, sent_ns, **attach_options) -> dict[str, list[int]]:
+def _attached_recording(ros, path, sent_ns, **options) -> dict[str, list[int]]:
     """Publish /scan stamped `sent_ns` and unstamped (zero) /cmd_vel; the log times per topic."""
     talker = ros.node("mcap_talker")
     listener = ros.node("mcap_listener")
     scan_pub = talker.create_publisher(LaserScan, "/scan", 10)
     cmd_pub = talker.create_publisher(TwistStamped, "/cmd_vel", 10)
     recorder = McapRecorder(path)
-    recorder.attach(listener, {"/scan": LaserScan, "/cmd_vel": TwistStamped}, **attach_options)
-    ros.spin_until(lambda: scan_pub.get_subscription_count() > 0
-                   and cmd_pub.get_subscription_count() > 0, 10.0, "recorder subscriptions")
+    graph = GraphRecorder(recorder, listener, discovery_period=0.05, **options)
+    ros.spin_until(lambda: {"/scan", "/cmd_vel"} <= set(graph.topics) and graph.matched(),
+                   10.0, "recorder subscriptions")
     for ns in sent_ns:
         scan_pub.publish(_scan(ns, 1))
         command = _command(ns, 2)
@@ -212,10 +213,13 @@ def _attached_recording(ros, path, sent_ns, **attach_options) -> dict[str, list[
     ros.spin_until(lambda: recorder.message_counts.get("/scan", 0) == len(sent_ns)
                    and recorder.message_counts.get("/cmd_vel", 0) == len(sent_ns), 10.0,
                    "every message")
+    graph.close()
     recorder.close()
     with AnyReader([path]) as reader:
         times: dict[str, list[int]] = {"/scan": [], "/cmd_vel": []}
         for connection, log_time, raw in reader.messages():
+            if connection.topic not in times:
+                continue  # /rosout, /parameter_events: the graph's own topics
             times[connection.topic].append(log_time)
             if connection.topic == "/scan":
                 scan = reader.deserialize(raw, connection.msgtype)
@@ -223,7 +227,7 @@ def _attached_recording(ros, path, sent_ns, **attach_options) -> dict[str, list[
     return times
 
 
-def test_attach_logs_every_message_when_it_arrives_on_one_clock(ros, tmp_path):
+def test_graph_recording_logs_every_message_when_it_arrives_on_one_clock(ros, tmp_path):
     """The default, as `ros2 bag record`: one time base whatever the stamps say."""
     sent_ns = [2_000_000_000 + k * DT_NS for k in range(5)]
     before = time.time_ns()
@@ -233,7 +237,7 @@ def test_attach_logs_every_message_when_it_arrives_on_one_clock(ros, tmp_path):
         assert len(times[topic]) == 5 and all(before <= t <= after for t in times[topic])
 
 
-def test_attach_can_log_header_stamps_with_zero_as_a_stamp(ros, tmp_path):
+def test_graph_recording_can_log_header_stamps_with_zero_as_a_stamp(ros, tmp_path):
     """A lockstep simulation stamps everything with simulated time, starting at 0."""
     sent_ns = [k * DT_NS for k in range(5)]  # the first stamp is 0: not "unstamped"
     simulated_now = [123 * DT_NS]
@@ -242,4 +246,129 @@ def test_attach_can_log_header_stamps_with_zero_as_a_stamp(ros, tmp_path):
     assert times["/scan"] == sent_ns
     assert times["/cmd_vel"] == [0] * 5  # its stamps are zero: t = 0 too, not the wall clock
     with pytest.raises(ValueError, match="log_time"):
-        McapRecorder(tmp_path / "x.mcap").attach(ros.node("x"), {}, log_time="stamp")
+        GraphRecorder(McapRecorder(tmp_path / "x.mcap"), ros.node("x"), log_time="stamp")
+
+
+# What rosbag2 (Jazzy) writes for a publisher seen through the graph: yaml-cpp's dump of the QoS
+# vector (rosbag2_storage/qos.cpp, metadata version 9). rmw does not announce a remote
+# publisher's history: "unknown", depth 0.
+_INFINITE = "    sec: 9223372036\n    nsec: 854775807\n"
+_ROSBAG2_BEST_EFFORT_OFFER = (
+    "- history: unknown\n  depth: 0\n  reliability: best_effort\n  durability: volatile\n"
+    f"  deadline:\n{_INFINITE}  lifespan:\n{_INFINITE}  liveliness: automatic\n"
+    f"  liveliness_lease_duration:\n{_INFINITE}  avoid_ros_namespace_conventions: false")
+
+
+def test_graph_recording_takes_every_topic_with_the_qos_its_publishers_offer(ros, tmp_path):
+    """As `ros2 bag record -a`: every topic, found as it appears, its offered QoS in the file.
+
+    A fixed list missed /path and the other outputs; every channel said reliable + volatile, so
+    a replay would not latch /map and /tf_static.
+    """
+    from rosbags.interfaces import QosDurability, QosReliability
+
+    from amr_common.qos import LATCHED, RELIABLE_10, scan_qos
+    path = tmp_path / "graph.mcap"
+    talker = ros.node("graph_talker")
+    scans = talker.create_publisher(LaserScan, "/scan", scan_qos(5))
+    commands = talker.create_publisher(TwistStamped, "/cmd_vel", RELIABLE_10)
+    latched = talker.create_publisher(Odometry, "/latched", LATCHED)
+    latched.publish(_odometry(5 * DT_NS, 7))  # before the recorder exists
+    hidden = talker.create_publisher(Odometry, "/_hidden", RELIABLE_10)
+    recorder = McapRecorder(path)
+    graph = GraphRecorder(recorder, ros.node("graph_recorder"), discovery_period=0.05)
+    late = None
+
+    def sent_and_received() -> bool:
+        nonlocal late
+        if late is None and "/scan" in graph.topics:  # a node that starts later
+            late = talker.create_publisher(GroundTruthPose, "/late", RELIABLE_10)
+        for publisher, message in ((scans, _scan(DT_NS, 0)), (commands, _command(DT_NS, 1)),
+                                   (hidden, _odometry(DT_NS, 2)),
+                                   (late, _truth(DT_NS, 3) if late else None)):
+            if message is not None:
+                publisher.publish(message)
+        counts = recorder.message_counts
+        return all(counts.get(t, 0) > 0 for t in ("/scan", "/cmd_vel", "/latched", "/late"))
+
+    ros.spin_until(sent_and_received, 15.0, "a message on every topic")
+    graph.close()
+    recorder.close()
+    with AnyReader([path]) as reader:
+        connections = {c.topic: c for c in reader.connections}
+        latched_messages = [reader.deserialize(raw, c.msgtype) for c, _, raw in
+                            reader.messages([connections["/latched"]])]
+    assert "/_hidden" not in connections  # as rosbag2: hidden topics are left out
+    assert {"/rosout", "/parameter_events"} <= set(connections)
+    assert [m.pose.pose.position.x for m in latched_messages] == [pytest.approx(0.07)]
+    offered = {t: c.ext.offered_qos_profiles for t, c in connections.items()}
+    assert [q.reliability for q in offered["/scan"]] == [QosReliability.BEST_EFFORT]
+    assert [(q.reliability, q.durability) for q in offered["/latched"]] == [
+        (QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL)]
+    assert [(q.reliability, q.durability) for q in offered["/cmd_vel"]] == [
+        (QosReliability.RELIABLE, QosDurability.VOLATILE)]
+    with open(path, "rb") as stream:
+        channels = {c.topic: c for c in make_reader(stream).get_summary().channels.values()}
+    assert channels["/scan"].metadata["offered_qos_profiles"] == _ROSBAG2_BEST_EFFORT_OFFER
+    type_hash = str(talker.get_publishers_info_by_topic("/scan")[0].topic_type_hash)
+    assert type_hash.startswith("RIHS01_")
+    assert channels["/scan"].metadata["topic_type_hash"] == type_hash
+
+
+def test_a_best_effort_publisher_joining_a_reliable_topic_is_recorded_too(ros, tmp_path):
+    """The subscription was reliable for the first publisher: it would never hear this one."""
+    from amr_common.qos import RELIABLE_10, scan_qos
+    path = tmp_path / "join.mcap"
+    recorder = McapRecorder(path)
+    reliable = ros.node("reliable_talker").create_publisher(LaserScan, "/scan", RELIABLE_10)
+    graph = GraphRecorder(recorder, ros.node("joining_recorder"), discovery_period=0.05)
+    ros.spin_until(lambda: "/scan" in graph.topics and graph.matched(), 10.0, "subscription")
+    ros.spin_until(lambda: (reliable.publish(_scan(DT_NS, 0)),
+                            recorder.message_counts["/scan"] > 0)[1], 10.0, "the first scan")
+    ros.spin_for(0.5)  # the first publisher's scans in flight arrive
+    best_effort = ros.node("best_effort_talker").create_publisher(LaserScan, "/scan",
+                                                                  scan_qos(5))
+    first = recorder.message_counts["/scan"]
+    ros.spin_until(lambda: (best_effort.publish(_scan(2 * DT_NS, 5)),
+                            recorder.message_counts["/scan"] > first)[1], 15.0,
+                   "a scan of the best-effort publisher")
+    graph.close()
+    recorder.close()
+    with AnyReader([path]) as reader:
+        ranges = [reader.deserialize(raw, c.msgtype).ranges[0] for c, _, raw in
+                  reader.messages([c for c in reader.connections if c.topic == "/scan"])]
+    assert len(ranges) > first and ranges[first:] == [pytest.approx(5.5)] * (len(ranges) - first)
+
+
+def test_offered_qos_text_is_rosbag2s_and_reads_back_with_rosbags():
+    from rclpy.duration import Duration
+    from rclpy.qos import (
+        DurabilityPolicy,
+        HistoryPolicy,
+        LivelinessPolicy,
+        QoSProfile,
+        ReliabilityPolicy,
+    )
+    from rosbags.interfaces import QosDurability, QosHistory, QosLiveliness, QosReliability
+    from rosbags.rosbag2.metadata import parse_qos
+
+    from amr_tools.mcap_recorder import offered_qos_yaml
+    infinite = Duration(nanoseconds=2**63 - 1)
+    remote = QoSProfile(history=HistoryPolicy.UNKNOWN, depth=0,
+                        reliability=ReliabilityPolicy.BEST_EFFORT,
+                        durability=DurabilityPolicy.VOLATILE, deadline=infinite,
+                        lifespan=infinite, liveliness=LivelinessPolicy.AUTOMATIC,
+                        liveliness_lease_duration=infinite)
+    assert offered_qos_yaml([remote]) == _ROSBAG2_BEST_EFFORT_OFFER
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                         deadline=Duration(seconds=1.5))
+    text = offered_qos_yaml([remote, latched])
+    assert "  deadline:\n    sec: 1\n    nsec: 500000000\n" in text
+    parsed = parse_qos(text)
+    assert [(q.history, q.depth, q.reliability, q.durability, q.liveliness) for q in parsed] == [
+        (QosHistory.UNKNOWN, 0, QosReliability.BEST_EFFORT, QosDurability.VOLATILE,
+         QosLiveliness.AUTOMATIC),
+        (QosHistory.KEEP_LAST, 1, QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL,
+         QosLiveliness.SYSTEM_DEFAULT)]
+    assert parsed[0].deadline.sec == 9223372036 and parsed[0].deadline.nsec == 854775807
+    assert offered_qos_yaml([]) == "[]" and parse_qos("[]") == []

@@ -75,15 +75,19 @@ def test_realtime_turtlebot3_rehearsal_runs_the_robot_graph(tmp_path):
     assert report["distance_m"] > 1.0, "the robot graph must drive the simulated Burger"
 
 
-def test_record_writes_an_mcap_that_an_independent_reader_opens(tmp_path):
+def test_record_writes_an_mcap_that_an_independent_reader_opens(tmp_path, capsys):
     from rosbags.highlevel import AnyReader
+    from rosbags.interfaces import QosDurability, QosReliability
     from rosbags.typesys import Stores, get_typestore
 
     record = tmp_path / "run.mcap"
     run_sim.main(["--duration", "5", "--record", str(record)])
-    # rosbags reads ROS 2 bags as folders: give it one holding just the MCAP file.
     with AnyReader([record], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
+        # The QoS each publisher offered, as rosbag2 stores it: `ros2 bag play` offers it again
+        # (a latched /map and /tf_static stay latched, /scan stays best effort).
+        offered = {c.topic: [(q.reliability, q.durability) for q in c.ext.offered_qos_profiles]
+                   for c in reader.connections}
         stamps, log_times, frames = {}, {}, set()
         for connection, timestamp, raw in reader.messages():
             msg = reader.deserialize(raw, connection.msgtype)
@@ -109,6 +113,16 @@ def test_record_writes_an_mcap_that_an_independent_reader_opens(tmp_path):
     assert frames == {("base_footprint", "base_scan"), ("odom", "base_footprint"),
                       ("map", "base_footprint_truth"), ("map", "odom")}
     assert max(max(times) for times in log_times.values()) <= 5 * 10**9
+    best_effort = (QosReliability.BEST_EFFORT, QosDurability.VOLATILE)
+    latched = (QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL)
+    assert offered["/scan"] == [best_effort]
+    assert offered["/tf_static"] == offered["/map"] == offered["/map_markers"] == [latched]
+    assert offered["/cmd_vel"] == [(QosReliability.RELIABLE, QosDurability.VOLATILE)]
+    # Every topic of the graph, as `ros2 bag record -a`: the clock and the nodes' logs too.
+    assert {"/clock", "/rosout", "/parameter_events"} <= set(counts)
+    total = sum(counts.values())
+    assert f"run_sim: recording written: {record} ({total} messages, 5.0 s)" in \
+        capsys.readouterr().out.splitlines()
 
 
 def _commands_per_stamp(path) -> dict[int, int]:
@@ -150,12 +164,29 @@ def test_record_with_every_start_writes_one_file_per_start(tmp_path, capsys):
     assert run_sim.main(["--world", "corridor_loop", "--start", "all", "--duration", "1",
                          "--record", str(record)]) == 0
     assert not record.exists()
+    said = [line for line in capsys.readouterr().out.splitlines() if "recording written" in line]
+    assert [line.split(": ")[2].split(" (")[0] for line in said] == [
+        str(tmp_path / f"run-{start}.mcap") for start in ("south", "north", "corner")]
+    assert all(line.endswith(" messages, 1.0 s)") for line in said), said
     for start in ("south", "north", "corner"):
         path = tmp_path / f"run-{start}.mcap"
         with open(path, "rb") as stream:
             metadata = {m.name: m.metadata for m in make_reader(stream).iter_metadata()}
         assert metadata["amr_sim"]["start"] == start
         assert 20 <= len(_log_times(path)["/scan"]) <= 21
+
+
+def test_a_run_without_controller_says_the_teleop_command_that_drives_it(capsys):
+    import shlex
+    assert run_sim.main(["--profile", "turtlebot3", "--realtime", "--teleop",
+                         "--duration", "1"]) == 0
+    said = [line for line in capsys.readouterr().out.splitlines()
+            if line.startswith("run_sim: no controller runs: drive from another terminal with ")]
+    assert len(said) == 1, said
+    argv = shlex.split(said[0].split(" with ", 1)[1])
+    assert Path(argv[0]).resolve() == Path(sys.executable).resolve()
+    assert Path(argv[1]).resolve() == SCRIPTS / "teleop.py"
+    assert argv[2:] == ["--local", "--domain-id", os.environ["ROS_DOMAIN_ID"]]
 
 
 def test_gui_runs_headless(tmp_path, monkeypatch):
@@ -434,6 +465,10 @@ def test_navigate_to_a_goal_with_the_five_node_graph(tmp_path, world, start, goa
     # localized, then from the pure pursuit (the last stamp also carries both nodes' final
     # zeros on the way down).
     per_stamp = _commands_per_stamp(record)
+    # Every output of the graph, the planner's path among them.
+    recorded = _log_times(record)
+    assert all(recorded.get(t) for t in ("/path", "/pose", "/amcl_pose", "/particles")), \
+        sorted(recorded)
     assert len(per_stamp) == report["steps"], "one stamp per step, no step without a command"
     last = max(per_stamp)
     assert all(n == 1 for stamp, n in per_stamp.items() if stamp != last), \

@@ -332,7 +332,7 @@ def test_realtime_turtlebot3_rates_and_stale_commands(ros):
 
 # --- goal and localization ----------------------------------------------------------------
 
-def test_goal_reached_while_localized_finishes_the_run_with_a_summary(ros):
+def test_goal_reached_while_localized_finishes_the_run_with_a_summary(ros, capfd):
     from amr_msgs.msg import PoseStamped
     probe = Probe(ros)
     pose_publisher = probe.node.create_publisher(PoseStamped, "/pose", 10)
@@ -376,6 +376,11 @@ def test_goal_reached_while_localized_finishes_the_run_with_a_summary(ros):
     assert summary["sim_time_s"] == pytest.approx(0.05 * summary["steps"])
     assert summary["wall_time_s"] > 0
     assert summary["localization_error"][0] == pytest.approx(offset, abs=0.02)
+    # Good news is information, not a warning.
+    lines = capfd.readouterr().err.splitlines()
+    for news in ("Localized: estimated", "Congratulations, you reached the goal!"):
+        said = [line for line in lines if news in line]
+        assert len(said) == 1 and said[0].startswith("[INFO]"), (news, said)
     # Finished: further commands are not answered.
     steps, count = node.simulator.steps, probe.count()["odometry"]
     probe.send(0.2, 0.0, seconds_to_time(node.simulator.time))

@@ -48,7 +48,7 @@ class Teleop:
     """scripts/teleop.py on its own topic, and what a subscriber of that topic receives."""
 
     def __init__(self, ros, topic: str, *options: str, kind: type = TwistStamped,
-                 stdin=subprocess.PIPE) -> None:
+                 stdin=subprocess.PIPE, env: dict | None = None) -> None:
         self.ros = ros
         self.kind = kind
         self.messages: list = []
@@ -56,7 +56,8 @@ class Teleop:
         node.create_subscription(kind, topic, self.messages.append, RELIABLE_10)
         self.process = subprocess.Popen(
             [sys.executable, str(TELEOP), "--local", "--topic", topic, *options],
-            stdin=stdin, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO)
+            stdin=stdin, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO,
+            env=env)
 
     @property
     def commands(self) -> list[tuple[float, float]]:
@@ -350,7 +351,8 @@ def test_option_errors(options, message, capsys):
         parse_args(options)
     assert exit_info.value.code == 2
     err = capsys.readouterr().err
-    assert message in err and len(err.strip().splitlines()[-1]) < 200
+    # One line, as the other scripts' errors: the usage text buried it.
+    assert len(err.splitlines()) == 1 and message in err and len(err) < 200, err
 
 
 def test_bad_environment_domain_is_an_option_error(monkeypatch, capsys):
@@ -366,8 +368,8 @@ def test_option_error_exits_2_before_anything_runs():
                             capture_output=True, text=True, cwd=REPO, timeout=30,
                             stdin=subprocess.DEVNULL)
     assert result.returncode == 2
-    assert result.stderr.splitlines()[-1] == \
-        "teleop.py: error: argument --hold-timeout: must be > 0 (got '0')"
+    assert result.stderr == ("teleop.py: error: argument --hold-timeout: must be > 0 (got '0') "
+                             "(--help lists the options)\n")
     assert "RMW=" not in result.stderr and result.stdout == ""
 
 
@@ -391,3 +393,73 @@ def test_a_script_endings_does_not_stop_the_driving_nor_the_final_zeros():
                  StatusLine(_ClosedOutput()))
     assert code == 0
     assert (0.02, 0.0) in sent and sent[-3:] == [(0.0, 0.0)] * 3
+
+
+# --- which local simulator ----------------------------------------------------------------
+
+class FakeSimulator:
+    """A process holding a domain lock as run_sim.py does (run_sim's own registration)."""
+
+    def __init__(self, env: dict, domain_id: int | None = None) -> None:
+        code = ("import sys; from amr_common.ros_env import isolate_local_graph; "
+                f"print(isolate_local_graph({domain_id}, program='run_sim'), flush=True); "
+                "sys.stdin.read()")
+        self.process = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE,
+                                        stdout=subprocess.PIPE, text=True, cwd=REPO, env=env)
+        self.domain_id = int(self.process.stdout.readline())
+
+    def stop(self) -> None:
+        self.process.stdin.close()  # the end of its input: it exits, the lock is free
+        self.process.wait(timeout=10)
+
+
+def _without_a_domain(tmp_path) -> dict:
+    """The environment of a new terminal (no ROS_DOMAIN_ID), with its own folder of locks."""
+    env = {k: v for k, v in os.environ.items() if k != "ROS_DOMAIN_ID"}
+    env["AMR_DOMAIN_LOCK_DIR"] = str(tmp_path / "locks")
+    return env
+
+
+@pytest.mark.slow
+def test_local_teleop_drives_the_one_local_simulator_without_being_told_its_domain(ros,
+                                                                                   tmp_path):
+    """teleop.py --local took a free domain of its own: it drove nothing."""
+    env = _without_a_domain(tmp_path)
+    # The simulator runs on this test's domain, where the test's subscriber listens.
+    simulator = FakeSimulator(env, int(os.environ["ROS_DOMAIN_ID"]))
+    try:
+        teleop = Teleop(ros, "/teleop_found", env=env)
+        wait_for_all(ros, [teleop])
+        teleop.keys("w")
+        teleop.wait_for(0.01, 0.0)
+        teleop.keys("q")
+        code, _, err = teleop.finish()
+    finally:
+        simulator.stop()
+    assert code == 0, err
+    assert f"teleop: driving the local simulator on ROS_DOMAIN_ID {simulator.domain_id}" in err
+
+
+def test_local_teleop_asks_which_domain_unless_exactly_one_simulator_runs(tmp_path):
+    env = _without_a_domain(tmp_path)
+
+    def teleop() -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, str(TELEOP), "--local"], capture_output=True,
+                              text=True, cwd=REPO, env=env, timeout=60,
+                              stdin=subprocess.DEVNULL)
+
+    alone = teleop()
+    assert alone.returncode == 2 and alone.stderr.startswith("teleop: no local simulator runs")
+    assert alone.stderr.rstrip().endswith("give --domain-id")
+    simulators = [FakeSimulator(env), FakeSimulator(env)]
+    try:
+        several = teleop()
+    finally:
+        for simulator in simulators:
+            simulator.stop()
+    assert several.returncode == 2, several.stderr
+    assert len(several.stderr.splitlines()) == 1 and "2 local simulators run" in several.stderr
+    for simulator in simulators:
+        assert f"{simulator.domain_id} (pid {simulator.process.pid})" in several.stderr
+    gone = teleop()  # the simulators ended: their locks are free again
+    assert gone.returncode == 2 and "no local simulator runs" in gone.stderr

@@ -174,3 +174,18 @@ def test_the_tools_command_line_never_reaches_rcl(monkeypatch, capfd):
     finally:
         probe.close()
     assert "deprecated" not in capfd.readouterr().err
+
+
+def test_echo_prints_fixed_size_arrays_as_plain_numbers():
+    """A covariance (float64[36], a numpy array in rclpy) printed 'np.float64(0.0)' 36 times."""
+    from geometry_msgs.msg import PoseWithCovarianceStamped
+
+    from amr_tools.introspection import flatten, to_data, to_yaml
+    message = PoseWithCovarianceStamped()
+    message.pose.covariance[0] = 0.25
+    message.pose.covariance[35] = -1.5
+    text = to_yaml(to_data(message))
+    assert "covariance: [0.25, " + "0.0, " * 34 + "-1.5]" in text
+    assert "np." not in text
+    row = flatten(to_data(message))
+    assert row["pose.covariance.0"] == 0.25 and type(row["pose.covariance.0"]) is float
