@@ -22,6 +22,7 @@ from typing import Any, Callable, Iterable
 import numpy as np
 
 from amr_common.controller_loader import DEFAULT_MAPPER
+from amr_common.link_failure import failure_text
 from amr_evaluation.executors import TaskLost, local_executor, run_tasks
 from amr_evaluation.mapping_episode import AUTO_DRIFT, OdometryDrift, run_mapping_episode
 
@@ -67,8 +68,7 @@ def run_mapping_spec(spec: MappingSpec) -> dict[str, Any]:
                                      mapper_params=spec.mapper_params, mapper=spec.mapper,
                                      controller=_controller(spec))
     except Exception as exc:  # noqa: BLE001 - reported per episode, the batch goes on
-        return {**asdict(spec), "error": f"{type(exc).__name__}: {exc}",
-                "traceback": traceback.format_exc()}
+        return {**asdict(spec), "error": failure_text(exc), "traceback": traceback.format_exc()}
     return result.to_dict()
 
 

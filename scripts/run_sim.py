@@ -41,7 +41,9 @@ Examples:
 `--world` (default: the world): a map SLAM built, or an old map of a changed room.
 Local runs are isolated: loopback discovery and a free ROS_DOMAIN_ID (printed at startup).
 Ctrl-C ends the whole run: the controller commands zero and the partial report is written,
-marked "interrupted": true (exit code 130).
+marked "interrupted": true (exit code 130). A link (--controller, --localizer, --planner,
+--follower, --mapper) that raises or returns what its interface forbids ends the run too: the
+robot stops, the report says why (`link_failure`), exit code 3, as evaluate.py's failed episode.
 """
 from __future__ import annotations
 
@@ -63,6 +65,7 @@ from link_options import (  # noqa: E402
     check_filter_map,
 )
 
+from amr_common.link_failure import LINK_FAILED  # noqa: E402
 from amr_common.ros_env import describe_graph_settings, isolate_local_graph  # noqa: E402
 from cli_checks import (  # noqa: E402
     OneLineArgumentParser,
@@ -308,6 +311,8 @@ def _simulate(args, world, map_world, starts, outputs, stop) -> int:
     if stop.requested:
         print("run_sim: interrupted", file=sys.stderr)
         return INTERRUPTED
+    if any(report["link_failure"] for report in reports):
+        return LINK_FAILED  # the run ended then, said why
     # 1: a run collided, or its goal had no path (the planner said why; the run ended then).
     return 1 if any(report["collisions"] > 0 or report.get("planning_error")
                     for report in reports) else 0
