@@ -316,6 +316,10 @@ def main(argv: list[str] | None = None) -> int:
         specs = episode_specs(settings)
         if args.localize:
             check_localization_options(args, settings, specs)
+        if args.slam:  # each episode's simulated LiDAR unit is calibrated for the mapper
+            from amr_evaluation.mapping_evaluation import check_lidar_units
+            check_lidar_units(((s.profile, s.seed) for s in specs),
+                              settings["links"].get("mapper"))
         check_filter_maps(specs, parse_overrides(args.pf_param), args.localize)
         started = dt_module.datetime.now(dt_module.timezone.utc)
         out = check_output_folder(args.out or Path("out") / f"evaluate-{started:%Y%m%d-%H%M%S}",

@@ -9,7 +9,8 @@
 
 --slam with --localize or --goal is refused: the particle filter and the planner need the map
 SLAM is still building; map first, then localize and navigate on the saved map
-(`--world DIR/map.yaml`). Every check runs before anything starts (one line, exit code 2).
+(`--world DIR/map.yaml`). --slam with --kidnap too: the mapper cannot know the robot was
+carried. Every check runs before anything starts (one line, exit code 2).
 """
 from __future__ import annotations
 
@@ -60,6 +61,10 @@ def check_slam_options(args, script: str, set_by_script: dict[str, str]) -> None
                              "(--world DIR/map.yaml)")
     if getattr(args, "map", None):
         raise ValueError("--slam and --map exclude each other: both would publish /map")
+    if getattr(args, "kidnap", None) is not None:  # (a robot's SLAM has no kidnapping either)
+        raise ValueError("--slam and --kidnap exclude each other: the mapper is not told that "
+                         "the robot was carried, so it would go on mapping from a wrong pose "
+                         "(--kidnap tests a localizer's recovery: --localize or --goal)")
     if args.map_out is not None:
         from cli_checks import check_output_file, check_output_folder
         folder = check_output_folder(args.map_out, "--map-out")

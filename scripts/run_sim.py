@@ -83,7 +83,12 @@ from launch_common import (  # noqa: E402
     add_foxglove_options,
     check_common_options,
 )
-from launch_slam import add_slam_options, check_slam_options, map_prefix  # noqa: E402
+from launch_slam import (  # noqa: E402
+    add_slam_options,
+    check_slam_options,
+    lidar_parameters,
+    map_prefix,
+)
 
 INTERRUPTED = 130  # exit code after Ctrl-C / SIGTERM, as a shell reports it
 # Node parameters run_sim sets from its own options: a -p / --pf-param would contradict them.
@@ -174,6 +179,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     check_common_options(parser, args, "run_sim", WALL_FOLLOWER_SET, FILTER_SET)
     try:
         check_slam_options(args, "run_sim", SLAM_SET)
+        if args.slam:  # the simulated unit calibrated now: one that cannot be is refused here
+            args.slam_lidar = lidar_parameters(args, args.profile)
     except ValueError as exc:
         parser.error(str(exc))
     if args.no_controller and not args.realtime:
@@ -219,7 +226,7 @@ def _check_simulator_options(parser, args) -> None:
         try:
             check_parameters({**defaults, name: value})
         except ValueError as exc:
-            parser.error(f"{option} {value:g}: {exc}")
+            parser.error(f"{option} {value}: {exc}")
 
 
 def main(argv=None) -> int:

@@ -195,13 +195,13 @@ class SimSession:
         """The slam node, mapping in the world's frame (its start pose), saving to map_prefix.
 
         The simulated scanner's LiDAR position, `deskew`, its range error and the unit's
-        calibration (launch_slam.lidar_parameters) or --slam-param.
+        calibration (args.slam_lidar: launch_slam.lidar_parameters) or --slam-param.
         """
-        from launch_slam import lidar_parameters, make_slam_node
+        from launch_slam import make_slam_node
         self.map_prefix = map_prefix
         self.slam_estimate: list[list[float]] = []
         self.slam_raster = None  # the map at the end of the run (for the plot)
-        overrides = lidar_parameters(self.args, self.args.profile)
+        overrides = dict(self.args.slam_lidar)  # launch_slam.lidar_parameters (run_sim checks)
         offset = overrides.pop("lidar_offset_x_m")
         self.slam_range_correction = overrides.get("range_correction")
         self.slam_node = make_slam_node(self.context, lidar_offset_x_m=offset,

@@ -42,6 +42,7 @@ for path in (str(REPO), str(SCRIPTS)):
 import evaluate  # noqa: E402  (the episode-set options and their checks)
 import evaluate_executors  # noqa: E402  (where the trials run)
 
+from amr_common.parameter_table import MAX_SEED  # noqa: E402
 from amr_evaluation.evaluation import EvaluationError, check_controller  # noqa: E402
 from amr_evaluation.tuning import (  # noqa: E402
     DEFAULT_OBJECTIVE,
@@ -93,6 +94,9 @@ def check_options(args: argparse.Namespace, episode_args: argparse.Namespace) ->
             if value is not None:
                 raise EvaluationError(f"{option} is for --search random or optuna (a grid "
                                       "search tries every combination once)")
+    if args.search_seed is not None and not 0 <= args.search_seed <= MAX_SEED:
+        raise EvaluationError(f"--search-seed must be from 0 to {MAX_SEED}, got "
+                              f"{args.search_seed}")
 
 
 def main(argv: list[str] | None = None) -> int:
