@@ -226,7 +226,8 @@ def _check_simulator_options(parser, args) -> None:
         try:
             check_parameters({**defaults, name: value})
         except ValueError as exc:
-            parser.error(f"{option} {value}: {exc}")
+            parser.error(f"{option} {value:g}: {exc}" if isinstance(value, float) else
+                         f"{option} {value}: {exc}")  # a seed in full
 
 
 def main(argv=None) -> int:
