@@ -7,9 +7,10 @@ x profiles x seeds): the controller explores until the particle filter is locali
 planner and the pure pursuit drive to the goal (amr_evaluation.navigation_episode). Writes
 results.json, results.csv and sheet.png (every episode's trajectory) to --out, prints a table and
 a one-line verdict.
-Exit code: 0 no collision (and every goal reached), 1 some episode collided, commanded
-NaN/inf/non-numbers or missed its goal, 2 bad options, 3 some episode failed to run (an
-exception, sys.exit, its worker process died, or it ran past --episode-timeout).
+Exit code: 0 no collision (and every goal reached), 1 some episode collided or missed its goal,
+2 bad options, 3 some episode failed: a link failed (raised, or commanded NaN/inf/non-numbers:
+amr_common.link_failure, as in run_sim.py), an exception, sys.exit, its worker process died, or
+it ran past --episode-timeout.
 
 Examples:
   .venv/bin/python scripts/evaluate.py --worlds lab02 --seeds 0,1,2 --duration 120
