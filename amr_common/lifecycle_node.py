@@ -100,6 +100,7 @@ class GuardedLifecycleNode(LifecycleNode):
         except LinkFailure as failure:
             self.fail_link(failure, time_s, spec, then)
             return None
+
     def warn_every(self, kind: str, text: str, period_s: float = 2.0,
                    error: bool = False) -> bool:
         """Log `text` (a warning, or an error) unless one of this `kind` was logged < period_s ago.
@@ -278,6 +279,7 @@ _TRANSITION_LABELS = {Transition.TRANSITION_CONFIGURE: "configure",
                       Transition.TRANSITION_ACTIVATE: "activate",
                       Transition.TRANSITION_DEACTIVATE: "deactivate",
                       **{t: "shutdown" for t in _SHUTDOWN_TRANSITIONS}}
+
 
 def first_link_failure(nodes) -> LinkFailure | None:
     """The first link failure among `nodes` (those without the attribute count as none)."""
