@@ -16,7 +16,9 @@ ranges (NaN, inf, 0.0 or outside [range_min, range_max] mean "no return": use
 amr_common.scan_returns). A class may offer `parameter_descriptions()` (a static method:
 name -> (default, description)): its node declares each as a ROS parameter and the run
 scripts' `-p` / `--*-param` options check names against it. Constructors are called with
-keywords only, as each interface says.
+keywords only, as each interface says. A call that raises where its interface allows no
+exception, or returns what it forbids (None, NaN where numbers are due, a wrong shape), is the
+link's failure (amr_common.link_failure): its node stops using it and the run fails.
 """
 from __future__ import annotations
 
@@ -43,7 +45,7 @@ class Controller(Protocol):
 
         Called once per control step (dt) while the robot is not localized. z_scan: ranges in
         m, counter-clockwise from angle_min; z_v, z_w: the measured twist. Must return finite
-        numbers (the node and the simulator stop the robot on anything else).
+        numbers (anything else is the controller's failure: the robot stops, the run fails).
         """
         ...
 

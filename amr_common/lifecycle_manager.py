@@ -25,6 +25,8 @@ from rclpy.lifecycle import LifecycleNode
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
+from amr_common.lifecycle_node import first_link_failure
+from amr_common.link_failure import LINK_FAILED
 from amr_common.node_runner import StopFlag, make_executor, shutdown_node, spin_until_stopped
 
 _TRANSITION_LABELS = {Transition.TRANSITION_CONFIGURE: "configure",
@@ -168,7 +170,9 @@ def run_managed(manager: LifecycleManager, stop: StopFlag,
     (controllers first: their final zero command goes out while DDS is still up), everything is
     destroyed and rclpy shut down. The caller has run rclpy.init(signal_handler_options=NO) and
     installed `stop` (Ctrl-C, SIGTERM, SIGHUP); a stop during start-up ends it there (no further
-    transition). Returns the process exit code (0 after a stop: the caller knows it from `stop`).
+    transition). A link of a node that failed (amr_common.link_failure) ends the run too. Returns
+    the process exit code (0 after a stop: the caller knows it from `stop`; LINK_FAILED after a
+    failed link).
     """
     executor = make_executor()
     for node in [*nodes, manager]:
@@ -176,7 +180,11 @@ def run_managed(manager: LifecycleManager, stop: StopFlag,
     exit_code = 0
     try:
         manager.startup(executor, stop)
-        spin_until_stopped(executor, stop)  # stay up, as a launch file's manager would
+        # Stay up, as a launch file's manager would; a link that failed ends the run.
+        spin_until_stopped(executor, stop, until=lambda: first_link_failure(nodes) is not None)
+        if first_link_failure(nodes) is not None:  # its node logged it and stopped the robot
+            manager.get_logger().error(f"the run failed: {first_link_failure(nodes)}")
+            exit_code = LINK_FAILED
     except StartupInterrupted:
         manager.get_logger().info("start-up interrupted: shutting the nodes down")
     except LifecycleStartupError as exc:

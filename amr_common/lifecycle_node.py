@@ -10,7 +10,9 @@ checks every request against the transitions available in the current state firs
 - a transition callback that raises is logged (error) and the transition ends as ERROR (rclpy
   then runs on_error), instead of rclpy's silent ERROR.
 It also forwards a plain-Python algorithm's logging to the node's logger on request
-(forward_python_logging), until the node is destroyed.
+(forward_python_logging), until the node is destroyed, and keeps the first failure of the
+node's link (fail_link, amr_common.link_failure): logged once, kept in `link_failure` for the
+run scripts, which end the run there (first_link_failure).
 
 The lifecycle shape every node of the project shares is here once:
 - `is_active` is True from activate to deactivate (or shutdown): the node's callbacks drop
@@ -25,12 +27,13 @@ from __future__ import annotations
 import logging
 import math
 import time
-from typing import Callable
+from typing import Any, Callable
 
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
+from amr_common.link_failure import LinkFailure, link_call
 from amr_common.python_logging import forward_to_ros_logger
 
 _SHUTDOWN_TRANSITIONS = (Transition.TRANSITION_UNCONFIGURED_SHUTDOWN,
@@ -62,6 +65,42 @@ class GuardedLifecycleNode(LifecycleNode):
         self._log_forwardings: list[Callable[[], None]] = []
         self._active = False
         self._last_logged: dict[str, float] = {}  # warn_every: kind -> monotonic time
+        # The first failure of the node's link (kept across transitions: the run failed).
+        self.link_failure: LinkFailure | None = None
+
+    def fail_link(self, failure: LinkFailure, time_s: float | None = None,
+                  spec: str | None = None, then: str = "") -> None:
+        """Keep the first failure of this node's link and log it once (an error).
+
+        `time_s`, `spec`: when and which class, where the failure does not say; `then`: what
+        the node does from now on (e.g. "commanding zero"). Later failures are not logged:
+        the node no longer uses the link.
+        """
+        if self.link_failure is not None:
+            return
+        self.link_failure = failure.placed(time_s, spec)
+        self.get_logger().error(f"{self.link_failure}" + (f"; {then}" if then else "")
+                                + " (the run fails)")
+
+    def use_link(self, link: str, member: str, function: Callable[..., Any], *args: Any,
+                 spec: str | None = None, allowed: tuple[type[BaseException], ...] = (),
+                 check: Callable[[Any], Any] | None = None, time_s: float | None = None,
+                 then: str = "") -> Any:
+        """function(*args), a call of the node's link (`member` names it), through `check`.
+
+        What it raises (except `allowed`) or what `check` refuses (a LinkFailure) is the link's
+        failure (fail_link, with `spec`, `time_s` and `then`); None is returned then, and at
+        once from then on: the link is not called again. A caller tells a failure from a None
+        result by `link_failure`.
+        """
+        if self.link_failure is not None:
+            return None
+        try:
+            out = link_call(link, member, function, *args, allowed=allowed)
+            return out if check is None else check(out)
+        except LinkFailure as failure:
+            self.fail_link(failure, time_s, spec, then)
+            return None
 
     def warn_every(self, kind: str, text: str, period_s: float = 2.0,
                    error: bool = False) -> bool:
@@ -101,8 +140,12 @@ class GuardedLifecycleNode(LifecycleNode):
         return super().on_deactivate(state)
 
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Release what on_configure created (`release()`); back to unconfigured."""
+        """Release what on_configure created (`release()`); back to unconfigured.
+
+        A failure of the link goes with it: the next configure builds the link anew.
+        """
         self.release()
+        self.link_failure = None
         return TransitionCallbackReturn.SUCCESS
 
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -240,4 +283,11 @@ _TRANSITION_LABELS = {Transition.TRANSITION_CONFIGURE: "configure",
                       Transition.TRANSITION_DEACTIVATE: "deactivate",
                       **{t: "shutdown" for t in _SHUTDOWN_TRANSITIONS}}
 
-__all__ = ["GuardedLifecycleNode"]
+
+def first_link_failure(nodes) -> LinkFailure | None:
+    """The first link failure among `nodes` (those without the attribute count as none)."""
+    return next((n.link_failure for n in nodes if getattr(n, "link_failure", None) is not None),
+                None)
+
+
+__all__ = ["GuardedLifecycleNode", "first_link_failure"]

@@ -243,6 +243,13 @@ def trinary_pixels(values: np.ndarray, occupied_thresh: float = 0.65,
     return pixels
 
 
+def as_read_back(raster: Raster) -> Raster:
+    """The raster that write_map's files of `raster` read back as (map_server's rules)."""
+    values = cell_values(trinary_pixels(raster.values), None, "trinary", False,
+                         SAVED_OCCUPIED_THRESH, SAVED_FREE_THRESH)
+    return Raster(values, raster.resolution, raster.origin)
+
+
 def write_map(raster: Raster, prefix: str | Path, image_format: str = "pgm",
               extras: dict[str, Any] | None = None) -> tuple[Path, Path]:
     """Write PREFIX.yaml + PREFIX.pgm (or .png) as map_saver does; returns both paths.

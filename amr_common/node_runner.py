@@ -59,9 +59,13 @@ def shutdown_node(node: LifecycleNode) -> None:
         node.get_logger().warning(f"shutdown transition failed: {exc}")
 
 
-def spin_until_stopped(executor: Executor, stop: StopFlag, context=None) -> None:
-    """Spin in short slices so signal handlers run and the idle CPU stays near zero."""
-    while not stop.requested and rclpy.ok(context=context):
+def spin_until_stopped(executor: Executor, stop: StopFlag, context=None,
+                       until: Callable[[], bool] | None = None) -> None:
+    """Spin in short slices so signal handlers run and the idle CPU stays near zero.
+
+    Until a stop, the context's shutdown or `until()` (e.g. a link failed).
+    """
+    while not stop.requested and rclpy.ok(context=context) and not (until and until()):
         executor.spin_once(timeout_sec=0.1)
 
 

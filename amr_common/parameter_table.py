@@ -28,6 +28,11 @@ from typing import Any, Mapping
 # name -> (default, description) or Param(default, description, rule)
 ParameterTable = Mapping[str, tuple[Any, str]]
 
+# The largest seed of every seeded part (simulator, filter, evaluate's --seeds, the searchers of
+# tune.py): numpy's legacy generators, which Optuna's and Ray Tune's searchers use, take 32 bits,
+# and one range keeps a seed valid in every script (a larger one overflowed a ROS parameter).
+MAX_SEED = 2**32 - 1
+
 
 @dataclass(frozen=True)
 class Rule:
@@ -54,14 +59,14 @@ class Rule:
 
     def range_text(self) -> str:
         """'>= 0', '> 0', '<= 1', 'in [0, 1]', 'in (0, 1.5708)' ... ('' without bounds)."""
-        low, high = self.low, self.high
+        low, high = _bound(self.low), _bound(self.high)
         if low is not None and high is not None:
-            return (f"in {'(' if self.low_open else '['}{low:g}, {high:g}"
+            return (f"in {'(' if self.low_open else '['}{low}, {high}"
                     f"{')' if self.high_open else ']'}")
         if low is not None:
-            return f"{'>' if self.low_open else '>='} {low:g}"
+            return f"{'>' if self.low_open else '>='} {low}"
         if high is not None:
-            return f"{'<' if self.high_open else '<='} {high:g}"
+            return f"{'<' if self.high_open else '<='} {high}"
         return ""
 
     def text(self) -> str:
@@ -74,6 +79,13 @@ class Rule:
         if self.range_text():
             parts.append(("each " if self.lengths else "") + self.range_text())
         return "; ".join(parts)
+
+
+def _bound(value: float | None) -> str | None:
+    """A range's bound as a message shows it: an integer in full (4294967295), else %g."""
+    if value is None:
+        return None
+    return str(int(value)) if float(value).is_integer() and abs(value) < 2**53 else f"{value:g}"
 
 
 def at_least(low: float) -> Rule:

@@ -12,7 +12,15 @@ from typing import Sequence
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import PoseStamped, Quaternion, Twist, TwistStamped
+from geometry_msgs.msg import (
+    Pose,
+    PoseArray,
+    PoseStamped,
+    PoseWithCovarianceStamped,
+    Quaternion,
+    Twist,
+    TwistStamped,
+)
 from nav_msgs.msg import Odometry, Path
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import LaserScan
@@ -132,6 +140,42 @@ def odometry_message(stamp: Time, frame_id: str, child_frame_id: str,
 def pose_from_message(pose) -> tuple[float, float, float]:
     """(x, y, theta) of a geometry_msgs/Pose (theta = yaw)."""
     return float(pose.position.x), float(pose.position.y), quaternion_to_yaw(pose.orientation)
+
+
+def fill_pose(pose, xyt: Sequence[float]) -> None:
+    """Set a geometry_msgs/Pose to (x, y, theta) on the ground (z 0, theta as yaw)."""
+    pose.position.x, pose.position.y = float(xyt[0]), float(xyt[1])
+    pose.position.z = 0.0
+    yaw_to_quaternion(float(xyt[2]), pose.orientation)
+
+
+def pose_with_covariance(xyt: Sequence[float], covariance: np.ndarray, stamp: Time,
+                         frame_id: str) -> PoseWithCovarianceStamped:
+    """geometry_msgs/PoseWithCovarianceStamped (/amcl_pose) of (x, y, theta).
+
+    The 3 x 3 covariance of (x, y, theta) is placed in ROS's 6 x 6 (x, y, z, roll, pitch, yaw).
+    """
+    message = PoseWithCovarianceStamped()
+    message.header.stamp = stamp
+    message.header.frame_id = frame_id
+    fill_pose(message.pose.pose, xyt)
+    full = np.zeros((6, 6))
+    index = [0, 1, 5]
+    full[np.ix_(index, index)] = covariance
+    message.pose.covariance = full.ravel().tolist()
+    return message
+
+
+def pose_array(poses: np.ndarray, stamp: Time, frame_id: str) -> PoseArray:
+    """geometry_msgs/PoseArray (/particles) of (N, 3) rows [x, y, theta]."""
+    message = PoseArray()
+    message.header.stamp = stamp
+    message.header.frame_id = frame_id
+    for xyt in poses:
+        pose = Pose()
+        fill_pose(pose, xyt)
+        message.poses.append(pose)
+    return message
 
 
 # --- paths --------------------------------------------------------------------------------

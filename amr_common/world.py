@@ -92,14 +92,17 @@ class World:
         """The world of a map: free cells (value 0) are free space, every other cell is wall.
 
         `extras`: cell_size, description, grid_origin. Raises WorldError (naming `source`) for
-        a map without a free cell and for named starts or goals off the free space.
+        a map without a free cell and for named goals off the free space. A map's named starts
+        (this project's keys, written by SLAM or world_to_map.py) are checked when one is used
+        (resolve_start): a start the map's cells cannot take leaves the map readable, and
+        another start pose overrides it.
         """
         if not (raster.values == 0).any():
             raise WorldError(f"{source}: the map has no free cell")
         world = cls(name=name, source=source, segments=boundary_segments(raster),
                     starts=dict(starts or {}), goal=goal, goals=dict(goals or {}),
                     raster=raster, **extras)
-        world._check_named_poses()
+        world._check_named_poses(starts=False)
         return world
 
     @classmethod
@@ -123,8 +126,8 @@ class World:
         world._check_named_poses()
         return world
 
-    def _check_named_poses(self) -> None:
-        for start_name, pose in self.starts.items():
+    def _check_named_poses(self, starts: bool = True) -> None:
+        for start_name, pose in self.starts.items() if starts else ():
             self._check_pose(pose, f"start '{start_name}'")
         for goal_name, point in self.goals.items():
             self._check_goal(point, f"goal '{goal_name}'")
@@ -203,11 +206,16 @@ class World:
             if not self.starts:
                 raise WorldError(f"{self.source}: the world names no start pose; pass "
                                  f"(x, y, theta)")
-            return next(iter(self.starts.values()))
+            start = next(iter(self.starts))
         if isinstance(start, str):
             if start not in self.starts:
                 raise WorldError(f"{self.source}: unknown start '{start}' (named starts: "
                                  f"{', '.join(self.starts) or 'none'})")
+            if self.raster is not None:  # a map's start is checked when used (from_raster)
+                problem = self.pose_problem(*self.starts[start][:2], what=f"start '{start}'")
+                if problem is not None:
+                    raise WorldError(f"{self.source}: {problem}: give a start pose (x, y, "
+                                     "theta) where the robot fits on this map instead")
             return self.starts[start]
         pose = pose_value(list(start) if not isinstance(start, list) else start, self.source,
                           what)

@@ -6,14 +6,15 @@ that start and stop commanding (CommandingNode, a GuardedLifecycleNode).
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Callable
 
 from geometry_msgs.msg import Twist, TwistStamped
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.publisher import Publisher
 
 from amr_common.lifecycle_node import GuardedLifecycleNode
-from amr_common.navigation_behaviour import limit_command  # noqa: F401  (the nodes' import)
+from amr_common.link_failure import checked_commands, class_spec
+from amr_common.navigation_behaviour import limit_command
 from amr_common.parameter_table import above
 from amr_common.qos import RELIABLE_10
 
@@ -138,6 +139,19 @@ class CommandingNode(GuardedLifecycleNode):
         self._stop_timer()
         self._publish_zero("shutting down", force=True)
         return super().on_shutdown(state)
+
+    def link_commands(self, link: str, obj: Any, compute: Callable[..., Any], *args: Any,
+                      time_s: float | None = None) -> tuple[float, float]:
+        """(v, w) of `compute(*args)` (the link `obj`'s compute_commands), clipped to the limits.
+
+        Zero once the link failed: what it raised or a return that is not two finite numbers
+        is its failure (fail_link; `time_s`: the measurement's time), and the node commands
+        zero from then on, without calling it again.
+        """
+        out = self.use_link(link, "compute_commands", compute, *args, spec=class_spec(obj),
+                            check=lambda out: checked_commands(link, out), time_s=time_s,
+                            then="commanding zero")
+        return (0.0, 0.0) if out is None else limit_command(*out)
 
     def _stop_timer(self) -> None:
         if self._timer is not None:

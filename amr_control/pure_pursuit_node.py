@@ -20,7 +20,8 @@ the path is forgotten unless it was planned (stamped) at most data_timeout after
 /scan gives the footprint clearance for the proximity slow-down and the room straight ahead
 for the stop short of an obstacle the map lacks (both ignored when stale).
 Safety as the wall follower: a zero command on deactivate, cleanup and shutdown (Ctrl-C
-included), never a non-finite value.
+included), never a non-finite value; a follower that raises or returns anything but two
+finite numbers has failed (amr_common.link_failure): zero from then on, the run fails.
 """
 from __future__ import annotations
 
@@ -35,6 +36,7 @@ from sensor_msgs.msg import LaserScan
 from amr_common.controller_loader import DEFAULT_FOLLOWER
 from amr_common.geometry import polyline_length
 from amr_common.interfaces import PathFollower
+from amr_common.link_failure import class_spec
 from amr_common.navigation_behaviour import Handover, timer_action
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameter_table import Param, ruled
@@ -52,7 +54,6 @@ from amr_control.command_output import (
     CommandingNode,
     CommandOutput,
     command_parameter_problems,
-    limit_command,
 )
 from amr_control.pure_pursuit import scan_clearance, scan_free_ahead
 
@@ -166,13 +167,14 @@ class PurePursuitNode(CommandingNode):
         points = path_points(message)
         self._path_stamp_ns = time_to_nanoseconds(message.header.stamp)
         if len(points) == 0:
-            self.pursuit.clear_path()
+            self._path_call("clear_path")
             self.get_logger().warning("empty /path (no plan): commanding zero while localized")
             return
         try:
-            self.pursuit.set_path(points)
+            if not self._path_call("set_path", points):
+                return
         except ValueError as exc:
-            self.pursuit.clear_path()
+            self._path_call("clear_path")
             self.get_logger().error(f"/path rejected ({exc}): commanding zero while localized")
             return
         length = polyline_length(points)
@@ -225,7 +227,8 @@ class PurePursuitNode(CommandingNode):
                 self._latest = (pose if in_order else None, stamp_ns, self.get_clock().now())
             return
         # Lockstep: the simulator waits for this answer, so always answer exactly once.
-        v, w = self._compute(pose) if pose is not None and in_order else (0.0, 0.0)
+        v, w = self._compute(pose, stamp_ns * 1e-9) if pose is not None and in_order \
+            else (0.0, 0.0)
         self._output.publish(v, w, message.header.stamp)
 
     def _in_order(self, stamp_ns: int) -> bool:
@@ -255,7 +258,7 @@ class PurePursuitNode(CommandingNode):
         # A path planned after this pose (from the relocalized one) stays; one stamped far
         # beyond it is bogus and goes too.
         if not 0 < self._path_stamp_ns - stamp_ns <= self.data_timeout * 1e9:
-            self.pursuit.clear_path()
+            self._path_call("clear_path")
         if not self.simulation:
             self._output.publish(0.0, 0.0, self.get_clock().now().to_msg())
 
@@ -275,18 +278,31 @@ class PurePursuitNode(CommandingNode):
         v, w = self._compute(pose) if pose is not None else (0.0, 0.0)
         self._output.publish(v, w, now.to_msg())
 
-    def _compute(self, pose: tuple[float, float, float]) -> tuple[float, float]:
+    def _compute(self, pose: tuple[float, float, float],
+                 time_s: float | None = None) -> tuple[float, float]:
+        """The follower's command; zero for good once it failed (CommandingNode)."""
+        return self.link_commands("follower", self.pursuit, self._pursue, pose, time_s=time_s)
+
+    def _pursue(self, pose: tuple[float, float, float]) -> Any:
+        """The follower's compute_commands with the scan's obstacles; its state change logged."""
         state = self.pursuit.state
-        try:
-            obstacles = self._scan_obstacles() if self.pursuit.path is not None else (None, None)
-            v, w = self.pursuit.compute_commands(*pose, *obstacles)
-        except Exception as exc:  # never take the node down: stop instead
-            self.get_logger().error(f"pure pursuit raised {exc!r}: commanding zero",
-                                    throttle_duration_sec=2.0)
-            return 0.0, 0.0
+        obstacles = self._scan_obstacles() if self.pursuit.path is not None else (None, None)
+        out = self.pursuit.compute_commands(*pose, *obstacles)
         if self.pursuit.state != state:
             self._log_state(self.pursuit.state)
-        return limit_command(v, w)
+        return out
+
+    def _path_call(self, member: str, *args: Any) -> bool:
+        """The follower's set_path / clear_path; False if it failed (fail_link) or had failed.
+
+        set_path's ValueError (an empty or non-finite path) passes through: a rejected path.
+        """
+        newest = self._newest_stamp_ns
+        self.use_link("follower", member, getattr(self.pursuit, member), *args,
+                      spec=class_spec(self.pursuit),
+                      allowed=(ValueError,) if member == "set_path" else (),
+                      time_s=None if newest is None else newest * 1e-9, then="commanding zero")
+        return self.link_failure is None
 
     def _log_state(self, state: str) -> None:
         if state == "arrived":

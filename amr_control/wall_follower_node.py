@@ -12,7 +12,9 @@ scan_frame, through chains such as the Burger's base_footprint -> base_link -> b
 node publishes it; the parameter is the fallback. A position that arrives after the controller
 computed its first command applies from the next configure (the controller is rebuilt).
 Safety: the TurtleBot3 keeps its last command forever, so the node sends a zero command on
-deactivate, cleanup and shutdown (Ctrl-C included), and never publishes a non-finite value.
+deactivate, cleanup and shutdown (Ctrl-C included), and never publishes a non-finite value. A
+controller that raises or returns anything but two finite numbers has failed
+(amr_common.link_failure): logged once, zero from then on, and the run scripts end the run.
 Handover with localization (`enable_localization`): for each synchronized (/odometry, /scan,
 /pose) set the node is in charge iff the pose is NOT localized or `stop_when_localized` is false.
 Out of charge it publishes nothing (the pure pursuit answers every localized /pose); in robot
@@ -39,6 +41,7 @@ from amr_common.controller_loader import (
     load_controller_class,
 )
 from amr_common.lifecycle_node import GuardedLifecycleNode
+from amr_common.link_failure import class_spec
 from amr_common.navigation_behaviour import Handover, timer_action
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameter_table import Param, at_least, check_values, ruled
@@ -49,6 +52,7 @@ from amr_common.robot import (
     MAX_PLAUSIBLE_LINEAR_SPEED,
     is_plausible_twist,
 )
+from amr_common.ros_conversions import time_to_nanoseconds
 from amr_common.tf import StaticTransformListener
 from amr_control.command_output import (
     COMMAND_PARAMETERS,
@@ -56,7 +60,6 @@ from amr_control.command_output import (
     CommandingNode,
     CommandOutput,
     command_parameter_problems,
-    limit_command,
 )
 
 _NODE_PARAMETERS: dict[str, Param] = ruled({
@@ -292,7 +295,8 @@ class WallFollowerNode(CommandingNode):
             self._hand_over(in_charge)
             # Lockstep: the simulator waits for this answer, so always answer (zero if bad).
             # The command carries the measurement's (simulated) stamp: no clock needed.
-            v, w = self._compute(*measurement) if measurement else (0.0, 0.0)
+            v, w = self._compute(*measurement, time_to_nanoseconds(scan.header.stamp) * 1e-9) \
+                if measurement else (0.0, 0.0)
             self._last_stamp = scan.header.stamp
             if in_charge:
                 self._publish(v, w, self._last_stamp)
@@ -337,8 +341,13 @@ class WallFollowerNode(CommandingNode):
         # NaN never equals itself: compare a NaN-free key, so a repeated broken geometry is
         # handed to the controller once, not with every scan.
         key = tuple(None if math.isnan(value) else value for value in geometry)
-        if key != self._scan_geometry and hasattr(self.controller, "set_scan_geometry"):
-            self.controller.set_scan_geometry(*geometry)
+        if key != self._scan_geometry and hasattr(self.controller, "set_scan_geometry") \
+                and self.link_failure is None:
+            self.use_link("controller", "set_scan_geometry", self.controller.set_scan_geometry,
+                          *geometry, spec=class_spec(self.controller), then="commanding zero",
+                          time_s=time_to_nanoseconds(scan.header.stamp) * 1e-9)
+            if self.link_failure is not None:
+                return None
             self._scan_geometry = key
         return np.asarray(scan.ranges, dtype=float), float(z_v), float(z_w)
 
@@ -363,19 +372,13 @@ class WallFollowerNode(CommandingNode):
         v, w = self._compute(*self._latest[:3])
         self._publish(v, w, now.to_msg())
 
-    def _compute(self, z_scan, z_v: float, z_w: float) -> tuple[float, float]:
+    def _compute(self, z_scan, z_v: float, z_w: float,
+                 time_s: float | None = None) -> tuple[float, float]:
+        """The controller's command; zero for good once it failed (CommandingNode)."""
         self._computed = True
-        try:
-            v, w = self.controller.compute_commands(z_scan, z_v, z_w)
-            v, w = float(v), float(w)
-        except Exception as exc:  # a user's controller must not take the node down
-            self.get_logger().error(f"controller raised {exc!r}: commanding zero",
-                                    throttle_duration_sec=2.0)
-            return 0.0, 0.0
-        if not (math.isfinite(v) and math.isfinite(w)):
-            self.get_logger().warning(f"controller returned non-finite ({v}, {w}): commanding "
-                                      f"zero", throttle_duration_sec=2.0)
-        return limit_command(v, w)
+        return self.link_commands("controller", self.controller,
+                                  self.controller.compute_commands, z_scan, z_v, z_w,
+                                  time_s=time_s)
 
     def _publish(self, v: float, w: float, stamp, force: bool = False) -> None:
         if self._output is not None:

@@ -32,15 +32,17 @@ from __future__ import annotations
 
 import math
 import time
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
 
 import numpy as np
 
 from amr_common.controller_loader import described_parameters
 from amr_common.coverage_grid import GridTooLargeError
 from amr_common.geometry import wrap_angles
+from amr_common.link_failure import LinkFailure, checked_commands, class_spec, link_call
 from amr_common.navigation_behaviour import (
     OdometryHold,
     as_sent_ranges,
@@ -212,36 +214,44 @@ def episode_start_label(start: Any, world: World, sim: Any) -> str | list[float]
     return [float(c) for c in sim.start]
 
 
-def tell_scan_geometry(target: Any, geometry: tuple, with_rays: bool = False) -> None:
+def tell_scan_geometry(target: Any, geometry: tuple, with_rays: bool = False,
+                       link: str = "controller") -> None:
     """target.set_scan_geometry(...) with a Simulator.scan_geometry, if target has it.
 
     Controllers take (angle_min, angle_increment, range_min, range_max); the particle filter
-    (with_rays) also the ray count.
+    (with_rays, link "localizer") also the ray count. What it raises is the link's failure
+    (amr_common.link_failure), as in its node; the localizer's ValueError passes through.
     """
     if callable(getattr(target, "set_scan_geometry", None)):
         # As the nodes read it from a LaserScan (float32 fields).
         angle_min, increment, rays, range_min, range_max = as_sent_scan_geometry(*geometry)
-        if with_rays:
-            target.set_scan_geometry(angle_min, increment, rays, range_min, range_max)
-        else:
-            target.set_scan_geometry(angle_min, increment, range_min, range_max)
+        values = (angle_min, increment, rays, range_min, range_max) if with_rays else \
+            (angle_min, increment, range_min, range_max)
+        link_call(link, "set_scan_geometry", target.set_scan_geometry, *values,
+                  allowed=(ValueError,) if with_rays else ())
 
 
-def as_commanded(out: Any) -> tuple[Any, Any]:
-    """A controller's (v, w) as the node sends it: clipped to the Burger's limits.
+def commanded(link: str, compute: Callable[..., Any], *args: Any) -> tuple[float, float]:
+    """A link's compute_commands(*args) as its node sends it: clipped to the Burger's limits.
 
-    Not finite: passed on as is (the simulator stops the robot and counts it in
-    invalid_commands; the node sends zero). Not a pair: TypeError.
+    What it raises, or a return that is not two finite numbers, is the link's failure
+    (LinkFailure, amr_common.link_failure): its node commands zero and the run fails.
+    """
+    return limit_command(*checked_commands(link, link_call(link, "compute_commands", compute,
+                                                           *args)))
+
+
+@contextmanager
+def failures_placed(sim: Simulator, links: dict[str, Any]) -> Iterator[None]:
+    """A LinkFailure raised inside gets the simulated time and the failing link's class.
+
+    `links`: link name -> the object (its class names it, as the node's parameter does).
     """
     try:
-        v, w = out
-    except (TypeError, ValueError):
-        raise TypeError(f"compute_commands must return (v, w), got {out!r}") from None
-    try:
-        finite = math.isfinite(v) and math.isfinite(w)
-    except TypeError:
-        finite = False
-    return limit_command(v, w) if finite else (v, w)
+        yield
+    except LinkFailure as failure:
+        obj = links.get(failure.link)
+        raise failure.placed(sim.time, None if obj is None else class_spec(obj)) from failure
 
 
 def run_episode(world: World | str, start=None, profile: str | SensorProfile = "ideal",
@@ -260,33 +270,33 @@ def run_episode(world: World | str, start=None, profile: str | SensorProfile = "
     if controller is None:
         controller = controller_factory(sim.dt) if controller_factory is not None else \
             default_controller(sim.dt, prof)
-    tell_scan_geometry(controller, geometry := sim.scan_geometry)
     n_steps = int(round(duration / sim.dt))
     positions = np.empty((n_steps + 1, 2))
     x, y, th = sim.pose
     positions[0] = (x, y)
     trajectory = [[0.0, x, y, th]] if record_trajectory else []
     wall_err_sq, wall_err_n = 0.0, 0
-
     z_scan, z_v, z_w = sim.measure()
     z_scan = as_sent_ranges(z_scan)  # what the node reads: a LaserScan's float32 ranges
     odometry = OdometryHold(prof.odom_period, z_v, z_w)
     wall_start = time.perf_counter()
-    for k in range(1, n_steps + 1):
-        v, w = as_commanded(controller.compute_commands(z_scan, *odometry.twist))
-        err = getattr(controller, "wall_distance_error", None)
-        if isinstance(err, (int, float)) and math.isfinite(err):
-            wall_err_sq += float(err) ** 2
-            wall_err_n += 1
-        z_scan, z_v, z_w = sim.step(v, w)
-        z_scan = as_sent_ranges(z_scan)
-        if sim.scan_geometry is not geometry:  # the LDS-02: every scan
-            tell_scan_geometry(controller, geometry := sim.scan_geometry)
-        odometry.update(sim.time, z_v, z_w)
-        x, y, th = sim.pose
-        positions[k] = (x, y)
-        if record_trajectory:
-            trajectory.append([sim.time, x, y, th])
+    with failures_placed(sim, {"controller": controller}):
+        tell_scan_geometry(controller, geometry := sim.scan_geometry)
+        for k in range(1, n_steps + 1):
+            v, w = commanded("controller", controller.compute_commands, z_scan, *odometry.twist)
+            err = getattr(controller, "wall_distance_error", None)
+            if isinstance(err, (int, float)) and math.isfinite(err):
+                wall_err_sq += float(err) ** 2
+                wall_err_n += 1
+            z_scan, z_v, z_w = sim.step(v, w)
+            z_scan = as_sent_ranges(z_scan)
+            if sim.scan_geometry is not geometry:  # the LDS-02: every scan
+                tell_scan_geometry(controller, geometry := sim.scan_geometry)
+            odometry.update(sim.time, z_v, z_w)
+            x, y, th = sim.pose
+            positions[k] = (x, y)
+            if record_trajectory:
+                trajectory.append([sim.time, x, y, th])
     wall_time = time.perf_counter() - wall_start
 
     bundled_name = world_obj.name if _is_bundled(world_obj) else world_obj.source

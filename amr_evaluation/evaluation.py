@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import math
 import time
-import traceback
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
@@ -27,6 +26,7 @@ from amr_common.controller_loader import (
     load_controller_class,
     parse_overrides,
 )
+from amr_common.link_failure import failure_text
 from amr_evaluation.evaluation_config import (
     MAX_EPISODES,
     POSE_SOURCES,
@@ -300,8 +300,8 @@ def run_one(spec: EpisodeSpec, trajectory: bool = True) -> EpisodeOutcome:
                                  record_trajectory=trajectory)
         return EpisodeOutcome(spec, result=result, wall_time_s=time.perf_counter() - start)
     except Exception as exc:  # one broken episode must not lose the others' results
-        detail = traceback.format_exception_only(type(exc), exc)[-1].strip()
-        return EpisodeOutcome(spec, error=detail, wall_time_s=time.perf_counter() - start)
+        return EpisodeOutcome(spec, error=failure_text(exc),
+                              wall_time_s=time.perf_counter() - start)
     except SystemExit as exc:  # a controller calling sys.exit ends its episode, not the run
         return EpisodeOutcome(spec, error=f"the episode called sys.exit({exc.code!r})",
                               wall_time_s=time.perf_counter() - start)

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from amr_common.controller_loader import described_parameters
-from amr_common.parameter_table import finite
+from amr_common.parameter_table import MAX_SEED, finite
 
 CONFIG_KEYS = ("worlds", "map", "starts", "goals", "pose_source", "profiles", "seeds", "duration",
                "dt", "controller", "params_file", "params", "jobs", "localizer", "planner",
@@ -123,8 +123,8 @@ def parse_seeds(value: str | int | Sequence[Any] | None) -> list[int]:
                 raise EvaluationError(f"seed '{part}' is not a non-negative integer or a range "
                                       f"like 0-9")
             for seed in new:
-                if seed > 2**32 - 1:
-                    raise EvaluationError(f"seed {seed} is out of range 0..2^32-1")
+                if seed > MAX_SEED:
+                    raise EvaluationError(f"seed {seed} is out of range 0..{MAX_SEED}")
                 if seed not in seeds:
                     seeds.append(seed)
     if not seeds:

@@ -74,8 +74,17 @@ def wall_reading(profile: str | SensorProfile, seed: int, distance: float,
 def calibrate_in_simulation(profile: str, seed: int,
                             distances: tuple[float, ...] = CALIBRATION_DISTANCES_M,
                             scans: int = CALIBRATION_SCANS) -> RangeCorrection:
-    """The unit's range correction from its readings at `distances` (see the module docstring)."""
-    return fit_correction({d: wall_reading(profile, seed, d, scans) for d in distances})
+    """The unit's range correction from its readings at `distances` (see the module docstring).
+
+    ValueError (one line) when the unit gives no reading of the wall at one of them (a profile
+    whose rays nearly all drop out, or whose noise scatters them off any line).
+    """
+    try:
+        return fit_correction({d: wall_reading(profile, seed, d, scans) for d in distances})
+    except ValueError as exc:
+        raise ValueError(f"the LiDAR of profile {getattr(profile, 'name', profile)}, seed "
+                         f"{seed} cannot be calibrated for SLAM's range correction ({exc}: too "
+                         "few of its returns lie on the wall's line)") from None
 
 
 __all__ = ["CALIBRATION_DISTANCES_M", "calibrate_in_simulation", "calibration_world",

@@ -49,9 +49,10 @@ from amr_common.navigation_behaviour import (
 )
 from amr_common.world import World
 from amr_evaluation.episode import (
-    as_commanded,
+    commanded,
     default_controller,
     episode_start_label,
+    failures_placed,
     tell_scan_geometry,
 )
 from amr_evaluation.pose_sources import ParticleFilterPose
@@ -155,8 +156,10 @@ def run_localization_episode(world: World | str, start=None,
         controller = default_controller(sim.dt, prof)
     tell_scan_geometry(controller, sim.scan_geometry)
     source = ParticleFilterPose(map_obj, sim, seed, localizer, **(filter_params or {}))
-    series, costs = _run_steps(sim, source, controller, int(round(float(duration) / sim.dt)),
-                               kidnap, stop_when_localized, record)
+    with failures_placed(sim, {"controller": controller, "localizer": source.filter}):
+        series, costs = _run_steps(sim, source, controller,
+                                   int(round(float(duration) / sim.dt)), kidnap,
+                                   stop_when_localized, record)
     return _result(sim, source.filter, seed, world_obj.name, map_obj.name,
                    episode_start_label(start, world_obj, sim), kidnap, record,
                    series, costs)
@@ -190,7 +193,7 @@ def _run_steps(sim: Simulator, source: ParticleFilterPose, controller: Any, n_st
     wall_start = time.perf_counter()
     for k in range(1, n_steps + 1):
         handover.update(pf.localized)
-        v, w = as_commanded(controller.compute_commands(z_scan, *odometry.twist))
+        v, w = commanded("controller", controller.compute_commands, z_scan, *odometry.twist)
         if stop_when_localized and not handover.explorer_in_charge:
             v, w = 0.0, 0.0
         teleport = kidnapping.due(sim.time)
@@ -202,11 +205,11 @@ def _run_steps(sim: Simulator, source: ParticleFilterPose, controller: Any, n_st
         if sim.scan_geometry is not geometry:  # the LDS-02: every scan
             tell_scan_geometry(controller, geometry := sim.scan_geometry)
         started = time.perf_counter()
-        source.update(sim, z_scan, *odometry.twist)
+        pose, localized = source.update(sim, z_scan, *odometry.twist)  # checked
         filter_time += time.perf_counter() - started
         particles_max = max(particles_max, len(pf.particles))
         truth[k] = (sim.time, *sim.pose)
-        estimate[k] = (sim.time, *pf.estimate, float(pf.localized))
+        estimate[k] = (sim.time, *pose, float(localized))
         distances[k] = sim.distance
         if record and not snapshot and pf.localized:
             snapshot = np.asarray(pf.particles)[::max(1, len(pf.particles) // 500)].tolist()

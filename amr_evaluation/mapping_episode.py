@@ -40,10 +40,22 @@ import numpy as np
 
 from amr_common.controller_loader import DEFAULT_MAPPER, described_parameters, link_class
 from amr_common.geometry import compose, inverse
+from amr_common.link_failure import (
+    checked_commands,
+    checked_estimate,
+    checked_raster,
+    checked_statistics,
+    link_call,
+)
 from amr_common.map_raster import Raster
 from amr_common.navigation_behaviour import OdometryHold, ScanNovelty
 from amr_common.world import World
-from amr_evaluation.episode import default_controller, episode_start_label, mapper_parameters
+from amr_evaluation.episode import (
+    default_controller,
+    episode_start_label,
+    failures_placed,
+    mapper_parameters,
+)
 from amr_evaluation.mapping_metrics import RayHits, mapping_figures, trajectory_errors
 from amr_mapping.scan_points import Scan
 from amr_sim.profiles import SensorProfile, get_profile
@@ -214,15 +226,15 @@ def run_mapping_episode(world: World | str, start=None,
     hits = RayHits(world_obj, prof.angle_min, prof.angle_increment, prof.scan_rays,
                    prof.range_min, min(prof.range_max, mapper.max_range_m))
     frame = sim.start if world_frame else (0.0, 0.0, 0.0)
-    run = _explore(sim, controller, mapper, odometry, hits, duration, frame)
-    raster = mapper.occupancy_raster()
+    with failures_placed(sim, {"controller": controller, "mapper": mapper}):
+        run = _explore(sim, controller, mapper, odometry, hits, duration, frame)
+        raster, stats = _map_and_statistics(mapper)
     rows = np.asarray(run.estimate, dtype=np.float64).reshape(-1, 4)
     # The map frame in the world: the start pose, or the world's own frame.
     origin = (0.0, 0.0, 0.0) if world_frame else sim.start
     figures = mapping_figures(world_obj, origin, np.asarray(run.truth), rows[:, 1:], raster,
                               hits)
     odom_errors = trajectory_errors(sim.start, np.asarray(run.truth), np.asarray(run.odometry))
-    stats = mapper.statistics()
     start_label = episode_start_label(start, world_obj, sim)
     return MappingResult(
         world=world_obj.name, start=start_label, profile=prof.name, seed=int(seed),
@@ -247,6 +259,17 @@ def _recorded(rows: np.ndarray, truth: list, raster: Raster) -> dict[str, Any]:
     """
     return {"estimate": rows.tolist(), "raster": raster,
             "trajectory": [[float(t), *map(float, pose)] for t, pose in zip(rows[:, 0], truth)]}
+
+
+def _map_and_statistics(mapper: Any) -> tuple[Any, dict[str, Any]]:
+    """The mapper's occupancy_raster() and statistics(), checked as the slam node checks them.
+
+    What it raises or returns that the Mapper interface forbids: LinkFailure.
+    """
+    raster = link_call("mapper", "occupancy_raster",
+                       lambda: checked_raster(mapper.occupancy_raster()))
+    stats = link_call("mapper", "statistics", lambda: checked_statistics(mapper.statistics()))
+    return raster, dict(stats)
 
 
 def _count(value: int | None) -> str:
@@ -324,7 +347,8 @@ def _explore(sim: Simulator, controller, mapper, odometry: DriftingOdometry, hit
         scan = Scan(ranges, angle_min, increment, range_min, range_max, scan_time)
         odom = compose(frame, held.held[2])
         started, cpu_started = time.perf_counter(), time.thread_time()
-        result = mapper.update(scan, odom, stamp)
+        result = link_call("mapper", "update", lambda: checked_estimate(
+            mapper.update(scan, odom, stamp)))
         run.update_cpu_ms.append(1e3 * (time.thread_time() - cpu_started))
         run.slam_time += time.perf_counter() - started
         if not result.status.startswith("rejected"):
@@ -336,7 +360,8 @@ def _explore(sim: Simulator, controller, mapper, odometry: DriftingOdometry, hit
     wall_start, cpu_start = time.perf_counter(), time.process_time()
     feed(z_scan, 0.0)
     for _ in range(n_steps):
-        v, w = controller.compute_commands(z_scan, *held.twist)
+        v, w = checked_commands("controller", link_call(
+            "controller", "compute_commands", controller.compute_commands, z_scan, *held.twist))
         z_scan, z_v, z_w = sim.step(v, w)
         held.update(sim.time, z_v, z_w, odometry.step(sim.odometry_pose, sim.dt))
         if novelty.is_new(z_scan, sim.scan_geometry[:2]):

@@ -23,9 +23,12 @@ from typing import Any, Callable, Iterable
 
 import numpy as np
 
-from amr_common.controller_loader import DEFAULT_MAPPER
+from amr_common.controller_loader import DEFAULT_MAPPER, link_class
+from amr_common.link_failure import failure_text
+from amr_evaluation.episode import mapper_parameters
 from amr_evaluation.executors import TaskLost, local_executor, run_tasks
 from amr_evaluation.mapping_episode import AUTO_DRIFT, OdometryDrift, run_mapping_episode
+from amr_sim.profiles import get_profile
 
 
 @dataclass(frozen=True)
@@ -72,9 +75,19 @@ def run_mapping_spec(spec: MappingSpec) -> dict[str, Any]:
                                      controller=_controller(spec), record=spec.record,
                                      world_frame=spec.world_frame)
     except Exception as exc:  # noqa: BLE001 - reported per episode, the batch goes on
-        return {**asdict(spec), "error": f"{type(exc).__name__}: {exc}",
-                "traceback": traceback.format_exc()}
+        return {**asdict(spec), "error": failure_text(exc), "traceback": traceback.format_exc()}
     return {**result.to_dict(), "raster": result.raster} if spec.record else result.to_dict()
+
+
+def check_lidar_units(units: Iterable[tuple[str, int]], mapper: str | None = None) -> None:
+    """Each simulated LiDAR unit (profile, seed) can be calibrated for the mapper; else ValueError.
+
+    episode.mapper_parameters of each: tens of milliseconds, before anything runs, instead of
+    every episode's error.
+    """
+    cls = link_class(mapper or DEFAULT_MAPPER, "mapper")
+    for profile, seed in dict.fromkeys(units):
+        mapper_parameters(get_profile(profile), cls, seed)
 
 
 def _controller(spec: MappingSpec):
@@ -304,5 +317,5 @@ def _summary_line(result: dict[str, Any]) -> str:
             "collisions")
 
 
-__all__ = ["MappingSpec", "evaluate_main", "mapping_specs", "mapping_table", "run_mapping_grid",
-           "run_mapping_spec", "save_maps", "summary_rows"]
+__all__ = ["MappingSpec", "check_lidar_units", "evaluate_main", "mapping_specs",
+           "mapping_table", "run_mapping_grid", "run_mapping_spec", "save_maps", "summary_rows"]

@@ -46,6 +46,7 @@ from amr_common.controller_loader import (
 )
 from amr_common.geometry import polyline_length
 from amr_common.interfaces import PathFollower
+from amr_common.link_failure import checked_path, link_call
 from amr_common.map_vs_world import load_map, resolve_goal_on_map
 from amr_common.navigation_behaviour import (
     GoalCheck,
@@ -58,10 +59,11 @@ from amr_common.navigation_behaviour import (
 from amr_common.world import World
 from amr_control.pure_pursuit import scan_clearance, scan_free_ahead
 from amr_evaluation.episode import (
-    as_commanded,
     checked_duration,
+    commanded,
     default_controller,
     episode_start_label,
+    failures_placed,
     tell_scan_geometry,
 )
 from amr_evaluation.localization_episode import localization_metrics
@@ -77,14 +79,17 @@ GOAL_REST_TIME_S = SIMULATOR_PARAMETERS["goal_rest_time"][0]
 def _pursue(pursuit: PathFollower, pose, z_scan, geometry, prof, radius: float):
     """The pure pursuit node's command for a localized pose (amr_control.pure_pursuit_node).
 
-    The scan's obstacles only once it has a path; the command clipped to the Burger's limits.
+    The scan's obstacles only once it has a path; the command clipped to the Burger's limits
+    (what the follower raises or a command that is not two finite numbers: its failure).
     """
-    obstacles = (None, None)
-    if pursuit.path is not None:
-        scan = (z_scan, geometry[0], geometry[1], geometry[3], geometry[4],
-                prof.lidar_offset_x, radius)
-        obstacles = (scan_clearance(*scan), scan_free_ahead(*scan))
-    return as_commanded(pursuit.compute_commands(*pose, *obstacles))
+    def compute():
+        obstacles = (None, None)
+        if pursuit.path is not None:
+            scan = (z_scan, geometry[0], geometry[1], geometry[3], geometry[4],
+                    prof.lidar_offset_x, radius)
+            obstacles = (scan_clearance(*scan), scan_free_ahead(*scan))
+        return pursuit.compute_commands(*pose, *obstacles)
+    return commanded("follower", compute)
 
 
 @dataclass
@@ -209,9 +214,12 @@ def run_navigation_episode(
     run = _Navigation(sim, pose_source, planner, pursuit, wall_follower, goal_xy, kidnap,
                       GoalCheck(goal_xy, goal_tolerance, goal_rest_time), record_trajectory)
     wall_start = time.perf_counter()
-    for _ in range(int(round(duration / sim.dt))):
-        if run.step(stall_timeout_s):
-            break
+    with failures_placed(sim, {"controller": wall_follower, "planner": planner,
+                               "follower": pursuit,
+                               "localizer": getattr(pose_source, "filter", None)}):
+        for _ in range(int(round(duration / sim.dt))):
+            if run.step(stall_timeout_s):
+                break
     wall_time = time.perf_counter() - wall_start
     start_label = episode_start_label(start, world_obj, sim)
     return run.result(world_obj.name, start_label, map_obj, source_name, seed, wall_time,
@@ -256,8 +264,8 @@ class _Navigation:
         if event == "lost":
             pursuit.clear_path()  # the wall follower takes over; replan when relocalized
         # The wall follower computes on every measurement (as its node), commands while in charge.
-        explore = as_commanded(self.wall_follower.compute_commands(self.z_scan,
-                                                                   *self.odometry.twist))
+        explore = commanded("controller", self.wall_follower.compute_commands, self.z_scan,
+                            *self.odometry.twist)
         if self.handover.explorer_in_charge:
             v, w = explore
         else:
@@ -292,9 +300,9 @@ class _Navigation:
         """A path from the estimate to the goal for the pursuit (or the planner's error)."""
         self.plans += 1
         began = time.perf_counter()
-        try:
-            self.path = np.asarray(self.planner.plan(estimate[:2], self.goal_xy).points,
-                                   dtype=float)
+        try:  # the planner node's checks (amr_common.link_failure): no path, or a failure
+            self.path = checked_path(link_call("planner", "plan", self.planner.plan,
+                                               estimate[:2], self.goal_xy, allowed=(ValueError,)))
             self.plan_ms = (time.perf_counter() - began) * 1e3
             self.pursuit.set_path(self.path)
         except ValueError as exc:  # PlanningError (the interface's): no path

@@ -11,6 +11,7 @@ import math
 from typing import Any
 
 from amr_common.controller_loader import DEFAULT_LOCALIZER, link_class
+from amr_common.link_failure import checked_localization, link_call
 from amr_common.navigation_behaviour import OdometryClock, ScanNovelty, stamp_ns
 from amr_common.world import World
 from amr_evaluation.episode import filter_parameters, tell_scan_geometry
@@ -58,21 +59,26 @@ class ParticleFilterPose:
         sensor = filter_parameters(sim.profile, world is sim.world, cls)
         self.filter = cls(world, **{"seed": seed, **sensor, **filter_params})
         self._geometry = sim.scan_geometry
-        tell_scan_geometry(self.filter, self._geometry, with_rays=True)
+        tell_scan_geometry(self.filter, self._geometry, with_rays=True, link="localizer")
         self._clock = OdometryClock()
         self._novelty = ScanNovelty()
 
     def update(self, sim: Simulator, z_scan, z_v: float, z_w: float):
-        """((x, y, theta), localized) after taking in the newest measurement."""
+        """((x, y, theta), localized) after taking in the newest measurement.
+
+        Each call checked as the node checks it (amr_common.link_failure): what the localizer
+        raises or an estimate its interface forbids is its failure (LinkFailure).
+        """
         dt, _ = self._clock.advance(stamp_ns(sim.time))
         if dt is not None:
-            self.filter.predict(float(z_v), float(z_w), dt)
+            link_call("localizer", "predict", self.filter.predict, float(z_v), float(z_w), dt)
         if sim.scan_geometry is not self._geometry:  # the LDS-02: every scan
             self._geometry = sim.scan_geometry
-            tell_scan_geometry(self.filter, self._geometry, with_rays=True)
-        self.filter.correct(z_scan, new_scan=self._novelty.is_new(z_scan),
-                            age_s=sim.time - sim.scan_time)
-        return tuple(self.filter.estimate), bool(self.filter.localized)
+            tell_scan_geometry(self.filter, self._geometry, with_rays=True, link="localizer")
+        link_call("localizer", "correct", lambda: self.filter.correct(
+            z_scan, new_scan=self._novelty.is_new(z_scan), age_s=sim.time - sim.scan_time))
+        return link_call("localizer", "estimate", lambda: checked_localization(
+            self.filter.estimate, self.filter.localized))
 
 
 def make_pose_source(kind: Any, world: World, sim: Simulator, seed: int,

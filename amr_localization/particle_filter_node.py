@@ -21,6 +21,9 @@ messages; its tuning values (`parameter_descriptions()`) are parameters of this 
 - No callback blocks the node for long: on a big map the filter's exhaustive pose searches
   are scored a slice per scan (amr_localization.filter_searches; on the 40 x 40 m floor at most
   ~0.15 s of CPU per call instead of ~3 s for a search in one go).
+A localizer that raises (beyond its interface's ValueErrors) or returns what its interface
+forbids has failed (amr_common.link_failure): logged once, /pose not localized from then on,
+and the run scripts end the run.
 Bad input (NaN or 0.0 everywhere, inconsistent scan geometry, non-finite odometry, stamps going
 backwards) is skipped with a throttled message, never a crash (a jump back by more than
 max_odometry_gap_s restarts the integration from there: one stamp far in the future cannot stop
@@ -35,7 +38,7 @@ import sys
 from typing import Any
 
 import numpy as np
-from geometry_msgs.msg import Pose, PoseArray, PoseWithCovarianceStamped
+from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import LaserScan
@@ -43,18 +46,21 @@ from sensor_msgs.msg import LaserScan
 from amr_common import message_filters
 from amr_common.interfaces import Localizer
 from amr_common.lifecycle_node import GuardedLifecycleNode
+from amr_common.link_failure import checked_covariance, checked_localization, checked_particles
 from amr_common.navigation_behaviour import OdometryClock, ScanNovelty
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameters import declare_link, declare_parameters, read_parameters
 from amr_common.qos import RELIABLE_10, scan_qos
 from amr_common.ros_conversions import (
-    pose_from_message,
+    fill_pose,
+    pose_array,
+    pose_with_covariance,
     scan_ranges,
     time_to_nanoseconds,
-    yaw_to_quaternion,
 )
 from amr_common.scan_returns import return_mask
 from amr_common.world import World
+from amr_localization.initial_pose_request import initial_pose_request
 from amr_localization.localization_tf import LocalizationTf
 from amr_localization.particle_filter_node_params import NODE_PARAMETERS as _NODE_PARAMETERS
 
@@ -194,13 +200,14 @@ class ParticleFilterNode(GuardedLifecycleNode):
                                       "without odometry: the motion in the gap is lost",
                                       throttle_duration_sec=2.0)
         if dt is not None:
-            self.filter.predict(float(v), float(w), dt)
+            self._use_filter("predict", lambda: self.filter.predict(float(v), float(w), dt),
+                             stamp * 1e-9)
 
     def _on_pair(self, odometry: Odometry, scan: LaserScan) -> None:
         if not self.is_active:
             return
         stamp_ns = time_to_nanoseconds(scan.header.stamp)
-        ranges = self._usable_ranges(scan)
+        ranges = self._usable_ranges(scan, stamp_ns)
         if ranges is not None:
             new_scan = self._scan_novelty.is_new(ranges)  # not the held one again
             if new_scan or self._taken_ns is None:
@@ -210,32 +217,42 @@ class ParticleFilterNode(GuardedLifecycleNode):
             # when it was first seen, as the headless episodes count it.
             newest = self._odometry_clock.last_ns
             age_s = 0.0 if newest is None else (newest - self._taken_ns) * 1e-9
-            try:
-                if self.filter.correct(ranges, new_scan=new_scan, age_s=age_s):
-                    self._last_scan_ns = stamp_ns
-                    self._publish_amcl_pose(scan.header.stamp)
-            except Exception as exc:  # never take the executor down
-                self.get_logger().error(f"measurement update failed: {exc!r}",
-                                        throttle_duration_sec=2.0)
-        self._publish_pose(scan.header.stamp, stamp_ns)
-        if self._tf is not None:
-            self._tf.publish_map_to_odom(self.filter.estimate, odometry, scan.header.stamp)
+            if self._use_filter("correct", lambda: self.filter.correct(
+                    ranges, new_scan=new_scan, age_s=age_s), stamp_ns * 1e-9):
+                self._last_scan_ns = stamp_ns
+                self._publish_amcl_pose(scan.header.stamp, stamp_ns)
+        estimate = self._publish_pose(scan.header.stamp, stamp_ns)
+        if self._tf is not None and self.link_failure is None:
+            self._tf.publish_map_to_odom(estimate, odometry, scan.header.stamp)
         self._publish_particles(scan.header.stamp, stamp_ns)
+
+    def _use_filter(self, member: str, function, time_s: float | None, **options) -> Any:
+        """function() (a call or read of the localizer's `member`); None once it failed.
+
+        Its failure (amr_common.link_failure) is kept and logged once; from then on /pose is
+        not localized and the localizer is not used again (GuardedLifecycleNode.use_link).
+        """
+        return self.use_link("localizer", member, function, spec=self.node_params["localizer"],
+                             time_s=time_s, then="/pose is not localized from now on",
+                             **options)
 
     def _on_lidar_offset(self, offset_m: float) -> None:
         """Use the LiDAR position /tf_static gives (the parameter is the fallback)."""
-        if self.filter is None or offset_m == self.filter.lidar_offset_x_m:
+        # (MapOdomTf passes only finite offsets within 1 m: the localizer must take them.)
+        if self.filter is None or offset_m == self._use_filter(
+                "lidar_offset_x_m", lambda: self.filter.lidar_offset_x_m, None):
             return
-        self.filter.set_lidar_offset(offset_m)
+        self._use_filter("set_lidar_offset", lambda: self.filter.set_lidar_offset(offset_m), None)
+        if self.link_failure is not None:
+            return
         self.get_logger().info(f"LiDAR at x = {offset_m:+.3f} m from /tf_static "
                                f"({self.node_params['base_frame']} -> "
                                f"{self.node_params['scan_frame']})")
 
-    def _usable_ranges(self, scan: LaserScan) -> np.ndarray | None:
-        """The scan's ranges if the message is usable, else None.
+    def _usable_ranges(self, scan: LaserScan, stamp_ns: int) -> np.ndarray | None:
+        """The scan's ranges if usable (geometry consistent, enough valid readings), else None.
 
-        The scan's ranges if the message is usable (geometry consistent, enough valid
-        readings), after telling the filter a new geometry; None (and a warning) if not.
+        A new geometry is told to the filter first; an unusable scan is skipped with a warning.
         """
         n = len(scan.ranges)
         geometry = (scan.angle_min, scan.angle_increment, n, scan.range_min, scan.range_max)
@@ -251,10 +268,13 @@ class ParticleFilterNode(GuardedLifecycleNode):
             return None
         if geometry != self._scan_key:
             try:
-                self.filter.set_scan_geometry(scan.angle_min, scan.angle_increment, n,
-                                              scan.range_min, scan.range_max)
+                self._use_filter("set_scan_geometry", lambda: self.filter.set_scan_geometry(
+                    scan.angle_min, scan.angle_increment, n, scan.range_min, scan.range_max),
+                    stamp_ns * 1e-9, allowed=(ValueError,))
             except ValueError as exc:
                 self.warn_every("scan", f"scan geometry rejected: {exc}")
+                return None
+            if self.link_failure is not None:
                 return None
             self._scan_key = geometry
         ranges = scan_ranges(scan)
@@ -270,20 +290,29 @@ class ParticleFilterNode(GuardedLifecycleNode):
         self.warn_every("initialpose", text, period_s=0.0)
 
     # --- outputs ---------------------------------------------------------------------------
-    def localized(self, stamp_ns: int) -> bool:
-        """The filter's flag, unless the newest usable scan is older than max_scan_age_s."""
-        if self.filter is None or not self.filter.localized or self._last_scan_ns is None:
-            return False
-        # abs(): a usable scan stamped after this pair (a bogus future stamp) is no evidence now
-        return abs(stamp_ns - self._last_scan_ns) * 1e-9 <= self.node_params["max_scan_age_s"]
+    def estimate(self, stamp_ns: int) -> tuple[tuple[float, float, float], bool]:
+        """The localizer's estimate and whether it is localized now.
 
-    def _publish_pose(self, stamp, stamp_ns: int) -> None:
-        x, y, theta = self.filter.estimate
+        Its flag, unless the newest usable scan is older than max_scan_age_s; checked
+        (amr_common.link_failure): NaN and False once the localizer failed.
+        """
+        checked = self._use_filter("estimate", lambda: checked_localization(
+            self.filter.estimate, self.filter.localized), stamp_ns * 1e-9)
+        if checked is None:
+            return (math.nan, math.nan, math.nan), False
+        pose, flag = checked
+        # abs(): a usable scan stamped after this pair (a bogus future stamp) is no evidence now
+        return pose, flag and self._last_scan_ns is not None and abs(
+            stamp_ns - self._last_scan_ns) * 1e-9 <= self.node_params["max_scan_age_s"]
+
+    def _publish_pose(self, stamp, stamp_ns: int) -> tuple[float, float, float]:
+        """/pose (and the on_pose hooks); the estimate published (NaN if none)."""
+        (x, y, theta), localized = self.estimate(stamp_ns)
         finite = all(math.isfinite(v) for v in (x, y, theta))
         message = self._pose_message
         message.header.stamp = stamp
-        _fill_pose(message.pose, (x, y, theta) if finite else (0.0, 0.0, 0.0))
-        message.localized = finite and self.localized(stamp_ns)
+        fill_pose(message.pose, (x, y, theta) if finite else (0.0, 0.0, 0.0))
+        message.localized = finite and localized
         self._outputs["pose"].publish(message)
         self.pose_count += 1
         for hook in list(self.on_pose):
@@ -292,20 +321,17 @@ class ParticleFilterNode(GuardedLifecycleNode):
             except Exception as exc:  # an observer must not stop the filter
                 self.get_logger().error(f"on_pose hook {hook!r} failed: {exc!r}",
                                         throttle_duration_sec=5.0)
+        return x, y, theta
 
-    def _publish_amcl_pose(self, stamp) -> None:
-        estimate, cov = self.filter.estimate, self.filter.covariance
-        if not (all(math.isfinite(v) for v in estimate) and np.all(np.isfinite(cov))):
+    def _publish_amcl_pose(self, stamp, stamp_ns: int) -> None:
+        read = self._use_filter("covariance", lambda: (checked_localization(
+            self.filter.estimate, False)[0], checked_covariance(self.filter.covariance)),
+            stamp_ns * 1e-9)
+        if read is None or not (all(math.isfinite(v) for v in read[0])
+                                and np.all(np.isfinite(read[1]))):
             return
-        message = PoseWithCovarianceStamped()
-        message.header.stamp = stamp
-        message.header.frame_id = self.node_params["map_frame"]
-        _fill_pose(message.pose.pose, estimate)
-        covariance = np.zeros((6, 6))
-        index = [0, 1, 5]  # x, y, yaw in ROS's (x, y, z, roll, pitch, yaw) order
-        covariance[np.ix_(index, index)] = cov
-        message.pose.covariance = covariance.ravel().tolist()
-        self._outputs["amcl_pose"].publish(message)
+        self._outputs["amcl_pose"].publish(pose_with_covariance(
+            *read, stamp, self.node_params["map_frame"]))
 
     def _publish_particles(self, stamp, stamp_ns: int) -> None:
         period_ns = int(self.node_params["particles_period_s"] * 1e9)
@@ -316,16 +342,12 @@ class ParticleFilterNode(GuardedLifecycleNode):
         if publisher.get_subscription_count() == 0:
             return
         self._last_particles_ns = stamp_ns
-        particles = self.filter.particles
+        particles = self._use_filter("particles", lambda: checked_particles(
+            self.filter.particles), stamp_ns * 1e-9)
+        if particles is None:
+            return
         step = max(1, len(particles) // int(self.node_params["particles_published"]))
-        message = PoseArray()
-        message.header.stamp = stamp
-        message.header.frame_id = self.node_params["map_frame"]
-        for x, y, theta in particles[::step]:
-            pose = Pose()
-            _fill_pose(pose, (x, y, theta))
-            message.poses.append(pose)
-        publisher.publish(message)
+        publisher.publish(pose_array(particles[::step], stamp, self.node_params["map_frame"]))
 
     def _on_initial_pose(self, message: PoseWithCovarianceStamped) -> None:
         """Re-initialize around a 2D pose estimate (sigmas from its covariance when usable).
@@ -337,27 +359,18 @@ class ParticleFilterNode(GuardedLifecycleNode):
         """
         if self.filter is None:
             return
-        frame = message.header.frame_id
-        if frame and frame != self.node_params["map_frame"]:
-            self._refuse_initial_pose(f"/initialpose in frame '{frame}' ignored: "
-                                      f"expected '{self.node_params['map_frame']}'")
+        request = initial_pose_request(message, self.node_params["map_frame"])
+        if isinstance(request, str):
+            self._refuse_initial_pose(request)
             return
+        (x, y, theta), sigma = request
         try:
-            x, y, theta = pose_from_message(message.pose.pose)
+            used = self._use_filter("initialize_pose", lambda: self.filter.initialize_pose(
+                (x, y, theta), sigma), None, allowed=(ValueError,))
         except ValueError as exc:
             self._refuse_initial_pose(f"/initialpose ignored: {exc}")
             return
-        cov = np.asarray(message.pose.covariance, dtype=float)
-        variances = cov[[0, 7, 35]] if cov.size == 36 else np.zeros(3)
-        if not all(math.isfinite(v) for v in (x, y, theta, *variances)):
-            self._refuse_initial_pose(f"/initialpose ignored: pose ({x}, {y}, {theta}) or "
-                                      f"variances {variances.tolist()} not finite")
-            return
-        sigma = np.sqrt(variances) if np.all(variances > 0.0) else None
-        try:
-            used = self.filter.initialize_pose((x, y, theta), sigma)
-        except ValueError as exc:
-            self._refuse_initial_pose(f"/initialpose ignored: {exc}")
+        if self.link_failure is not None:
             return
         clamped = sigma is not None and not np.allclose(used, sigma, rtol=0.0, atol=0.0)
         note = f" (clamped to the map from {_rounded(sigma)})" if clamped else ""
@@ -371,12 +384,6 @@ class ParticleFilterNode(GuardedLifecycleNode):
 
 def _rounded(values) -> list[float]:
     return [float(f"{float(v):.3g}") for v in values]
-
-
-def _fill_pose(pose: Pose, xyt) -> None:
-    pose.position.x, pose.position.y = float(xyt[0]), float(xyt[1])
-    pose.position.z = 0.0
-    yaw_to_quaternion(float(xyt[2]), pose.orientation)
 
 
 def main(args: list[str] | None = None) -> int:

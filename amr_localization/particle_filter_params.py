@@ -14,6 +14,7 @@ import math
 from typing import Any
 
 from amr_common.parameter_table import (
+    MAX_SEED,
     Param,
     above,
     at_least,
@@ -139,7 +140,7 @@ PARAMETERS: dict[str, Param] = ruled(
     _TABLE, at_least(0.0), lidar_offset_x_m=None, lidar_model=one_of(*MODEL_NAMES),
     map_walls=one_of(*MAP_WALLS),
     initial_pose=vector(0, 3), initial_pose_sigma=vector(3, low=0.0),
-    seed=at_least(0), beams=between(1, 4096), table_angles=between(8, 4096),
+    seed=between(0, MAX_SEED), beams=between(1, 4096), table_angles=between(8, 4096),
     localize_updates=at_least(1), lost_updates=at_least(1), reinit_updates=at_least(1),
     z_random=between(0.0, 1.0, low_open=True, high_open=True),
     sigma_hit_m=above(0.0), kld_epsilon=above(0.0), match_tolerance_m=above(0.0),

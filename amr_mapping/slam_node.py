@@ -22,11 +22,11 @@ amr_common.interfaces.Mapper, default the Mapper), results become messages.
 - The map frame is the odometry frame at the first scan moved by `map_start_pose`.
 Bad input (NaN/inf/0 ranges, a changing ray count, odometry jumps, stamps going backwards): the
 Mapper and the odometry history skip or distrust it and log (throttled per kind); nothing NaN is
-published, no callback raises.
+published, no callback raises. A mapper that raises or returns what its interface forbids has
+failed (amr_mapping.slam_node_mapper): mapping stops, and the run scripts end the run.
 """
 from __future__ import annotations
 
-import math
 import sys
 import time
 from collections import deque
@@ -40,6 +40,7 @@ from sensor_msgs.msg import LaserScan
 from amr_common.geometry import compose
 from amr_common.interfaces import Mapper, MappingEstimate
 from amr_common.lifecycle_node import GuardedLifecycleNode
+from amr_common.link_failure import checked_estimate
 from amr_common.map_messages import occupancy_grid
 from amr_common.map_odom_tf import MapOdomTf
 from amr_common.navigation_behaviour import ScanNovelty
@@ -49,6 +50,7 @@ from amr_common.pose_history import LATER, OLDER, PoseHistory
 from amr_common.qos import LATCHED, RELIABLE_10, scan_qos
 from amr_common.ros_conversions import pose_from_message, time_to_nanoseconds, yaw_to_quaternion
 from amr_mapping.slam_map_files import read_save_request, write_slam_map
+from amr_mapping.slam_node_mapper import MapperCalls
 from amr_mapping.slam_node_params import NODE_PARAMETERS as _NODE_PARAMETERS
 from amr_mapping.slam_node_params import configured_line, node_parameter_problems
 from amr_mapping.timings import timing_summary
@@ -57,7 +59,7 @@ _ODOMETRY_HISTORY_S = 5.0  # how far back a scan's stamp may lie behind the newe
 _MAX_WAITING_SCANS = 10  # 2 s of 5 Hz scans
 
 
-class SlamNode(GuardedLifecycleNode):
+class SlamNode(MapperCalls, GuardedLifecycleNode):
     """Online SLAM on /scan and the odometry pose; see the module docstring for the I/O.
 
     Configure builds the Mapper and creates the /map, /slam_pose (and /tf) lifecycle publishers,
@@ -249,16 +251,13 @@ class SlamNode(GuardedLifecycleNode):
 
     def _map_scan(self, scan: LaserScan, stamp_ns: int, odom: tuple[float, float, float]
                   ) -> None:
-        try:
-            # The Mapper's map frame is the odometry frame at its first scan: moving the
-            # odometry by the start pose puts the map where map_start_pose says.
-            estimate = self.mapper.update(scan, compose(self._start, odom), stamp_ns * 1e-9)
-        except Exception as exc:  # never take the executor down
-            self.warn_every("mapper", f"mapping a scan failed: {exc!r}", error=True)
-            return
-        if estimate.status.startswith("rejected") or \
-                not all(math.isfinite(v) for v in estimate.pose):
-            return  # the Mapper said why (throttled)
+        # The Mapper's map frame is the odometry frame at its first scan: moving the
+        # odometry by the start pose puts the map where map_start_pose says.
+        estimate = self._use_mapper("update", self.mapper.update, scan,
+                                    compose(self._start, odom), stamp_ns * 1e-9,
+                                    check=checked_estimate, time_s=stamp_ns * 1e-9)
+        if estimate is None or estimate.status.startswith("rejected"):
+            return  # the Mapper said why (throttled), or it failed (logged)
         self.mapped_scans += 1
         # A mapper that says when its map changed (the Mapper: keyframes and loop closures
         # only) is redrawn then; any other after every mapped scan.
@@ -267,8 +266,7 @@ class SlamNode(GuardedLifecycleNode):
         self._last_scan_stamp = scan.header.stamp
         self._publish_pose(estimate)
         if self.node_params["publish_tf"]:
-            self._tf.publish(self.map_to_odom, scan.header.stamp)
-            self._last_tf_ns = stamp_ns
+            self._publish_tf(scan.header.stamp, stamp_ns)
         for hook in list(self.on_estimate):
             try:
                 hook(stamp_ns, estimate, self)
@@ -287,17 +285,15 @@ class SlamNode(GuardedLifecycleNode):
                 "must agree)", throttle_duration_sec=10.0)
             return
         self._mapper_params = {**self._mapper_params, "lidar_offset_x_m": offset_m}
-        self.mapper = self._mapper_class(self._mapper_params)
+        mapper = self._use_mapper("the constructor", self._mapper_class, self._mapper_params)
+        if mapper is None:
+            return
+        self.mapper = mapper
         self.get_logger().info(f"LiDAR at x = {offset_m:+.3f} m from /tf_static "
                                f"({self.node_params['base_frame']} -> "
                                f"{self.node_params['scan_frame']})")
 
     # --- outputs ---------------------------------------------------------------------------
-    @property
-    def map_to_odom(self) -> tuple[float, float, float]:
-        """The map -> odom transform (x, y, yaw) of the newest estimate."""
-        return compose(self.mapper.map_to_odom, self._start)
-
     def _publish_pose(self, estimate: MappingEstimate) -> None:
         message = self._pose_message
         message.header.stamp = self._last_scan_stamp
@@ -315,8 +311,7 @@ class SlamNode(GuardedLifecycleNode):
         if stamp_ns - self._last_tf_ns < self.node_params["transform_publish_period_s"] * 1e9 \
                 or self._tf.publisher.get_subscription_count() == 0:
             return  # (nobody listens in a lockstep run: ~30 us a step saved)
-        self._tf.publish(self.map_to_odom, stamp)
-        self._last_tf_ns = stamp_ns
+        self._publish_tf(stamp, stamp_ns)
 
     def _publish_map(self) -> None:
         """/map if it changed since the last one (and anything was mapped)."""
@@ -324,14 +319,12 @@ class SlamNode(GuardedLifecycleNode):
                 self._map_version == self._published_version:
             return
         started = time.perf_counter()
-        try:
-            raster = self.mapper.occupancy_raster()
-            message = occupancy_grid(raster.values, raster.resolution, raster.origin,
-                                     self.node_params["map_frame"], self._last_scan_stamp)
-        except Exception as exc:  # never take the executor down
-            self.warn_every("map", f"building /map failed: {exc!r}", error=True)
+        raster = self.map_raster()
+        if raster is None:
             return
-        self._outputs["map"].publish(message)
+        self._outputs["map"].publish(occupancy_grid(
+            raster.values, raster.resolution, raster.origin, self.node_params["map_frame"],
+            self._last_scan_stamp))
         self._published_version = self._map_version
         self.map_ms.append(1e3 * (time.perf_counter() - started))
 
@@ -339,14 +332,20 @@ class SlamNode(GuardedLifecycleNode):
     def save_map(self, prefix: str | Path, image_format: str | None = None) -> Path:
         """Write the map so far as PREFIX.yaml + PREFIX.pgm (png); the YAML's path.
 
-        ValueError (MapFileError included) with the reason when nothing was mapped yet or the
-        files cannot be written (amr_mapping.slam_map_files.write_slam_map).
+        ValueError (MapFileError included) with the reason when nothing was mapped yet, the
+        mapper failed, or the map has no free cell or cannot be written (write_slam_map).
         """
         if self.mapper is None or self.mapped_scans == 0:
             raise ValueError("nothing to save: no scan has been mapped yet")
-        yaml_path = write_slam_map(self.mapper, prefix,
-                                   image_format or self.node_params["image_format"],
-                                   self._start, self.mapped_scans)
+        raster, stats = self.map_raster(), self.mapper_statistics()
+        if self.link_failure is not None:  # its map is not trusted: an earlier save stays
+            raise ValueError(f"the mapper failed: {self.link_failure.reason}")
+        yaml_path, no_start = write_slam_map(raster, stats, prefix,
+                                             image_format or self.node_params["image_format"],
+                                             self._start, self.mapped_scans)
+        if no_start is not None:
+            self.get_logger().warning(f"{yaml_path} names no start pose: {no_start} on its "
+                                      f"{raster.resolution:g} m cells; give one to drive in it")
         self._saved_version = self._map_version
         self.saved_maps.append(yaml_path)
         return yaml_path

@@ -9,7 +9,9 @@
 - Replans when /pose becomes localized again after localization was lost (the pure pursuit
   stops on the loss; the wall follower explores until the filter relocalizes).
 - A goal inside a wall, too close to one or unreachable, or no goal at all: a clear logged error
-  and an EMPTY path (the pursuit then commands zero), never a crash.
+  and an EMPTY path (the pursuit then commands zero), never a crash. A planner that raises
+  anything else or returns no (K, 2) finite points has failed (amr_common.link_failure): an
+  empty path, no more planning, and the run scripts end the run.
 The path is stamped with the /pose it was planned from. The algorithm is the `planner`
 parameter's class (MODULE:CLASS of amr_common.interfaces.Planner; default
 amr_planning.planner.Planner); its tuning values are parameters of this node.
@@ -29,12 +31,13 @@ from amr_common.controller_loader import DEFAULT_PLANNER
 from amr_common.geometry import polyline_length
 from amr_common.interfaces import Planner
 from amr_common.lifecycle_node import GuardedLifecycleNode
+from amr_common.link_failure import LinkFailure, checked_path, class_spec, link_call
 from amr_common.navigation_behaviour import Handover
 from amr_common.node_runner import run_lifecycle_node
 from amr_common.parameter_table import Param, ruled, vector
 from amr_common.parameters import declare_link, declare_parameters, read_parameters
 from amr_common.qos import LATCHED, RELIABLE_10
-from amr_common.ros_conversions import path_message
+from amr_common.ros_conversions import path_message, time_to_nanoseconds
 from amr_common.world import World
 
 _NODE_PARAMETERS: dict[str, Param] = ruled({
@@ -181,18 +184,25 @@ class PlannerNode(GuardedLifecycleNode):
             self._fail("no goal: set the `goal` or `goal_name` parameter, give the world a "
                        "goal, or send /goal_pose")
             return
+        if self.link_failure is not None:
+            return  # the planner failed: the empty path stays
         began = time.perf_counter()
         try:
-            plan = self.planner.plan(start, self.goal)
+            plan = link_call("planner", "plan", self.planner.plan, start, self.goal,
+                             allowed=(ValueError,))
+            points = checked_path(plan)
         except ValueError as exc:  # PlanningError: no path, the message says why
             self._fail(str(exc), "no path: ")
             return
-        except Exception as exc:  # a bug must not take the node (and the loop) down
-            self._fail(f"planning failed: {exc!r}")
+        except LinkFailure as failure:  # a bug, None, a wrong shape: the planner failed
+            stamp = self._pose_stamp
+            self.fail_link(failure, None if stamp is None else time_to_nanoseconds(stamp) * 1e-9,
+                           class_spec(self.planner), "publishing an empty path")
+            self.last_plan = None
+            self._publish([])
             return
         elapsed_ms = (time.perf_counter() - began) * 1e3
         self.last_plan, self.last_error = plan, None
-        points = plan.points
         self.get_logger().info(
             f"path from ({start[0]:.3f}, {start[1]:.3f}) to ({self.goal[0]:.3f}, "
             f"{self.goal[1]:.3f}): {len(points)} poses, {polyline_length(points):.2f} m, min "

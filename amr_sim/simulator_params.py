@@ -7,8 +7,8 @@ from __future__ import annotations
 from typing import Any
 
 from amr_common.parameter_table import (
+    MAX_SEED,
     Param,
-    at_least,
     between,
     check_values,
     one_of,
@@ -69,7 +69,7 @@ _TABLE: dict[str, tuple[Any, str]] = {
     "map_resolution": (0.05, "Cell size of /map in metres (0.005 to 1)"),
 }
 PARAMETERS: dict[str, Param] = ruled(
-    _TABLE, dt=between(1e-4, 1.0), seed=at_least(0), mode=one_of("lockstep", "realtime"),
+    _TABLE, dt=between(1e-4, 1.0), seed=between(0, MAX_SEED), mode=one_of("lockstep", "realtime"),
     command_timeout=between(0.0, 3600.0), goal=vector(0, 2), goal_rest_time=between(0.0, 3600.0),
     goal_tolerance=between(1e-3, 100.0), kidnap=vector(0, 4), map_resolution=between(0.005, 1.0))
 

@@ -35,6 +35,7 @@ from typing import Any, Callable, Mapping, Sequence
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from script_endings import interruptible, run_script  # noqa: E402
 
+from amr_common.parameter_table import MAX_SEED  # noqa: E402
 from amr_common.ros_env import (  # noqa: E402
     describe_graph_settings,
     environment_domain_id,
@@ -121,7 +122,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--simulate", default=None, metavar="PROFILE", help="calibrate a "
                         "simulated unit of this sensor profile (e.g. turtlebot3:randomized) "
                         "instead of the robot: no ROS, no prompts")
-    parser.add_argument("--seed", type=number_argument(int, 0), default=None,
+    parser.add_argument("--seed", type=number_argument(int, 0, maximum=MAX_SEED), default=None,
                         help="with --simulate: the seed that draws the unit (default 0)")
     parser.add_argument("--topic", type=ros_name_argument("topic"), default=None,
                         help="robot: the LaserScan topic (default /scan)")

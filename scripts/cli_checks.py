@@ -78,7 +78,7 @@ def number_argument(kind: type = float, minimum: float = 0.0, *, above: bool = F
         low = f"> {minimum:g}" if above else f">= {minimum:g}"
         if not (math.isfinite(value) and (value > minimum if above else value >= minimum)
                 and value <= maximum):
-            high = "" if maximum == math.inf else f" and <= {maximum:g}"
+            high = "" if maximum == math.inf else f" and <= {maximum:.15g}"
             raise argparse.ArgumentTypeError(f"must be {low}{high} (got '{text}')")
         return value
 

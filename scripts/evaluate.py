@@ -8,10 +8,11 @@ planner and the pure pursuit drive to the goal (amr_evaluation.navigation_episod
 results.json (with the set's kind and links, for compare.py), results.csv and sheet.png (every
 episode's trajectory; --slam: every map, each also saved in maps/) to --out, prints a table and
 a one-line verdict.
-Exit code: 0 no collision (and every goal reached), 1 some episode collided, commanded
-NaN/inf/non-numbers or missed its goal, 2 bad options, 3 some episode failed to run (an
-exception, sys.exit, its worker process died, or it ran past --episode-timeout) or its map could
-not be saved, 130 / 129 stopped by Ctrl-C or SIGTERM / SIGHUP (the terminal closed).
+Exit code: 0 no collision (and every goal reached), 1 some episode collided or missed its goal,
+2 bad options, 3 some episode failed: a link failed (raised, or commanded NaN/inf/non-numbers:
+amr_common.link_failure, as in run_sim.py), an exception, sys.exit, its worker process died, or
+it ran past --episode-timeout; or a map could not be saved; 130 / 129 stopped by Ctrl-C or
+SIGTERM / SIGHUP (the terminal closed).
 
 Examples:
   .venv/bin/python scripts/evaluate.py --worlds lab02 --seeds 0,1,2 --duration 120
@@ -327,6 +328,10 @@ def _evaluate(argv: list[str] | None) -> int:
         specs = episode_specs(settings)
         if args.localize:
             check_localization_options(args, settings, specs)
+        if args.slam:  # each episode's simulated LiDAR unit is calibrated for the mapper
+            from amr_evaluation.mapping_evaluation import check_lidar_units
+            check_lidar_units(((s.profile, s.seed) for s in specs),
+                              settings["links"].get("mapper"))
         check_filter_maps(specs, parse_overrides(args.pf_param), args.localize)
         started = dt_module.datetime.now(dt_module.timezone.utc)
         out = check_output_folder(args.out or Path("out") / f"evaluate-{started:%Y%m%d-%H%M%S}",

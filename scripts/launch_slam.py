@@ -9,8 +9,9 @@
 
 --slam with --localize or --goal is refused: the particle filter and the planner need the map
 SLAM is still building; map first, then localize and navigate on the saved map
-(run_sim.py `--world DIR/map.yaml`, run_robot.py `--map DIR/map.yaml`). Every check runs
-before anything starts (one line, exit code 2).
+(run_sim.py `--world DIR/map.yaml`, run_robot.py `--map DIR/map.yaml`). --slam with --kidnap
+too: the mapper cannot know the robot was carried. Every check runs before anything starts (one
+line, exit code 2).
 A map that could not be written (the folder gone, a full disk) fails the run: MAP_NOT_WRITTEN.
 """
 from __future__ import annotations
@@ -67,6 +68,10 @@ def check_slam_options(args, script: str, set_by_script: dict[str, str]) -> None
                              f"({on_map} DIR/{MAP_NAME}.yaml)")
     if getattr(args, "map", None):
         raise ValueError("--slam and --map exclude each other: both would publish /map")
+    if getattr(args, "kidnap", None) is not None:  # (a robot's SLAM has no kidnapping either)
+        raise ValueError("--slam and --kidnap exclude each other: the mapper is not told that "
+                         "the robot was carried, so it would go on mapping from a wrong pose "
+                         "(--kidnap tests a localizer's recovery: --localize or --goal)")
     if args.map_out is not None:
         if not str(args.map_out).strip():
             raise ValueError(f"--map-out {args.map_out!r}: give a folder (an empty name would "

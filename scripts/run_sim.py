@@ -43,8 +43,11 @@ Local runs are isolated: loopback discovery and a free ROS_DOMAIN_ID (printed at
 Ctrl-C (or SIGTERM) ends the whole run: the controller commands zero and the partial report is
 written, marked "interrupted": true (exit code 130); a closed terminal (SIGHUP) likewise, exit
 code 129. A closed output (`| head`, `| tee` ended first) drops the rest of the output and
-loses nothing else. Exit code 1: a collision or no path to the goal; 3: the map of --slam
---map-out could not be written (said, and `map_saved: false` with the reason in the report).
+loses nothing else. A link (--controller, --localizer, --planner, --follower, --mapper) that
+raises or returns what its interface forbids ends the run too: the robot stops, the report says
+why (`link_failure`), exit code 3, as evaluate.py's failed episode. Exit code 1: a collision or
+no path to the goal; 3: the map of --slam --map-out could not be written (said, and
+`map_saved: false` with the reason in the report).
 """
 from __future__ import annotations
 
@@ -69,6 +72,7 @@ from link_options import (  # noqa: E402
 )
 from script_endings import run_script  # noqa: E402
 
+from amr_common.link_failure import LINK_FAILED  # noqa: E402
 from amr_common.ros_env import describe_graph_settings, isolate_local_graph  # noqa: E402
 from cli_checks import (  # noqa: E402
     OneLineArgumentParser,
@@ -90,6 +94,7 @@ from launch_slam import (  # noqa: E402
     MAP_NOT_WRITTEN,
     add_slam_options,
     check_slam_options,
+    lidar_parameters,
     map_prefix,
 )
 
@@ -181,6 +186,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     check_common_options(parser, args, "run_sim", WALL_FOLLOWER_SET, FILTER_SET)
     try:
         check_slam_options(args, "run_sim", SLAM_SET)
+        if args.slam:  # the simulated unit calibrated now: one that cannot be is refused here
+            args.slam_lidar = lidar_parameters(args, args.profile)
     except ValueError as exc:
         parser.error(str(exc))
     if args.no_controller and not args.realtime:
@@ -226,7 +233,8 @@ def _check_simulator_options(parser, args) -> None:
         try:
             check_parameters({**defaults, name: value})
         except ValueError as exc:
-            parser.error(f"{option} {value:g}: {exc}")
+            parser.error(f"{option} {value:g}: {exc}" if isinstance(value, float) else
+                         f"{option} {value}: {exc}")  # a seed in full
 
 
 def main(argv=None) -> int:
@@ -329,6 +337,8 @@ def _simulate(args, world, map_world, starts, outputs, stop) -> int:
         return MAP_NOT_WRITTEN
     if stop.requested:
         return stop.exit_code  # 130 after Ctrl-C or SIGTERM, 129 after SIGHUP
+    if any(report["link_failure"] for report in reports):
+        return LINK_FAILED  # the run ended then, said why
     # 1: a run collided, or its goal had no path (the planner said why; the run ended then).
     return 1 if any(report["collisions"] > 0 or report.get("planning_error")
                     for report in reports) else 0

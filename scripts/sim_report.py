@@ -44,7 +44,13 @@ def run_report(args, world, start, sim, trajectory, wall_errors, wall_time: floa
         "trajectory": trajectory,
         "collision_points": [list(p) for p in sim.collision_points],
         "effects": sim.effects.as_dict() if getattr(sim, "effects", None) else None,
+        **link_failure_fields(None),
     }
+
+
+def link_failure_fields(failure) -> dict:
+    """The report's `link_failure`: why the run failed (amr_common.link_failure), or None."""
+    return {"link_failure": None if failure is None else str(failure)}
 
 
 def report_before_start(args, world, start, map_world=None) -> dict:
@@ -71,15 +77,15 @@ def report_before_start(args, world, start, map_world=None) -> dict:
             "goal_reached_time_s": None, "stopped_time_s": None,
             "final_position_error_m": math.hypot(x - goal[0], y - goal[1])}, None, [], None)
     if getattr(args, "slam", False):
-        report |= slam_fields(world, args.profile, trajectory, [], None, None, {},
+        report |= slam_fields(world, args.profile, trajectory, [], None, {}, None, {},
                               map_error="no scan was mapped" if getattr(args, "map_out", None)
                               else None)
     return report
 
 
-def slam_fields(world, profile: str, trajectory: list, estimate: list, raster, mapper,
-                timings: dict, map_file=None, range_correction=None,
-                map_error: str | None = None) -> dict:
+def slam_fields(world, profile: str, trajectory: list, estimate: list, raster, stats,
+                max_range_m: float | None, timings: dict, map_file=None,
+                range_correction=None, map_error: str | None = None) -> dict:
     """The report's SLAM figures and every SLAM pose ([t, x, y, theta], map = world frame).
 
     The headless mapping episode's figures (amr_evaluation.mapping_metrics): trajectory RMSE /
@@ -87,12 +93,12 @@ def slam_fields(world, profile: str, trajectory: list, estimate: list, raster, m
     the true poses); loop closures, Mapper and node timings (wall ms), the map file written
     (map_saved: True; False with map_error, why, when --map-out's map was not written; None
     without --map-out), the simulated LiDAR unit's calibration given to the slam node (None:
-    none). None for the figures when nothing was mapped.
+    none). `stats` and `max_range_m`: the mapper's statistics() and max_range_m (checked by the
+    slam node). None for the figures when nothing was mapped.
     """
     figures: dict = dict.fromkeys(("trajectory_rmse_m", "trajectory_max_m", "heading_rmse_rad",
                                    "precision", "recall", "seen_wall_m"))
-    stats = mapper.statistics() if mapper is not None else {}
-    if estimate and raster is not None:
+    if estimate and raster is not None and max_range_m is not None:
         from amr_evaluation.mapping_metrics import RayHits, mapping_figures
         from amr_sim.profiles import get_profile
         prof = get_profile(profile)
@@ -101,7 +107,7 @@ def slam_fields(world, profile: str, trajectory: list, estimate: list, raster, m
         index = np.clip(np.searchsorted(rows[:, 0], est[:, 0] - 1e-6), 0, len(rows) - 1)
         truth = rows[index, 1:]
         hits = RayHits(world, prof.angle_min, prof.angle_increment, prof.scan_rays,
-                       prof.range_min, min(prof.range_max, mapper.max_range_m))
+                       prof.range_min, min(prof.range_max, max_range_m))
         for x, y, theta in truth:
             hits.add(x + prof.lidar_offset_x * math.cos(theta),
                      y + prof.lidar_offset_x * math.sin(theta), theta)
@@ -209,7 +215,7 @@ def navigation_line(report: dict) -> str:
             f"final error {report['final_position_error_m'] * 100:.1f} cm, collisions "
             f"{report['collisions']}, min clearance {report['min_clearance_m'] * 100:.1f} "
             f"cm; {report['sim_time_s']:.1f} s simulated in {report['wall_time_s']:.1f} s "
-            f"({f'{factor}x' if factor else 'n/a'} real time)")
+            f"({f'{factor}x' if factor else 'n/a'} real time)" + failed_line(report))
 
 
 def run_line(report: dict) -> str:
@@ -224,4 +230,9 @@ def run_line(report: dict) -> str:
             + (" explored n/a" if report["explored_fraction"] is None else
                f" explored {report['explored_fraction'] * 100:.0f}%")
             + (f", laps {laps}" if laps else "") + localization_line(report)
-            + slam_line(report))
+            + slam_line(report) + failed_line(report))
+
+
+def failed_line(report: dict) -> str:
+    """'; FAILED: <why>' when a link failed (the run's exit code is 3), else ''."""
+    return f"; FAILED: {report['link_failure']}" if report.get("link_failure") else ""

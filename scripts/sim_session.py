@@ -21,6 +21,7 @@ import time
 import rclpy
 from rclpy.signals import SignalHandlerOptions
 from sim_report import (
+    link_failure_fields,
     localization_fields,
     navigation_fields,
     navigation_line,
@@ -31,6 +32,7 @@ from sim_report import (
 )
 
 from amr_common.lifecycle_manager import LifecycleManager, LifecycleStartupError
+from amr_common.lifecycle_node import first_link_failure
 from amr_common.node_runner import make_executor, shutdown_node
 from amr_common.world import start_label
 from amr_sim.simulator_node import SimulatorNode
@@ -63,9 +65,8 @@ def _simulator_values(args, start: str, own_map: bool, localize: bool, slam: boo
                   # it runs; without it (or a user's own localization node) the truth does.
                   "map_to_odom_from_truth": not (args.enable_localization or localize
                                                  or slam),
-                  "publish_map": not own_map}  # the map publisher below sends the map
-    if slam:  # the slam node's /map: the map being built, not the world
-        sim_values["publish_map"] = False
+                  # The map publisher sends --map; the slam node the map being built.
+                  "publish_map": not (own_map or slam)}
     if args.goal:
         sim_values["goal"] = list(args.goal)
     if getattr(args, "kidnap", None):
@@ -113,12 +114,9 @@ class SimSession:
         self.slam_node = None
         if slam:
             self._add_slam_node(map_prefix)
-        self.wall_follower = next((n for n in self.control_nodes
-                                   if n.get_name() == "wall_follower"), None)
-        self.particle_filter = next((n for n in self.control_nodes
-                                     if n.get_name() == "particle_filter"), None)
-        self.planner_node = next((n for n in self.control_nodes if n.get_name() == "planner"),
-                                 None)
+        self.wall_follower, self.particle_filter, self.planner_node = (
+            next((n for n in self.control_nodes if n.get_name() == name), None)
+            for name in ("wall_follower", "particle_filter", "planner"))
         self.estimate: list[list[float]] = []
         self.particles_snapshot: list[list[float]] = []
         if self.particle_filter is not None:
@@ -199,13 +197,13 @@ class SimSession:
         """The slam node, mapping in the world's frame (its start pose), saving to map_prefix.
 
         The simulated scanner's LiDAR position, `deskew`, its range error and the unit's
-        calibration (launch_slam.lidar_parameters) or --slam-param.
+        calibration (args.slam_lidar: launch_slam.lidar_parameters) or --slam-param.
         """
-        from launch_slam import lidar_parameters, make_slam_node
+        from launch_slam import make_slam_node
         self.map_prefix = map_prefix
         self.slam_estimate: list[list[float]] = []
         self.slam_raster = None  # the map at the end of the run (for the plot)
-        overrides = lidar_parameters(self.args, self.args.profile)
+        overrides = dict(self.args.slam_lidar)  # launch_slam.lidar_parameters (run_sim checks)
         offset = overrides.pop("lidar_offset_x_m")
         self.slam_range_correction = overrides.get("range_correction")
         self.slam_node = make_slam_node(self.context, lidar_offset_x_m=offset,
@@ -268,7 +266,8 @@ class SimSession:
         try:
             # A goal the planner cannot reach ends the run at once: the robot would only wait.
             while (sim.time < args.duration - 1e-9 and not self.simulator_node.finished
-                   and not self._stop_requested() and self.planning_error() is None):
+                   and not self._stop_requested() and self.planning_error() is None
+                   and first_link_failure(self.control_nodes) is None):
                 self.executor.spin_once(timeout_sec=0.1)
                 if sim.steps != last_steps:
                     last_steps, last_progress = sim.steps, time.monotonic()
@@ -278,7 +277,7 @@ class SimSession:
         except KeyboardInterrupt:  # only without a StopFlag (run_sim.py installs one)
             self.interrupted = True
         self.interrupted = self.interrupted or (self.stop is not None and self.stop.requested)
-        if self.interrupted:
+        if self.interrupted:  # (a failed link: its node logged it, the summary says it)
             print(f"run_sim: interrupted at t={sim.time:.2f} s")
         elif self.planning_error() is not None:
             print(f"run_sim: no path to the goal: {self.planning_error()}", file=sys.stderr)
@@ -335,7 +334,8 @@ class SimSession:
                               "simulation" if follower.get_parameter("simulation").value
                               else "robot (timer)"},
                           map_world=self.map_world) \
-            | self._localization_report() | self._navigation_report() | self._slam_report()
+            | self._localization_report() | self._navigation_report() | self._slam_report() \
+            | link_failure_fields(first_link_failure(self.control_nodes))
 
     def _slam_report(self) -> dict:
         """The SLAM figures; the map written to the --map-out prefix first (if any)."""
@@ -344,21 +344,19 @@ class SimSession:
             return {}
         map_file, map_error = None, "no scan was mapped" if self.map_prefix else None
         if node.mapper is not None and node.mapped_scans:
-            self.slam_raster = node.mapper.occupancy_raster()
+            self.slam_raster = node.map_raster()  # None if the mapper failed
             if self.map_prefix:
                 try:
                     map_file, map_error = node.save_map(self.map_prefix), None
                 except (ValueError, OSError) as exc:  # checked, but it may go (run_sim says)
                     map_error = str(exc)
         return slam_fields(self.world, self.args.profile, self.trajectory, self.slam_estimate,
-                           self.slam_raster, node.mapper, node.timings(), map_file,
-                           self.slam_range_correction, map_error)
+                           self.slam_raster, node.mapper_statistics(), node.mapper_max_range(),
+                           node.timings(), map_file, self.slam_range_correction, map_error)
 
     def _localization_report(self) -> dict:
-        if self.particle_filter is None:
-            return {}
-        return localization_fields(self.args, self.trajectory, self.estimate,
-                                    self.particles_snapshot)
+        return {} if self.particle_filter is None else localization_fields(
+            self.args, self.trajectory, self.estimate, self.particles_snapshot)
 
     def _navigation_report(self) -> dict:
         if not self.navigating:

@@ -59,8 +59,8 @@ def parse_args(argv=None) -> argparse.Namespace:
         for world in args.worlds:
             World.load(world)
         args.seeds = parse_seeds(args.seeds)
-        from amr_sim.profiles import get_profile
-        get_profile(args.profile)
+        from amr_evaluation.mapping_evaluation import check_lidar_units
+        check_lidar_units((args.profile, seed) for seed in args.seeds)  # (their calibration)
         args.out = check_output_folder(args.out, "--out")
         args.filter_params = parse_overrides(args.pf_param)
         if args.filter_params:

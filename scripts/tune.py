@@ -45,6 +45,7 @@ import evaluate  # noqa: E402  (the episode-set options and their checks)
 import evaluate_executors  # noqa: E402  (where the trials run)
 from script_endings import interruptible, run_script  # noqa: E402
 
+from amr_common.parameter_table import MAX_SEED  # noqa: E402
 from amr_evaluation.evaluation import EvaluationError, check_controller  # noqa: E402
 from amr_evaluation.tuning import (  # noqa: E402
     DEFAULT_OBJECTIVE,
@@ -96,6 +97,9 @@ def check_options(args: argparse.Namespace, episode_args: argparse.Namespace) ->
             if value is not None:
                 raise EvaluationError(f"{option} is for --search random or optuna (a grid "
                                       "search tries every combination once)")
+    if args.search_seed is not None and not 0 <= args.search_seed <= MAX_SEED:
+        raise EvaluationError(f"--search-seed must be from 0 to {MAX_SEED}, got "
+                              f"{args.search_seed}")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -76,7 +76,9 @@ class LoopbackCluster:
             "num_cpus": 0, "node_ip_address": "127.0.0.1", "include_dashboard": False,
             "_system_config": FAST_NODE_DEATH})
         self.workers = [self.add_worker(worker_cpus)]
-        self.ray.init(address=self.address, logging_level="WARNING")
+        # The workers' output stays in their log files: forwarded, it would be printed into
+        # whichever test runs when it arrives (a worker ended by a test prints as it goes).
+        self.ray.init(address=self.address, logging_level="WARNING", log_to_driver=False)
 
     @property
     def address(self) -> str:
@@ -92,6 +94,11 @@ class LoopbackCluster:
         self.cluster.remove_node(node, allow_graceful=False)
         if node in self.workers:
             self.workers.remove(node)
+
+    def end_test_work(self) -> None:
+        """End what a test left on the cluster: its idle warm episode workers."""
+        from amr_evaluation.ray_workers import release_idle_warm_workers
+        release_idle_warm_workers(self.ray)
 
     def close(self) -> None:
         """Disconnect and stop every node."""

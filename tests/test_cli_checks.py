@@ -140,7 +140,7 @@ def test_bad_params_files_and_controllers_are_one_line_errors(capsys, tmp_path, 
     (["--goal", "1.094,-0.2", "--profile", "turtlebot3"],
      "goal (1.094, -0.2) is too close to a wall: clearance 0.106 m < 0.135 m"),
     (["--dt", "10"], "--dt 10: dt must be in [0.0001, 1] (got 10.0)"),
-    (["--seed", "-1"], "--seed -1: seed must be >= 0 (got -1)"),
+    (["--seed", "-1"], "--seed -1: seed must be in [0, 4294967295] (got -1)"),
     (["--pf-param", "beams:=90"], "--pf-param needs --localize or --goal"),
 ])
 def test_bad_run_options_are_one_line_errors(capsys, argv, message):

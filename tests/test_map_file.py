@@ -262,10 +262,16 @@ def test_broken_yaml_is_a_one_line_error(tmp_path):
     _refused(path, "invalid YAML: while parsing a flow sequence", WorldError)
 
 
-def test_a_named_start_off_the_free_cells_is_refused(tmp_path):
+def test_a_named_start_off_the_free_cells_is_refused_when_used_and_another_start_overrides_it(
+        tmp_path):
+    # A coarse SLAM map's own start could make the whole map unreadable, --start included.
     pgm(tmp_path / "map.pgm", np.full((20, 20), 254, dtype=np.uint8))
-    _refused(map_yaml(tmp_path, extra="starts:\n  out: [5.0, 5.0, 0]\n"),
-             "start 'out' (5, 5) is outside the map", WorldError)
+    world = World.load(map_yaml(tmp_path, extra="starts:\n  out: [5.0, 5.0, 0]\n"))
+    for start in ("out", None):
+        with pytest.raises(WorldError, match=r"start 'out' \(5, 5\) is outside the map: give a "
+                                             r"start pose \(x, y, theta\)"):
+            world.resolve_start(start)
+    assert world.resolve_start((-0.5, 2.5, 0.0)) == (-0.5, 2.5, 0.0)
 
 
 def test_extras_of_scalars_only_stay_a_valid_map_yaml(tmp_path):

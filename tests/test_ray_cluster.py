@@ -38,7 +38,8 @@ def test_tasks_run_on_the_worker_node_with_the_sessions_token(ray_cluster):
     assert len(token.read_text()) == 64 and not token.is_relative_to(Path.home())
 
 
-def test_a_newcomer_with_an_empty_home_gets_the_cluster_and_a_home_left_alone(tmp_path):
+def test_a_newcomer_with_an_empty_home_gets_the_cluster_and_a_home_left_alone(
+        tmp_path, ray_processes_end):
     home = tmp_path / "home"
     home.mkdir()
     env = {k: v for k, v in os.environ.items() if k not in RAY_AUTH_VARIABLES}
@@ -50,3 +51,25 @@ def test_a_newcomer_with_an_empty_home_gets_the_cluster_and_a_home_left_alone(tm
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     assert "1 passed" in proc.stdout
     assert sorted(p.name for p in home.iterdir()) == []  # no ~/.ray/auth_token, nothing
+
+
+def test_a_ray_worker_left_running_is_found_and_its_end_waited_for(ray_cluster):
+    """The check every Ray test ends with (tests/ray_processes.py) sees a test's own worker.
+
+    A Tune trial's worker outlived its test by seconds and printed into a later test's output
+    as it ended; the session cluster's own processes are not counted.
+    """
+    from tests import ray_processes
+    ray = ray_cluster.ray
+
+    @ray.remote(num_cpus=1)
+    class Lingers:
+        def pid(self) -> int:
+            return os.getpid()
+
+    actor = Lingers.remote()
+    pid = ray.get(actor.pid.remote())
+    left = ray_processes.leftovers()
+    assert list(left) == [pid] and left[pid].startswith("ray::Lingers"), left
+    ray.kill(actor)
+    assert ray_processes.wait_until_ended() == {}

@@ -283,7 +283,7 @@ def _free_port() -> int:
         return sock.getsockname()[1]
 
 
-def test_the_readmes_ray_start_recipe_works_from_an_empty_home(tmp_path):
+def test_the_readmes_ray_start_recipe_works_from_an_empty_home(tmp_path, ray_processes_end):
     """README "Sweep on a cluster", on this machine: a token, `ray start --head`, `--ray auto`.
 
     As a newcomer: HOME empty, no Ray variables. A Ray temporary folder of its own, so `auto`

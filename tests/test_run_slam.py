@@ -370,19 +370,13 @@ def test_evaluate_slam_option_mistakes(capsys, tmp_path, argv, message):
 def test_the_report_leaves_out_counts_a_mapper_does_not_give():
     import sim_report
 
-    class Silent:
-        max_range_m = 3.5
-
-        def statistics(self) -> dict:
-            return {}
-
     world = World.load("lab02")
     start = world.starts["inner"]
     trajectory = [[0.0, *start], [0.2, *start]]
     from amr_common.map_file import world_as_map
     raster, _ = world_as_map(world, 0.02)
     report = sim_report.slam_fields(world, "turtlebot3", trajectory, [[0.2, *start]], raster,
-                                    Silent(), {})
+                                    {}, 3.5, {})  # a mapper whose statistics() gives nothing
     slam = report["slam"]
     assert slam["keyframes"] is None and slam["loop_closures"] is None  # not "0": not reported
     line = sim_report.slam_line(report)
