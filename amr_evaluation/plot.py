@@ -17,7 +17,7 @@ from matplotlib.figure import Figure
 
 from amr_common.geometry import polyline_length
 from amr_common.robot import ROBOT_RADIUS
-from amr_common.world import World, map_label
+from amr_common.world.world import World, map_label
 
 _WALL_COLOUR = "#222222"
 _MAP_COLOUR = "#66c2a5"  # the map's walls when it is not the world (teal: not an estimate colour)

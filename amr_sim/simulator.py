@@ -32,9 +32,9 @@ import pymunk
 
 from amr_common import robot
 from amr_common.geometry import wrap_angle
-from amr_common.raycast import nearest_wall
 from amr_common.robot import COMMAND_CLIP  # |v|, |w| beyond this are absurd
-from amr_common.world import World
+from amr_common.world.raycast import nearest_wall
+from amr_common.world.world import World
 from amr_sim.contact import (
     ALLOWED_PENETRATION,
     ROBOT_TYPE,

@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .coverage_grid import inside_polygon_points
-from .world_file import WorldError, WorldFile
+from amr_common.world.coverage_grid import inside_polygon_points
+from amr_common.world.world_file import WorldError, WorldFile
 
 
 def squared_segment_distances(seg: np.ndarray, px, py) -> np.ndarray:

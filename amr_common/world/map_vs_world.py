@@ -18,7 +18,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Sequence
 
-from .world import World
+from amr_common.world.world import World
 
 
 def load_map(source: str | Path | World | None, world: World) -> World:

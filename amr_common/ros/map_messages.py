@@ -2,7 +2,7 @@
 
 nav_msgs/OccupancyGrid (/map) and visualization_msgs/MarkerArray of its walls (/map_markers).
 Message building only (no node); the cells are the world's occupancy grid
-(amr_common.occupancy_grid: the planner's and the particle filter's cells; values in the
+(amr_common.world.occupancy_grid: the planner's and the particle filter's cells; values in the
 OccupancyGrid convention, row 0 southmost).
 """
 from __future__ import annotations
@@ -86,13 +86,13 @@ def wall_markers(segments: np.ndarray, frame_id: str = "map", stamp: Time | None
 
 def world_map_messages(world, resolution: float, frame_id: str = "map",
                        stamp: Time | None = None) -> tuple[OccupancyGrid, MarkerArray]:
-    """/map and /map_markers of an amr_common.world.World.
+    """/map and /map_markers of an amr_common.world.world.World.
 
     /map: OccupancyGrid.from_world(world, resolution), the cells the planner and the filter use
     at that resolution. A map world's /map is its map's cells and values exactly (`resolution`
     does not apply).
     """
-    from amr_common.occupancy_grid import OccupancyGrid
+    from amr_common.world.occupancy_grid import OccupancyGrid
     raster = world.raster if world.raster is not None else \
         OccupancyGrid.from_world(world, resolution).raster()
     return (occupancy_grid(raster.values, raster.resolution, raster.origin, frame_id, stamp),

@@ -1,9 +1,10 @@
 """World files: the project's YAML worlds and the course's map JSON, read into a WorldFile.
 
 Three file formats load with `World.load(name_or_path)` (through `read_world_file`); the third,
-a Nav2 map_server map YAML (it has `image`, `resolution`, ...), is read by amr_common.map_file:
+a Nav2 map_server map YAML (it has `image`, `resolution`, ...), is read by
+amr_common.world.map_file:
 
-1. The project's own YAML world file (bundled ones live in amr_common/worlds/<name>.yaml and
+1. The project's own YAML world file (bundled ones live in amr_common/world/worlds/<name>.yaml and
    load by name, e.g. `World.load("lab02")`; any other file loads by path)::
 
        name: lab02               # optional, defaults to the file stem
@@ -19,7 +20,7 @@ a Nav2 map_server map YAML (it has `image`, `resolution`, ...), is read by amr_c
        starts:                   # optional named start poses [x, y, theta]
          outer: [1.0, -1.0, pi/2]  # theta in rad: a number or "pi", "pi/2", "3*pi/2", "-pi/4"
        goals:                    # optional named goals [x, y] (navigation targets, >= 0.135 m
-                                 # from every wall: amr_common.world.GOAL_CLEARANCE)
+                                 # from every wall: amr_common.world.world.GOAL_CLEARANCE)
          far_corner: [-1.0, 1.0]
        goal: far_corner          # optional default goal: [x, y] or a name of `goals`;
                                  # without it the first named goal is the default
@@ -43,7 +44,7 @@ coordinates, polylines with too few points, zero-length walls, a boundary or hol
 itself, a hole outside or across the boundary, start poses or goals outside the boundary, inside
 an obstacle or too close to a wall) raises WorldError naming the file; the checks against the
 walls (polygons, starts within the robot radius, goals within the planner's inflation
-GOAL_CLEARANCE = 0.135 m, no zero-length wall) are World's (amr_common.world).
+GOAL_CLEARANCE = 0.135 m, no zero-length wall) are World's (amr_common.world.world).
 """
 from __future__ import annotations
 
@@ -58,7 +59,7 @@ import numpy as np
 import yaml
 
 if TYPE_CHECKING:
-    from amr_common.map_file import MapFile
+    from amr_common.world.map_file import MapFile
 
 WORLDS_DIR = Path(__file__).resolve().parent / "worlds"
 
@@ -77,10 +78,10 @@ _WorldYamlLoader.add_implicit_resolver(
     list("-+0123456789."))
 
 
-# The keys of a Nav2 map YAML (amr_common.map_file); a world YAML has none of them.
+# The keys of a Nav2 map YAML (amr_common.world.map_file); a world YAML has none of them.
 NAV2_MAP_KEYS = ("image", "mode", "resolution", "origin", "negate", "occupied_thresh",
                  "free_thresh")
-# Keys a world YAML shares with a map YAML (a map's extras: amr_common.map_file).
+# Keys a world YAML shares with a map YAML (a map's extras: amr_common.world.map_file).
 PROJECT_KEYS = frozenset({"name", "description", "cell_size", "grid_origin", "starts", "goals",
                           "goal"})
 
@@ -118,7 +119,7 @@ def read_world_file(name_or_path: str | Path) -> WorldFile | MapFile:
     """Read a bundled world by name ("lab02") or a .yaml/.yml/.json file by path.
 
     A YAML with Nav2 map keys (`image`, `resolution`, ...) is a map: its MapFile
-    (amr_common.map_file).
+    (amr_common.world.map_file).
     """
     text = str(name_or_path)
     path = Path(text).expanduser()
@@ -148,7 +149,7 @@ def _from_yaml(raw: str, path: Path) -> WorldFile | MapFile:
     except yaml.YAMLError as exc:
         raise WorldError(f"{path}: invalid YAML: {' '.join(str(exc).split())}") from exc
     if isinstance(data, dict) and set(data) & set(NAV2_MAP_KEYS):  # a Nav2 map_server map
-        from amr_common.map_file import map_from_yaml  # it imports WorldError from here
+        from amr_common.world.map_file import map_from_yaml  # it imports WorldError from here
         return map_from_yaml(data, path)
     if not isinstance(data, dict):
         raise WorldError(f"{path}: expected a mapping with keys boundary, holes, walls, "
