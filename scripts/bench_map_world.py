@@ -27,7 +27,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from amr_common.world.map_file import world_as_map  # noqa: E402
+from amr_common.world.map_export import world_as_map  # noqa: E402
 from amr_common.world.map_raster import FREE, OCCUPIED, Raster  # noqa: E402
 from amr_common.world.raster_raycast import MarchGrid  # noqa: E402
 from amr_common.world.world import World  # noqa: E402

@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from amr_common.world.map_file import world_as_map, write_map
+from amr_common.world.map_export import world_as_map
+from amr_common.world.map_file import write_map
 from amr_common.world.map_vs_world import load_map, resolve_goal_on_map, start_warning
 from amr_common.world.world import World, WorldError
 from amr_evaluation.localization_episode import (

@@ -17,7 +17,8 @@ from visualization_msgs.msg import Marker
 from amr_common.ros.map_messages import grid_values, world_map_messages
 from amr_common.ros.qos import LATCHED
 from amr_common.world import occupancy_grid
-from amr_common.world.map_file import world_as_map, write_map
+from amr_common.world.map_export import world_as_map
+from amr_common.world.map_file import write_map
 from amr_common.world.map_raster import OCCUPIED, Raster
 from amr_common.world.world import World
 from amr_localization.expected_ranges import expected_range_table

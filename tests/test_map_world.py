@@ -15,7 +15,8 @@ import pytest
 from amr_common.robot import ROBOT_RADIUS
 from amr_common.ros.map_messages import grid_values, world_map_messages
 from amr_common.world.distance_transform import squared_edt, squared_edt_python
-from amr_common.world.map_file import read_map, world_as_map, write_map
+from amr_common.world.map_export import world_as_map
+from amr_common.world.map_file import read_map, write_map
 from amr_common.world.map_raster import Raster, boundary_segments
 from amr_common.world.occupancy_grid import OccupancyGrid
 from amr_common.world.raster_raycast import MarchGrid, march, march_python, scan_grid_kernel

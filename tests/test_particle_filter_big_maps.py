@@ -151,7 +151,8 @@ def test_the_pose_search_of_a_coarse_table_finds_the_exact_twin_in_corridor_loop
 
 def _map_world(tmp_path, name: str, resolution: float) -> World:
     """A bundled world as a Nav2 map (what scripts/world_to_map.py writes), loaded."""
-    from amr_common.world.map_file import world_as_map, write_map
+    from amr_common.world.map_export import world_as_map
+    from amr_common.world.map_file import write_map
     raster, extras = world_as_map(World.load(name), resolution)
     yaml_path, _ = write_map(raster, tmp_path / f"{name}_{100 * resolution:g}cm", "pgm", extras)
     return World.load(yaml_path)

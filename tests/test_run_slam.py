@@ -373,7 +373,7 @@ def test_the_report_leaves_out_counts_a_mapper_does_not_give():
     world = World.load("lab02")
     start = world.starts["inner"]
     trajectory = [[0.0, *start], [0.2, *start]]
-    from amr_common.world.map_file import world_as_map
+    from amr_common.world.map_export import world_as_map
     raster, _ = world_as_map(world, 0.02)
     report = sim_report.slam_fields(world, "turtlebot3", trajectory, [[0.2, *start]], raster,
                                     {}, 3.5, {})  # a mapper whose statistics() gives nothing

@@ -50,14 +50,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import yaml
-from PIL import Image, UnidentifiedImageError
 
 from amr_common.world.coverage_grid import GridTooLargeError, check_grid_size
 from amr_common.world.map_raster import FREE, OCCUPIED, UNKNOWN, Raster
-from amr_common.world.occupancy_grid import OccupancyGrid
 from amr_common.world.world_file import (
     NAV2_MAP_KEYS,
     PROJECT_KEYS,
+    MapYaml,
     WorldError,
     number_value,
     positive_number,
@@ -66,16 +65,13 @@ from amr_common.world.world_file import (
 )
 
 if TYPE_CHECKING:
-    from amr_common.world.world import World
+    from PIL import Image
 
 MODES = ("trinary", "scale", "raw")
 NAV2_KEYS = NAV2_MAP_KEYS  # what map_server reads (amr_common.world.world_file dispatches on them)
 # map_saver's trinary pixels and the thresholds it writes with them.
 OCCUPIED_PIXEL, FREE_PIXEL, UNKNOWN_PIXEL = 0, 254, 205
 SAVED_OCCUPIED_THRESH, SAVED_FREE_THRESH = 0.65, 0.196
-# Worlds converted to maps: 2 cm, this project's SLAM and planner cell (walls within 1 cm of
-# their place; slam_toolbox's 5 cm would narrow a 0.4 m corridor by 5 cm).
-CONVERT_RESOLUTION = 0.02
 _LOG = logging.getLogger(__name__)
 
 
@@ -106,10 +102,10 @@ class MapFile:
 def read_map(path: str | Path) -> MapFile:
     """Read a map YAML and its image (MapFileError if it is not one or is malformed)."""
     spec = read_world_file(Path(path))
-    if not isinstance(spec, MapFile):
+    if not isinstance(spec, MapYaml):
         raise MapFileError(f"{spec.path}: not a Nav2 map YAML (none of the keys "
                            f"{', '.join(NAV2_KEYS)})")
-    return spec
+    return map_from_yaml(spec.data, spec.path)
 
 
 def map_from_yaml(data: dict[str, Any], path: Path) -> MapFile:
@@ -192,6 +188,9 @@ def cell_values(gray: np.ndarray, alpha: np.ndarray | None, mode: str, negate: b
 def _read_image(image_path: Path, yaml_path: Path,
                 resolution: float) -> tuple[np.ndarray, np.ndarray | None]:
     """(8-bit gray, 8-bit alpha or None) of the image, rows as in the file (row 0 = top)."""
+    # Pillow only when an image is read or written: every process that loads a World imports
+    # this module, most never touch an image.
+    from PIL import Image, UnidentifiedImageError
     what = f"{yaml_path}: image {image_path}"
     if not image_path.is_file():
         raise MapFileError(f"{what} not found")
@@ -302,32 +301,6 @@ def write_map(raster: Raster, prefix: str | Path, image_format: str = "pgm",
     return yaml_path, image_path
 
 
-def world_as_map(world: World, resolution: float = CONVERT_RESOLUTION
-                 ) -> tuple[Raster, dict[str, Any]]:
-    """(cells, extras) of any amr_common.world.world.World as a map at `resolution` m per cell.
-
-    The cells are the world's occupancy grid (OccupancyGrid.from_world: cell centres on
-    multiples of the resolution, so a wall on such a line is one cell thick around its true
-    place, and the free space loses half a cell along each wall); the extras keep its name,
-    starts, goals and coverage grid (write_map(raster, prefix, extras=extras)).
-    """
-    raster = OccupancyGrid.from_world(world, resolution).raster()
-    grid_origin = world.grid_origin
-    if grid_origin is None and world.boundary is not None:  # the coverage grid's default
-        grid_origin = tuple(float(v) for v in world.boundary.min(axis=0))
-    extras: dict[str, Any] = {"name": world.name, "description": world.description or
-                              f"converted from {world.source}", "cell_size": world.cell_size}
-    if grid_origin is not None:
-        extras["grid_origin"] = list(grid_origin)
-    if world.starts:
-        extras["starts"] = world.starts
-    if world.goals:
-        extras["goals"] = world.goals
-    if world.goal is not None and world.goal != next(iter(world.goals.values()), None):
-        extras["goal"] = world.goal
-    return raster, extras
-
-
 def _write_image(stream, pixels: np.ndarray, image_format: str, resolution: float) -> None:
     if image_format == "pgm":
         height, width = pixels.shape
@@ -335,6 +308,7 @@ def _write_image(stream, pixels: np.ndarray, image_format: str, resolution: floa
                      f"{width} {height}\n255\n".encode("ascii"))
         stream.write(pixels.tobytes())
     else:
+        from PIL import Image
         Image.fromarray(pixels, mode="L").save(stream, format="PNG")
 
 
@@ -359,5 +333,5 @@ def _plain(value: Any) -> Any:
     return value
 
 
-__all__ = ["CONVERT_RESOLUTION", "MODES", "MapFile", "MapFileError", "cell_values",
-           "map_from_yaml", "read_map", "trinary_pixels", "world_as_map", "write_map"]
+__all__ = ["MODES", "MapFile", "MapFileError", "cell_values", "map_from_yaml", "read_map",
+           "trinary_pixels", "write_map"]

@@ -36,7 +36,6 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -44,9 +43,7 @@ from amr_common.world.cell_grid import CellIndexing, cell_index
 from amr_common.world.coverage_grid import box_slices, check_grid_size, inside_polygon_grid
 from amr_common.world.distance_transform import free_cell_clearances
 from amr_common.world.map_raster import FREE, OCCUPIED, UNKNOWN, Raster
-
-if TYPE_CHECKING:  # world.py builds on the modules this one imports
-    from amr_common.world.world import World
+from amr_common.world.world import World
 
 
 @dataclass(frozen=True)

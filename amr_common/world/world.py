@@ -34,6 +34,7 @@ import numpy as np
 
 from amr_common.robot import ROBOT_RADIUS
 from amr_common.world.coverage_grid import CoverageGrid, build_coverage_grid, inside_polygon_points
+from amr_common.world.map_file import map_from_yaml
 from amr_common.world.map_raster import Raster, boundary_segments
 from amr_common.world.polygons import (
     check_polygons,
@@ -85,6 +86,7 @@ class World:
         spec = read_world_file(name_or_path)
         if isinstance(spec, WorldFile):
             return cls._from_file(spec)
+        spec = map_from_yaml(spec.data, spec.path)  # a Nav2 map YAML: its keys and image
         return cls.from_raster(spec.raster, name=spec.name, source=str(spec.path),
                                starts=spec.starts, goals=spec.goals, goal=spec.goal,
                                cell_size=spec.cell_size, description=spec.description,

@@ -1,8 +1,8 @@
 """World files: the project's YAML worlds and the course's map JSON, read into a WorldFile.
 
 Three file formats load with `World.load(name_or_path)` (through `read_world_file`); the third,
-a Nav2 map_server map YAML (it has `image`, `resolution`, ...), is read by
-amr_common.world.map_file:
+a Nav2 map_server map YAML (it has `image`, `resolution`, ...), is recognised here and handed on
+as parsed YAML (a MapYaml): its keys and image are read by amr_common.world.map_file.
 
 1. The project's own YAML world file (bundled ones live in amr_common/world/worlds/<name>.yaml and
    load by name, e.g. `World.load("lab02")`; any other file loads by path)::
@@ -53,13 +53,10 @@ import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import yaml
-
-if TYPE_CHECKING:
-    from amr_common.world.map_file import MapFile
 
 WORLDS_DIR = Path(__file__).resolve().parent / "worlds"
 
@@ -115,11 +112,19 @@ class WorldFile:
     grid_origin: tuple[float, float] | None = None
 
 
-def read_world_file(name_or_path: str | Path) -> WorldFile | MapFile:
+@dataclass(frozen=True)
+class MapYaml:
+    """A YAML with Nav2 map keys: a map parsed as YAML only (read by amr_common.world.map_file)."""
+
+    path: Path
+    data: dict[str, Any]
+
+
+def read_world_file(name_or_path: str | Path) -> WorldFile | MapYaml:
     """Read a bundled world by name ("lab02") or a .yaml/.yml/.json file by path.
 
-    A YAML with Nav2 map keys (`image`, `resolution`, ...) is a map: its MapFile
-    (amr_common.world.map_file).
+    A YAML with Nav2 map keys (`image`, `resolution`, ...) is a map: its MapYaml, whose keys
+    and image amr_common.world.map_file reads (map_from_yaml).
     """
     text = str(name_or_path)
     path = Path(text).expanduser()
@@ -143,14 +148,13 @@ def read_world_file(name_or_path: str | Path) -> WorldFile | MapFile:
     return _from_yaml(raw, path)
 
 
-def _from_yaml(raw: str, path: Path) -> WorldFile | MapFile:
+def _from_yaml(raw: str, path: Path) -> WorldFile | MapYaml:
     try:
         data = yaml.load(raw, Loader=_WorldYamlLoader)
     except yaml.YAMLError as exc:
         raise WorldError(f"{path}: invalid YAML: {' '.join(str(exc).split())}") from exc
     if isinstance(data, dict) and set(data) & set(NAV2_MAP_KEYS):  # a Nav2 map_server map
-        from amr_common.world.map_file import map_from_yaml  # it imports WorldError from here
-        return map_from_yaml(data, path)
+        return MapYaml(path, data)
     if not isinstance(data, dict):
         raise WorldError(f"{path}: expected a mapping with keys boundary, holes, walls, "
                          f"starts, ... (or a Nav2 map YAML with 'image')")
