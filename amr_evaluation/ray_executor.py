@@ -205,7 +205,8 @@ class RayExecutor:
         """
         self.connect()
         if self._workers is None:  # kept for later runs of this executor (close() ends them)
-            self._workers = WorkerSet(self)
+            self._workers = WorkerSet(self._ray, self._worker_class, self.keep_workers_s,
+                                      self.runtime_env, self.cluster_cpus)
         pool = self._workers
         pool.new_run(tuple(preload))
         waiting = deque(enumerate(specs))

@@ -9,12 +9,9 @@ from __future__ import annotations
 import time
 import uuid
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any, Callable
 
 from amr_evaluation.ray_workers import NAMESPACE, WARM_PREFIX, warm_workers, worker_key
-
-if TYPE_CHECKING:
-    from amr_evaluation.ray_executor import RayExecutor
 
 
 def import_hint(cause: BaseException | str) -> str:
@@ -51,12 +48,18 @@ class WorkerLost:
 class WorkerSet:
     """The EpisodeWorkers of one run: ready, starting, and the node each one runs on."""
 
-    def __init__(self, executor: "RayExecutor") -> None:
-        self.ray, self.preload = executor._ray, ()
-        self._executor = executor
-        self._class = executor._worker_class
-        self._keep_s = executor.keep_workers_s
-        self._key = worker_key(executor.runtime_env)
+    def __init__(self, ray: Any, worker_class: Any, keep_workers_s: float,
+                 runtime_env: dict | None, cluster_cpus: Callable[[], int]) -> None:
+        """The workers of a RayExecutor: its connected `ray`, its EpisodeWorker actor class.
+
+        `keep_workers_s` and `runtime_env` as the executor's; `cluster_cpus()` counts the
+        CPUs of the cluster's alive nodes.
+        """
+        self.ray, self.preload = ray, ()
+        self._cluster_cpus = cluster_cpus
+        self._class = worker_class
+        self._keep_s = keep_workers_s
+        self._key = worker_key(runtime_env)
         self.ready: list[Any] = []  # started, alive
         self.starting: dict[Any, Any] = {}  # ready() ref -> worker
         # actor id -> node id, kept after a worker is discarded (its loss message asks)
@@ -83,7 +86,7 @@ class WorkerSet:
         if self.failure:
             return
         if time.monotonic() - self._checked > 2.0:  # nodes may come and go
-            self._cpus, self._checked = self._executor.cluster_cpus(), time.monotonic()
+            self._cpus, self._checked = self._cluster_cpus(), time.monotonic()
         while len(self._handles) < min(self._cpus, episodes_left):
             if self._keep_s:
                 worker = self._class.options(

@@ -5,12 +5,16 @@ and the scripts sit above them. amr_tools (whole programs: Foxglove bridge, map 
 recorder, introspection) imports only the shared layer, like an algorithm, and nothing below the
 scripts imports it. examples/ (a student's links) sits on top like the scripts: it imports only
 the shared layer (a replacement needs nothing else), and nothing of the project imports it.
+No amr_* module imports itself through others (an import circle), whether the imports sit at
+the top of a module, in a function or under TYPE_CHECKING: a circle is a layering inside a
+package that nobody can read top-down, and a lazy import only hides it.
 """
 from __future__ import annotations
 
 import ast
 import subprocess
 import sys
+from collections import deque
 from pathlib import Path
 
 import pytest
@@ -38,6 +42,118 @@ def imported_amr_packages(package: str) -> dict[str, set[str]]:
         found[str(path.relative_to(REPO))] = {n for n in names
                                               if n.startswith("amr_") or n == EXAMPLES}
     return found
+
+
+def _module_name(root: Path, path: Path) -> str:
+    parts = path.relative_to(root).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def import_graph(root: Path) -> dict[str, set[str]]:
+    """{amr_* module: the amr_* modules it imports} of the packages in `root`.
+
+    Every import statement counts (module top level, functions, TYPE_CHECKING blocks).
+    `from package import name` is an import of the module package.name when there is one, else
+    of the package; relative imports are resolved against the importing module's package.
+    """
+    files = {_module_name(root, path): path
+             for package in sorted(root.glob("amr_*/__init__.py"))
+             for path in sorted(package.parent.rglob("*.py"))}
+    graph: dict[str, set[str]] = {}
+    for module, path in files.items():
+        package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+        targets: set[str] = set()
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), filename=str(path))):
+            if isinstance(node, ast.Import):
+                for alias in node.names:
+                    parts = alias.name.split(".")
+                    targets.update([".".join(parts[:n]) for n in range(len(parts), 0, -1)
+                                    if ".".join(parts[:n]) in files][:1])
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    anchor = package.split(".")[:len(package.split(".")) - (node.level - 1)]
+                    base = ".".join(anchor + ([node.module] if node.module else []))
+                for alias in node.names:
+                    if f"{base}.{alias.name}" in files:
+                        targets.add(f"{base}.{alias.name}")
+                    elif base in files:
+                        targets.add(base)
+        graph[module] = targets - {module}
+    return graph
+
+
+def import_circles(graph: dict[str, set[str]]) -> list[tuple[list[str], set[str]]]:
+    """(a circle [a, b, ..., a], its group) for each group of modules that import each other.
+
+    A group: modules each of which imports every other through the others (a strongly
+    connected component); the circle is the shortest one from its first module.
+    """
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    groups: list[set[str]] = []
+
+    def visit(module: str) -> None:  # Tarjan's strongly connected components
+        index[module] = low[module] = len(index)
+        stack.append(module)
+        for target in sorted(graph.get(module, ())):
+            if target not in index:
+                visit(target)
+                low[module] = min(low[module], low[target])
+            elif target in stack:
+                low[module] = min(low[module], index[target])
+        if low[module] == index[module]:
+            group = set()
+            while True:
+                member = stack.pop()
+                group.add(member)
+                if member == module:
+                    break
+            if len(group) > 1:
+                groups.append(group)
+
+    for module in sorted(graph):
+        if module not in index:
+            visit(module)
+    circles = []
+    for group in groups:  # the shortest way from the group's first module back to it
+        start = min(group)
+        paths = {start: [start]}
+        queue = deque([start])
+        while queue:
+            module = queue.popleft()
+            if start in graph[module]:
+                circles.append((paths[module] + [start], group))
+                break
+            for target in sorted(graph[module] & group):
+                if target not in paths:
+                    paths[target] = paths[module] + [target]
+                    queue.append(target)
+    return circles
+
+
+def test_no_import_circle_among_the_amr_modules():
+    circles = import_circles(import_graph(REPO))
+    assert not circles, "import circles:\n" + "\n".join(
+        f"{' -> '.join(circle)} (in a group of {len(group)}: {', '.join(sorted(group))})"
+        for circle, group in circles)
+
+
+def test_the_circle_check_finds_a_circle_through_a_function_and_a_relative_import(tmp_path):
+    package = tmp_path / "amr_made_up"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "maps.py").write_text("from amr_made_up.worlds import World\n")
+    (package / "worlds.py").write_text("def load():\n    from .files import read\n")
+    (package / "files.py").write_text("import amr_made_up.maps as maps\n")
+    (package / "plain.py").write_text("from amr_made_up import files\n")  # into it, not in it
+    graph = import_graph(tmp_path)
+    assert graph["amr_made_up.plain"] == {"amr_made_up.files"}
+    names = ["amr_made_up.files", "amr_made_up.maps", "amr_made_up.worlds"]
+    assert import_circles(graph) == [([*names, "amr_made_up.files"], set(names))]
+    (package / "worlds.py").write_text("def load():\n    return None\n")
+    assert import_circles(import_graph(tmp_path)) == []
 
 
 def test_shared_layer_imports_only_itself():
