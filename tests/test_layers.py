@@ -5,9 +5,11 @@ and the scripts sit above them. amr_tools (whole programs: Foxglove bridge, map 
 recorder, introspection) imports only the shared layer, like an algorithm, and nothing below the
 scripts imports it. examples/ (a student's links) sits on top like the scripts: it imports only
 the shared layer (a replacement needs nothing else), and nothing of the project imports it.
-No amr_* module imports itself through others (an import circle), whether the imports sit at
-the top of a module, in a function or under TYPE_CHECKING: a circle is a layering inside a
-package that nobody can read top-down, and a lazy import only hides it.
+Inside amr_common, only its ros/ subpackage imports ROS (rclpy, message packages): interfaces,
+worlds and sensor models stay plain Python. No amr_* module imports itself through others (an
+import circle), whether the imports sit at the top of a module, in a function or under
+TYPE_CHECKING: a circle is a layering inside a package that nobody can read top-down, and a
+lazy import only hides it.
 """
 from __future__ import annotations
 
@@ -159,6 +161,19 @@ def test_the_circle_check_finds_a_circle_through_a_function_and_a_relative_impor
 def test_shared_layer_imports_only_itself():
     for module, names in imported_amr_packages(SHARED).items():
         assert names <= {SHARED}, f"{module} imports {sorted(names - {SHARED})}"
+
+
+def test_only_the_shared_layers_ros_subpackage_imports_ros():
+    for path in sorted((REPO / SHARED).rglob("*.py")):
+        if path.relative_to(REPO / SHARED).parts[0] == "ros":
+            continue
+        tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+        names = {alias.name.split(".")[0] for node in ast.walk(tree)
+                 if isinstance(node, ast.Import) for alias in node.names}
+        names |= {node.module.split(".")[0] for node in ast.walk(tree)
+                  if isinstance(node, ast.ImportFrom) and node.module and node.level == 0}
+        ros = sorted(n for n in names if n in ("rclpy", "tf2_ros") or n.endswith("_msgs"))
+        assert not ros, f"{path.relative_to(REPO)} imports {ros}: its home is {SHARED}/ros/"
 
 
 @pytest.mark.parametrize("package", [p for p in ALGORITHM_PACKAGES if (REPO / p).is_dir()])

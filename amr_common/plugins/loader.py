@@ -34,7 +34,7 @@ _SIGNATURES = {"compute_commands": "compute_commands(z_scan, z_v, z_w)"}
 
 
 class PluginSpecError(ValueError):
-    """A class spec (any link) cannot be loaded; the message says why."""
+    """A plug-in's spec (MODULE:CLASS of any link) or its overrides cannot be used; says why."""
 
 
 def load_class(spec: str, link: str = "controller") -> type:
