@@ -15,7 +15,9 @@ from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parent.parent
+# The checkout's root, wherever in tests/ this file sits.
+REPO = next(folder for folder in Path(__file__).resolve().parents
+            if (folder / "pyproject.toml").is_file())
 README = REPO / "README.md"
 MAX_README_LINES = 400
 # Folders that hold no text of this project: environments, build output, other projects' code.
