@@ -5,7 +5,8 @@ robot's pose history, interpolated), adds the datasheet's systematic error and G
 the ray's distance band, drops rays at random (more at grazing incidence and long range) and,
 for the LDS-02, bins irregular samples into a scan whose ray count and angle_min change from scan
 to scan, as ld08_driver does. The ray loop is one compiled kernel (amr_common.jit) with a numpy
-twin (`scan_rays_numpy`) that gives the same results.
+twin (`scan_rays_numpy`) that gives the same results. On a big map (World.wall_grid) each scan
+is cast against the walls within the scanner's reach only (those its valid rays can hit).
 """
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ import numpy as np
 
 from amr_common.jit import HAVE_NUMBA, jit
 from amr_common.lidar_models import LidarModel
+from amr_common.raster_raycast import SegmentGrid
 from amr_common.raycast import cast_rays_kernel, cast_rays_numpy
 from amr_sim.effects import Effects
 from amr_sim.profiles import SensorProfile
@@ -252,10 +254,13 @@ class RealLidar:
     """
 
     def __init__(self, segments: np.ndarray, profile: SensorProfile, effects: Effects,
-                 rng: np.random.Generator, dt: float = 0.05, use_numba: bool = True) -> None:
+                 rng: np.random.Generator, dt: float = 0.05, use_numba: bool = True,
+                 grid: SegmentGrid | None = None) -> None:
+        """`grid`: the walls in buckets (a big map): each scan casts against those in reach."""
         model = profile.lidar_model
         self.model = model
         self.segments = np.ascontiguousarray(segments, dtype=np.float64)
+        self._grid = grid
         self.bands = band_table(model, effects)
         params = np.zeros(N_PARAMS)
         params[SKEW_S] = model.revolution_s if effects.scan_skew else 0.0
@@ -307,11 +312,26 @@ class RealLidar:
         params[T_END] = t_end
         n = len(angles)
         out = np.empty(n)
-        self._kernel(self.segments, self.history, self._head, angles,
+        self._kernel(self._walls_in_reach(), self.history, self._head, angles,
                      np.cos(angles) if cos is None else cos,
                      np.sin(angles) if sin is None else sin, self.bands, params,
                      self._rng.standard_normal(n), self._rng.random(n, dtype=np.float32), out)
         return out
+
+    def _walls_in_reach(self) -> np.ndarray:
+        """The walls a valid ray of the next scan can hit (all of them without a grid).
+
+        A ray's range counts only up to sensing_max, from where the LiDAR was during the
+        revolution (the poses in the history): the walls within sensing_max of the newest pose
+        plus the farthest the others are from it. The ranges of those rays are exact; the
+        others read no return in any case.
+        """
+        if self._grid is None:
+            return self.segments
+        newest = self.history[self._head, 1:3]
+        spread = float(np.max(np.hypot(*(self.history[:, 1:3] - newest).T)))
+        return np.ascontiguousarray(self._grid.segments[self._grid.near(
+            newest[0], newest[1], self.model.sensing_max + spread + 1e-6)])
 
     def scan(self, t_end: float) -> np.ndarray:
         """The scan whose revolution ends at t_end (the driver's stamp)."""
@@ -347,7 +367,7 @@ class RealLidar:
         count = min(int(TWO_PI / spacing) + 1, most)
         params[T_END] = t_end
         out, angle_min, rays = self._ld08_kernel(
-            self.segments, self.history, self._head, float(uniform[-1]), spacing, count,
+            self._walls_in_reach(), self.history, self._head, float(uniform[-1]), spacing, count,
             increment, self.bands, params, gauss, uniform)
         self.geometry = (float(angle_min), increment, int(rays))
         return out
