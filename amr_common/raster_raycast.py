@@ -22,6 +22,8 @@ kernel's own arithmetic (raycast.segment_hit), so it finds exactly the range tha
 wall finds; a disc query lists the walls near a point. For walls that are not a map's free-cell
 edges (the particle filter's walls inside a map's occupied cells, map_raster.
 likely_wall_segments) and for the simulator's contacts on big maps (the walls near the robot).
+
+Long: both grids' kernels and their plain twins in one home, so that a ray walks a grid one way.
 """
 from __future__ import annotations
 
@@ -31,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from amr_common.jit import jit
+from amr_common.polygons import squared_segment_distances
 from amr_common.raycast import segment_hit, segment_offset
 
 FREE_CELL, BORDER = 1, 2
@@ -182,8 +185,8 @@ class SegmentGrid:
     def build(cls, segments: np.ndarray, size: float | None = None) -> "SegmentGrid":
         """The grid of these walls, buckets of `size` m (default: ~4 walls per bucket).
 
-        Coarser if need be: at most _MAX_BUCKETS buckets, and listings that stay within a few
-        times the walls (long slanted walls touch many buckets with their bounding boxes).
+        Coarser if need be: at most _MAX_BUCKETS buckets, and listings within a few times the
+        walls (long slanted walls touch many buckets with their bounding boxes).
         """
         walls = np.ascontiguousarray(np.asarray(segments, dtype=np.float64).reshape(-1, 4))
         lo = np.minimum(walls[:, :2], walls[:, 2:]) - _LIST_EPS
@@ -219,11 +222,21 @@ class SegmentGrid:
                 self.ny)
 
     def near(self, x: float, y: float, radius: float) -> np.ndarray:
-        """Indices (ascending) of the walls within `radius` of (x, y)."""
-        out = np.empty(len(self.segments), dtype=np.int64)
-        stamp = np.zeros(len(self.segments), dtype=np.int64)
-        count = walls_near(*self.arrays, float(x), float(y), -1.0, float(radius), stamp, 1, out)
-        return np.sort(out[:count])
+        """Indices (ascending) of the walls within `radius` of (x, y).
+
+        The buckets' listings (a slice of `items` per row of buckets), then exact distances.
+        """
+        c0, c1 = (min(max(int(math.floor((v - self.x0) / self.size)), 0), self.nx - 1)
+                  for v in (x - radius, x + radius))
+        r0, r1 = (min(max(int(math.floor((v - self.y0) / self.size)), 0), self.ny - 1)
+                  for v in (y - radius, y + radius))
+        rows = np.arange(r0, r1 + 1) * self.nx
+        found = np.unique(np.concatenate([self.items[self.starts[b + c0]:self.starts[b + c1 + 1]]
+                                          for b in rows]))
+        with np.errstate(divide="ignore", invalid="ignore"):  # a point wall: NaN, never near
+            distance = np.sqrt(squared_segment_distances(self.segments[found], float(x),
+                                                         float(y)))
+        return found[distance <= radius].astype(np.int64)
 
     def clearances(self, points: np.ndarray) -> np.ndarray:
         """Distance (m) from each point of a (K, 2) array to the nearest wall."""
@@ -279,12 +292,11 @@ def clearances_through_buckets_python(segments, starts, items, x0, y0, size, nx,
                                       out):
     """Distance from each point of a (K, 2) array to the nearest wall, written into out.
 
-    The buckets around a point's own are searched in growing square rings; a wall listed only
-    in ring r or beyond is more than r - 1 buckets away (its nearest point lies in a bucket
-    that lists it), so the search ends once the nearest found is that close (raycast.
-    segment_offset's distances: those of raycast.clearances_python, exactly). A point off the
-    buckets starts from the nearest point of the buckets' box, d away from it: a wall more than
-    D from that point is more than sqrt(D^2 + d^2) from the point itself.
+    The buckets around a point's own are searched in growing square rings; a wall listed only in
+    ring r or beyond is more than r - 1 buckets away (its nearest point lies in a bucket that
+    lists it): the search ends once the nearest found is that close (clearances_python's
+    distances, exactly). A point off the buckets starts from the nearest point of their box, d
+    away: a wall more than D from that point is more than sqrt(D^2 + d^2) from the point.
     """
     for i in range(points.shape[0]):
         px = points[i, 0]
@@ -369,7 +381,29 @@ def cast_through_buckets_python(segments, starts, items, x0, y0, size, nx, ny, o
 cast_through_buckets = jit(cast_through_buckets_python)
 
 
-__all__ = ["BORDER", "FREE_CELL", "MarchGrid", "SegmentGrid", "cast_through_buckets",
+def cast_rays_through_buckets_python(segments, starts, items, x0, y0, size, nx, ny, ox, oy, dx,
+                                     dy, out_range, out_cos):
+    """raycast.cast_rays_python through the buckets: ray i from (ox[i], oy[i]) along dx, dy[i].
+
+    Ranges (inf for none) and |cos| of the incidence (0 without a hit); the ranges by
+    scan_python's arithmetic (cast_rays_python's differs in the last bits).
+    """
+    for i in range(ox.shape[0]):
+        t, k = cast_through_buckets(segments, starts, items, x0, y0, size, nx, ny, ox[i], oy[i],
+                                    dx[i], dy[i])
+        out_range[i] = t
+        out_cos[i] = 0.0
+        if k >= 0:
+            ex = segments[k, 2] - segments[k, 0]
+            ey = segments[k, 3] - segments[k, 1]
+            out_cos[i] = abs(dx[i] * ey - dy[i] * ex) * (1.0 / math.sqrt(ex * ex + ey * ey))
+
+
+cast_rays_through_buckets = jit(cast_rays_through_buckets_python)
+
+
+__all__ = ["BORDER", "FREE_CELL", "MarchGrid", "SegmentGrid", "cast_rays_through_buckets",
+           "cast_rays_through_buckets_python", "cast_through_buckets",
            "cast_through_buckets_python", "clearances_through_buckets",
            "clearances_through_buckets_python", "march", "march_python", "scan_grid_kernel",
            "scan_grid_python", "walls_near", "walls_near_python"]

@@ -191,6 +191,7 @@ def test_a_big_maps_simulator_holds_only_the_walls_near_the_robot_with_the_same_
 
 @pytest.mark.parametrize("profile", ["turtlebot3", "turtlebot3_lds02"])
 def test_the_real_scanner_on_a_big_map_reads_what_every_wall_gives(monkeypatch, profile):
+    """Its rays walk the walls' buckets: the same readings (ranges to the last bits)."""
     from amr_sim.simulator import Simulator
     world = speckled_world(150, 0.02, seed=5)
     scans = []
@@ -201,7 +202,45 @@ def test_the_real_scanner_on_a_big_map_reads_what_every_wall_gives(monkeypatch, 
         for i in range(30):
             sim.step(0.1, 0.5)
         scans.append(sim.last_scan)
-    assert np.array_equal(scans[0], scans[1], equal_nan=True)
+        assert (len(sim.lidar.walls[1]) > 0) != every_wall  # buckets, then none
+    returns = [np.isfinite(scan) & (scan > 0.0) for scan in scans]  # no return: NaN or 0.0
+    assert np.array_equal(returns[0], returns[1]) and 0 < returns[0].sum() < len(scans[0])
+    np.testing.assert_allclose(scans[0], scans[1], rtol=0, atol=1e-9)
+
+
+def test_the_real_scanners_kernel_through_buckets_and_its_twins_agree():
+    from amr_common.raster_raycast import (
+        SegmentGrid,
+        cast_rays_through_buckets,
+        cast_rays_through_buckets_python,
+    )
+    from amr_common.raycast import cast_rays_kernel
+    from amr_sim.lidar_effects import scan_rays_kernel, scan_rays_numpy
+    from amr_sim.simulator import Simulator
+    world = speckled_world(120, 0.03, seed=9)
+    grid = SegmentGrid.build(world.segments)
+    rng = np.random.default_rng(2)
+    ox, oy = rng.uniform(0.1, 2.3, (2, 300))
+    headings = rng.uniform(-math.pi, math.pi, 300)
+    out = [(np.empty(300), np.empty(300)) for _ in range(3)]
+    cast_rays_kernel(world.segments, ox, oy, np.cos(headings), np.sin(headings), *out[0])
+    for kernel, (ranges, cos) in zip((cast_rays_through_buckets,
+                                      cast_rays_through_buckets_python), out[1:]):
+        kernel(*grid.arrays, ox, oy, np.cos(headings), np.sin(headings), ranges, cos)
+        np.testing.assert_allclose(ranges, out[0][0], rtol=1e-12)
+        np.testing.assert_allclose(cos, out[0][1], rtol=0, atol=1e-9)
+    sim = Simulator(world, start="centre", profile="turtlebot3", seed=4)
+    for k in range(13):
+        sim.step(0.2, 2.0 * math.sin(k))
+    lidar = sim.lidar
+    gauss, uniform = rng.standard_normal(360), rng.random(360, dtype=np.float32)
+    args = (lidar.walls, lidar.history, lidar._head, lidar.angles, lidar._cos, lidar._sin,
+            lidar.bands, lidar.params, gauss, uniform)
+    fast, slow = np.empty(360), np.empty(360)
+    scan_rays_kernel(*args, fast)
+    scan_rays_numpy(*args, slow)
+    np.testing.assert_allclose(fast, slow, rtol=0, atol=1e-12)
+    assert (fast > 0.0).sum() > 100
 
 
 def test_a_map_of_millions_of_walls_gets_no_wall_markers_its_map_shows_them():
