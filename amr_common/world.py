@@ -12,6 +12,9 @@ A map world (a Nav2 map YAML, or `World.from_raster` on a map SLAM built) keeps 
 and non-free cells (amr_common.map_raster.boundary_segments), and the occupancy grid of the
 planner, the particle filter and /map is the map's own cells.
 
+A world file's movers (amr_common.movers: round obstacles that walk) are in `movers`, apart from
+the walls: the simulator moves them; the planner, the particle filter and /map never see them.
+
 A World answers the geometric questions of the simulator, the planner, the filter and the
 metrics: clearances, free space, start and goal poses, the coverage grid.
 
@@ -22,7 +25,8 @@ so a path to it never leaves the planner's free space. A start only needs the ro
 Every problem (missing file, unknown name, bad YAML/JSON, missing keys, non-numeric or non-finite
 coordinates, polylines with too few points, zero-length walls, self-crossing polygons, holes
 outside or across the boundary, start poses or goals outside the boundary, inside an obstacle
-or too close to a wall) raises WorldError naming the file.
+or too close to a wall, a mover's bad values or a path leaving the boundary) raises WorldError
+naming the file.
 """
 from __future__ import annotations
 
@@ -34,6 +38,7 @@ import numpy as np
 
 from .coverage_grid import CoverageGrid, build_coverage_grid, inside_polygon_points
 from .map_raster import Raster, boundary_segments
+from .movers import Mover, mover_path_problem
 from .polygons import check_polygons, closed_segments, point_in_polygon, squared_segment_distances
 from .raster_raycast import MarchGrid
 from .raycast import clearances_into
@@ -72,6 +77,7 @@ class World:
     _grids: dict = field(default_factory=dict, init=False, repr=False, compare=False)
     goals: dict[str, tuple[float, float]] = field(default_factory=dict)  # named goals
     raster: Raster | None = None  # a map world's cells (free: value 0), else None
+    movers: tuple[Mover, ...] = ()  # round obstacles that walk: the simulated world only
 
     # ------------------------------------------------------------------ loading
     @classmethod
@@ -119,10 +125,14 @@ class World:
             raise WorldError(f"{path}: zero-length wall at ({x1:g}, {y1:g}) (repeated point in "
                              f"a polyline)")
         check_polygons(spec)
+        for mover in spec.movers:
+            problem = mover_path_problem(mover, spec.boundary)
+            if problem is not None:
+                raise WorldError(f"{path}: {problem}")
         world = cls(name=spec.name, source=str(path), segments=segments, starts=spec.starts,
                     goal=spec.goal, cell_size=spec.cell_size, description=spec.description,
                     boundary=spec.boundary, holes=spec.holes, goals=dict(spec.goals),
-                    grid_origin=spec.grid_origin)
+                    grid_origin=spec.grid_origin, movers=spec.movers)
         world._check_named_poses()
         return world
 

@@ -23,10 +23,15 @@ a Nav2 map_server map YAML (it has `image`, `resolution`, ...), is read by amr_c
          far_corner: [-1.0, 1.0]
        goal: far_corner          # optional default goal: [x, y] or a name of `goals`;
                                  # without it the first named goal is the default
+       movers:                   # optional round obstacles that walk (amr_common.movers):
+         - {radius: 0.2, path: [[x, y], ...], speed: 0.4}  # back and forth along the path
+         - {radius: 0.2, path: [[x, y], ...], speed: 0.3, loop: true, start_s: 5}
 
    Coordinates are metres in the world frame (REP 103: x east, y north, theta CCW from x).
    A closed polyline may repeat its first point at the end; it is closed either way.
    Numbers may be written 1e-6 (YAML 1.1 alone would read that as a string).
+   Movers are the simulated world only: walls, /map, the planner and the filter never see
+   them, and a world file given as a map (--map) has them dropped.
 
 2. The course's map JSON, by path: `{"metric": {"boundary": [[x, y], ...], "holes": [[[x, y],
    ...], ...]}}` (boundary = outer closed polyline, each hole = a closed obstacle polyline).
@@ -41,9 +46,11 @@ a Nav2 map_server map YAML (it has `image`, `resolution`, ...), is read by amr_c
 Every problem (missing file, unknown name, bad YAML/JSON, missing keys, non-numeric or non-finite
 coordinates, polylines with too few points, zero-length walls, a boundary or hole that crosses
 itself, a hole outside or across the boundary, start poses or goals outside the boundary, inside
-an obstacle or too close to a wall) raises WorldError naming the file; the checks against the
+an obstacle or too close to a wall, a mover with a bad radius, path, speed, loop or start_s, or
+whose path leaves the boundary) raises WorldError naming the file (and the mover); the checks
+against the
 walls (polygons, starts within the robot radius, goals within the planner's inflation
-GOAL_CLEARANCE = 0.135 m, no zero-length wall) are World's (amr_common.world).
+GOAL_CLEARANCE = 0.135 m, no zero-length wall, movers' paths) are World's (amr_common.world).
 """
 from __future__ import annotations
 
@@ -56,6 +63,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import yaml
+
+from .movers import Mover, movers_from_file
 
 if TYPE_CHECKING:
     from amr_common.map_file import MapFile
@@ -112,6 +121,7 @@ class WorldFile:
     cell_size: float = 0.4
     description: str = ""
     grid_origin: tuple[float, float] | None = None
+    movers: tuple[Mover, ...] = ()  # round obstacles that walk (amr_common.movers)
 
 
 def read_world_file(name_or_path: str | Path) -> WorldFile | MapFile:
@@ -153,7 +163,7 @@ def _from_yaml(raw: str, path: Path) -> WorldFile | MapFile:
     if not isinstance(data, dict):
         raise WorldError(f"{path}: expected a mapping with keys boundary, holes, walls, "
                          f"starts, ... (or a Nav2 map YAML with 'image')")
-    known = {"boundary", "holes", "walls"} | PROJECT_KEYS
+    known = {"boundary", "holes", "walls", "movers"} | PROJECT_KEYS
     unknown = set(data) - known
     if unknown:
         raise WorldError(f"{path}: unknown key(s) {sorted(unknown)}; allowed: {sorted(known)}")
@@ -165,6 +175,7 @@ def _from_yaml(raw: str, path: Path) -> WorldFile | MapFile:
     walls = [_polyline(w, path, f"walls[{i}]", closed=False)
              for i, w in enumerate(_as_list(data.get("walls", []), path, "walls"))]
     return WorldFile(path=path, boundary=boundary, holes=holes, walls=walls,
+                     movers=movers_from_file(data.get("movers"), path),
                      **project_values(data, path))
 
 
