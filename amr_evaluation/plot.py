@@ -106,15 +106,22 @@ def draw_movers(ax, world: World, times: Sequence[float] = (0.0,),
                                          linestyles=":", linewidths=1.2, zorder=2.5,
                                          label="movers (path, where at t)" if i == 0 else None))
         mover_waits = waits[i] if waits is not None and i < len(waits) else None
+        labels: list[tuple[float, float, list[str]]] = []  # one per place (a mover may return)
         for k, t in enumerate(times):
             x, y = mover.position_at(walked_time(t, mover_waits))
             disc = _circle(x, y, mover.radius)
             alpha = 0.15 + 0.45 * (k + 1) / len(times)
             ax.fill(disc[:, 0], disc[:, 1], color=_MOVER_COLOUR, alpha=alpha, zorder=2.6,
                     linewidth=0)
-            if len(times) > 1:
-                ax.annotate(f"{t:.0f}s", (x, y), ha="center", va="center", fontsize=6,
-                            color="black", zorder=2.7)
+            near = [label for label in labels if math.dist(label[:2], (x, y)) < 0.5 * mover.radius]
+            if near:
+                near[0][2].append(f"{t:.0f}")
+            else:
+                labels.append((x, y, [f"{t:.0f}"]))
+        if len(times) > 1:
+            for x, y, texts in labels:
+                ax.annotate(", ".join(texts) + " s", (x, y), ha="center", va="center",
+                            fontsize=6, color="black", zorder=2.7)
 
 
 def snapshot_times(trajectory: np.ndarray, count: int = MOVER_SNAPSHOTS) -> list[float]:
