@@ -4,12 +4,14 @@
 # amr_msgs (and tf2_msgs) when their sources changed, and compiles the numba kernels into
 # their cache when their sources changed (so the first run is as fast as the next). `make
 # test` also installs the cluster extra (Ray, requirements-cluster.lock: ~560 MB, ~30 s) so
-# the Ray tests run; `make run` does not need it.
+# the Ray tests run, and the docs extra (MkDocs, requirements-docs.lock: ~110 MB) to build the
+# manual; `make run` needs neither.
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 DEPS_STAMP := $(VENV)/.stamp-deps
 CLUSTER_STAMP := $(VENV)/.stamp-cluster
+DOCS_STAMP := $(VENV)/.stamp-docs
 MSGS_STAMP := $(VENV)/.stamp-amr_msgs
 MSGS_SOURCES := $(wildcard amr_msgs/msg/*.msg amr_msgs/srv/*.srv) amr_msgs/CMakeLists.txt amr_msgs/package.xml \
 	tools/cmake/ros_pypi_wheels.cmake tools/build_amr_msgs.py
@@ -35,8 +37,12 @@ LOCAL_ROS := ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 run: $(MSGS_STAMP) $(NUMBA_STAMP)
 	$(LOCAL_ROS) $(PY) scripts/run_sim.py $(ARGS)
 
-test: $(MSGS_STAMP) $(CLUSTER_STAMP) $(NUMBA_STAMP)
+# The manual is built after the linter and before pytest: a broken link or anchor fails the run
+# within seconds (mkdocs --strict), and the site lands in site/ (not tracked). The variable
+# silences Material for MkDocs' notice of its end of life (May 2027; docs/dependencies.md).
+test: $(MSGS_STAMP) $(CLUSTER_STAMP) $(DOCS_STAMP) $(NUMBA_STAMP)
 	$(PY) -m ruff check .
+	NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict --quiet
 	$(LOCAL_ROS) $(PY) -m pytest $(PYTEST_ARGS)
 
 bench: $(MSGS_STAMP) $(NUMBA_STAMP)
@@ -55,6 +61,11 @@ $(DEPS_STAMP): requirements.lock pyproject.toml | $(PY)
 $(CLUSTER_STAMP): $(DEPS_STAMP) requirements-cluster.lock
 	$(PY) -m pip install --disable-pip-version-check -q -r requirements-cluster.lock \
 		-c requirements.lock
+	touch $@
+
+$(DOCS_STAMP): $(CLUSTER_STAMP) requirements-docs.lock
+	$(PY) -m pip install --disable-pip-version-check -q -r requirements-docs.lock \
+		-c requirements.lock -c requirements-cluster.lock
 	touch $@
 
 $(TF2_STAMP): $(DEPS_STAMP) $(TF2_SOURCES)
@@ -78,8 +89,13 @@ lock: | $(PY)
 	build/lock-venv/bin/python tools/pin_requirements.py > requirements.lock
 	build/lock-venv/bin/pip install -q -r requirements-cluster.in -c requirements.lock
 	build/lock-venv/bin/python tools/pin_requirements.py --exclude requirements.lock \
-		> requirements-cluster.lock
+		--source "requirements-cluster.in on top of requirements.lock" > requirements-cluster.lock
+	build/lock-venv/bin/pip install -q -r requirements-docs.in -c requirements.lock \
+		-c requirements-cluster.lock
+	build/lock-venv/bin/python tools/pin_requirements.py --exclude requirements.lock \
+		--exclude requirements-cluster.lock \
+		--source "requirements-docs.in on top of both locks" > requirements-docs.lock
 	rm -rf build/lock-venv
 
 clean:
-	rm -rf $(VENV) build
+	rm -rf $(VENV) build site

@@ -7,7 +7,7 @@
 
 Needs the optional `cluster` extra (`pip install -e .[cluster]`, or requirements-cluster.lock);
 nothing else in the project imports Ray. Every node's workers must import this project from the
-same venv path (or a runtime_env that installs it): see README "Sweep on a cluster".
+same venv path (or a runtime_env that installs it): see docs/tune.md, "Sweep on a cluster".
 
 Episodes run on EpisodeWorker actors of 1 CPU each (amr_evaluation/ray_workers.py), one
 episode at a time per worker, as many workers as the cluster has CPUs. Joining a running

@@ -20,8 +20,8 @@ if TYPE_CHECKING:
 def import_hint(cause: BaseException | str) -> str:
     """A hint when the workers cannot import this project."""
     text = cause if isinstance(cause, str) else type(cause).__name__
-    return (" (do the cluster's workers import this project? see README 'Sweep on a "
-            "cluster')") if ("ImportError" in text or "ModuleNotFoundError" in text) else ""
+    return (" (do the cluster's workers import this project? see docs/tune.md, 'Sweep "
+            "on a cluster')") if ("ImportError" in text or "ModuleNotFoundError" in text) else ""
 
 
 def two_lines(exc: BaseException) -> str:

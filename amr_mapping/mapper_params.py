@@ -185,7 +185,7 @@ def range_error_parameters(lidar_model: str) -> dict[str, Any]:
     Smooth the noise along straight walls by the model's precision, and keep only each wall's
     most-hit cells within 8 cm, hit at least 3 times, as occupied: measured under the
     simulator's reality gap
-    (README "Mapping figures"). 'none': {} (the defaults: exact ranges). The unit's own
+    (docs/slam.md, "Mapping figures"). 'none': {} (the defaults: exact ranges). The unit's own
     calibration, range_correction, comes on top.
     """
     if lidar_model == "none":

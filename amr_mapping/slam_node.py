@@ -1,7 +1,7 @@
 """The `slam` lifecycle node (`amr_slam`): /scan + the odometry pose -> /map, map -> odom, pose.
 
-Online graph SLAM (amr_mapping.mapper.Mapper) for users coming from slam_toolbox (README, "The
-slam node and the mapping runs", has the why of each choice):
+Online graph SLAM (amr_mapping.mapper.Mapper) for users coming from slam_toolbox (docs/slam.md,
+"The slam node and the mapping runs", has the why of each choice):
 
     .venv/bin/amr_slam --ros-args -p autostart:=true -p output_prefix:=$HOME/maps/room
     ros2 service call /slam/save_map amr_msgs/srv/SaveMap "{name: $HOME/maps/room}"

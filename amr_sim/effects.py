@@ -97,7 +97,8 @@ EFFECTS: dict[str, EffectSpec] = {
     "imu_yaw_drift_deg_per_min": EffectSpec(
         0.5, (-2.0, 2.0), (-360.0, 360.0), "deg/min",
         "drift of the IMU heading that the real /odom uses (odometry.use_imu: true)",
-        "turtlebot3 issues #655, #819 (yaw drifts at rest); MEMS gyro after calibration: "
+        "github.com/ROBOTIS-GIT/turtlebot3/issues/655 and /819 (yaw drifts at rest); MEMS gyro "
+        "after calibration: "
         "1-2 deg/min"),
     # --- real time only (the simulator node's timer mode) ----------------------------------
     "scan_loss_share": EffectSpec(

@@ -6,8 +6,8 @@ step. `turtlebot3_clean` imitates the interfaces of the real TurtleBot3 Burger w
 360 rays at 1 deg from base_scan, 32 mm behind the robot centre, 0.12-3.5 m, 0.0 for no return,
 Gaussian range noise (sigma 0.01 m), a new scan every 0.2 s (5 Hz), /odom with a pose only at
 20 Hz, and commands quantised like turtlebot3_node (int(v * 100) / 100) and limited to 0.22 m/s
-and 2.84 rad/s. It was called `turtlebot3` until issue 21: the figures measured before were
-measured with it.
+and 2.84 rad/s. It was called `turtlebot3` before the reality-gap profiles: the figures
+measured before were measured with it.
 
 `turtlebot3` is the Burger as a user gets it: `turtlebot3_clean` with every reality-gap effect
 at its typical value (amr_sim.effects, docs/reality-gap.md: LDS-01 range error and noise by

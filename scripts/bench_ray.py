@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """evaluate.py on a local Ray instance against the local process pool, measured in the same run.
 
-The same episodes (default 24 of 300 s: README's baseline, lab02, maze_deadends and
+The same episodes (default 24 of 300 s: the baseline of docs/tune.md, lab02, maze_deadends and
 room_obstacles from every start with the turtlebot3_clean profile, seeds 0-2) are run by whole
 `evaluate.py` processes, as a user runs them, in four ways:
 - `evaluate.py` (the local pool of --jobs processes),
@@ -45,8 +45,8 @@ SLOTS = (("pool",), ("ray_started",), ("ray_joined_cold", "ray_joined_warm"))  #
 def evaluate_args(episodes: int, duration: float) -> list[str]:
     """evaluate.py options for `episodes` episodes (a multiple of 8).
 
-    README's baseline (lab02, maze_deadends, room_obstacles: 8 starts; turtlebot3_clean) with seeds
-    0, 1, ...
+    docs/tune.md's baseline (lab02, maze_deadends, room_obstacles: 8 starts; turtlebot3_clean)
+    with seeds 0, 1, ...
     """
     if episodes < 8 or episodes % 8:
         raise SystemExit("--episodes must be a multiple of 8 (8 starts per seed)")

@@ -1,11 +1,11 @@
 """A Ray cluster on loopback for the tests (the `ray_cluster` fixture in conftest.py).
 
-A head node without CPUs (it only coordinates, as on a real cluster) and one worker node with
-two CPUs, every Ray process bound to 127.0.0.1; this test process is connected to it as the
-driver. Its node processes are children of this process, started from this venv's Python: the
-workers import the project from the same venv path, the set-up README "Sweep on a cluster"
-describes. Nodes are declared dead after ~2 s of missed health checks (Ray's default ~15 s), so
-node-loss tests stay short. Ray start-up takes a few seconds: one cluster per test session.
+A head node without CPUs (it only coordinates, as on a real cluster) and one worker node with two
+CPUs, every Ray process bound to 127.0.0.1; this test process is connected to it as the driver. Its
+node processes are children of this process, started from this venv's Python: the workers import
+the project from the same venv path, the set-up docs/tune.md "Sweep on a cluster" describes. Nodes
+are declared dead after ~2 s of missed health checks (Ray's default ~15 s), so node-loss tests stay
+short. Ray start-up takes a few seconds: one cluster per test session.
 
 Every Ray instance of the test session (this cluster, `evaluate.py --ray` in a subprocess)
 authenticates with the session's own token (use_session_ray_token, called by conftest.py

@@ -1,6 +1,6 @@
 """`.ci/run`: the README's test command as a newcomer runs it, with a fresh empty HOME.
 
-Issue 18: the suite passed where an earlier run had left `~/.ray/auth_token` and failed on a
+The suite once passed where an earlier run had left `~/.ray/auth_token` and failed on a
 new machine; CI now runs `make test` with HOME a new empty folder it removes afterwards.
 (Here with a stand-in `make` on PATH that notes what it was given: the suite itself is the
 command, it cannot run inside itself.)

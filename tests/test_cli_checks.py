@@ -225,7 +225,7 @@ def test_run_robot_checks_the_same_way(capsys, argv, message):
     _robot_fails_with(capsys, argv, message)
 
 
-# --- a map too big for the particle filter (issue 18 #9) -------------------------------------
+# --- a map too big for the particle filter ----------------------------------------------------
 # Refused only when the filter configured (exit 1, after the nodes started); now one line, exit
 # code 2, before anything runs, saying what it would need; with the filter's own parameters
 # (a node parameter such as slop is not the filter's); a run without the filter is not refused.

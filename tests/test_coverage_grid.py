@@ -1,4 +1,4 @@
-"""The coverage grid behind "explored" and "laps" (issue 10, B7 / B12).
+"""The coverage grid behind "explored" and "laps".
 
 Aligned with the map, rasterized (big and fine worlds report in seconds), bounded with a clear
 error, and a metric that cannot be computed is reported as such while the rest of the report

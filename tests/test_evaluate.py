@@ -54,7 +54,7 @@ def test_bad_inputs_are_one_line_errors_with_exit_code_2(capsys, tmp_path, monke
               "--ray-keep-workers must be a number of seconds >= 0, got -1"),
              (["--ray", "127.0.0.1:1", "--ray-keep-workers", "nan"],
               "--ray-keep-workers must be a number of seconds >= 0, got nan"),
-             # Issue 18 #6: --jobs with a cluster's address was silently ignored.
+             # --jobs with a cluster's address was once silently ignored.
              (["--ray", "127.0.0.1:1"], "--jobs 1 sets the CPUs of a local Ray instance (--ray "
                                         "without an address): with --ray ADDRESS"),
              (["--ray", "auto"], "with --ray ADDRESS the cluster's CPUs run the episodes")]
@@ -66,7 +66,7 @@ def test_bad_inputs_are_one_line_errors_with_exit_code_2(capsys, tmp_path, monke
 
 
 def test_evaluate_finishes_when_worker_processes_die(capsys, tmp_path):
-    """Issue 10 B8: it used to wait forever for the episode of a worker that died."""
+    """It used to wait forever for the episode of a worker that died."""
     out = tmp_path / "out"
     code = evaluate.main(["--worlds", "lab02", "--starts", "outer,inner", "--duration", "1",
                           "--jobs", "2", "--no-sheet", "--out", str(out),
@@ -92,7 +92,7 @@ def test_the_local_pool_imports_no_ray(tmp_path):
 
 def test_options_that_would_be_ignored_or_mean_nothing_are_one_line_errors(capsys, tmp_path,
                                                                           course_map):
-    """Issue 18 #11: each was accepted (and ignored, or read as 'all'/'none') or crashed."""
+    """Each was once accepted (and ignored, or read as 'all'/'none') or crashed."""
     cases = [(["--localize", "--kidnap-at", "-5"], "--kidnap-at must be a time within the "
                                                    "episode (0 < T < 1 s), got -5"),
              (["--localize", "--kidnap-at", "0"], "(0 < T < 1 s), got 0"),
@@ -123,7 +123,7 @@ def test_options_that_would_be_ignored_or_mean_nothing_are_one_line_errors(capsy
 
 def test_a_hanging_or_crashing_controller_is_its_episodes_error_with_the_results_written(
         capsys, tmp_path):
-    """Issue 18 #8: a sleeping controller hung evaluate.py (--out stayed empty).
+    """A sleeping controller used to hang evaluate.py (--out stayed empty).
 
     And a single episode ran in evaluate.py's own process, which the controller's os._exit
     ended: no results at all.
@@ -156,7 +156,7 @@ def test_a_hanging_or_crashing_controller_is_its_episodes_error_with_the_results
                                      ["--localize", "--pf-param", "initial_pose:=[0.05,20,0]"]])
 def test_a_map_too_big_for_the_filter_is_refused_before_anything_runs(capsys, tmp_path,
                                                                       big_floor, options):
-    """Issue 18 #9: the episodes failed one by one when their filter was built."""
+    """A map too big for the filter: the episodes used to fail one by one as it was built."""
     code, out, err = _evaluate(capsys, "--worlds", str(big_floor), *options, "--out",
                                str(tmp_path / "out"))
     assert code == 2 and len(err.strip().splitlines()) == 1, err

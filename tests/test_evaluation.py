@@ -393,7 +393,7 @@ def test_episodes_tell_the_controller_where_the_profiles_lidar_is(profile, param
     assert outcome.error is None
     assert LidarAwareController.received == [expected]
 
-# --- controllers that end their process or command garbage (issue 10, B8) ------------------
+# --- controllers that end their process or command garbage ---------------------------------
 # A dead worker is that episode's error and the others still run; NaN or non-number commands
 # are counted per episode and fail the verdict.
 
@@ -470,7 +470,7 @@ def _misbehaving(how: str) -> EpisodeSpec:
 
 
 def test_an_episode_past_its_time_limit_is_its_error_and_the_others_still_run():
-    """Issue 18 #8: a controller that sleeps forever hung the whole evaluation."""
+    """A controller that sleeps forever used to hang the whole evaluation."""
     specs = [_misbehaving("none"), _misbehaving("sleep"), _misbehaving("exit"),
              _misbehaving("none"), _misbehaving("sleep"), _misbehaving("none")]
     seen = []
@@ -488,7 +488,7 @@ def test_an_episode_past_its_time_limit_is_its_error_and_the_others_still_run():
 @pytest.mark.parametrize("how, error", [("sleep", "ran past its wall-clock limit of 2 s"),
                                         ("exit", "worker process died (exit code 7)")])
 def test_a_single_episode_is_protected_too(how, error):
-    """Issue 18 #8: one episode (or --jobs 1) ran in this process: os._exit ended it."""
+    """One episode (or --jobs 1) used to run in this process: os._exit ended it."""
     (outcome,) = run_episodes([_misbehaving(how)], jobs=1, episode_timeout_s=2.0)
     assert outcome.result is None and error in outcome.error
     assert os.getpid() == _PID  # still here

@@ -52,7 +52,7 @@ def test_quaternion_to_yaw_of_general_rotations_matches_transforms3d():
 
 @pytest.mark.parametrize("scale", [3.0, 1e-5, 1e300, 1e-300 * 1e299])
 def test_non_unit_quaternions_keep_their_yaw(scale):
-    """A 1e300-norm quaternion used to overflow the norm and give a wrong yaw (issue 10 B11)."""
+    """A 1e300-norm quaternion used to overflow the norm and give a wrong yaw ."""
     x, y, z, w = yaw_to_quaternion(0.7)
     assert quaternion_to_yaw(x * scale, y * scale, z * scale, w * scale) == pytest.approx(0.7)
 

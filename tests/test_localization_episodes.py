@@ -1,11 +1,11 @@
 """End to end without ROS: the wall follower explores, the particle filter localizes.
 
-End to end without ROS: the wall follower explores, the particle filter localizes (the same
-classes as the nodes). Global localization on every bundled world in both profiles, the exactly
-symmetric world that must never be declared, and kidnapping. The large sweep behind the
-README's figures is `scripts/evaluate.py --localize`; these runs are its small, fixed sample
-(`turtlebot3` here is the Burger with the reality gap's effects; the README's figures were
-measured with the clean model, `turtlebot3_clean`).
+End to end without ROS: the wall follower explores, the particle filter localizes (the same classes
+as the nodes). Global localization on every bundled world in both profiles, the exactly symmetric
+world that must never be declared, and kidnapping. The large sweep behind the manual's figures
+(docs/localize.md) is `scripts/evaluate.py --localize`; these runs are its small, fixed sample
+(`turtlebot3` here is the Burger with the reality gap's effects; the manual's figures were measured
+with the clean model, `turtlebot3_clean`).
 """
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from amr_common.world import World, bundled_worlds
 from amr_evaluation.localization_episode import localization_metrics, run_localization_episode
 
 # One start per world; lab02's is the inner maze (its outer ring is four-fold symmetric but for
-# one opening: there the filter waits a lap, see the README).
+# one opening: there the filter waits a lap, see docs/localize.md).
 STARTS = {"lab02": "inner", "maze_deadends": "centre", "room_obstacles": "north_east",
           "wide_maze": "middle", "twin_maze": "south_west", "twin_maze_small": "north_west"}
 DURATION_S = 40.0

@@ -1,10 +1,10 @@
-"""The particle filter on a real scanner and on maps that are not polygons (issues 19 and 21).
+"""The particle filter on a real scanner and on maps that are not polygons (SLAM maps, Nav2 maps).
 
 The sensor model (range_sensor: tolerances and sigmas by the datasheet's distance bands, missing
-returns unknown), scan de-skewing against an analytic moving-robot scan, where a map's walls
-most likely are (likely_wall_segments), and short episodes under the reality gap and on a Nav2
-map and a SLAM map of the world. The large sweeps behind the README's and docs/reality-gap.md's
-figures are `scripts/evaluate.py --localize`; these are their small, fixed sample.
+returns unknown), scan de-skewing against an analytic moving-robot scan, where a map's walls most
+likely are (likely_wall_segments), and short episodes under the reality gap and on a Nav2 map and a
+SLAM map of the world. The large sweeps behind docs/localize.md's and docs/reality-gap.md's figures
+are `scripts/evaluate.py --localize`; these are their small, fixed sample.
 """
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ from amr_localization.particle_filter import ParticleFilter
 from amr_localization.particle_filter_params import check_parameters
 from amr_localization.range_sensor import RangeSensor, lidar_model_for
 
-TRACKING_MEAN_M, TRACKING_MAX_M = 0.02, 0.08  # issue 21's figures under the effects
+TRACKING_MEAN_M, TRACKING_MAX_M = 0.02, 0.08  # the targets under the reality gap's effects
 
 
 def _cast(segments: np.ndarray, ox, oy, directions) -> np.ndarray:
@@ -250,9 +250,9 @@ def _check_episode(result, within_s: float) -> None:
 def test_the_filter_localizes_under_the_reality_gap(profile, seed):
     """Every LiDAR effect drawn from the seed: localized, never falsely, tracked within 2/8 cm.
 
-    Range error and noise by band, skew, dropouts, the LDS-02's changing rays: within issue
-    21's tracking figures. Before the sensor model and de-skewing, these never localized
-    (docs/reality-gap.md).
+    Range error and noise by band, skew, dropouts, the LDS-02's changing rays: within the
+    tracking targets under the reality gap. Before the sensor model and de-skewing, these never
+    localized (docs/reality-gap.md).
     """
     result = run_localization_episode("lab02", "inner", profile=profile, seed=seed,
                                       duration=20.0, record=False)
@@ -261,7 +261,7 @@ def test_the_filter_localizes_under_the_reality_gap(profile, seed):
 
 @pytest.mark.slow
 def test_the_filter_localizes_on_a_slam_map_of_the_world():
-    """The round trip of issue 19: map lab02 by SLAM, localize on that map in the true world.
+    """The SLAM round trip: map lab02 by SLAM, localize on that map in the true world.
 
     SLAM marks both cells around a wall; the filter expected the walls on the map's free edges
     (2 cm short), and the true pose explained 66 % of the rays: it never localized.

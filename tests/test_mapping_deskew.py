@@ -1,4 +1,4 @@
-"""The Mapper de-skews a real LiDAR's scans with the odometry (issue 21 part 3, SLAM).
+"""The Mapper de-skews a real LiDAR's scans with the odometry (SLAM under the reality gap).
 
 A Burger's LiDAR measures its rays clockwise over the 0.2 s before the scan's stamp: while the
 robot turns, the pose at the stamp explains the early rays badly. Synthetic scans of a known

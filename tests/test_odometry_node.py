@@ -182,7 +182,7 @@ def test_velocities_of_the_cyclone_dds_emulated_robot(ros, tmp_path):
 
 
 def test_huge_quaternions_and_implausible_stamps_never_publish_absurd_velocities(ros, capfd):
-    """Issue 10 B11: only the Burger's possible velocities come out.
+    """Only the Burger's possible velocities come out.
 
     A 1e300-norm quaternion keeps its yaw, stamps 1 ns apart are skipped and a pose jump is
     not a speed.

@@ -325,7 +325,7 @@ def test_parameters_are_checked_with_every_problem_named():
                                          ("kld_bin_xy_m", 1e-9), ("cluster_angle_rad", 1e-12),
                                          ("table_resolution_m", 1e-4), ("noise_w_per_v", 1e9)])
 def test_values_that_would_cost_absurd_memory_or_time_are_refused(name, value):
-    """Caught by the checks run scripts call before starting the nodes (issue 18, item 6).
+    """Caught by the checks run scripts call before starting the nodes .
 
     max_particles 1e8 spent 75 s in configure; tiny KLD or cluster bins allocated histograms
     beyond the machine's memory.
@@ -370,7 +370,7 @@ def test_adaptive_count_shrinks_when_tracking():
     assert ParticleFilter(world).particle_count == 8000
 
 
-# --- hostile initial poses (issue 18, item 1) ------------------------------------------------
+# --- hostile initial poses --------------------------------------------------------------------
 
 def test_dominant_cluster_of_particles_spread_over_kilometres():
     """A histogram over the particles' extent must not grow with it (was a MemoryError)."""

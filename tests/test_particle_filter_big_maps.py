@@ -1,4 +1,4 @@
-"""The particle filter on big maps (issue 18, item 9): the table it can afford, or a refusal.
+"""The particle filter on big maps: the table it can afford, or a refusal.
 
 The expected-range table grows with the free area: a 40 x 40 m office floor gets 4 cm cells and
 180 directions within max_memory_mb (the old 2 cm x 360 table would need ~2.9 GB; the old code
@@ -194,7 +194,7 @@ def test_a_map_world_too_big_is_refused_with_its_own_grids_figure(tmp_path, reso
     assert plans[-1].table_bytes == table.nbytes
 
 
-# --- the exhaustive pose search of a big map, a slice per scan (issue 18 #9 follow-up) --------
+# --- the exhaustive pose search of a big map, a slice per scan ---------------------------------
 # On the 40 x 40 m floor the search (885,000 positions, ~3 s of CPU) ran in one correct() call:
 # at the first scan of a global search and before each declaration the node answered nothing
 # for seconds while the robot drove on its last command. Now each call scores at most

@@ -118,7 +118,7 @@ def test_replans_from_the_relocalized_pose(ros):
 
 
 def test_a_pose_stamped_far_in_the_future_does_not_stick(ros):
-    """The planner keeps no stamp order that one bad stamp could block (issue 18, item 7).
+    """The planner keeps no stamp order that one bad stamp could block .
 
     After a pose stamped 11 days ahead, a /goal_pose plans from the newest pose that arrived,
     and the path carries that pose's stamp (the pursuit forgets a path stamped far beyond a

@@ -1,6 +1,6 @@
 """tools/precompile.py and the Makefile step: numba's kernels are compiled at set-up.
 
-Issue 18 #14: the first run after `make setup` spent ~15 s (a quiet machine) compiling the
+The first run after `make setup` used to spend ~15 s (a quiet machine) compiling the
 kernels. The set-up now runs every kernel once (their cache files are written), again whenever
 a file they are compiled from changes.
 """

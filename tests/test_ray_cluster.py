@@ -1,6 +1,6 @@
 """The test session's Ray cluster (tests/ray_cluster.py) on a machine where Ray never ran.
 
-Issue 18: with an empty HOME (no `~/.ray/auth_token`), every test on the `ray_cluster` fixture
+With an empty HOME (no `~/.ray/auth_token`), every test on the `ray_cluster` fixture once
 errored at set-up (Ray's GCS aborts without a token); it passed only where an earlier
 `evaluate.py --ray` had written one. The session now brings its own token, and never reads or
 writes the user's `~/.ray`.

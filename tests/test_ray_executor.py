@@ -1,10 +1,10 @@
 """evaluate.py --ray: episodes as Ray tasks give the local pool's results, and survive losses.
 
 On the `ray_cluster` fixture (tests/ray_cluster.py): a head without CPUs and one worker node on
-127.0.0.1, started from this venv (the shared-venv set-up of README "Sweep on a cluster"), this
-process the driver. Every metric of every episode is compared with the local process pool's
-run of the same episodes; a worker process killed mid-episode is retried, a second death and
-a lost node are survived, and a cluster without CPUs ends the sweep with errors, not a hang.
+127.0.0.1, started from this venv (the shared-venv set-up of docs/tune.md "Sweep on a cluster"),
+this process the driver. Every metric of every episode is compared with the local process pool's
+run of the same episodes; a worker process killed mid-episode is retried, a second death and a lost
+node are survived, and a cluster without CPUs ends the sweep with errors, not a hang.
 """
 from __future__ import annotations
 
@@ -197,7 +197,7 @@ def test_a_worker_killed_mid_episode_is_retried_and_a_second_death_reported(ray_
 
 def test_an_episode_past_its_time_limit_ends_its_ray_worker_and_the_others_still_run(
         ray_cluster):
-    """Issue 18 #8: a controller sleeping forever hung the sweep on Ray too."""
+    """A controller sleeping forever used to hang the sweep on Ray too."""
     hows = ["none", "sleep", "none", "none", "sleep", "none"]
     specs = [EpisodeSpec("lab02", "outer", seed=k, duration=1.0,
                          controller="tests.controllers:Misbehaves", params={"how": how})
@@ -283,8 +283,8 @@ def _free_port() -> int:
         return sock.getsockname()[1]
 
 
-def test_the_readmes_ray_start_recipe_works_from_an_empty_home(tmp_path, ray_processes_end):
-    """README "Sweep on a cluster", on this machine: a token, `ray start --head`, `--ray auto`.
+def test_the_manuals_ray_start_recipe_works_from_an_empty_home(tmp_path, ray_processes_end):
+    """docs/tune.md "Sweep on a cluster" here: a token, `ray start --head`, `--ray auto`.
 
     As a newcomer: HOME empty, no Ray variables. A Ray temporary folder of its own, so `auto`
     finds this head, not another Ray on the machine (short: Ray's socket paths are limited).
@@ -332,5 +332,5 @@ def test_the_readmes_ray_start_recipe_works_from_an_empty_home(tmp_path, ray_pro
     assert f"on the Ray cluster at 127.0.0.1:{port}: 1 CPUs on 1 node(s)" in proc.stdout
     assert refused.returncode == 2, refused.stdout + refused.stderr
     assert "a cluster with token authentication needs" in refused.stderr.splitlines()[-1]
-    assert sorted(p.name for p in home.iterdir()) == [".ray"]  # the token, as the README says
+    assert sorted(p.name for p in home.iterdir()) == [".ray"]  # the token, as the manual says
     assert len((home / ".ray" / "auth_token").read_text()) == 64

@@ -58,7 +58,8 @@ def test_clean_profiles_are_unchanged(profile, expected):
 
 def test_turtlebot3_clean_is_the_old_turtlebot3_and_turtlebot3_has_every_effect():
     clean, burger = get_profile("turtlebot3_clean"), get_profile("turtlebot3")
-    # The clean model's fields as `turtlebot3` had them before issue 21 (bar the name).
+    # The clean model's fields as `turtlebot3` had them before the reality-gap profiles (bar the
+    # name).
     assert dataclasses.asdict(clean) == {
         "name": "turtlebot3_clean", "scan_rays": 360, "angle_min": 0.0,
         "angle_increment": 2.0 * math.pi / 360, "range_min": 0.12, "range_max": 3.5,

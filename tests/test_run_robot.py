@@ -88,7 +88,7 @@ def test_robot_graph_drives_the_emulated_robot_and_stops_when_scans_stop(ros, tm
     assert all(c["linear"][0] == 0.0 and c["angular"][2] == 0.0 for c in late), late[:3]
 
 
-# Ctrl-C at any moment of start-up (issue 18 #7): during the imports it was a KeyboardInterrupt
+# Ctrl-C at any moment of start-up: during the imports it used to be a KeyboardInterrupt
 # traceback, and once the graph ran the exit code was 0. Each moment: exit code 130, no
 # traceback; a controller that had been configured sends its zero command on the way down (the
 # robot keeps its last command), and a zero is the last command the test hears; nothing at all

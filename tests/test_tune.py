@@ -91,7 +91,7 @@ def test_default_objective_picks_the_fastest_speed_that_does_not_hit_the_wall(
 
 def test_a_controller_that_hangs_or_ends_its_process_is_a_bad_episode_of_its_trial(
         ray_cluster, tmp_path, capsys):
-    """Issue 18 #8: a sleeping controller hung tune.py.
+    """A sleeping controller used to hang tune.py.
 
     One that ended its process lost the trial (twice: Tune retried it). Now each is its
     episode's error, and the trial is scored.
@@ -161,7 +161,7 @@ def test_bad_tune_options_are_one_line_errors(capsys, tmp_path, big_floor):
                           (["--space", "kp=1,2", "--objective", "nowhere:f"],
                            "No module named 'nowhere'"),
                           ([], "give at least one --space"),
-                          # Issue 18 #11: a huge grid hung, then died with a traceback; the
+                          # A huge grid used to hang, then die with a traceback; the
                           # searcher-only options were ignored by a grid search.
                           (["--space", "kp=1:10:100000000"], "N must be an integer from 2 to "
                                                              "10000, got 100000000"),
@@ -181,7 +181,7 @@ def test_bad_tune_options_are_one_line_errors(capsys, tmp_path, big_floor):
                            "--kidnap-at needs --localize"),
                           (["--space", "kp=1,2", "--ray", "127.0.0.1:1", "--jobs", "2"],
                            "with --ray ADDRESS the cluster's CPUs run the episodes"),
-                          # Issue 18 #9: navigation episodes run the particle filter.
+                          # Navigation episodes run the particle filter: a map too big for it.
                           (["--space", "kp=1,2", "--worlds", str(big_floor), "--goals",
                             "along"], "map is too big for the particle filter")]:
         code = tune.main(["--worlds", "lab02", "--duration", "1", *argv,

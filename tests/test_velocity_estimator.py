@@ -186,7 +186,7 @@ def test_bad_parameters_raise(kwargs):
         VelocityEstimator(**kwargs)
 
 
-# ---- implausible intervals and speeds (issue 10, B11) ---------------------------------------
+# ---- implausible intervals and speeds -------------------------------------------------------
 def test_stamps_a_nanosecond_apart_are_skipped_not_turned_into_megametres_per_second():
     estimator = VelocityEstimator()
     estimator.update(0.0, 0.0, *quaternion(0.0), 1_000_000_000)

@@ -81,7 +81,7 @@ def test_a_late_stopping_drive_still_turns_into_the_side_corridor(start, seed):
     assert result.collisions == 0
 
 
-# ---- physically impossible odometry and repeated bad input (issue 10, B4 / B11) ------------
+# ---- physically impossible odometry and repeated bad input ----------------------------------
 def lab02_run(corrupt_at=None, bad=(0.0, 0.0), repeat=1, steps=800):
     """Drive lab02's outer corridor; odometry replaced by `bad` for `repeat` steps."""
     from amr_common.world import World

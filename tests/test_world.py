@@ -78,7 +78,7 @@ GOOD = "boundary: [[0, 0], [2, 0], [2, 2], [0, 2]]\n"
 
 
 def test_numbers_with_an_exponent_and_no_dot_are_numbers(tmp_path):
-    """YAML 1.1 reads 1e-6 as a string; a world file means the number (issue 10, B11)."""
+    """YAML 1.1 reads 1e-6 as a string; a world file means the number."""
     path = tmp_path / "exponents.yaml"
     path.write_text("cell_size: 4e-1\nboundary: [[0, 0], [2E0, 0], [2, 2], [-1e-6, 2]]\n"
                     "starts: {a: [1, +1e0, 1e-6], b: [1.5e0, 1.5, -2.5E-1]}\n")

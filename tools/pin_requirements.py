@@ -4,9 +4,11 @@
 (action_msgs, rclpy, ...) that look like distributions but do not exist on PyPI. Only
 distributions that pip itself installed are pinned, never this project itself.
 
-`--exclude FILE` leaves out the distributions FILE pins: requirements-cluster.lock holds only
-what the cluster extra adds to requirements.lock.
+`--exclude FILE` (repeatable) leaves out the distributions FILE pins: requirements-cluster.lock
+holds only what the cluster extra adds to requirements.lock, requirements-docs.lock only what
+the manual's build adds to both. `--source TEXT` names what was resolved in the header line.
 """
+import argparse
 import json
 import re
 import subprocess
@@ -23,16 +25,19 @@ def _normal(name):
     return re.sub(r"[-_.]+", "-", name.strip()).lower()
 
 
-args = sys.argv[1:]
-excluded = _names(args[1]) if args[:1] == ["--exclude"] else set()
-excluded |= {"pip", "amr-wall-following"}
+parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+parser.add_argument("--exclude", action="append", default=[], metavar="FILE")
+parser.add_argument("--source", default=None, metavar="TEXT")
+args = parser.parse_args()
+excluded = {"pip", "amr-wall-following"}
+for path in args.exclude:
+    excluded |= _names(path)
 report = json.loads(subprocess.run([sys.executable, "-m", "pip", "inspect"], check=True,
                                    capture_output=True, text=True).stdout)
 pins = sorted((p["metadata"]["name"], p["metadata"]["version"]) for p in report["installed"]
               if p.get("installer") == "pip"
               and _normal(p["metadata"]["name"]) not in excluded)
-what = ("requirements-cluster.in on top of requirements.lock" if len(args) > 1
-        else "requirements.in resolved")
+what = args.source or "requirements.in resolved"
 print(f"# Pinned environment ({what} by `make lock`; do not edit by hand)")
 for name, version in sorted(pins, key=lambda p: p[0].lower()):
     print(f"{name}=={version}")
