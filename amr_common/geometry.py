@@ -1,6 +1,6 @@
 """Planar geometry shared by every package: angles, planar poses, yaw <-> quaternion.
 
-Pure math on floats (no message classes, no rclpy); amr_common.ros_conversions applies it to
+Pure math on floats (no message classes, no rclpy); amr_common.ros.ros_conversions applies it to
 geometry_msgs. REP 103: x forward/east, y left/north, yaw counter-clockwise about +z.
 """
 from __future__ import annotations

@@ -12,11 +12,11 @@ from geometry_msgs.msg import Twist, TwistStamped
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.publisher import Publisher
 
-from amr_common.lifecycle_node import GuardedLifecycleNode
-from amr_common.link_failure import checked_commands, class_spec
 from amr_common.navigation_behaviour import limit_command
-from amr_common.parameter_table import above
-from amr_common.qos import RELIABLE_10
+from amr_common.plugins.link_failure import checked_commands, class_spec
+from amr_common.plugins.parameter_table import above
+from amr_common.ros.lifecycle_node import GuardedLifecycleNode
+from amr_common.ros.qos import RELIABLE_10
 
 # The parameters every commanding node declares alike (the nodes add their own, e.g. what
 # data_timeout applies to).

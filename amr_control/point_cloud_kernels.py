@@ -21,7 +21,7 @@ import numpy as np
 
 from amr_common.jit import jit
 from amr_common.robot import arc_displacement_kernel
-from amr_common.scan_returns import is_return
+from amr_common.sensors.scan_returns import is_return
 from amr_control.point_memory_kernels import (
     advance_pose,
     deskew_point,

@@ -42,9 +42,16 @@ from typing import Any
 import numpy as np
 
 from amr_common.geometry import without_repeats, wrap_angle
-from amr_common.parameter_table import Param, above, at_least, checked_values, finite, ruled
+from amr_common.plugins.parameter_table import (
+    Param,
+    above,
+    at_least,
+    checked_values,
+    finite,
+    ruled,
+)
 from amr_common.robot import MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED, ROBOT_RADIUS, TRACK
-from amr_common.scan_returns import return_mask
+from amr_common.sensors.scan_returns import return_mask
 
 # name: (default, description with units). The pure_pursuit node declares each as a parameter.
 _TABLE: dict[str, tuple[Any, str]] = {
@@ -114,7 +121,7 @@ def scan_clearance(ranges: np.ndarray, angle_min: float, angle_increment: float,
                    robot_radius: float) -> float | None:
     """Smallest distance from the robot's footprint to a scan point (m).
 
-    None without a return (amr_common.scan_returns: NaN, inf, 0.0 and readings outside
+    None without a return (amr_common.sensors.scan_returns: NaN, inf, 0.0 and readings outside
     [range_min, range_max] are none).
     """
     points = _scan_points(ranges, angle_min, angle_increment, range_min, range_max,
@@ -168,7 +175,7 @@ def _ray_directions(angle_min: float, angle_increment: float, rays: int):
 class PurePursuit:
     """Regulated pure pursuit of a path (see the module docstring).
 
-    Implements amr_common.interfaces.PathFollower.
+    Implements amr_common.plugins.interfaces.PathFollower.
     """
 
     # Instance attributes of the PathFollower interface (set by the path and control methods).

@@ -1,8 +1,8 @@
 """The `pure_pursuit` lifecycle node: /pose (localized) + /path (+ /scan) -> /cmd_vel.
 
 Thin: the algorithm is the `follower` parameter's class (MODULE:CLASS of
-amr_common.interfaces.PathFollower; default amr_control.pure_pursuit.PurePursuit). Handover with
-the wall follower (which commands while /pose is NOT localized):
+amr_common.plugins.interfaces.PathFollower; default amr_control.pure_pursuit.PurePursuit). Handover
+with the wall follower (which commands while /pose is NOT localized):
 - Simulation mode (`simulation: true`, lockstep): EVERY localized /pose gets exactly one /cmd_vel
   stamped like the pose: zero until a path has come, the pursuit's command while following, zero
   again once stopped at the path's end. A non-localized /pose gets none (the wall follower
@@ -21,7 +21,7 @@ the path is forgotten unless it was planned (stamped) at most data_timeout after
 for the stop short of an obstacle the map lacks (both ignored when stale).
 Safety as the wall follower: a zero command on deactivate, cleanup and shutdown (Ctrl-C
 included), never a non-finite value; a follower that raises or returns anything but two
-finite numbers has failed (amr_common.link_failure): zero from then on, the run fails.
+finite numbers has failed (amr_common.plugins.link_failure): zero from then on, the run fails.
 """
 from __future__ import annotations
 
@@ -33,16 +33,16 @@ from nav_msgs.msg import Path
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import LaserScan
 
-from amr_common.controller_loader import DEFAULT_FOLLOWER
 from amr_common.geometry import polyline_length
-from amr_common.interfaces import PathFollower
-from amr_common.link_failure import class_spec
 from amr_common.navigation_behaviour import Handover, timer_action
-from amr_common.node_runner import run_lifecycle_node
-from amr_common.parameter_table import Param, ruled
-from amr_common.parameters import declare_link, declare_parameters, read_parameters
-from amr_common.qos import LATCHED, RELIABLE_10, scan_qos
-from amr_common.ros_conversions import (
+from amr_common.plugins.interfaces import PathFollower
+from amr_common.plugins.link_failure import class_spec
+from amr_common.plugins.loader import DEFAULT_FOLLOWER
+from amr_common.plugins.parameter_table import Param, ruled
+from amr_common.ros.node_runner import run_lifecycle_node
+from amr_common.ros.parameters import declare_link, declare_parameters, read_parameters
+from amr_common.ros.qos import LATCHED, RELIABLE_10, scan_qos
+from amr_common.ros.ros_conversions import (
     path_points,
     pose_from_message,
     scan_ranges,
@@ -65,7 +65,7 @@ _NODE_PARAMETERS: dict[str, Param] = ruled({
     "data_timeout": (0.5, "Robot mode: command zero when the newest /pose is older than this; "
                           "a /scan older than this is not used (seconds)"),
     "follower": (DEFAULT_FOLLOWER, "Path follower class as MODULE:CLASS implementing "
-                                   "amr_common.interfaces.PathFollower (its tuning values "
+                                   "amr_common.plugins.interfaces.PathFollower (its tuning values "
                                    "become parameters of this node)"),
     "frame_id": ("map", "Frame of /pose and /path"),
     "pose_topic": ("/pose", "amr_msgs/PoseStamped input (the particle filter's estimate)"),

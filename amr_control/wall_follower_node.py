@@ -14,7 +14,7 @@ computed its first command applies from the next configure (the controller is re
 Safety: the TurtleBot3 keeps its last command forever, so the node sends a zero command on
 deactivate, cleanup and shutdown (Ctrl-C included), and never publishes a non-finite value. A
 controller that raises or returns anything but two finite numbers has failed
-(amr_common.link_failure): logged once, zero from then on, and the run scripts end the run.
+(amr_common.plugins.link_failure): logged once, zero from then on, and the run scripts end the run.
 Handover with localization (`enable_localization`): for each synchronized (/odometry, /scan,
 /pose) set the node is in charge iff the pose is NOT localized or `stop_when_localized` is false.
 Out of charge it publishes nothing (the pure pursuit answers every localized /pose); in robot
@@ -33,27 +33,27 @@ from nav_msgs.msg import Odometry
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import LaserScan
 
-from amr_common import message_filters
-from amr_common.controller_loader import (
+from amr_common.navigation_behaviour import Handover, timer_action
+from amr_common.plugins.link_failure import class_spec
+from amr_common.plugins.loader import (
     DEFAULT_CONTROLLER,
-    ControllerSpecError,
+    PluginSpecError,
     described_parameters,
     load_controller_class,
 )
-from amr_common.lifecycle_node import GuardedLifecycleNode
-from amr_common.link_failure import class_spec
-from amr_common.navigation_behaviour import Handover, timer_action
-from amr_common.node_runner import run_lifecycle_node
-from amr_common.parameter_table import Param, at_least, check_values, ruled
-from amr_common.parameters import declare_parameters, read_parameters
-from amr_common.qos import RELIABLE_10, scan_qos
+from amr_common.plugins.parameter_table import Param, at_least, check_values, ruled
 from amr_common.robot import (
     MAX_PLAUSIBLE_ANGULAR_SPEED,
     MAX_PLAUSIBLE_LINEAR_SPEED,
     is_plausible_twist,
 )
-from amr_common.ros_conversions import time_to_nanoseconds
-from amr_common.tf import StaticTransformListener
+from amr_common.ros import message_filters
+from amr_common.ros.lifecycle_node import GuardedLifecycleNode
+from amr_common.ros.node_runner import run_lifecycle_node
+from amr_common.ros.parameters import declare_parameters, read_parameters
+from amr_common.ros.qos import RELIABLE_10, scan_qos
+from amr_common.ros.ros_conversions import time_to_nanoseconds
+from amr_common.ros.tf import StaticTransformListener
 from amr_control.command_output import (
     COMMAND_PARAMETERS,
     COMMAND_RULES,
@@ -148,14 +148,14 @@ class WallFollowerNode(CommandingNode):
 
     def __init__(self, node_name: str = "wall_follower", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
-        # Numbers take ints for doubles (`-p kp:=5`): amr_common.parameters.
+        # Numbers take ints for doubles (`-p kp:=5`): amr_common.ros.parameters.
         declare_parameters(self, _NODE_PARAMETERS)
         # The controller's tuning values become ROS parameters when the class describes them.
         self._tuning: dict[str, tuple[Any, str]] = {}
         try:
             self._tuning = tuning_table(load_controller_class(_load_controller_spec(self)))
             declare_parameters(self, self._tuning)
-        except ControllerSpecError as exc:
+        except PluginSpecError as exc:
             self.get_logger().error(f"{exc} (configure will fail)")
         self._lidar_offset_from_tf: float | None = None  # kept across configures
         self._reset_runtime()

@@ -8,7 +8,14 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from amr_common.parameter_table import Param, at_least, between, checked_values, one_of, ruled
+from amr_common.plugins.parameter_table import (
+    Param,
+    at_least,
+    between,
+    checked_values,
+    one_of,
+    ruled,
+)
 from amr_common.robot import MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED, ROBOT_RADIUS, TRACK
 
 # name: (default, description). Defaults work in the simulator's ideal and turtlebot3 profiles.

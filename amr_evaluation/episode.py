@@ -16,7 +16,7 @@ newest scan (a new one only every scan_period, 0.2 s) and on the newest odometry
 
 Metrics:
 - explored_fraction: share of the world's free cells (cell_size grid aligned with the map, see
-  amr_common.coverage_grid; centre clearance > robot radius) whose centre the robot passed
+  amr_common.world.coverage_grid; centre clearance > robot radius) whose centre the robot passed
   within cell_size / 2 of.
 - laps: full turns of the robot's position around the centroid of the world's free space, from
   the accumulated (unwrapped) winding angle: floor(|winding| / 2 pi). Meaningful for ring-shaped
@@ -39,18 +39,18 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
-from amr_common.controller_loader import described_parameters
-from amr_common.coverage_grid import GridTooLargeError
 from amr_common.geometry import wrap_angles
-from amr_common.link_failure import LinkFailure, checked_commands, class_spec, link_call
-from amr_common.movers import collisions_text
 from amr_common.navigation_behaviour import (
     OdometryHold,
     as_sent_ranges,
     as_sent_scan_geometry,
     limit_command,
 )
-from amr_common.world import WORLDS_DIR, World
+from amr_common.plugins.link_failure import LinkFailure, checked_commands, class_spec, link_call
+from amr_common.plugins.loader import described_parameters
+from amr_common.world.coverage_grid import GridTooLargeError
+from amr_common.world.movers import collisions_text
+from amr_common.world.world import WORLDS_DIR, World
 from amr_evaluation.lidar_calibration import calibrate_in_simulation
 from amr_mapping.mapper_params import range_error_parameters
 from amr_sim.profiles import SensorProfile, get_profile
@@ -160,7 +160,7 @@ def mapper_parameters(profile: SensorProfile, mapper_class: Any = None,
     range_error_parameters) and, with a `seed`, the unit's `range_correction`, calibrated
     against a wall as its owner would (lidar_calibration); 'none' for ideal and the clean ones.
     `mapper_class`: only the parameters it takes, the LiDAR's position always
-    (amr_common.interfaces.Mapper names it).
+    (amr_common.plugins.interfaces.Mapper names it).
     """
     values = {"lidar_offset_x_m": profile.lidar_offset_x, "deskew": scans_skewed(profile),
               "lidar_model": "none"}
@@ -224,7 +224,7 @@ def tell_scan_geometry(target: Any, geometry: tuple, with_rays: bool = False,
 
     Controllers take (angle_min, angle_increment, range_min, range_max); the particle filter
     (with_rays, link "localizer") also the ray count. What it raises is the link's failure
-    (amr_common.link_failure), as in its node; the localizer's ValueError passes through.
+    (amr_common.plugins.link_failure), as in its node; the localizer's ValueError passes through.
     """
     if callable(getattr(target, "set_scan_geometry", None)):
         # As the nodes read it from a LaserScan (float32 fields).
@@ -239,7 +239,7 @@ def commanded(link: str, compute: Callable[..., Any], *args: Any) -> tuple[float
     """A link's compute_commands(*args) as its node sends it: clipped to the Burger's limits.
 
     What it raises, or a return that is not two finite numbers, is the link's failure
-    (LinkFailure, amr_common.link_failure): its node commands zero and the run fails.
+    (LinkFailure, amr_common.plugins.link_failure): its node commands zero and the run fails.
     """
     return limit_command(*checked_commands(link, link_call(link, "compute_commands", compute,
                                                            *args)))

@@ -17,16 +17,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
-from amr_common.controller_loader import (
+from amr_common.plugins.link_failure import failure_text
+from amr_common.plugins.loader import (
     DEFAULT_CONTROLLER,
     DEFAULT_FOLLOWER,
     DEFAULT_LOCALIZER,
     DEFAULT_PLANNER,
-    ControllerSpecError,
+    PluginSpecError,
     load_controller_class,
     parse_overrides,
 )
-from amr_common.link_failure import failure_text
 from amr_evaluation.evaluation_config import (
     MAX_EPISODES,
     POSE_SOURCES,
@@ -46,7 +46,7 @@ from amr_evaluation.executors import (
 )
 
 __all__ = [
-    "DEFAULT_CONTROLLER", "ControllerSpecError", "EvaluationError", "EpisodeSpec",
+    "DEFAULT_CONTROLLER", "PluginSpecError", "EvaluationError", "EpisodeSpec",
     "EpisodeOutcome", "parse_name_list", "parse_start_list", "parse_seeds", "parse_overrides",
     "expand_grid", "load_config", "load_ros_params_file", "check_controller", "run_one",
     "run_summary", "lost_episode", "run_episodes", "POSE_SOURCES",
@@ -68,7 +68,7 @@ class EpisodeSpec:
     goal: str | None = None  # a named goal or "x,y": a navigation episode
     pose_source: str = "filter"  # of a navigation episode: "filter" or "truth"
     map: str | None = None  # the filter's and the planner's map (None: the world)
-    # The links' classes (MODULE:CLASS, amr_common.interfaces) of a navigation episode.
+    # The links' classes (MODULE:CLASS, amr_common.plugins.interfaces) of a navigation episode.
     localizer: str = DEFAULT_LOCALIZER
     planner: str = DEFAULT_PLANNER
     follower: str = DEFAULT_FOLLOWER
@@ -89,7 +89,7 @@ class EpisodeSpec:
     @property
     def label(self) -> str:
         """world[@map]/start[->goal]/profile/seed N, for tables and progress lines."""
-        from amr_common.world import start_label
+        from amr_common.world.world import start_label
         goal = f"->{self.goal}" if self.goal else ""
         on_map = f"@{Path(self.map).stem}" if self.map else ""
         return (f"{Path(self.world).stem}{on_map}/{start_label(self.start) or '-'}{goal}/"
@@ -125,11 +125,11 @@ def expand_grid(worlds: str | Sequence[str], starts: str | Sequence[str] = "all"
     of each world, or names, applied like the start names; None: wall-following episodes.
     An empty list given for starts, profiles or goals is an error (not 'all' or 'none').
     `map`: the map of the filter and the planner while the simulator drives in the
-    world (amr_common.map_vs_world; one world only): the goals are checked against it, and
+    world (amr_common.world.map_vs_world; one world only): the goals are checked against it, and
     what the map and the world disagree on (a start the map lacks, a goal the world blocks) is
     appended to `warnings`. `links`: {"localizer" | "planner" | "follower": MODULE:CLASS}.
     """
-    from amr_common.world import bundled_worlds
+    from amr_common.world.world import bundled_worlds
     from amr_sim.profiles import get_profile
 
     world_names = parse_name_list(worlds)
@@ -171,7 +171,7 @@ def expand_grid(worlds: str | Sequence[str], starts: str | Sequence[str] = "all"
 
 def _starts_and_goals(world_names: list[str], starts: Any) -> tuple[dict, dict]:
     """Each world's chosen starts (names and poses, checked) and goal names, one load each."""
-    from amr_common.world import World, WorldError
+    from amr_common.world.world import World, WorldError
     start_list = _given(parse_start_list(starts), starts, "starts", ["all"],
                         "give 'all', start names or X,Y,THETA poses")
     poses = [s for s in start_list if not isinstance(s, str)]
@@ -217,8 +217,8 @@ def _given(parsed: list, value: Any, what: str, default: list, hint: str) -> lis
 def _check_map(map_source: str, world_names: list[str], starts: dict, goals: dict,
                warnings: list[str] | None) -> None:
     """The map loads, stands for one world and takes its goals; warnings for the rest."""
-    from amr_common.map_vs_world import load_map, resolve_goal_on_map, start_warning
-    from amr_common.world import World, WorldError
+    from amr_common.world.map_vs_world import load_map, resolve_goal_on_map, start_warning
+    from amr_common.world.world import World, WorldError
     if len(world_names) != 1:
         raise EvaluationError(f"a map stands for one world: give one world with it (got "
                               f"{', '.join(world_names)})")
@@ -258,7 +258,7 @@ def check_controller(spec: str, params: Mapping[str, Any] | None, dt: float) -> 
     try:
         cls(dt, **dict(params or {}))
     except Exception as exc:  # a user's class may raise anything on bad parameters
-        raise ControllerSpecError(f"controller '{spec}' rejected its parameters "
+        raise PluginSpecError(f"controller '{spec}' rejected its parameters "
                                   f"{dict(params or {})}: {exc}") from exc
     return cls
 

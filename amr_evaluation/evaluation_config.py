@@ -13,8 +13,8 @@ import re
 from pathlib import Path
 from typing import Any, Sequence
 
-from amr_common.controller_loader import described_parameters
-from amr_common.parameter_table import MAX_SEED, finite
+from amr_common.plugins.loader import described_parameters
+from amr_common.plugins.parameter_table import MAX_SEED, finite
 
 CONFIG_KEYS = ("worlds", "map", "starts", "goals", "pose_source", "profiles", "seeds", "duration",
                "dt", "controller", "params_file", "params", "jobs", "localizer", "planner",

@@ -17,7 +17,7 @@ import time
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence, TextIO
 
-from amr_common.world import start_label
+from amr_common.world.world import start_label
 from amr_evaluation.evaluation import EpisodeOutcome
 
 __all__ = [

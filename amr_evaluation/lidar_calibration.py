@@ -1,7 +1,7 @@
 """Calibrating a simulated LiDAR unit's ranges the way a Burger's owner calibrates a real one.
 
 The simulated robot stands facing a flat wall at tape-measured distances (from the LiDAR's
-centre), the unit takes `scans` scans at each, and amr_common.range_calibration turns the
+centre), the unit takes `scans` scans at each, and amr_common.sensors.range_calibration turns the
 readings into the `range_correction` the Mapper applies. The unit is the one a run with the
 same profile and seed drives (the reality-gap effects are drawn from the seed); nothing is
 read from the simulator but its scans.
@@ -15,14 +15,14 @@ from functools import lru_cache
 
 import numpy as np
 
-from amr_common.range_calibration import (
+from amr_common.robot import ROBOT_RADIUS
+from amr_common.sensors.range_calibration import (
     RangeCorrection,
     fit_correction,
     wall_distance,
     wall_points,
 )
-from amr_common.robot import ROBOT_RADIUS
-from amr_common.world import World
+from amr_common.world.world import World
 from amr_sim.profiles import SensorProfile, get_profile
 from amr_sim.simulator import Simulator
 

@@ -26,7 +26,7 @@ Metrics (errors of the estimate against the true pose, every step):
 - kidnap: loss_reported_after_s (first localized false after it) and relocalized_after_s.
 
 `map` (default the world): the map the filter uses while the simulator drives in the world
-(amr_common.map_vs_world): the metrics above then say what an unmapped box, a moved wall or a
+(amr_common.world.map_vs_world): the metrics above then say what an unmapped box, a moved wall or a
 SLAM map does to localization - against the truth, so a confident wrong pose counts as false.
 """
 from __future__ import annotations
@@ -38,16 +38,16 @@ from typing import Any
 
 import numpy as np
 
-from amr_common.controller_loader import DEFAULT_LOCALIZER
 from amr_common.geometry import wrap_angles
-from amr_common.map_vs_world import load_map
 from amr_common.navigation_behaviour import (
     Handover,
     KidnapSchedule,
     OdometryHold,
     as_sent_ranges,
 )
-from amr_common.world import World
+from amr_common.plugins.loader import DEFAULT_LOCALIZER
+from amr_common.world.map_vs_world import load_map
+from amr_common.world.world import World
 from amr_evaluation.episode import (
     commanded,
     default_controller,
@@ -144,8 +144,8 @@ def run_localization_episode(world: World | str, start=None,
     """Run the wall follower with the particle filter for `duration` simulated seconds.
 
     kidnap (t, x, y, theta): teleport the robot at simulated time t (Simulator.teleport).
-    localizer: the class (or its MODULE:CLASS) of amr_common.interfaces.Localizer, default the
-    ParticleFilter. filter_params: its parameters (seed defaults to the episode's; the LiDAR's
+    localizer: the class (or its MODULE:CLASS) of amr_common.plugins.interfaces.Localizer, default
+    the ParticleFilter. filter_params: its parameters (seed defaults to the episode's; the LiDAR's
     position, lidar_model, deskew and map_walls to the profile's: episode.filter_parameters,
     those the class takes). map: the filter's map (None: the world; see the module docstring).
     """

@@ -63,7 +63,7 @@ def kidnap_pose(world_name: str, start: str | None, at: float) -> tuple[float, .
     A kidnapping for `start`: at time `at`, to the world's next named start (turned by a
     quarter turn, so the view differs), or None if the world has a single start.
     """
-    from amr_common.world import World
+    from amr_common.world.world import World
     world = World.load(world_name)
     names = list(world.starts)
     if len(names) < 2:
@@ -75,7 +75,7 @@ def kidnap_pose(world_name: str, start: str | None, at: float) -> tuple[float, .
 
 def run_one(spec: LocalizationSpec) -> LocalizationOutcome:
     """Run one episode in this process (an exception becomes the outcome's error)."""
-    from amr_common.controller_loader import load_controller_class
+    from amr_common.plugins.loader import load_controller_class
     from amr_evaluation.episode import robot_parameters
     from amr_evaluation.localization_episode import run_localization_episode
     from amr_sim.profiles import get_profile
@@ -237,7 +237,7 @@ def evaluate_main(specs, settings: dict[str, Any], args, out: Path, executor=Non
     import csv
     import json
 
-    from amr_common.controller_loader import parse_overrides
+    from amr_common.plugins.loader import parse_overrides
     kidnap_at = getattr(args, "kidnap_at", None)
     filter_params = tuple(sorted(parse_overrides(getattr(args, "pf_param", [])).items()))
     controller_params = tuple(sorted(settings["params"].items()))

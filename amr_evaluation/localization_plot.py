@@ -13,7 +13,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from amr_common.world import World
+from amr_common.world.world import World
 from amr_evaluation.localization_episode import FALSE_POSITION_M, pose_errors
 from amr_evaluation.plot import draw_navigation, draw_world, fitted_title, snapshot_times
 

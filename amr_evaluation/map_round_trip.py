@@ -6,7 +6,8 @@
 1. Mapping: the wall follower explores the TRUE world for `map_duration` s from its first start
    while the Mapper maps it with a drifting odometry (amr_evaluation.mapping_episode, the map
    built in the world's frame as run_sim.py --slam builds it); the map is written as Nav2 map
-   files (amr_common.map_file) and read back as a world, as a user does with map_saver's files.
+   files (amr_common.world.map_file) and read back as a world, as a user does with map_saver's
+   files.
 2. Navigation on the map: the simulator drives the TRUE world; the particle filter (global
    localization: no initial pose) and the planner get the SLAM map
    (amr_evaluation.navigation_episode with the filter and the planner built on the map world);
@@ -19,9 +20,9 @@ Figures: the map's precision / recall, false localizations (localized while more
 and the final distance to it where the robot rests, collisions.
 
 The filter runs with its own defaults, as on the world: it expects a map's walls inside the
-occupied cells (amr_common.map_raster.likely_wall_segments: SLAM marks both cells around a wall),
-known to half a cell (range_sensor), so its localized test (97 % of the rays within 3 cm, plus
-that half cell) holds on the SLAM map as on the world. (On the cells' free edges, up to a cell
+occupied cells (amr_common.world.map_raster.likely_wall_segments: SLAM marks both cells around a
+wall), known to half a cell (range_sensor), so its localized test (97 % of the rays within 3 cm,
+plus that half cell) holds on the SLAM map as on the world. (On the cells' free edges, up to a cell
 into the free space, the true pose explained ~75 % of the rays and the round trip needed the
 check widened to 8 cm and 90 %.)
 """
@@ -34,8 +35,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from amr_common.map_file import write_map
-from amr_common.world import World
+from amr_common.world.map_file import write_map
+from amr_common.world.world import World
 from amr_evaluation.executors import TaskLost, local_executor, run_tasks
 
 MAP_DURATION_S = 300.0

@@ -24,7 +24,7 @@ Figures (amr_evaluation.mapping_metrics): trajectory RMSE / max against the trut
 the start, map precision and recall at 3 cm, loop closures, SLAM update times, and the speed
 (simulated seconds per wall-clock second of the whole loop, simulator and controller included).
 
-The mapper is any amr_common.interfaces.Mapper (`mapper`: MODULE:CLASS, a class or a ready
+The mapper is any amr_common.plugins.interfaces.Mapper (`mapper`: MODULE:CLASS, a class or a ready
 object; default amr_mapping.mapper:Mapper), used only through the interface's members: the
 update times are measured around its update() calls; keyframes, loop closures and the loop
 closures' times come from its statistics() when it reports them (None / NaN otherwise).
@@ -38,18 +38,18 @@ from typing import Any
 
 import numpy as np
 
-from amr_common.controller_loader import DEFAULT_MAPPER, described_parameters, link_class
 from amr_common.geometry import compose, inverse
-from amr_common.link_failure import (
+from amr_common.navigation_behaviour import OdometryHold, ScanNovelty
+from amr_common.plugins.link_failure import (
     checked_commands,
     checked_estimate,
     checked_raster,
     checked_statistics,
     link_call,
 )
-from amr_common.map_raster import Raster
-from amr_common.navigation_behaviour import OdometryHold, ScanNovelty
-from amr_common.world import World
+from amr_common.plugins.loader import DEFAULT_MAPPER, described_parameters, link_class
+from amr_common.world.map_raster import Raster
+from amr_common.world.world import World
 from amr_evaluation.episode import (
     default_controller,
     episode_start_label,
@@ -201,7 +201,7 @@ def run_mapping_episode(world: World | str, start=None,
     """Explore `world` with the wall follower for `duration` s while the mapper maps it.
 
     record: the result also carries the SLAM poses, the true ones and the map (_recorded).
-    mapper: the mapper's class as "MODULE:CLASS" or a class (amr_common.interfaces.Mapper;
+    mapper: the mapper's class as "MODULE:CLASS" or a class (amr_common.plugins.interfaces.Mapper;
     None: amr_mapping.mapper:Mapper), built with the profile's LiDAR offset, `loop_closure`
     (if the class has that parameter) and `mapper_params`; or a ready object with the
     interface's members.

@@ -23,8 +23,8 @@ from typing import Any, Callable, Iterable
 
 import numpy as np
 
-from amr_common.controller_loader import DEFAULT_MAPPER, link_class
-from amr_common.link_failure import failure_text
+from amr_common.plugins.link_failure import failure_text
+from amr_common.plugins.loader import DEFAULT_MAPPER, link_class
 from amr_evaluation.episode import mapper_parameters
 from amr_evaluation.executors import TaskLost, local_executor, run_tasks
 from amr_evaluation.mapping_episode import AUTO_DRIFT, OdometryDrift, run_mapping_episode
@@ -57,7 +57,7 @@ def mapping_specs(worlds: Iterable[str], seeds: Iterable[int], duration: float =
                   mapper: str | None = None) -> list[MappingSpec]:
     """Every world x loop-closure setting x seed; starts: world -> start for worlds without.
 
-    mapper: MODULE:CLASS of an amr_common.interfaces.Mapper (None: the project's).
+    mapper: MODULE:CLASS of an amr_common.plugins.interfaces.Mapper (None: the project's).
     """
     starts = starts or {}
     return [MappingSpec(world, int(seed), float(duration), bool(closure), drift,
@@ -94,7 +94,7 @@ def _controller(spec: MappingSpec):
     """The spec's explorer, built as evaluate.py builds controllers, or None (the default)."""
     if spec.controller is None:
         return None
-    from amr_common.controller_loader import load_controller_class
+    from amr_common.plugins.loader import load_controller_class
     from amr_evaluation.episode import robot_parameters
     from amr_sim.profiles import get_profile
     controller_class = load_controller_class(spec.controller)
@@ -246,7 +246,7 @@ def save_maps(results: list[dict[str, Any]], out: Path, mapper: str) -> int:
     Sets each row's "map_file" (relative to `out`), or "map_error" with why it could not be
     written (also printed); returns how many could not.
     """
-    from amr_common.map_file import write_map
+    from amr_common.world.map_file import write_map
     unsaved, used = 0, set()
     for result in results:
         if result.get("raster") is None:
@@ -272,7 +272,7 @@ def save_maps(results: list[dict[str, Any]], out: Path, mapper: str) -> int:
 
 def _file_stem(result: dict[str, Any]) -> str:
     """WORLD-START-PROFILE-seedN with only letters, digits, '.', '_', ',' and '-'."""
-    from amr_common.world import start_label
+    from amr_common.world.world import start_label
     text = (f"{result['world']}-{start_label(result['start'])}-{result['profile']}-seed"
             f"{result['seed']}")
     return re.sub(r"[^\w.,-]+", "_", text)
@@ -297,7 +297,7 @@ def _draw_sheet(specs: list[MappingSpec], results: list[dict[str, Any]], path: P
     """sheet.png of the episodes that ran (each world loaded once)."""
     import textwrap
 
-    from amr_common.world import World
+    from amr_common.world.world import World
     from amr_evaluation.mapping_plot import plot_mapping_sheet
     ran = [(spec.world, result) for spec, result in zip(specs, results) if "error" not in result]
     worlds = {source: World.load(source) for source in dict.fromkeys(s for s, _ in ran)}

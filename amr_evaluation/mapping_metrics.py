@@ -6,8 +6,8 @@
 - Precision: share of the map's OCCUPIED cells whose centre lies within `tolerance` (3 cm) of a
   true wall.
 - Recall: the walls sampled every 1 cm; a sample counts as seen when a noise-free ray of the
-  run (from the true LiDAR pose, amr_common.raycast) ended within SEEN_RADIUS of it; recall is
-  the share of the seen samples with an OCCUPIED cell centre within `tolerance`.
+  run (from the true LiDAR pose, amr_common.world.raycast) ended within SEEN_RADIUS of it; recall
+  is the share of the seen samples with an OCCUPIED cell centre within `tolerance`.
 """
 from __future__ import annotations
 
@@ -15,12 +15,12 @@ import math
 
 import numpy as np
 
-from amr_common.cell_grid import cell_index
 from amr_common.geometry import compose, inverse, wrap_angles
-from amr_common.map_raster import OCCUPIED, Raster
-from amr_common.raycast import scan_into
-from amr_common.scan_returns import return_mask
-from amr_common.world import World
+from amr_common.sensors.scan_returns import return_mask
+from amr_common.world.cell_grid import cell_index
+from amr_common.world.map_raster import OCCUPIED, Raster
+from amr_common.world.raycast import scan_into
+from amr_common.world.world import World
 
 TOLERANCE_M = 0.03
 SAMPLE_SPACING_M = 0.01

@@ -15,8 +15,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 
-from amr_common.map_raster import Raster
-from amr_common.world import World
+from amr_common.world.map_raster import Raster
+from amr_common.world.world import World
 from amr_evaluation.plot import draw_raster
 
 

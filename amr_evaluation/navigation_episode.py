@@ -25,7 +25,7 @@ graph runs it: predicted with every odometry twist, corrected with every new sca
 newest measurement and odometry twist.
 
 `map` (default the world): the map the pose source and the planner use while the simulator
-drives in the world (amr_common.map_vs_world): an unmapped box, a moved wall, a SLAM map. The
+drives in the world (amr_common.world.map_vs_world): an unmapped box, a moved wall, a SLAM map. The
 goal is checked against the map (the planner's), `goal_warning` says when the world blocks it;
 the pursuit still slows near what the scan sees, and every figure is measured in the world.
 """
@@ -38,17 +38,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from amr_common.controller_loader import (
-    DEFAULT_FOLLOWER,
-    DEFAULT_LOCALIZER,
-    DEFAULT_PLANNER,
-    link_class,
-)
 from amr_common.geometry import polyline_length
-from amr_common.interfaces import PathFollower
-from amr_common.link_failure import checked_path, link_call
-from amr_common.map_vs_world import load_map, resolve_goal_on_map
-from amr_common.movers import collisions_text
 from amr_common.navigation_behaviour import (
     GoalCheck,
     Handover,
@@ -57,7 +47,17 @@ from amr_common.navigation_behaviour import (
     as_sent_pose,
     as_sent_ranges,
 )
-from amr_common.world import World
+from amr_common.plugins.interfaces import PathFollower
+from amr_common.plugins.link_failure import checked_path, link_call
+from amr_common.plugins.loader import (
+    DEFAULT_FOLLOWER,
+    DEFAULT_LOCALIZER,
+    DEFAULT_PLANNER,
+    link_class,
+)
+from amr_common.world.map_vs_world import load_map, resolve_goal_on_map
+from amr_common.world.movers import collisions_text
+from amr_common.world.world import World
 from amr_control.pure_pursuit import scan_clearance, scan_free_ahead
 from amr_evaluation.episode import (
     checked_duration,
@@ -199,7 +199,8 @@ def run_navigation_episode(
     relocalize). Stalled: localized and commanded zero for stall_timeout_s before reaching the
     goal (the episode then ends) - also when something the map lacks blocks the way.
     localizer, planner_class, follower: the classes (or their MODULE:CLASS) of the links
-    (amr_common.interfaces), default the project's; the episode uses only interface members.
+    (amr_common.plugins.interfaces), default the project's; the episode uses only interface
+    members.
     """
     duration = checked_duration(duration)
     world_obj = world if isinstance(world, World) else World.load(world)
@@ -304,7 +305,7 @@ class _Navigation:
         """A path from the estimate to the goal for the pursuit (or the planner's error)."""
         self.plans += 1
         began = time.perf_counter()
-        try:  # the planner node's checks (amr_common.link_failure): no path, or a failure
+        try:  # the planner node's checks (amr_common.plugins.link_failure): no path, or a failure
             self.path = checked_path(link_call("planner", "plan", self.planner.plan,
                                                estimate[:2], self.goal_xy, allowed=(ValueError,)))
             self.plan_ms = (time.perf_counter() - began) * 1e3

@@ -10,10 +10,10 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from amr_common.controller_loader import DEFAULT_LOCALIZER, link_class
-from amr_common.link_failure import checked_localization, link_call
 from amr_common.navigation_behaviour import OdometryClock, ScanNovelty, stamp_ns
-from amr_common.world import World
+from amr_common.plugins.link_failure import checked_localization, link_call
+from amr_common.plugins.loader import DEFAULT_LOCALIZER, link_class
+from amr_common.world.world import World
 from amr_evaluation.episode import filter_parameters, tell_scan_geometry
 from amr_sim.simulator import Simulator
 
@@ -51,7 +51,7 @@ class ParticleFilterPose:
                  localizer: str | type = DEFAULT_LOCALIZER, **filter_params) -> None:
         """A localizer on `world` for the profile of `sim` (its LiDAR position and scan).
 
-        localizer: an amr_common.interfaces.Localizer class, or its MODULE:CLASS.
+        localizer: an amr_common.plugins.interfaces.Localizer class, or its MODULE:CLASS.
         """
         cls = link_class(localizer, "localizer")
         # The simulated LiDAR (position, model, skew, where the map's walls are), as far as
@@ -66,8 +66,8 @@ class ParticleFilterPose:
     def update(self, sim: Simulator, z_scan, z_v: float, z_w: float):
         """((x, y, theta), localized) after taking in the newest measurement.
 
-        Each call checked as the node checks it (amr_common.link_failure): what the localizer
-        raises or an estimate its interface forbids is its failure (LinkFailure).
+        Each call checked as the node checks it (amr_common.plugins.link_failure): what the
+        localizer raises or an estimate its interface forbids is its failure (LinkFailure).
         """
         dt, _ = self._clock.advance(stamp_ns(sim.time))
         if dt is not None:

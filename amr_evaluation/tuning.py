@@ -32,7 +32,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
-from amr_common.controller_loader import (
+from amr_common.plugins.loader import (
     described_parameters,
     load_controller_class,
     parse_value,

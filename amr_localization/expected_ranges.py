@@ -1,11 +1,11 @@
 """The expected-range table of the beam model, on the world's occupancy grid.
 
-For every cell of amr_common.occupancy_grid.OccupancyGrid (the grid the planner and /map use:
+For every cell of amr_common.world.occupancy_grid.OccupancyGrid (the grid the planner and /map use:
 cell centres on multiples of the resolution, so a 0.4 m corridor's centre line runs through cell
 centres) where a LiDAR can be, and every one of `angles` directions, the range (mm, uint16) a
 LiDAR at the cell centre would measure.
 
-Built once per world with the simulator's own ray-casting kernel (amr_common.raycast), so the
+Built once per world with the simulator's own ray-casting kernel (amr_common.world.raycast), so the
 filter's idea of a range is exactly the simulated LiDAR's. Only cells at least `min_clearance`
 inside the free space get a row of ranges (`rows` maps every grid cell to its row); every other
 cell shares row 0, all zeros, which matches no reading. So the table grows with the free area,
@@ -29,10 +29,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from amr_common.jit import HAVE_NUMBA, jit
-from amr_common.occupancy_grid import OccupancyGrid
-from amr_common.raycast import scan_kernel, scan_numpy, segment_offset
 from amr_common.robot import ROBOT_RADIUS
-from amr_common.world import World
+from amr_common.world.occupancy_grid import OccupancyGrid
+from amr_common.world.raycast import scan_kernel, scan_numpy, segment_offset
+from amr_common.world.world import World
 
 NO_RANGE_MM = 65535  # a ray that hits nothing (or beyond 65.5 m)
 MIN_CLEARANCE_M = 0.01  # cells closer to a wall get no row (the LiDAR cannot be there)
@@ -221,7 +221,7 @@ def build_expected_range_table(world: World, resolution: float = 0.02, angles: i
     """Build the table (uncached); see expected_range_table() for the cached one.
 
     segments: the walls the rays hit (default the world's; a map world's likely walls, see
-    amr_common.map_raster.likely_wall_segments); the grid stays the world's.
+    amr_common.world.map_raster.likely_wall_segments); the grid stays the world's.
     """
     segments = world.segments if segments is None else np.ascontiguousarray(
         segments, dtype=np.float64)

@@ -11,7 +11,7 @@ import math
 import numpy as np
 from geometry_msgs.msg import PoseWithCovarianceStamped
 
-from amr_common.ros_conversions import pose_from_message
+from amr_common.ros.ros_conversions import pose_from_message
 
 
 def initial_pose_request(message: PoseWithCovarianceStamped, map_frame: str

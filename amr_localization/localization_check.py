@@ -29,8 +29,8 @@ from typing import Callable
 import numpy as np
 
 from amr_common.jit import jit
-from amr_common.raycast import scan_into
-from amr_common.scan_returns import is_return
+from amr_common.sensors.scan_returns import is_return
+from amr_common.world.raycast import scan_into
 from amr_localization.cluster import Cluster, dominant_cluster, weighted_pose_mean
 from amr_localization.particle_filter_params import PARAMETERS
 

@@ -19,8 +19,8 @@ with the exhaustive pose search (pose_search) and the rival tracks (ambiguity). 
 searches (a global search's first scan, the check before declaring) are scored a slice per
 correct() call, so none blocks for long on a big map (filter_searches).
 On a map world (a Nav2 map, a SLAM map) the expected ranges come from the walls where the map
-most likely has them (amr_common.map_raster.likely_wall_segments: inside the occupied cells, not
-on their free edges), known to half a cell (range_sensor).
+most likely has them (amr_common.world.map_raster.likely_wall_segments: inside the occupied cells,
+not on their free edges), known to half a cell (range_sensor).
 """
 from __future__ import annotations
 
@@ -30,10 +30,10 @@ from typing import Any
 
 import numpy as np
 
-from amr_common.map_raster import likely_wall_segments
 from amr_common.robot import arc_step
-from amr_common.scan_deskew import MotionHistory
-from amr_common.world import World
+from amr_common.sensors.scan_deskew import MotionHistory
+from amr_common.world.map_raster import likely_wall_segments
+from amr_common.world.world import World
 from amr_localization.ambiguity import AmbiguityGuard
 from amr_localization.beam_model import BeamModel
 from amr_localization.expected_ranges import expected_range_table
@@ -68,7 +68,7 @@ class ParticleFilter(FilterSearches):
     """Particles (N, 3) [x, y, theta] with weights; see the module docstring for the cycle.
 
     The exhaustive searches and what they decide: FilterSearches (filter_searches).
-    Implements amr_common.interfaces.Localizer.
+    Implements amr_common.plugins.interfaces.Localizer.
     """
 
     # Instance attributes of the Localizer interface (set in __init__ and the filter cycle).

@@ -5,8 +5,8 @@ Outputs /pose (amr_msgs/PoseStamped with `localized`), /amcl_pose, /particles an
 (localization_tf.py).
 
 Thin: messages become predict / correct calls on the localizer (parameter `localizer`,
-MODULE:CLASS of amr_common.interfaces.Localizer; default the ParticleFilter) and results become
-messages; its tuning values (`parameter_descriptions()`) are parameters of this node.
+MODULE:CLASS of amr_common.plugins.interfaces.Localizer; default the ParticleFilter) and results
+become messages; its tuning values (`parameter_descriptions()`) are parameters of this node.
 - Every /odometry message moves the particles by its twist over the time since the previous one
   (so between the turtlebot3's 5 Hz scans the pose is predicted from odometry).
 - Every approximately synchronized (/odometry, /scan) pair is answered with exactly one /pose,
@@ -22,8 +22,8 @@ messages; its tuning values (`parameter_descriptions()`) are parameters of this 
   are scored a slice per scan (amr_localization.filter_searches; on the 40 x 40 m floor at most
   ~0.15 s of CPU per call instead of ~3 s for a search in one go).
 A localizer that raises (beyond its interface's ValueErrors) or returns what its interface
-forbids has failed (amr_common.link_failure): logged once, /pose not localized from then on,
-and the run scripts end the run.
+forbids has failed (amr_common.plugins.link_failure): logged once, /pose not localized from then
+on, and the run scripts end the run.
 Bad input (NaN or 0.0 everywhere, inconsistent scan geometry, non-finite odometry, stamps going
 backwards) is skipped with a throttled message, never a crash (a jump back by more than
 max_odometry_gap_s restarts the integration from there: one stamp far in the future cannot stop
@@ -43,23 +43,27 @@ from nav_msgs.msg import Odometry
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import LaserScan
 
-from amr_common import message_filters
-from amr_common.interfaces import Localizer
-from amr_common.lifecycle_node import GuardedLifecycleNode
-from amr_common.link_failure import checked_covariance, checked_localization, checked_particles
 from amr_common.navigation_behaviour import OdometryClock, ScanNovelty
-from amr_common.node_runner import run_lifecycle_node
-from amr_common.parameters import declare_link, declare_parameters, read_parameters
-from amr_common.qos import RELIABLE_10, scan_qos
-from amr_common.ros_conversions import (
+from amr_common.plugins.interfaces import Localizer
+from amr_common.plugins.link_failure import (
+    checked_covariance,
+    checked_localization,
+    checked_particles,
+)
+from amr_common.ros import message_filters
+from amr_common.ros.lifecycle_node import GuardedLifecycleNode
+from amr_common.ros.node_runner import run_lifecycle_node
+from amr_common.ros.parameters import declare_link, declare_parameters, read_parameters
+from amr_common.ros.qos import RELIABLE_10, scan_qos
+from amr_common.ros.ros_conversions import (
     fill_pose,
     pose_array,
     pose_with_covariance,
     scan_ranges,
     time_to_nanoseconds,
 )
-from amr_common.scan_returns import return_mask
-from amr_common.world import World
+from amr_common.sensors.scan_returns import return_mask
+from amr_common.world.world import World
 from amr_localization.initial_pose_request import initial_pose_request
 from amr_localization.localization_tf import LocalizationTf
 from amr_localization.particle_filter_node_params import NODE_PARAMETERS as _NODE_PARAMETERS
@@ -229,8 +233,8 @@ class ParticleFilterNode(GuardedLifecycleNode):
     def _use_filter(self, member: str, function, time_s: float | None, **options) -> Any:
         """function() (a call or read of the localizer's `member`); None once it failed.
 
-        Its failure (amr_common.link_failure) is kept and logged once; from then on /pose is
-        not localized and the localizer is not used again (GuardedLifecycleNode.use_link).
+        Its failure (amr_common.plugins.link_failure) is kept and logged once; from then on /pose
+        is not localized and the localizer is not used again (GuardedLifecycleNode.use_link).
         """
         return self.use_link("localizer", member, function, spec=self.node_params["localizer"],
                              time_s=time_s, then="/pose is not localized from now on",
@@ -294,7 +298,7 @@ class ParticleFilterNode(GuardedLifecycleNode):
         """The localizer's estimate and whether it is localized now.
 
         Its flag, unless the newest usable scan is older than max_scan_age_s; checked
-        (amr_common.link_failure): NaN and False once the localizer failed.
+        (amr_common.plugins.link_failure): NaN and False once the localizer failed.
         """
         checked = self._use_filter("estimate", lambda: checked_localization(
             self.filter.estimate, self.filter.localized), stamp_ns * 1e-9)

@@ -7,14 +7,14 @@ from __future__ import annotations
 
 from typing import Any
 
-from amr_common.controller_loader import DEFAULT_LOCALIZER
-from amr_common.parameter_table import Param, at_least, between, check_values, ruled
+from amr_common.plugins.loader import DEFAULT_LOCALIZER
+from amr_common.plugins.parameter_table import Param, at_least, between, check_values, ruled
 
 NODE_PARAMETERS: dict[str, Param] = ruled({
     "world": ("lab02", "Bundled world name or path to a world .yaml / course map .json / Nav2 "
                        "map .yaml (the simulator's loader)"),
     "localizer": (DEFAULT_LOCALIZER, "Localizer class as MODULE:CLASS implementing "
-                                     "amr_common.interfaces.Localizer (its tuning values "
+                                     "amr_common.plugins.interfaces.Localizer (its tuning values "
                                      "become parameters of this node)"),
     "queue_size": (10, "Synchronizer queue size per input"),
     "slop": (0.15, "Synchronizer slop in seconds (lockstep stamps are equal; the real robot's "

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from amr_common.parameter_table import (
+from amr_common.plugins.parameter_table import (
     MAX_SEED,
     Param,
     above,
@@ -26,7 +26,7 @@ from amr_common.parameter_table import (
     vector,
 )
 from amr_common.robot import ROBOT_RADIUS
-from amr_common.world import World
+from amr_common.world.world import World
 from amr_localization.range_sensor import MODEL_NAMES
 from amr_localization.table_memory import MemoryPlan, choose_table
 

@@ -2,8 +2,8 @@
 
 Particles are drawn and kept where the robot can be: centre inside the free space and at least
 the robot radius from every wall (`sample_free_poses` checks each drawn point exactly with the
-world's clearance kernel). The grid is the expected-range table's (amr_common.occupancy_grid).
-Headings are kept in [-pi, pi). No rclpy import.
+world's clearance kernel). The grid is the expected-range table's
+(amr_common.world.occupancy_grid). Headings are kept in [-pi, pi). No rclpy import.
 """
 from __future__ import annotations
 
@@ -12,9 +12,9 @@ import math
 import numpy as np
 
 from amr_common.geometry import wrap_angles
-from amr_common.occupancy_grid import OccupancyGrid
 from amr_common.robot import ROBOT_RADIUS
-from amr_common.world import World
+from amr_common.world.occupancy_grid import OccupancyGrid
+from amr_common.world.world import World
 
 
 def wrap_headings(particles: np.ndarray) -> np.ndarray:

@@ -5,7 +5,7 @@ Three kinds of scan (the `lidar_model` parameter):
   stamp pose, a fixed noise. A reading matches within `match_tolerance_m` and is weighed with
   `sigma_hit_m`; a missing return where the map expects a wall counts against a pose (the clean
   simulator returns every ray it can).
-- `LDS-01`, `LDS-02` (amr_common.lidar_models: the datasheets' distance bands): the error
+- `LDS-01`, `LDS-02` (amr_common.sensors.lidar_models: the datasheets' distance bands): the error
   grows with the range, so the tolerance of a reading r is match_tolerance_m + accuracy(r) +
   2 precision(r) (a unit off by its whole accuracy still matches ~98 % of its rays) and its
   sigma sqrt(sigma_hit_m^2 + accuracy(r)^2 + precision(r)^2); a missing return (0.0, NaN, inf)
@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from amr_common.lidar_models import LIDAR_MODELS, LidarModel
+from amr_common.sensors.lidar_models import LIDAR_MODELS, LidarModel
 
 EXACT = "exact"
 AUTO = "auto"

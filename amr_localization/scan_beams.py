@@ -18,7 +18,7 @@ from typing import NamedTuple
 import numpy as np
 
 from amr_common.jit import jit
-from amr_common.scan_returns import is_return
+from amr_common.sensors.scan_returns import is_return
 from amr_localization.expected_ranges import NO_RANGE_MM
 from amr_localization.range_sensor import SCALE_ONE
 

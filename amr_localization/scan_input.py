@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from amr_common.scan_deskew import MotionHistory, deskew
-from amr_common.scan_returns import return_mask
+from amr_common.sensors.scan_deskew import MotionHistory, deskew
+from amr_common.sensors.scan_returns import return_mask
 from amr_localization.range_sensor import RangeSensor
 from amr_localization.scan_beams import BeamReadings, ScanBeams
 

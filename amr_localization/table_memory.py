@@ -27,11 +27,11 @@ from typing import Any
 
 import numpy as np
 
-from amr_common.coverage_grid import MAX_GRID_CELLS
-from amr_common.distance_transform import free_cell_clearances
-from amr_common.map_raster import Raster
-from amr_common.occupancy_grid import grid_shape
-from amr_common.world import World
+from amr_common.world.coverage_grid import MAX_GRID_CELLS
+from amr_common.world.distance_transform import free_cell_clearances
+from amr_common.world.map_raster import Raster
+from amr_common.world.occupancy_grid import grid_shape
+from amr_common.world.world import World
 from amr_localization.expected_ranges import MIN_CLEARANCE_M
 
 COARSEST_RESOLUTION_M = 0.04
@@ -145,7 +145,7 @@ def candidate_plans(world: World, params: dict[str, Any]) -> list[MemoryPlan]:
 def choose_table(world: World, params: dict[str, Any]) -> MemoryPlan:
     """The finest candidate plan within max_memory_mb; MapTooBigError if none fits.
 
-    A plan whose grid exceeds amr_common.coverage_grid.MAX_GRID_CELLS does not fit either.
+    A plan whose grid exceeds amr_common.world.coverage_grid.MAX_GRID_CELLS does not fit either.
     """
     plans = candidate_plans(world, params)
     budget = params["max_memory_mb"] * _MB

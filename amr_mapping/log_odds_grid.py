@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from amr_common.map_raster import FREE, OCCUPIED, UNKNOWN, Raster
+from amr_common.world.map_raster import FREE, OCCUPIED, UNKNOWN, Raster
 from amr_mapping.grid_kernels import trace_rays
 
 GROWTH_CELLS = 64  # cells added at a time on a side that needs them

@@ -3,14 +3,14 @@
     mapper = Mapper({"lidar_offset_x_m": -0.032})
     estimate = mapper.update(scan, odom_pose, stamp)   # scan: LaserScan-like; odom: (x, y, th)
     mapper.pose, mapper.map_to_odom                    # map frame; map -> odom for /tf
-    mapper.occupancy_raster()                          # amr_common.map_raster.Raster (/map)
+    mapper.occupancy_raster()                          # amr_common.world.map_raster.Raster (/map)
     mapper.statistics()                                # keyframes, loop closures, timings
 
 Each update predicts the pose from the odometry since the last one (the motion prior), moves
 each ray to the robot's pose at the stamp with that odometry (`deskew`: a real LiDAR measures
-its rays over the scan's scan_time before the stamp; amr_common.scan_deskew, as the particle
-filter) and matches the scan against the local map, a log-odds grid of the latest keyframes
-(scan_matcher.CorrelativeMatcher). A scan becomes a keyframe after the robot moved
+its rays over the scan's scan_time before the stamp; amr_common.sensors.scan_deskew, as the
+particle filter) and matches the scan against the local map, a log-odds grid of the latest
+keyframes (scan_matcher.CorrelativeMatcher). A scan becomes a keyframe after the robot moved
 `keyframe_distance_m` or turned `keyframe_angle_rad`: it joins the local map (the oldest leaves
 it, exactly: counts are integers), the global map, and the pose graph with a link to the keyframe
 before. Every few keyframes the loop closer looks for an earlier keyframe near the current one
@@ -36,11 +36,11 @@ from typing import Any
 import numpy as np
 
 from amr_common.geometry import compose, inverse, wrap_angle
-from amr_common.lidar_models import revolution_ages
-from amr_common.map_raster import Raster
 from amr_common.python_logging import ThrottledLogger
 from amr_common.robot import MAX_PLAUSIBLE_ANGULAR_SPEED, MAX_PLAUSIBLE_LINEAR_SPEED
-from amr_common.scan_deskew import MotionHistory, points_now
+from amr_common.sensors.lidar_models import revolution_ages
+from amr_common.sensors.scan_deskew import MotionHistory, points_now
+from amr_common.world.map_raster import Raster
 from amr_mapping.log_odds_grid import UNITS, LogOddsGrid
 from amr_mapping.loop_closure import LoopCloser, draw
 from amr_mapping.mapper_params import check_parameters, parameter_descriptions
@@ -72,7 +72,7 @@ class MappingEstimate:
 class Mapper:
     """Online graph SLAM (see the module docstring); parameters: mapper_params.PARAMETERS.
 
-    Implements amr_common.interfaces.Mapper.
+    Implements amr_common.plugins.interfaces.Mapper.
     """
 
     def __init__(self, params: dict[str, Any] | None = None) -> None:

@@ -7,8 +7,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from amr_common.lidar_models import LIDAR_MODELS
-from amr_common.parameter_table import (
+from amr_common.plugins.parameter_table import (
     Param,
     above,
     at_least,
@@ -18,7 +17,8 @@ from amr_common.parameter_table import (
     ruled,
     vector,
 )
-from amr_common.range_calibration import RangeCorrection
+from amr_common.sensors.lidar_models import LIDAR_MODELS
+from amr_common.sensors.range_calibration import RangeCorrection
 
 MODEL_NAMES = ("none",) + tuple(LIDAR_MODELS)
 
@@ -42,8 +42,8 @@ _TABLE: dict[str, tuple[Any, str]] = {
                             "parameters that go with it (range_error_parameters)."),
     "range_correction": ([], "The unit's range calibration: [measured range, correction, ...] "
                              "in m, true = measured + correction, piecewise linear "
-                             "(amr_common.range_calibration; scripts/calibrate_lidar.py measures "
-                             "it). [] = as measured."),
+                             "(amr_common.sensors.range_calibration; scripts/calibrate_lidar.py "
+                             "measures it). [] = as measured."),
     "smooth_half_window": (0, "Range noise smoothing: each return moves onto the line through "
                               "a window of this many neighbours on each side, the most central "
                               "straight one, else the straightest (amr_mapping.scan_smoothing; "

@@ -16,7 +16,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from amr_common.scan_returns import return_mask
+from amr_common.sensors.scan_returns import return_mask
 
 MAX_RAYS = 100_000  # more rays than any 2D LiDAR gives: refused as malformed
 MAX_SCAN_TIME_S = 1.0  # a revolution longer than this is not a Burger's LiDAR (5 Hz: 0.2 s)

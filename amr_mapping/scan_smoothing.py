@@ -20,8 +20,8 @@ from typing import Any
 import numpy as np
 
 from amr_common.jit import jit
-from amr_common.lidar_models import LIDAR_MODELS
-from amr_common.range_calibration import RangeCorrection
+from amr_common.sensors.lidar_models import LIDAR_MODELS
+from amr_common.sensors.range_calibration import RangeCorrection
 from amr_mapping.line_kernels import _small_eigen
 from amr_mapping.scan_points import RangesFilter
 

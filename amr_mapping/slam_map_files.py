@@ -10,9 +10,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Mapping
 
-from amr_common.map_file import as_read_back, write_map
-from amr_common.map_raster import Raster
-from amr_common.world import World, WorldError
+from amr_common.world.map_file import as_read_back, write_map
+from amr_common.world.map_raster import Raster
+from amr_common.world.world import World, WorldError
 
 
 def write_slam_map(raster: Raster, statistics: Mapping[str, Any], prefix: str | Path,
@@ -20,8 +20,8 @@ def write_slam_map(raster: Raster, statistics: Mapping[str, Any], prefix: str | 
                    mapped_scans: int) -> tuple[Path, str | None]:
     """PREFIX.yaml + PREFIX.pgm (or .png) of a mapper's map; (the YAML's path, why no start).
 
-    `raster` and `statistics`: the mapper's (checked, amr_common.link_failure). The start is
-    named unless the map read back cannot take it (a coarse map's cells: a wall within the
+    `raster` and `statistics`: the mapper's (checked, amr_common.plugins.link_failure). The start
+    is named unless the map read back cannot take it (a coarse map's cells: a wall within the
     robot's radius); the second item then says why, else None. ValueError (MapFileError
     included) or OSError when the files cannot be written or the map has no free cell (it
     would read back as nothing to drive or localize in); the files of an earlier save stay.

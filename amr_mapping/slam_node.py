@@ -7,7 +7,7 @@ Online graph SLAM (amr_mapping.mapper.Mapper) for users coming from slam_toolbox
     ros2 service call /slam/save_map amr_msgs/srv/SaveMap "{name: $HOME/maps/room}"
 
 Thin: messages become update calls on the `mapper` parameter's class (MODULE:CLASS of
-amr_common.interfaces.Mapper, default the Mapper), results become messages.
+amr_common.plugins.interfaces.Mapper, default the Mapper), results become messages.
 - In: every new /scan (best effort; a scan repeating the previous one's ranges is skipped: the
   lockstep simulator re-sends its held scan) with the odometry POSE interpolated at its stamp
   (amr_common.pose_history) from `odometry_topic` (nav_msgs/Odometry, default /odometry); a
@@ -38,17 +38,21 @@ from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import LaserScan
 
 from amr_common.geometry import compose
-from amr_common.interfaces import Mapper, MappingEstimate
-from amr_common.lifecycle_node import GuardedLifecycleNode
-from amr_common.link_failure import checked_estimate
-from amr_common.map_messages import occupancy_grid
-from amr_common.map_odom_tf import MapOdomTf
 from amr_common.navigation_behaviour import ScanNovelty
-from amr_common.node_runner import run_lifecycle_node
-from amr_common.parameters import declare_link, declare_parameters, read_parameters
+from amr_common.plugins.interfaces import Mapper, MappingEstimate
+from amr_common.plugins.link_failure import checked_estimate
 from amr_common.pose_history import LATER, OLDER, PoseHistory
-from amr_common.qos import LATCHED, RELIABLE_10, scan_qos
-from amr_common.ros_conversions import pose_from_message, time_to_nanoseconds, yaw_to_quaternion
+from amr_common.ros.lifecycle_node import GuardedLifecycleNode
+from amr_common.ros.map_messages import occupancy_grid
+from amr_common.ros.map_odom_tf import MapOdomTf
+from amr_common.ros.node_runner import run_lifecycle_node
+from amr_common.ros.parameters import declare_link, declare_parameters, read_parameters
+from amr_common.ros.qos import LATCHED, RELIABLE_10, scan_qos
+from amr_common.ros.ros_conversions import (
+    pose_from_message,
+    time_to_nanoseconds,
+    yaw_to_quaternion,
+)
 from amr_mapping.slam_map_files import read_save_request, write_slam_map
 from amr_mapping.slam_node_mapper import MapperCalls
 from amr_mapping.slam_node_params import NODE_PARAMETERS as _NODE_PARAMETERS
@@ -74,7 +78,7 @@ class SlamNode(MapperCalls, GuardedLifecycleNode):
         super().__init__(node_name, **kwargs)
         # Numbers take ints for doubles (-p map_update_interval_s:=2), checked in on_configure.
         declare_parameters(self, _NODE_PARAMETERS)
-        # The `mapper` class (amr_common.interfaces.Mapper) and its parameters.
+        # The `mapper` class (amr_common.plugins.interfaces.Mapper) and its parameters.
         self._mapper_class, self._tuning = declare_link(self, "mapper", _NODE_PARAMETERS)
         # Run scripts append callables: each is called with (stamp_ns, MappingEstimate, node)
         # after every mapped scan (in-process observation without a subscription).

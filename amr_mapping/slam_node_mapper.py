@@ -1,4 +1,4 @@
-"""The slam node's calls of its mapper, each checked (amr_common.link_failure).
+"""The slam node's calls of its mapper, each checked (amr_common.plugins.link_failure).
 
 MapperCalls is a base of SlamNode (amr_mapping.slam_node): the mapper's map, statistics and
 map -> odom as the node and the run scripts read them. A mapper that raises or returns what the
@@ -11,15 +11,15 @@ import math
 from typing import Any, Mapping
 
 from amr_common.geometry import compose
-from amr_common.link_failure import (
+from amr_common.plugins.link_failure import (
     LinkFailure,
     checked_pose,
     checked_raster,
     checked_statistics,
     shown,
 )
-from amr_common.map_raster import Raster
-from amr_common.ros_conversions import time_to_nanoseconds
+from amr_common.ros.ros_conversions import time_to_nanoseconds
+from amr_common.world.map_raster import Raster
 
 
 class MapperCalls:
@@ -33,8 +33,8 @@ class MapperCalls:
     def _use_mapper(self, member: str, function, *args, **options) -> Any:
         """function(*args), a call of the mapper's `member`; None once it failed.
 
-        Its failure (amr_common.link_failure) is kept and logged once: the node maps no more,
-        and the map saved so far stays (GuardedLifecycleNode.use_link).
+        Its failure (amr_common.plugins.link_failure) is kept and logged once: the node maps no
+        more, and the map saved so far stays (GuardedLifecycleNode.use_link).
         """
         stamp = self._last_scan_stamp
         options.setdefault("time_s", None if stamp is None else time_to_nanoseconds(stamp) * 1e-9)

@@ -9,12 +9,12 @@ import os
 from pathlib import Path
 from typing import Any
 
-from amr_common.controller_loader import DEFAULT_MAPPER
-from amr_common.parameter_table import finite
+from amr_common.plugins.loader import DEFAULT_MAPPER
+from amr_common.plugins.parameter_table import finite
 
 NODE_PARAMETERS: dict[str, tuple[Any, str]] = {
     "mapper": (DEFAULT_MAPPER, "Mapper class as MODULE:CLASS implementing "
-                               "amr_common.interfaces.Mapper (its tuning values become "
+                               "amr_common.plugins.interfaces.Mapper (its tuning values become "
                                "parameters of this node)"),
     "scan_topic": ("/scan", "sensor_msgs/LaserScan input (subscribed best effort)"),
     "odometry_topic": ("/odometry", "nav_msgs/Odometry input whose POSE is used: the "

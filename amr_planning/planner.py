@@ -7,7 +7,8 @@ clearance. No rclpy (the `planner` node wraps it).
     plan = planner.plan((1.0, -1.0), (0.6, -0.6))       # PlanningError if impossible
     plan.points, plan.length_m, plan.min_clearance_m
 
-Grid and costs (amr_common.occupancy_grid gives each cell's exact distance c to the nearest wall):
+Grid and costs (amr_common.world.occupancy_grid gives each cell's exact distance c to the nearest
+wall):
 - a cell is not traversable when c < robot_radius_m + safety_margin_m (the inflated walls);
 - otherwise it costs 1 + clearance_weight * ((c_pref - c) / (c_pref - c_infl))^2 per cell length
   for c < c_pref = preferred_clearance_m, else 1: paths keep to the middle of corridors narrower
@@ -18,7 +19,7 @@ Grid and costs (amr_common.occupancy_grid gives each cell's exact distance c to 
 - Paths never leave the inflated free space, except where the robot already is: a start inside
   the inflation (it may even touch a wall) is connected by a straight piece to the nearest
   traversable cell that does not bring it closer to the walls. A goal must keep the inflation
-  radius from every wall (amr_common.world's goal rule, the one the run scripts check): one
+  radius from every wall (amr_common.world.world's goal rule, the one the run scripts check): one
   closer is a PlanningError, never a straight piece through the inflation.
 The grid path is then simplified and its corners rounded (amr_planning.smoothing).
 """
@@ -32,11 +33,18 @@ from typing import Any
 import numpy as np
 
 from amr_common.geometry import polyline_length, without_repeats
-from amr_common.occupancy_grid import OccupancyGrid
-from amr_common.parameter_table import Param, above, at_least, checked_values, one_of, ruled
-from amr_common.raycast import nearest_wall_kernel
+from amr_common.plugins.parameter_table import (
+    Param,
+    above,
+    at_least,
+    checked_values,
+    one_of,
+    ruled,
+)
 from amr_common.robot import ROBOT_RADIUS
-from amr_common.world import SAFETY_MARGIN, World
+from amr_common.world.occupancy_grid import OccupancyGrid
+from amr_common.world.raycast import nearest_wall_kernel
+from amr_common.world.world import SAFETY_MARGIN, World
 from amr_planning import search, smoothing
 
 ALGORITHMS = ("astar", "wavefront")
@@ -114,7 +122,8 @@ def check_parameters(overrides: dict[str, Any]) -> dict[str, Any]:
 class Planner:
     """Plans paths on one world; the grid and its costs are built once, in the constructor.
 
-    Implements amr_common.interfaces.Planner (plan() returns a Plan: its points and figures).
+    Implements amr_common.plugins.interfaces.Planner (plan() returns a Plan: its points and
+    figures).
     """
 
     def __init__(self, world: World, grid: OccupancyGrid | None = None, **params: Any) -> None:

@@ -10,10 +10,10 @@
   stops on the loss; the wall follower explores until the filter relocalizes).
 - A goal inside a wall, too close to one or unreachable, or no goal at all: a clear logged error
   and an EMPTY path (the pursuit then commands zero), never a crash. A planner that raises
-  anything else or returns no (K, 2) finite points has failed (amr_common.link_failure): an
+  anything else or returns no (K, 2) finite points has failed (amr_common.plugins.link_failure): an
   empty path, no more planning, and the run scripts end the run.
 The path is stamped with the /pose it was planned from. The algorithm is the `planner`
-parameter's class (MODULE:CLASS of amr_common.interfaces.Planner; default
+parameter's class (MODULE:CLASS of amr_common.plugins.interfaces.Planner; default
 amr_planning.planner.Planner); its tuning values are parameters of this node.
 """
 from __future__ import annotations
@@ -27,18 +27,18 @@ from geometry_msgs.msg import PoseStamped as GoalPoseStamped
 from nav_msgs.msg import Path
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 
-from amr_common.controller_loader import DEFAULT_PLANNER
 from amr_common.geometry import polyline_length
-from amr_common.interfaces import Planner
-from amr_common.lifecycle_node import GuardedLifecycleNode
-from amr_common.link_failure import LinkFailure, checked_path, class_spec, link_call
 from amr_common.navigation_behaviour import Handover
-from amr_common.node_runner import run_lifecycle_node
-from amr_common.parameter_table import Param, ruled, vector
-from amr_common.parameters import declare_link, declare_parameters, read_parameters
-from amr_common.qos import LATCHED, RELIABLE_10
-from amr_common.ros_conversions import path_message, time_to_nanoseconds
-from amr_common.world import World
+from amr_common.plugins.interfaces import Planner
+from amr_common.plugins.link_failure import LinkFailure, checked_path, class_spec, link_call
+from amr_common.plugins.loader import DEFAULT_PLANNER
+from amr_common.plugins.parameter_table import Param, ruled, vector
+from amr_common.ros.lifecycle_node import GuardedLifecycleNode
+from amr_common.ros.node_runner import run_lifecycle_node
+from amr_common.ros.parameters import declare_link, declare_parameters, read_parameters
+from amr_common.ros.qos import LATCHED, RELIABLE_10
+from amr_common.ros.ros_conversions import path_message, time_to_nanoseconds
+from amr_common.world.world import World
 
 _NODE_PARAMETERS: dict[str, Param] = ruled({
     "world": ("lab02", "Bundled world name or path to a world .yaml / course map .json / Nav2 "
@@ -46,7 +46,7 @@ _NODE_PARAMETERS: dict[str, Param] = ruled({
     "goal": ([], "Goal [x, y] in metres; [] = goal_name, else the world's default goal"),
     "goal_name": ("", "A named goal of the world (used when `goal` is [])"),
     "planner": (DEFAULT_PLANNER, "Planner class as MODULE:CLASS implementing "
-                                 "amr_common.interfaces.Planner (its tuning values become "
+                                 "amr_common.plugins.interfaces.Planner (its tuning values become "
                                  "parameters of this node)"),
     "replan_on_relocalization": (True, "Plan again from the pose when /pose becomes localized "
                                        "after localization was lost"),

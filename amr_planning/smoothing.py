@@ -23,7 +23,7 @@ import math
 import numpy as np
 
 from amr_common.jit import jit
-from amr_common.raycast import clearances_into, nearest_wall_kernel
+from amr_common.world.raycast import clearances_into, nearest_wall_kernel
 
 _MAX_ARC_STEP_RAD = 0.25
 

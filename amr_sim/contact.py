@@ -15,7 +15,7 @@ import pymunk
 
 from amr_common import robot
 from amr_common.jit import jit
-from amr_common.raycast import segment_offset
+from amr_common.world.raycast import segment_offset
 
 ALLOWED_PENETRATION = 0.0005  # m: resting contact depth, below collision_slop so it is stable
 ROBOT_TYPE, WALL_TYPE = 1, 2  # pymunk collision types

@@ -1,19 +1,24 @@
 """The simulated 2D LiDAR: a scan of rays from a pose against the world's wall segments.
 
-The ray-casting kernels live in amr_common.raycast (shared with the particle filter and the
+The ray-casting kernels live in amr_common.world.raycast (shared with the particle filter and the
 planner); this module adds the sensor: ray angles, range limits and the no-return value. A map
-world with many wall segments is scanned through its cells instead (amr_common.raster_raycast:
-the same ranges, at a cost that does not grow with the segments). Circles (`circles`, rows
-[x, y, radius]: the world's movers where they are now, kept up to date by the simulator) are
-seen on top of the walls.
+world with many wall segments is scanned through its cells instead
+(amr_common.world.raster_raycast: the same ranges, at a cost that does not grow with the segments).
+Circles (`circles`, rows [x, y, radius]: the world's movers where they are now, kept up to date by
+the simulator) are seen on top of the walls.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from amr_common.jit import HAVE_NUMBA
-from amr_common.raster_raycast import MarchGrid, scan_grid_kernel
-from amr_common.raycast import scan_circles_kernel, scan_circles_numpy, scan_kernel, scan_numpy
+from amr_common.world.raster_raycast import MarchGrid, scan_grid_kernel
+from amr_common.world.raycast import (
+    scan_circles_kernel,
+    scan_circles_numpy,
+    scan_kernel,
+    scan_numpy,
+)
 
 
 class Lidar:

@@ -14,8 +14,8 @@ import math
 import numpy as np
 
 from amr_common.jit import HAVE_NUMBA, jit
-from amr_common.lidar_models import LidarModel
-from amr_common.raycast import (
+from amr_common.sensors.lidar_models import LidarModel
+from amr_common.world.raycast import (
     cast_circles_kernel,
     cast_circles_numpy,
     cast_rays_kernel,

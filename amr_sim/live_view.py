@@ -18,7 +18,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from amr_common.robot import ROBOT_RADIUS
-from amr_common.scan_returns import return_mask
+from amr_common.sensors.scan_returns import return_mask
 
 DEFAULT_MAX_WINDOW_PX = (1000, 800)
 MARGIN_M = 0.25

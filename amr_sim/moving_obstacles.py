@@ -1,6 +1,6 @@
 """The world's movers inside the simulator: their clocks, waits, contacts and LiDAR circles.
 
-Each mover (amr_common.movers) has its own clock. Every step, before the robot moves, each
+Each mover (amr_common.world.movers) has its own clock. Every step, before the robot moves, each
 mover's clock advances by dt unless the position that gives would come within KEEP_OFF of the
 robot's body where it stands: then the mover waits this step (logged in `waits`). So a mover
 never walks into the robot, and every contact with one is the robot's doing.
@@ -14,15 +14,15 @@ The movers are no pymunk bodies: two small compiled kernels do the walking and t
 (about a microsecond a step for a few movers, where pymunk's per-body Python calls cost ~10).
 
 `circles` (rows [x, y, radius]) is the array the LiDAR casts against
-(amr_common.raycast.cast_circles / scan_circles), updated in place.
+(amr_common.world.raycast.cast_circles / scan_circles), updated in place.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from amr_common.jit import jit
-from amr_common.movers import Mover, path_position
 from amr_common.robot import ROBOT_RADIUS
+from amr_common.world.movers import Mover, path_position
 
 KEEP_OFF = 0.001  # m: a mover keeps this gap to the robot's body, so it never starts a contact
 

@@ -24,8 +24,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
-from amr_common.lidar_models import LDS01, LDS02, LidarModel
 from amr_common.robot import LIDAR_OFFSET_X, MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED
+from amr_common.sensors.lidar_models import LDS01, LDS02, LidarModel
 from amr_sim.effects import Effects, parse_effect_value
 
 RANDOMIZED = "randomized"  # the profile option that draws the effects from the seed

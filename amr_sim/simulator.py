@@ -13,7 +13,7 @@ Walls stop the robot through a speculative contact constraint (amr_sim.contact):
 at most 0.5 mm inside a wall. Pymunk detects the contacts (begin/separate callbacks count
 collisions) and its solver pushes out any deeper overlap.
 
-The world's movers (amr_common.movers; amr_sim.moving_obstacles) walk first in each step,
+The world's movers (amr_common.world.movers; amr_sim.moving_obstacles) walk first in each step,
 each waiting while its next position would touch the robot; then they stand like walls for the
 robot's motion (its velocity is limited towards them too; their contacts are counted by
 amr_sim.moving_obstacles, not pymunk) and are seen by the LiDAR. `collisions` counts every
@@ -38,9 +38,9 @@ import pymunk
 
 from amr_common import robot
 from amr_common.geometry import wrap_angle
-from amr_common.raycast import nearest_wall
 from amr_common.robot import COMMAND_CLIP  # |v|, |w| beyond this are absurd
-from amr_common.world import World, WorldError
+from amr_common.world.raycast import nearest_wall
+from amr_common.world.world import World, WorldError
 from amr_sim.contact import (
     ALLOWED_PENETRATION,
     ROBOT_TYPE,

@@ -1,7 +1,7 @@
 """The `amr_simulator` lifecycle node: the amr_sim core behind the course's ROS interface.
 
 Thin: commands become `Simulator.step(v, w)` calls and results become messages
-(amr_common.ros_conversions). Two modes:
+(amr_common.ros.ros_conversions). Two modes:
 - lockstep (default, as CoppeliaSim stepping): each /cmd_vel advances exactly one dt, then
   /clock and /ground_truth (while anyone subscribes), the odometry topic and /scan are
   published with the simulated time as stamp; on activation a first measurement is published
@@ -31,14 +31,14 @@ from rclpy.clock import Clock, ClockType
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 
 from amr_common.geometry import angle_difference
-from amr_common.lifecycle_node import GuardedLifecycleNode
-from amr_common.movers import collisions_text
 from amr_common.navigation_behaviour import GoalCheck, KidnapSchedule
-from amr_common.node_runner import run_lifecycle_node
-from amr_common.parameters import declare_parameters, read_parameters
-from amr_common.qos import RELIABLE_10
-from amr_common.ros_conversions import command_from_twist, pose_from_message
-from amr_common.world import World
+from amr_common.ros.lifecycle_node import GuardedLifecycleNode
+from amr_common.ros.node_runner import run_lifecycle_node
+from amr_common.ros.parameters import declare_parameters, read_parameters
+from amr_common.ros.qos import RELIABLE_10
+from amr_common.ros.ros_conversions import command_from_twist, pose_from_message
+from amr_common.world.movers import collisions_text
+from amr_common.world.world import World
 from amr_sim.simulator import Simulator
 from amr_sim.simulator_outputs import SimulatorOutputs
 from amr_sim.simulator_params import DEFAULT_START, PARAMETERS, check_parameters
@@ -56,7 +56,7 @@ class SimulatorNode(GuardedLifecycleNode):
 
     def __init__(self, node_name: str = "amr_simulator", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
-        # Numbers take ints for doubles (`-p dt:=1`): amr_common.parameters.
+        # Numbers take ints for doubles (`-p dt:=1`): amr_common.ros.parameters.
         declare_parameters(self, PARAMETERS)
         # Run scripts append callables here; each is called with the simulator after a step.
         self.on_step: list[Callable[[Any], None]] = []
@@ -153,7 +153,7 @@ class SimulatorNode(GuardedLifecycleNode):
         if synchronize:
             # As the course template: a step needs a command AND the pose estimate it was
             # computed with (slop 10 s: in lockstep the stamps are simulated times).
-            from amr_common import message_filters
+            from amr_common.ros import message_filters
             self._filters = [
                 message_filters.Subscriber(self, TwistStamped, "/cmd_vel",
                                            qos_profile=RELIABLE_10),

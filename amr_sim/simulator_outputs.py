@@ -24,32 +24,32 @@ from rosgraph_msgs.msg import Clock as ClockMessage
 from sensor_msgs.msg import LaserScan
 from tf2_msgs.msg import TFMessage
 
-from amr_common.coverage_grid import GridTooLargeError
 from amr_common.geometry import angle_difference
-from amr_common.map_messages import (
+from amr_common.robot import LIDAR_HEIGHT, step_chord
+from amr_common.ros.map_messages import (
     MAP_MARKERS_TOPIC,
     MAP_TOPIC,
     WORLD_MARKERS_TOPIC,
     world_map_messages,
     world_markers,
 )
-from amr_common.map_vs_world import load_map, unmapped_walls
-from amr_common.qos import LATCHED, RELIABLE_10, scan_qos
-from amr_common.robot import LIDAR_HEIGHT, step_chord
-from amr_common.ros_conversions import (
+from amr_common.ros.qos import LATCHED, RELIABLE_10, scan_qos
+from amr_common.ros.ros_conversions import (
     float32_array,
     laser_scan,
     laser_scan_from_profile,
     odometry_message,
     seconds_to_time,
 )
-from amr_common.tf import (
+from amr_common.ros.tf import (
     TF_QOS,
     TF_TOPIC,
     StaticTransformBroadcaster,
     map_to_odom,
     planar_transform,
 )
+from amr_common.world.coverage_grid import GridTooLargeError
+from amr_common.world.map_vs_world import load_map, unmapped_walls
 from amr_sim.reality import delivery_stream
 
 WORLD_MARKERS_PERIOD_S = 0.1  # simulated time between /world_markers updates while movers walk

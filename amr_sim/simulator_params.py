@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from amr_common.parameter_table import (
+from amr_common.plugins.parameter_table import (
     MAX_SEED,
     Param,
     between,
@@ -15,11 +15,11 @@ from amr_common.parameter_table import (
     ruled,
     vector,
 )
-from amr_common.world import parse_start
+from amr_common.world.world import parse_start
 
 DEFAULT_START = "outer"  # the course's "outer corridor" start in lab02
 # name: (default, description); the default's type is the parameter's ([] = a double array).
-# Numbers accept ints or doubles (`-p dt:=1` must not kill the process): amr_common.parameters
+# Numbers accept ints or doubles (`-p dt:=1` must not kill the process): amr_common.ros.parameters
 # declares them with dynamic typing, on_configure checks.
 _TABLE: dict[str, tuple[Any, str]] = {
     "world": ("lab02", "Bundled world name or path to a world .yaml / course map .json / Nav2 "

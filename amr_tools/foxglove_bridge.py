@@ -31,11 +31,11 @@ from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
 
-from amr_common.lifecycle_node import GuardedLifecycleNode
-from amr_common.node_runner import run_lifecycle_node
-from amr_common.parameter_table import Param, between, ruled
-from amr_common.parameters import declare_parameters, read_parameters
-from amr_common.qos import RELIABLE_10
+from amr_common.plugins.parameter_table import Param, between, ruled
+from amr_common.ros.lifecycle_node import GuardedLifecycleNode
+from amr_common.ros.node_runner import run_lifecycle_node
+from amr_common.ros.parameters import declare_parameters, read_parameters
+from amr_common.ros.qos import RELIABLE_10
 from amr_tools.foxglove_gate import FoxgloveGate, normalize_origin, self_signed_certificate
 from amr_tools.introspection import UnknownTypeError, matched_qos, message_class
 from amr_tools.mcap_recorder import (
@@ -96,7 +96,7 @@ class FoxgloveBridgeNode(GuardedLifecycleNode):
 
     def __init__(self, node_name: str = "foxglove_bridge", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
-        # Numbers take ints for doubles (-p discovery_period:=2): amr_common.parameters.
+        # Numbers take ints for doubles (-p discovery_period:=2): amr_common.ros.parameters.
         declare_parameters(self, PARAMETERS)
         self.declare_parameter(ALLOWED_ORIGINS[0], Parameter.Type.STRING_ARRAY,
                                ParameterDescriptor(description=ALLOWED_ORIGINS[1]))

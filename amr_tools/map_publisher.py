@@ -13,13 +13,13 @@ import sys
 
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 
-from amr_common.lifecycle_node import GuardedLifecycleNode
-from amr_common.map_messages import MAP_MARKERS_TOPIC, MAP_TOPIC, world_map_messages
-from amr_common.node_runner import run_lifecycle_node
-from amr_common.parameter_table import between, ruled
-from amr_common.parameters import declare_parameters, read_parameters
-from amr_common.qos import LATCHED
-from amr_common.world import World
+from amr_common.plugins.parameter_table import between, ruled
+from amr_common.ros.lifecycle_node import GuardedLifecycleNode
+from amr_common.ros.map_messages import MAP_MARKERS_TOPIC, MAP_TOPIC, world_map_messages
+from amr_common.ros.node_runner import run_lifecycle_node
+from amr_common.ros.parameters import declare_parameters, read_parameters
+from amr_common.ros.qos import LATCHED
+from amr_common.world.world import World
 
 _PARAMETERS = ruled({
     "world": ("lab02", "Bundled world name or path to a world .yaml / the course's map .json / "
@@ -39,7 +39,7 @@ class MapPublisherNode(GuardedLifecycleNode):
 
     def __init__(self, node_name: str = "map_publisher", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
-        # -p resolution:=1 is fine: numbers take ints for doubles (amr_common.parameters).
+        # -p resolution:=1 is fine: numbers take ints for doubles (amr_common.ros.parameters).
         declare_parameters(self, _PARAMETERS)
         self._outputs: dict = {}
         self._messages = None

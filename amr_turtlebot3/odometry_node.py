@@ -19,12 +19,12 @@ from __future__ import annotations
 from nav_msgs.msg import Odometry
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 
-from amr_common.lifecycle_node import GuardedLifecycleNode
-from amr_common.node_runner import run_lifecycle_node
-from amr_common.parameter_table import Param, above, at_least, ruled
-from amr_common.parameters import declare_parameters, read_parameters
-from amr_common.qos import RELIABLE_10
-from amr_common.ros_conversions import time_to_nanoseconds
+from amr_common.plugins.parameter_table import Param, above, at_least, ruled
+from amr_common.ros.lifecycle_node import GuardedLifecycleNode
+from amr_common.ros.node_runner import run_lifecycle_node
+from amr_common.ros.parameters import declare_parameters, read_parameters
+from amr_common.ros.qos import RELIABLE_10
+from amr_common.ros.ros_conversions import time_to_nanoseconds
 from amr_turtlebot3.velocity_estimator import Status, VelocityEstimator
 
 WARNING_PERIOD = 5.0  # seconds between repeated warnings of one kind
@@ -53,7 +53,7 @@ class OdometryNode(GuardedLifecycleNode):
     def __init__(self, node_name: str = "amr_odometry", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
         # Numbers take ints for doubles (`-p max_gap:=1`), and a wrong value fails configure
-        # with a reason instead of raising in the constructor: amr_common.parameters.
+        # with a reason instead of raising in the constructor: amr_common.ros.parameters.
         declare_parameters(self, _PARAMETERS)
         self.estimator: VelocityEstimator | None = None
         self._publisher = None

@@ -1,8 +1,8 @@
 """A course-style Monte Carlo localization with the likelihood-field model (Thrun et al., ch. 6.4).
 
-A small, readable amr_common.interfaces.Localizer: the project's ParticleFilter does much more
-(a beam model on an expected-range table, adaptive particle counts, exhaustive pose searches, a
-guarded "localized" flag). Run it in place of the project's:
+A small, readable amr_common.plugins.interfaces.Localizer: the project's ParticleFilter does much
+more (a beam model on an expected-range table, adaptive particle counts, exhaustive pose searches,
+a guarded "localized" flag). Run it in place of the project's:
 
     .venv/bin/python scripts/run_sim.py --world lab02 --localize \
         --localizer examples.likelihood_mcl:LikelihoodFieldMcl
@@ -29,11 +29,11 @@ from typing import Any
 
 import numpy as np
 
-from amr_common.occupancy_grid import OccupancyGrid
-from amr_common.parameter_table import at_least, checked_values, ruled, vector
+from amr_common.plugins.parameter_table import at_least, checked_values, ruled, vector
 from amr_common.robot import ROBOT_RADIUS
-from amr_common.scan_returns import return_mask
-from amr_common.world import World
+from amr_common.sensors.scan_returns import return_mask
+from amr_common.world.occupancy_grid import OccupancyGrid
+from amr_common.world.world import World
 
 # name: (default, description); ruled() adds what values are allowed (checked_values checks).
 _PARAMETERS = ruled({

@@ -1,7 +1,7 @@
 """The course's occupancy-grid mapping with known poses: it trusts the odometry, no scan matching.
 
-A small, readable amr_common.interfaces.Mapper: the project's Mapper is graph SLAM (each scan
-matched against the map, keyframes, loop closures, a pose graph). This one takes the odometry
+A small, readable amr_common.plugins.interfaces.Mapper: the project's Mapper is graph SLAM (each
+scan matched against the map, keyframes, loop closures, a pose graph). This one takes the odometry
 pose as the truth and draws every scan into a log-odds grid at that pose, so you see what
 SLAM is for: as the odometry drifts, the walls it draws again later land beside the first ones
 and the map smears. Run it in place of the project's:
@@ -28,10 +28,10 @@ from typing import Any
 
 import numpy as np
 
-from amr_common.cell_grid import cell_index
-from amr_common.map_raster import FREE, OCCUPIED, UNKNOWN, Raster
-from amr_common.parameter_table import above, checked_values, ruled
-from amr_common.scan_returns import return_mask
+from amr_common.plugins.parameter_table import above, checked_values, ruled
+from amr_common.sensors.scan_returns import return_mask
+from amr_common.world.cell_grid import cell_index
+from amr_common.world.map_raster import FREE, OCCUPIED, UNKNOWN, Raster
 
 _PARAMETERS = ruled({
     "lidar_offset_x_m": (0.0, "Where the LiDAR sits ahead of the robot centre [m] (the run "

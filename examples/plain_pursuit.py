@@ -1,8 +1,8 @@
 """The course's plain pure pursuit: steer along the arc through a point `lookahead_m` ahead.
 
-A small, readable amr_common.interfaces.PathFollower: the project's PurePursuit is regulated
-(speed from curvature, obstacles and the distance left; stops at sharp corners and turns in
-place; an adaptive lookahead). Run it in place of the project's:
+A small, readable amr_common.plugins.interfaces.PathFollower: the project's PurePursuit is
+regulated (speed from curvature, obstacles and the distance left; stops at sharp corners and turns
+in place; an adaptive lookahead). Run it in place of the project's:
 
     .venv/bin/python scripts/run_sim.py --world lab02 --goal inner_far \
         --follower examples.plain_pursuit:PlainPursuit
@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from amr_common.parameter_table import above, checked_values, ruled
+from amr_common.plugins.parameter_table import above, checked_values, ruled
 from amr_common.robot import MAX_ANGULAR_SPEED, ROBOT_RADIUS
 
 _PARAMETERS = ruled({

@@ -1,6 +1,6 @@
 """A course-style wavefront planner: a breadth-first wave from the goal over the free cells.
 
-A small, readable amr_common.interfaces.Planner: the project's Planner does more (A* with a
+A small, readable amr_common.plugins.interfaces.Planner: the project's Planner does more (A* with a
 clearance cost that keeps to the middle of corridors, smoothing with rounded corners, compiled
 searches). Run it in place of the project's:
 
@@ -26,9 +26,9 @@ from typing import Any
 import numpy as np
 
 from amr_common.geometry import without_repeats
-from amr_common.occupancy_grid import OccupancyGrid
-from amr_common.parameter_table import above, checked_values, ruled
-from amr_common.world import World
+from amr_common.plugins.parameter_table import above, checked_values, ruled
+from amr_common.world.occupancy_grid import OccupancyGrid
+from amr_common.world.world import World
 
 _PARAMETERS = ruled({
     "resolution_m": (0.02, "Grid cell size [m]"),

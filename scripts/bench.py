@@ -30,7 +30,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import launch_common  # noqa: E402,F401  (puts the repo on sys.path)
-from amr_common.ros_env import isolate_local_graph  # noqa: E402
+from amr_common.ros.ros_env import isolate_local_graph  # noqa: E402
 
 
 def _rate(count: int, seconds: float) -> float:

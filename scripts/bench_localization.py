@@ -41,7 +41,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from amr_common.robot import LIDAR_OFFSET_X  # noqa: E402
-from amr_common.world import World  # noqa: E402
+from amr_common.world.world import World  # noqa: E402
 from amr_localization import beam_model  # noqa: E402
 from amr_localization.particle_filter import ParticleFilter  # noqa: E402
 from amr_sim.lidar import Lidar  # noqa: E402
@@ -57,7 +57,7 @@ REPO = Path(__file__).resolve().parents[1]
 _EPISODE = """
 import json, resource, sys, time
 sys.path.insert(0, {repo!r})
-from amr_common.world import World
+from amr_common.world.world import World
 from amr_evaluation.localization_episode import run_localization_episode
 from amr_localization.particle_filter import ParticleFilter
 world = World.load({world!r})

@@ -8,9 +8,10 @@ For each world (default lab02 and room_obstacles), in one run and with the same 
 - a SLAM-like version of that map (`slam_like`: ragged walls and speckles, as a real mapping run
   leaves them), thousands of short segments,
 each map scanned against its segments and by grid ray marching through its cells
-(amr_common.raster_raycast), which is what World.march_grid decides between. A step = physics,
-wall contacts and a full 360-ray scan (the ideal profile scans every step). Microseconds of CPU
-time per step (time.process_time), the best of --repeats runs, and the ratio to the polygon world.
+(amr_common.world.raster_raycast), which is what World.march_grid decides between. A step =
+physics, wall contacts and a full 360-ray scan (the ideal profile scans every step). Microseconds
+of CPU time per step (time.process_time), the best of --repeats runs, and the ratio to the polygon
+world.
 
 Usage: .venv/bin/python scripts/bench_map_world.py [--steps N] [--repeats R] [--worlds a,b]
 """
@@ -26,10 +27,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from amr_common.map_file import world_as_map  # noqa: E402
-from amr_common.map_raster import FREE, OCCUPIED, Raster  # noqa: E402
-from amr_common.raster_raycast import MarchGrid  # noqa: E402
-from amr_common.world import World  # noqa: E402
+from amr_common.world.map_file import world_as_map  # noqa: E402
+from amr_common.world.map_raster import FREE, OCCUPIED, Raster  # noqa: E402
+from amr_common.world.raster_raycast import MarchGrid  # noqa: E402
+from amr_common.world.world import World  # noqa: E402
 from amr_sim.lidar import Lidar  # noqa: E402
 from amr_sim.simulator import Simulator  # noqa: E402
 

@@ -64,8 +64,8 @@ def bench_deskew(duration: float, rounds: int = 2) -> dict:
     """SLAM update medians (CPU ms) on turtlebot3 with de-skew on and off; its own cost."""
     import numpy as np
 
-    from amr_common.lidar_models import revolution_ages
-    from amr_common.scan_deskew import MotionHistory, points_now
+    from amr_common.sensors.lidar_models import revolution_ages
+    from amr_common.sensors.scan_deskew import MotionHistory, points_now
     from amr_mapping.scan_smoothing import smooth_ranges
     variants = {"on": {}, "off": {"deskew": False}, "no_smoothing": {"smooth_half_window": 0}}
     medians: dict = {name: [] for name in variants}
@@ -147,7 +147,7 @@ def bench_ros_graph(duration: float) -> dict:
     """Real-time factors of the lockstep graph without SLAM, with it, with the reference."""
     import bench_ros
 
-    from amr_common.ros_env import isolate_local_graph
+    from amr_common.ros.ros_env import isolate_local_graph
     isolate_local_graph()
     wall_follower = "amr_control.wall_follower:WallFollower"
     graphs: dict = {}

@@ -34,7 +34,7 @@ if str(REPO) not in sys.path:  # run from a checkout without installing
 
 import numpy as np  # noqa: E402
 
-from amr_common.world import World  # noqa: E402
+from amr_common.world.world import World  # noqa: E402
 from amr_planning import search  # noqa: E402
 from amr_planning.planner import Planner  # noqa: E402
 

@@ -25,7 +25,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import launch_common  # noqa: E402,F401  (puts the repo on sys.path)
-from amr_common.ros_env import claim_free_domain_id, isolate_local_graph  # noqa: E402
+from amr_common.ros.ros_env import claim_free_domain_id, isolate_local_graph  # noqa: E402
 
 DT = 0.05
 
@@ -46,7 +46,7 @@ class _Graph:
     def __init__(self) -> None:
         import rclpy
 
-        from amr_common.node_runner import make_executor
+        from amr_common.ros.node_runner import make_executor
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=claim_free_domain_id())
         self.executor = make_executor(self.context)

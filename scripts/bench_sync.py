@@ -11,7 +11,7 @@ Workloads, queue_size 10, slop 50 ms:
             the reference's worst case, a walk of the whole product (queue_size ** (inputs - 1)
             tuples per arrival).
 Rows: ours through the public API (PointStamped messages, header parsing, lock), our pure
-matcher (amr_common.time_matching), and the reference search written out literally (the
+matcher (amr_common.ros.time_matching), and the reference search written out literally (the
 oracle of tests/sync_reference.py) on the same arrivals, in the same run; ratio = reference /
 ours (pure matcher against the equally pure reference).
 """
@@ -27,7 +27,7 @@ REPO = Path(__file__).resolve().parent.parent
 if str(REPO) not in sys.path:  # run from a checkout without installing
     sys.path.insert(0, str(REPO))
 
-from amr_common.ros_env import isolate_local_graph  # noqa: E402
+from amr_common.ros.ros_env import isolate_local_graph  # noqa: E402
 
 NS = 1_000_000_000
 QUEUE_SIZE = 10
@@ -74,8 +74,8 @@ def _time_per_add(run, arrivals_count: int, repeats: int) -> float:
 def measure(num_inputs: int, arrivals: list[tuple[int, int]], repeats: int = 5) -> dict:
     from geometry_msgs.msg import PointStamped
 
-    from amr_common import time_matching
-    from amr_common.message_filters import ApproximateTimeSynchronizer, SimpleFilter
+    from amr_common.ros import time_matching
+    from amr_common.ros.message_filters import ApproximateTimeSynchronizer, SimpleFilter
     from tests.sync_reference import ReferenceApproximateSync
 
     messages = []

@@ -5,8 +5,8 @@ Every LDS-01 has its own systematic range error (up to 15 mm below 0.5 m, up to 
 range above): a map built from its scans is scaled by as much, and no odometry can reveal it.
 Stand the Burger facing a flat wall at a few distances measured with a tape from the LiDAR's
 centre; at each, the script pools --scans scans of the wall within +-10 deg straight ahead
-(amr_common.range_calibration), prints what the unit reads and its error, and at the end the
-correction (true = measured + correction, piecewise linear) for the slam node.
+(amr_common.sensors.range_calibration), prints what the unit reads and its error, and at the end
+the correction (true = measured + correction, piecewise linear) for the slam node.
 
   .venv/bin/python scripts/calibrate_lidar.py --domain-id 30                 # the real robot
   .venv/bin/python scripts/calibrate_lidar.py --domain-id 30 --out ~/lds01.yaml
@@ -35,8 +35,8 @@ from typing import Any, Callable, Mapping, Sequence
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from script_endings import interruptible, run_script  # noqa: E402
 
-from amr_common.parameter_table import MAX_SEED  # noqa: E402
-from amr_common.ros_env import (  # noqa: E402
+from amr_common.plugins.parameter_table import MAX_SEED  # noqa: E402
+from amr_common.ros.ros_env import (  # noqa: E402
     describe_graph_settings,
     environment_domain_id,
     isolate_local_graph,
@@ -187,13 +187,13 @@ def _check_simulated_distances(profile: str, distances: Sequence[float]) -> None
 def pooled_wall_points(scans: Sequence[Any]) -> Any:
     """The returns within +-10 deg ahead of every LaserScan in `scans`, pooled: (N, 2) metres.
 
-    Readings that are not returns (amr_common.scan_returns: 0.0, the LDS-01's "none", NaN,
+    Readings that are not returns (amr_common.sensors.scan_returns: 0.0, the LDS-01's "none", NaN,
     outside the scan's [range_min, range_max]) are left out.
     """
     import numpy as np
 
-    from amr_common.range_calibration import wall_points
-    from amr_common.scan_returns import return_mask
+    from amr_common.sensors.range_calibration import wall_points
+    from amr_common.sensors.scan_returns import return_mask
     pooled = [np.empty((0, 2))]
     for scan in scans:
         ranges = np.asarray(scan.ranges, dtype=np.float64)
@@ -204,7 +204,7 @@ def pooled_wall_points(scans: Sequence[Any]) -> Any:
 
 def checked_reading(distance: float, reading: float | None, points: int | None = None) -> float:
     """`reading` of the wall `distance` m away; CalibrationError if none or beyond any LiDAR's."""
-    from amr_common.range_calibration import MIN_WALL_RETURNS, RangeCorrection
+    from amr_common.sensors.range_calibration import MIN_WALL_RETURNS, RangeCorrection
     if reading is None:
         if points is None:
             why = "the returns ahead are too few or not on one line"
@@ -259,7 +259,7 @@ def measure_robot(args: argparse.Namespace) -> dict[float, float]:
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
 
-    from amr_common.range_calibration import wall_distance
+    from amr_common.sensors.range_calibration import wall_distance
     # No rclpy signal handlers: Ctrl-C is a KeyboardInterrupt, answered in main().
     context = rclpy.Context()
     rclpy.init(args=[], context=context, signal_handler_options=SignalHandlerOptions.NO)
@@ -305,7 +305,7 @@ def collect_scans(node: Any, spin_once: Callable[..., None], topic: str, count: 
     """
     from sensor_msgs.msg import LaserScan
 
-    from amr_common.qos import scan_qos
+    from amr_common.ros.qos import scan_qos
     scans: list = []
     subscription = node.create_subscription(LaserScan, topic, scans.append, scan_qos())
     try:
@@ -350,7 +350,7 @@ def params_yaml(values: Sequence[float], readings: Mapping[float, float], source
 
 def report(readings: Mapping[float, float], args: argparse.Namespace, source: str) -> None:
     """Print the correction and the ways to give it to the slam node; write --out."""
-    from amr_common.range_calibration import fit_correction
+    from amr_common.sensors.range_calibration import fit_correction
     from amr_mapping.mapper_params import check_parameters
     try:
         values = fit_correction(readings).as_list()

@@ -17,7 +17,7 @@ REPO = Path(__file__).resolve().parent.parent
 if str(REPO) not in sys.path:  # run from a checkout without installing
     sys.path.insert(0, str(REPO))
 
-from amr_common.ros_env import check_domain_id  # noqa: E402
+from amr_common.ros.ros_env import check_domain_id  # noqa: E402
 
 
 class OneLineArgumentParser(argparse.ArgumentParser):

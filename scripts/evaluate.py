@@ -10,8 +10,8 @@ episode's trajectory; --slam: every map, each also saved in maps/) to --out, pri
 a one-line verdict.
 Exit code: 0 no collision (and every goal reached), 1 some episode collided or missed its goal,
 2 bad options, 3 some episode failed: a link failed (raised, or commanded NaN/inf/non-numbers:
-amr_common.link_failure, as in run_sim.py), an exception, sys.exit, its worker process died, or
-it ran past --episode-timeout; or a map could not be saved; 130 / 129 stopped by Ctrl-C or
+amr_common.plugins.link_failure, as in run_sim.py), an exception, sys.exit, its worker process
+died, or it ran past --episode-timeout; or a map could not be saved; 130 / 129 stopped by Ctrl-C or
 SIGTERM / SIGHUP (the terminal closed).
 
 Examples:
@@ -56,11 +56,7 @@ from evaluate_executors import (  # noqa: E402
 from link_options import add_link_options, check_filter_map, links_ran  # noqa: E402
 from script_endings import interruptible, run_script  # noqa: E402
 
-from amr_common.controller_loader import (  # noqa: E402
-    DEFAULT_LOCALIZER,
-    ControllerSpecError,
-    load_controller_class,
-)
+from amr_common.plugins.loader import DEFAULT_LOCALIZER, PluginSpecError, load_controller_class
 from amr_evaluation.evaluation import (  # noqa: E402
     DEFAULT_CONTROLLER,
     EvaluationError,
@@ -209,7 +205,7 @@ EVALUATE_NEEDS = {"localizer": "--localize or --goals with the filter's pose",
 def check_links(args: argparse.Namespace, settings: dict) -> dict[str, str]:
     """The --localizer / --planner / --follower / --mapper classes, loaded now: {link: spec}.
 
-    ControllerSpecError (one line) naming what a class lacks; EvaluationError for a link the
+    PluginSpecError (one line) naming what a class lacks; EvaluationError for a link the
     episodes do not run (a planner without --goals).
     """
     from link_options import check_links as load_links
@@ -220,7 +216,7 @@ def check_links(args: argparse.Namespace, settings: dict) -> dict[str, str]:
     try:
         return load_links({link: settings.get(link) for link in EVALUATE_NEEDS}, runs,
                           EVALUATE_NEEDS)
-    except ControllerSpecError:
+    except PluginSpecError:
         raise
     except ValueError as exc:
         raise EvaluationError(str(exc)) from None
@@ -285,8 +281,8 @@ def check_filter_maps(specs, overrides: dict, localize: bool = False) -> None:
     big for its memory budget (saying what it would need), an initial pose where the robot
     cannot be: EvaluationError (one line). Milliseconds per map: nothing is built.
     """
-    from amr_common.map_vs_world import load_map
-    from amr_common.world import World
+    from amr_common.world.map_vs_world import load_map
+    from amr_common.world.world import World
     maps = [(spec.map, spec.world, spec.localizer) for spec in specs  # on the map, if one
             if localize or (spec.goal is not None and spec.pose_source == "filter")]
     for map_source, world, localizer in dict.fromkeys(maps):
@@ -338,7 +334,7 @@ def _evaluate(argv: list[str] | None) -> int:
                                   "--out")
         executor = make_executor(args, settings["jobs"], len(specs),
                                  settings["episode_timeout"])
-    except ValueError as exc:  # EvaluationError, ControllerSpecError, a bad --out
+    except ValueError as exc:  # EvaluationError, PluginSpecError, a bad --out
         print(f"evaluate: {exc}", file=sys.stderr)
         return 2
     try:

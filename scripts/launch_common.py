@@ -94,8 +94,8 @@ def check_common_options(parser, args, script: str, wall_follower_set: dict[str,
     """
     from link_options import check_link_options, check_particle_filter
 
-    from amr_common.controller_loader import ControllerSpecError, parse_overrides
-    from amr_common.parameter_table import check_value
+    from amr_common.plugins.loader import PluginSpecError, parse_overrides
+    from amr_common.plugins.parameter_table import check_value
     from amr_control.wall_follower_node import node_parameters
     from amr_tools.foxglove_bridge import PARAMETERS as FOXGLOVE_PARAMETERS
     # The options that stand for node parameters: by the rules of those parameters.
@@ -118,7 +118,7 @@ def check_common_options(parser, args, script: str, wall_follower_set: dict[str,
                                      ("--pf-param", "pf_overrides", pf_param)):
         try:
             setattr(args, attribute, parse_overrides(items))
-        except ControllerSpecError as exc:
+        except PluginSpecError as exc:
             parser.error(f"{option}: {exc}")
     localize = bool(getattr(args, "localize", False) or getattr(args, "goal", None) is not None)
     try:
@@ -141,8 +141,8 @@ def _refused(option: str, overrides: dict, script: str, set_by_script: dict[str,
 
 def _check_wall_follower(args, script: str, set_by_script: dict[str, str]) -> None:
     """-p names and values, the params file and the controller; ValueError (one line)."""
-    from amr_common.controller_loader import DEFAULT_CONTROLLER, load_controller_class
-    from amr_common.parameters import typed_values
+    from amr_common.plugins.loader import DEFAULT_CONTROLLER, load_controller_class
+    from amr_common.ros.parameters import typed_values
     from amr_control.wall_follower_node import (
         node_parameter_problems,
         parameter_table,
@@ -273,7 +273,7 @@ def simulated_robot_parameters(tuning: dict, params_file, profile_name: str) -> 
     (the robot's file states the real LiDAR's 0.2 s, which turtlebot3_clean does not skew:
     de-skewing its scans would smear them); -p still sets it.
     """
-    from amr_common.controller_loader import DEFAULT_CONTROLLER, load_controller_class
+    from amr_common.plugins.loader import DEFAULT_CONTROLLER, load_controller_class
     from amr_evaluation.episode import robot_parameters
     from amr_evaluation.evaluation import load_ros_params_file
     from amr_sim.profiles import get_profile

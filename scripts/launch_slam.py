@@ -4,7 +4,7 @@
     --map-out DIR           ... and writes DIR/map.yaml + DIR/map.pgm (Nav2 map files) at the
                             end, on Ctrl-C too (run_robot without it: maps/DATE-TIME/)
     --slam-param NAME:=VALUE  a slam node / Mapper parameter (repeatable)
-    --mapper MODULE:CLASS   the slam node's mapper (amr_common.interfaces.Mapper)
+    --mapper MODULE:CLASS   the slam node's mapper (amr_common.plugins.interfaces.Mapper)
     --no-controller         no controller runs: drive with scripts/teleop.py (alias --teleop)
 
 --slam with --localize or --goal is refused: the particle filter and the planner need the map
@@ -37,8 +37,8 @@ def add_slam_options(parser, script: str) -> None:
                         help="slam node or Mapper parameter override (repeatable), e.g. "
                         "--slam-param loop_closure:=false")
     parser.add_argument("--mapper", default=None, metavar="MODULE:CLASS", help="with --slam: "
-                        "a mapper (amr_common.interfaces.Mapper) for the slam node (default "
-                        "amr_mapping.mapper:Mapper)")
+                        "a mapper (amr_common.plugins.interfaces.Mapper) for the slam node "
+                        "(default amr_mapping.mapper:Mapper)")
     parser.add_argument("--no-controller", "--teleop", dest="no_controller",
                         action="store_true", help="start no controller: drive the robot with "
                         "scripts/teleop.py" + (" (needs --realtime: lockstep advances on the "
@@ -107,21 +107,21 @@ def slam_overrides(items: list[str], set_by_script: dict[str, str],
     mapper: --mapper's MODULE:CLASS (loaded now: ValueError naming what is missing); its
     parameters are the ones --slam-param takes, and it becomes the node's `mapper` parameter.
     """
-    from amr_common.controller_loader import (
+    from amr_common.plugins.loader import (
         DEFAULT_MAPPER,
-        ControllerSpecError,
+        PluginSpecError,
         link_parameters,
         load_class,
         parse_overrides,
     )
-    from amr_common.parameters import typed_values
+    from amr_common.ros.parameters import typed_values
     from amr_mapping.mapper_params import check_parameters
     from amr_mapping.slam_node_params import NODE_PARAMETERS, node_parameter_problems
     try:
         overrides = parse_overrides(items)
         PARAMETERS = link_parameters(load_class(mapper or DEFAULT_MAPPER, "mapper"),
                                      NODE_PARAMETERS)
-    except ControllerSpecError as exc:
+    except PluginSpecError as exc:
         raise ValueError(str(exc) if mapper and str(exc).startswith("mapper") else
                          f"--slam-param: {exc}") from None
     if "mapper" in overrides:
@@ -157,7 +157,7 @@ def lidar_parameters(args: Any, profile: Any = None) -> dict[str, Any]:
     (LDS-02 owners: --slam-param lidar_model:=LDS-02), its place, and the calibration the user
     gives (--slam-param range_correction:=[...], scripts/calibrate_lidar.py).
     """
-    from amr_common.controller_loader import DEFAULT_MAPPER, described_parameters, link_class
+    from amr_common.plugins.loader import DEFAULT_MAPPER, described_parameters, link_class
     from amr_mapping.mapper_params import range_error_parameters
     given = args.slam_overrides or {}
     mapper = link_class(getattr(args, "mapper", None) or DEFAULT_MAPPER, "mapper")

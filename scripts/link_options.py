@@ -22,13 +22,13 @@ def add_localization_options(parser) -> None:
 
 # The links the scripts can swap (in the ROS graph each is a node parameter of the same name).
 LINK_OPTIONS = {
-    "localizer": "a localizer (amr_common.interfaces.Localizer), e.g. "
+    "localizer": "a localizer (amr_common.plugins.interfaces.Localizer), e.g. "
                  "examples.likelihood_mcl:LikelihoodFieldMcl",
-    "planner": "a planner (amr_common.interfaces.Planner), e.g. "
+    "planner": "a planner (amr_common.plugins.interfaces.Planner), e.g. "
                "examples.wavefront_planner:WavefrontPlanner",
-    "follower": "a path follower (amr_common.interfaces.PathFollower), e.g. "
+    "follower": "a path follower (amr_common.plugins.interfaces.PathFollower), e.g. "
                 "examples.plain_pursuit:PlainPursuit",
-    "mapper": "a mapper (amr_common.interfaces.Mapper), e.g. "
+    "mapper": "a mapper (amr_common.plugins.interfaces.Mapper), e.g. "
               "examples.odometry_mapper:OdometryMapper",
 }
 RUN_SCRIPT_NEEDS = {"localizer": "--localize or --goal", "planner": "--goal",
@@ -40,7 +40,7 @@ def add_link_options(parser, needs: dict[str, str] = RUN_SCRIPT_NEEDS) -> None:
 
     needs: link -> the options it goes with (said in the help).
     """
-    from amr_common.controller_loader import LINKS
+    from amr_common.plugins.loader import LINKS
     for link, with_options in needs.items():
         parser.add_argument(f"--{link}", default=None, metavar="MODULE:CLASS",
                             help=f"with {with_options}: {LINK_OPTIONS[link]} (default "
@@ -51,10 +51,10 @@ def check_links(given: dict[str, str | None], runs: dict[str, bool],
                 needs_text: dict[str, str]) -> dict[str, str]:
     """Load every given link's class now: {link: MODULE:CLASS} of the given ones.
 
-    ControllerSpecError (one line) naming what a class lacks; ValueError for a link whose
+    PluginSpecError (one line) naming what a class lacks; ValueError for a link whose
     node or episode part does not run (`runs` False): "--planner needs --goal" (needs_text).
     """
-    from amr_common.controller_loader import load_class
+    from amr_common.plugins.loader import load_class
     given = {link: spec for link, spec in given.items() if spec}
     for link, spec in given.items():
         if not runs[link]:
@@ -78,7 +78,7 @@ def links_ran(kind: str, given: dict[str, str | None], pose_source: str = "filte
     `given`: the user's classes by link (the controller's included), missing or None for the
     project's.
     """
-    from amr_common.controller_loader import LINKS
+    from amr_common.plugins.loader import LINKS
     return {link: given.get(link) or LINKS[link][1] for link in RESULT_KINDS[kind]
             if not (link == "localizer" and kind == "navigation" and pose_source != "filter")}
 
@@ -100,13 +100,13 @@ def check_mapper_params(items: list[str], mapper: str | None) -> dict[str, Any]:
     here, another class when an episode builds it. (The run scripts' --slam-param also takes
     the slam node's own parameters: launch_slam.slam_overrides.)
     """
-    from amr_common.controller_loader import (
+    from amr_common.plugins.loader import (
         DEFAULT_MAPPER,
         described_parameters,
         load_class,
         parse_overrides,
     )
-    from amr_common.parameters import typed_values
+    from amr_common.ros.parameters import typed_values
     overrides = parse_overrides(items)
     if mapper in (None, DEFAULT_MAPPER):
         from amr_mapping.mapper_params import check_parameters
@@ -132,8 +132,8 @@ def check_particle_filter(args, script: str, set_by_script: dict[str, str]) -> N
     if not (getattr(args, "localize", False) or getattr(args, "goal", None) is not None):
         raise ValueError("--pf-param needs --localize or --goal (no particle filter runs "
                          "without them)")
-    from amr_common.controller_loader import DEFAULT_LOCALIZER, link_parameters, load_class
-    from amr_common.parameters import typed_values
+    from amr_common.plugins.loader import DEFAULT_LOCALIZER, link_parameters, load_class
+    from amr_common.ros.parameters import typed_values
     from amr_localization.particle_filter_node_params import (
         node_parameter_problems,
         node_parameters,
@@ -173,7 +173,7 @@ def check_filter_map(world, pf_overrides: dict[str, Any], localizer: str | None 
     Milliseconds: nothing is built. Only for the project's filter (`localizer` None or it):
     another localizer checks its map when its node builds it.
     """
-    from amr_common.controller_loader import DEFAULT_LOCALIZER
+    from amr_common.plugins.loader import DEFAULT_LOCALIZER
     if localizer not in (None, DEFAULT_LOCALIZER):
         return
     from amr_localization.particle_filter_params import PARAMETERS, check_parameters, check_world

@@ -44,7 +44,7 @@ from link_options import (  # noqa: E402
 )
 from script_endings import run_script  # noqa: E402
 
-from amr_common.ros_env import describe_graph_settings, environment_domain_id  # noqa: E402
+from amr_common.ros.ros_env import describe_graph_settings, environment_domain_id  # noqa: E402
 from cli_checks import (  # noqa: E402
     OneLineArgumentParser,
     add_domain_id_option,
@@ -128,7 +128,7 @@ def parse_args(argv=None) -> argparse.Namespace:
         parser.error(f"{'--goal' if args.goal else '--localize'} needs --map (the map of the "
                      f"room the robot is in)")
     if args.map is not None:
-        from amr_common.world import World
+        from amr_common.world.world import World
         try:
             world = World.load(args.map)
             if args.goal is not None:
@@ -175,7 +175,7 @@ def _run(args: argparse.Namespace, stop: StopFlag) -> int:
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
-    from amr_common.lifecycle_manager import LifecycleManager, run_managed
+    from amr_common.ros.lifecycle_manager import LifecycleManager, run_managed
 
     # No arguments for rcl: it would read the script's own command line (a '__ns:=...' value
     # as a remapping of every node).

@@ -72,8 +72,8 @@ from link_options import (  # noqa: E402
 )
 from script_endings import run_script  # noqa: E402
 
-from amr_common.link_failure import LINK_FAILED  # noqa: E402
-from amr_common.ros_env import describe_graph_settings, isolate_local_graph  # noqa: E402
+from amr_common.plugins.link_failure import LINK_FAILED  # noqa: E402
+from amr_common.ros.ros_env import describe_graph_settings, isolate_local_graph  # noqa: E402
 from cli_checks import (  # noqa: E402
     OneLineArgumentParser,
     add_domain_id_option,
@@ -202,7 +202,7 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def _check_start_outputs_kidnap(parser, args) -> None:
     """--start parsed, --plot and --record file names, --kidnap within the run."""
-    from amr_common.world import parse_start
+    from amr_common.world.world import parse_start
     try:
         if args.start != "all":
             args.start = parse_start(args.start or "")
@@ -262,8 +262,8 @@ def _prepare(args):
     """
     import sim_session  # noqa: F401  (the slow imports, while Ctrl-C can still simply abort)
 
-    from amr_common.map_vs_world import load_map, resolve_goal_on_map, start_warning
-    from amr_common.world import World, WorldError, start_label
+    from amr_common.world.map_vs_world import load_map, resolve_goal_on_map, start_warning
+    from amr_common.world.world import World, WorldError, start_label
     try:
         isolate_local_graph(args.domain_id, program="run_sim")  # teleop.py --local finds it
         world = World.load(args.world)
@@ -301,7 +301,7 @@ def _simulate(args, world, map_world, starts, outputs, stop) -> int:
     from sim_report import map_lost, report_before_start
     from sim_session import SimSession
 
-    from amr_common.world import start_label
+    from amr_common.world.world import start_label
     print(f"run_sim: {describe_graph_settings()}", flush=True)  # the graph starts now
     if args.no_controller:
         print(f"run_sim: no controller runs: drive from another terminal with "

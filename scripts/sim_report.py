@@ -13,8 +13,8 @@ import math
 import numpy as np
 
 from amr_common.geometry import polyline_length
-from amr_common.movers import collisions_text
-from amr_common.world import map_label, start_label
+from amr_common.world.movers import collisions_text
+from amr_common.world.world import map_label, start_label
 from amr_evaluation.episode import trajectory_metrics
 
 
@@ -52,7 +52,7 @@ def run_report(args, world, start, sim, trajectory, wall_errors, wall_time: floa
 
 
 def link_failure_fields(failure) -> dict:
-    """The report's `link_failure`: why the run failed (amr_common.link_failure), or None."""
+    """The report's `link_failure`: why a link failed (amr_common.plugins.link_failure) or None."""
     return {"link_failure": None if failure is None else str(failure)}
 
 

@@ -31,10 +31,10 @@ from sim_report import (
     slam_fields,
 )
 
-from amr_common.lifecycle_manager import LifecycleManager, LifecycleStartupError
-from amr_common.lifecycle_node import first_link_failure
-from amr_common.node_runner import make_executor, shutdown_node
-from amr_common.world import start_label
+from amr_common.ros.lifecycle_manager import LifecycleManager, LifecycleStartupError
+from amr_common.ros.lifecycle_node import first_link_failure
+from amr_common.ros.node_runner import make_executor, shutdown_node
+from amr_common.world.world import start_label
 from amr_sim.simulator_node import SimulatorNode
 from launch_common import (
     ROBOT_PARAMS,
@@ -79,7 +79,7 @@ def _simulator_values(args, start: str, own_map: bool, localize: bool, slam: boo
 class SimSession:
     """One start of a run_sim.py run: the graph in one process, its report and outputs.
 
-    `stop` (an amr_common.node_runner.StopFlag) ends the run early: the report is then marked
+    `stop` (an amr_common.ros.node_runner.StopFlag) ends the run early: the report is then marked
     interrupted. `record_path`: an MCAP file for this start's topics. `map_world`: the map of
     the filter, the planner and /map (None or `world`: the world; then args.map is not used).
     """
@@ -176,7 +176,7 @@ class SimSession:
             control_nodes = [make_wall_follower(
                 self.context, params_file=params_file, overrides=tuning)]
             if localize:
-                from amr_common.controller_loader import DEFAULT_LOCALIZER, link_class
+                from amr_common.plugins.loader import DEFAULT_LOCALIZER, link_class
                 from amr_evaluation.episode import filter_parameters
                 from amr_sim.profiles import get_profile
                 sensor = filter_parameters(  # those the localizer takes

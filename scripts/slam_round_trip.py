@@ -51,8 +51,8 @@ def parse_args(argv=None) -> argparse.Namespace:
                         help="worker processes (default: all cores)")
     parser.add_argument("--out", default="out/round_trip", help="maps and results.json here")
     args = parser.parse_args(argv)
-    from amr_common.controller_loader import ControllerSpecError, parse_overrides
-    from amr_common.world import World, WorldError, bundled_worlds
+    from amr_common.plugins.loader import PluginSpecError, parse_overrides
+    from amr_common.world.world import World, WorldError, bundled_worlds
     from amr_evaluation.evaluation_config import parse_name_list, parse_seeds
     try:
         args.worlds = bundled_worlds() if args.worlds == "all" else parse_name_list(args.worlds)
@@ -66,7 +66,7 @@ def parse_args(argv=None) -> argparse.Namespace:
         if args.filter_params:
             from amr_localization.particle_filter_params import check_parameters
             check_parameters(args.filter_params)
-    except (ValueError, WorldError, ControllerSpecError) as exc:
+    except (ValueError, WorldError, PluginSpecError) as exc:
         parser.error(str(exc))
     return args
 

@@ -44,7 +44,7 @@ from script_endings import run_script  # noqa: E402
 from terminal_keys import KeyReader, StatusLine  # noqa: E402
 
 from amr_common.robot import MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED  # noqa: E402
-from amr_common.ros_env import (  # noqa: E402
+from amr_common.ros.ros_env import (  # noqa: E402
     describe_graph_settings,
     environment_domain_id,
     isolate_local_graph,
@@ -285,8 +285,8 @@ def make_sender(node, topic: str, stamped: bool) -> tuple[Callable[[float, float
     """(send(v, w), publisher): commands on `topic`, reliable keep last 10 as turtlebot3_node."""
     from geometry_msgs.msg import Twist, TwistStamped
 
-    from amr_common.qos import RELIABLE_10
-    from amr_common.ros_conversions import twist_stamped
+    from amr_common.ros.qos import RELIABLE_10
+    from amr_common.ros.ros_conversions import twist_stamped
 
     publisher = node.create_publisher(TwistStamped if stamped else Twist, topic, RELIABLE_10)
 
@@ -329,7 +329,7 @@ def main(argv=None) -> int:
         import rclpy
         from rclpy.signals import SignalHandlerOptions
 
-        from amr_common.node_runner import StopFlag
+        from amr_common.ros.node_runner import StopFlag
     except KeyboardInterrupt:
         return INTERRUPTED
     except LookupError as exc:  # not one local simulator: the user says which

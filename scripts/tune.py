@@ -5,7 +5,7 @@ Each trial (one parameter set) runs every episode of the set headless and is sco
 objective; trials run in parallel on a Ray cluster, by default a local Ray instance on this
 machine (127.0.0.1). The episode set takes evaluate.py's options (--worlds, --starts, --profiles,
 --randomize, --seeds, --duration, --dt, --controller, --params-file, -p, --config, --jobs,
---goals with --localizer, --planner, --follower (your own links, amr_common.interfaces),
+--goals with --localizer, --planner, --follower (your own links, amr_common.plugins.interfaces),
 --episode-timeout: an episode that hangs or ends its process is a bad episode of its trial; with
 --randomize every seed is a robot with its own reality-gap effects, so the default objective
 keeps the parameters that hold on all of them). Writes to --out:
@@ -45,7 +45,7 @@ import evaluate  # noqa: E402  (the episode-set options and their checks)
 import evaluate_executors  # noqa: E402  (where the trials run)
 from script_endings import interruptible, run_script  # noqa: E402
 
-from amr_common.parameter_table import MAX_SEED  # noqa: E402
+from amr_common.plugins.parameter_table import MAX_SEED  # noqa: E402
 from amr_evaluation.evaluation import EvaluationError, check_controller  # noqa: E402
 from amr_evaluation.tuning import (  # noqa: E402
     DEFAULT_OBJECTIVE,
@@ -129,7 +129,7 @@ def _tune(argv: list[str] | None) -> int:
                                   "--out")
         executor = evaluate_executors.ray_executor(args.ray, settings["jobs"],
                                                    args.ray_runtime_env)
-    except ValueError as exc:  # EvaluationError, ControllerSpecError, a bad --out
+    except ValueError as exc:  # EvaluationError, PluginSpecError, a bad --out
         print(f"tune: {exc}", file=sys.stderr)
         return 2
     try:

@@ -19,8 +19,8 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from amr_common.map_file import CONVERT_RESOLUTION, world_as_map, write_map  # noqa: E402
-from amr_common.world import World  # noqa: E402
+from amr_common.world.map_file import CONVERT_RESOLUTION, world_as_map, write_map  # noqa: E402
+from amr_common.world.world import World  # noqa: E402
 from cli_checks import OneLineArgumentParser  # noqa: E402
 
 

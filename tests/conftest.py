@@ -23,7 +23,7 @@ import os
 import shutil
 import tempfile
 
-from amr_common.ros_env import isolate_local_graph
+from amr_common.ros.ros_env import isolate_local_graph
 
 # Before any rclpy import in the tests: a private domain (file-locked, so parallel xdist workers
 # and concurrent runs never share one), loopback discovery, logs in a temporary folder.

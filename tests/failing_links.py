@@ -2,7 +2,7 @@
 
 Each is the project's class with one member broken from its FROM_CALL-th call on: raising, or
 returning what the link's interface forbids (None, NaN, a wrong shape). Test plug-ins for the
-rule of amr_common.link_failure.
+rule of amr_common.plugins.link_failure.
 """
 import dataclasses
 import math

@@ -1,7 +1,8 @@
 """A synthetic LiDAR for the wall follower's tests: scan layouts and exact ray casting.
 
 `cast(segments, layout, pose)` reads wall segments as a scanner with one of the layouts below
-would (no_return outside [range_min, range_max]); plain numpy, independent of amr_common.raycast.
+would (no_return outside [range_min, range_max]); plain numpy, independent of
+amr_common.world.raycast.
 """
 from __future__ import annotations
 

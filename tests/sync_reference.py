@@ -12,7 +12,7 @@ from __future__ import annotations
 import itertools
 import random
 
-from amr_common import time_matching as tm
+from amr_common.ros import time_matching as tm
 
 
 class ReferenceApproximateSync:

@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 from sensor_msgs.msg import LaserScan
 
-from amr_common.qos import scan_qos
-from amr_common.range_calibration import RangeCorrection
+from amr_common.ros.qos import scan_qos
+from amr_common.sensors.range_calibration import RangeCorrection
 from amr_mapping.mapper_params import check_parameters
 from tests.processes import REPO, terminate, wait_for
 

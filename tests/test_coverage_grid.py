@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from amr_common.coverage_grid import MAX_GRID_CELLS, GridTooLargeError
 from amr_common.robot import ROBOT_RADIUS
-from amr_common.world import World
+from amr_common.world.coverage_grid import MAX_GRID_CELLS, GridTooLargeError
+from amr_common.world.world import World
 from amr_evaluation.episode import count_laps, explored_fraction, run_episode
 
 REPO = Path(__file__).resolve().parent.parent
@@ -187,9 +187,9 @@ def test_metrics_of_a_2500_obstacle_world_do_not_hang(tmp_path):
     path = tmp_path / "forest.yaml"
     path.write_text(json.dumps({"boundary": [[0, 0], [52, 0], [52, 52], [0, 52]],
                                 "holes": holes, "starts": {"a": [0.5, 0.5, 0.0]}}))
-    code = ("import sys, numpy as np; from amr_common.world import World; "
+    code = ("import sys, numpy as np; from amr_common.world.world import World; "
             "from amr_evaluation.episode import trajectory_metrics; "
-            "from amr_common.map_messages import grid_values, world_map_messages; "
+            "from amr_common.ros.map_messages import grid_values, world_map_messages; "
             "w = World.load(sys.argv[1]); "
             "m = trajectory_metrics(w, np.array([[0.5, 0.5], [0.5, 51.5], [51.5, 51.5]])); "
             "r = grid_values(world_map_messages(w, 0.05)[0]); "   # the simulator's /map
@@ -204,7 +204,7 @@ def test_metrics_of_a_2500_obstacle_world_do_not_hang(tmp_path):
 
 
 def test_clearance_kernels_agree_with_the_pointwise_distance():
-    from amr_common.raycast import clearances_kernel, clearances_numpy, clearances_python
+    from amr_common.world.raycast import clearances_kernel, clearances_numpy, clearances_python
 
     world = World.load("room_obstacles")
     points = np.random.default_rng(3).uniform(-0.5, 4.5, (300, 2))

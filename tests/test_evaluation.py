@@ -15,10 +15,10 @@ from pathlib import Path
 import pytest
 
 from amr_evaluation.evaluation import (
-    ControllerSpecError,
     EpisodeOutcome,
     EpisodeSpec,
     EvaluationError,
+    PluginSpecError,
     check_controller,
     expand_grid,
     load_config,
@@ -44,7 +44,7 @@ EVALUATE = REPO / "scripts" / "evaluate.py"
 
 def test_grid_is_worlds_x_starts_x_profiles_x_seeds():
     specs = expand_grid("lab02,corridor_loop", "all", "ideal,turtlebot3", "0,1", duration=30.0)
-    from amr_common.world import World
+    from amr_common.world.world import World
     starts = {w: list(World.load(w).starts) for w in ("lab02", "corridor_loop")}
     expected = [(w, s, p, seed) for w in ("lab02", "corridor_loop") for s in starts[w]
                 for p in ("ideal", "turtlebot3") for seed in (0, 1)]
@@ -64,7 +64,7 @@ def test_named_starts_apply_to_the_worlds_that_have_them():
 
 
 def test_all_worlds_and_bad_names():
-    from amr_common.world import bundled_worlds
+    from amr_common.world.world import bundled_worlds
     assert {s.world for s in expand_grid("all", "all", "ideal", "0")} == set(bundled_worlds())
     with pytest.raises(EvaluationError, match="unknown world 'atlantis'"):
         expand_grid("atlantis")
@@ -165,11 +165,11 @@ def test_controller_loading_errors_are_clear():
              f"{__name__}:Missing": "has no 'Missing'",
              "json:JSONDecoder": "has no compute_commands"}
     for bad, message in cases.items():
-        with pytest.raises(ControllerSpecError, match=message):
+        with pytest.raises(PluginSpecError, match=message):
             check_controller(bad, {}, 0.05)
-    with pytest.raises(ControllerSpecError, match="rejected its parameters.*unknown_gain"):
+    with pytest.raises(PluginSpecError, match="rejected its parameters.*unknown_gain"):
         check_controller(spec, {"unknown_gain": 1}, 0.05)
-    with pytest.raises(ControllerSpecError, match="gain must be positive"):
+    with pytest.raises(PluginSpecError, match="gain must be positive"):
         check_controller(spec, {"gain": -1.0}, 0.05)
 
 
@@ -508,7 +508,7 @@ def test_the_default_time_limit_is_the_larger_of_60_s_and_twice_the_simulated_ti
 @pytest.mark.parametrize("kind, shown", [("nan", "(nan, 0.0)"), ("inf", "(0.1, -inf)"),
                                          ("text", "('fast', None)")])
 def test_a_controller_commanding_nan_inf_or_text_fails_its_episode_with_the_reason(kind, shown):
-    # One rule with run_sim.py (amr_common.link_failure): such a controller has failed; its
+    # One rule with run_sim.py (amr_common.plugins.link_failure): such a controller has failed; its
     # episodes were counted as run with "invalid commands" (exit 1), its run_sim.py runs as
     # clean (exit 0).
     outcomes = run_episodes([_pool_spec("Standing"), _pool_spec("Garbage", kind=kind)], jobs=1)
@@ -525,7 +525,7 @@ def test_a_controller_commanding_nan_inf_or_text_fails_its_episode_with_the_reas
 # --- navigation episodes -------------------------------------------------------------------
 
 def test_navigation_grid_is_worlds_x_starts_x_goals():
-    from amr_common.world import World
+    from amr_common.world.world import World
     specs = expand_grid("lab02,maze_deadends", "outer,south_west",
                         goals="inner_far,north_east", pose_source="truth")
     assert [(s.world, s.start, s.goal, s.pose_source) for s in specs] == [

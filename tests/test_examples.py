@@ -12,9 +12,9 @@ from pathlib import Path
 
 import pytest
 
-from amr_common import interfaces
-from amr_common.controller_loader import load_class
-from amr_common.world import World
+from amr_common.plugins import interfaces
+from amr_common.plugins.loader import load_class
+from amr_common.world.world import World
 
 SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
 sys.path.insert(0, str(SCRIPTS))

@@ -32,9 +32,9 @@ from sensor_msgs.msg import LaserScan
 from websockets.exceptions import InvalidHandshake, InvalidMessage, InvalidStatus
 from websockets.sync.client import connect
 
-from amr_common.map_messages import occupancy_grid
-from amr_common.qos import LATCHED, scan_qos
-from amr_common.ros_conversions import laser_scan, seconds_to_time
+from amr_common.ros.map_messages import occupancy_grid
+from amr_common.ros.qos import LATCHED, scan_qos
+from amr_common.ros.ros_conversions import laser_scan, seconds_to_time
 from amr_tools.foxglove_bridge import FoxgloveBridgeNode
 from tests.processes import terminate, wait_for
 

@@ -1,16 +1,16 @@
-"""amr_common.interfaces: the reference classes implement their links; load errors name the gap.
+"""amr_common.plugins.interfaces: the reference classes implement their links; errors name gaps.
 
-Every link of the chain is loaded by MODULE:CLASS (amr_common.controller_loader.load_class): a
+Every link of the chain is loaded by MODULE:CLASS (amr_common.plugins.loader.load_class): a
 malformed spec, a module that does not import, a missing class, or a class that lacks a member
-of the interface is one ControllerSpecError naming the link, the spec and what is missing.
+of the interface is one PluginSpecError naming the link, the spec and what is missing.
 """
 from __future__ import annotations
 
 import pytest
 
-from amr_common import interfaces
-from amr_common.controller_loader import LINKS, ControllerSpecError, load_class
-from amr_common.world import World
+from amr_common.plugins import interfaces
+from amr_common.plugins.loader import LINKS, PluginSpecError, load_class
+from amr_common.world.world import World
 
 
 class HalfLocalizer:
@@ -77,7 +77,7 @@ def test_every_member_is_documented():
     ("mapper", "amr_planning.planner:Planner", "has no update, pose, map_to_odom"),
 ])
 def test_a_bad_spec_names_what_is_missing(link, spec, message):
-    with pytest.raises(ControllerSpecError, match=message) as error:
+    with pytest.raises(PluginSpecError, match=message) as error:
         load_class(spec, link)
     assert str(error.value).startswith(f"{link} '{spec}'")
     assert "\n" not in str(error.value)

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from amr_common.world import World
+from amr_common.world.world import World
 from amr_sim.lidar import Lidar
 from amr_sim.profiles import IDEAL, TURTLEBOT3, TURTLEBOT3_CLEAN, get_profile
 from amr_sim.simulator import Simulator

@@ -10,9 +10,9 @@ import math
 import numpy as np
 import pytest
 
-from amr_common.raycast import cast_rays_kernel, cast_rays_numpy
 from amr_common.robot import LIDAR_OFFSET_X
-from amr_common.world import World
+from amr_common.world.raycast import cast_rays_kernel, cast_rays_numpy
+from amr_common.world.world import World
 from amr_sim.lidar_effects import RealLidar, scan_rays_kernel, scan_rays_numpy
 from amr_sim.profiles import get_profile
 from amr_sim.reality import effects_of

@@ -2,7 +2,7 @@
 import pytest
 from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 
-from amr_common.lifecycle_manager import LifecycleManager, LifecycleStartupError
+from amr_common.ros.lifecycle_manager import LifecycleManager, LifecycleStartupError
 
 
 class RecordingNode(LifecycleNode):

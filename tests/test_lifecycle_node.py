@@ -19,7 +19,7 @@ from lifecycle_msgs.srv import ChangeState, GetState
 from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.parameter import Parameter
 
-from amr_common.lifecycle_node import GuardedLifecycleNode
+from amr_common.ros.lifecycle_node import GuardedLifecycleNode
 from amr_control.pure_pursuit_node import PurePursuitNode
 from amr_control.wall_follower_node import WallFollowerNode
 from amr_localization.particle_filter_node import ParticleFilterNode

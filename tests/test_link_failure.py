@@ -20,7 +20,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from amr_common.link_failure import (
+from amr_common.plugins.link_failure import (
     LinkFailure,
     checked_commands,
     checked_estimate,
@@ -30,7 +30,7 @@ from amr_common.link_failure import (
     checked_statistics,
     link_call,
 )
-from amr_common.map_raster import Raster
+from amr_common.world.map_raster import Raster
 
 SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
 sys.path.insert(0, str(SCRIPTS))
@@ -150,8 +150,8 @@ MAPPER_CASES = {  # mapper class: the reason (run_sim's report)
     "NoneUpdateMapper": "update returned None, not an estimate with a status text and a pose",
     "NanPoseMapper": "update's pose (status 'first') is (nan, nan, nan), not three finite "
                      "numbers",
-    "NoneRasterMapper": "occupancy_raster returned None, not a Raster (amr_common.map_raster) "
-                        "with 2-D integer values",
+    "NoneRasterMapper": "occupancy_raster returned None, not a Raster "
+                        "(amr_common.world.map_raster) with 2-D integer values",
     "RaisingStatisticsMapper": "statistics raised RuntimeError: statistics broke",
 }
 

@@ -13,7 +13,7 @@ import math
 
 import pytest
 
-from amr_common.world import World, bundled_worlds
+from amr_common.world.world import World, bundled_worlds
 from amr_evaluation.localization_episode import localization_metrics, run_localization_episode
 
 # One start per world; lab02's is the inner maze (its outer ring is four-fold symmetric but for

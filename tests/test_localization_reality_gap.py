@@ -13,11 +13,17 @@ import math
 import numpy as np
 import pytest
 
-from amr_common.lidar_models import LDS01, LDS02
-from amr_common.map_file import world_as_map
-from amr_common.map_raster import FREE, OCCUPIED, Raster, boundary_segments, likely_wall_segments
-from amr_common.scan_deskew import MotionHistory, deskew
-from amr_common.world import World
+from amr_common.sensors.lidar_models import LDS01, LDS02
+from amr_common.sensors.scan_deskew import MotionHistory, deskew
+from amr_common.world.map_file import world_as_map
+from amr_common.world.map_raster import (
+    FREE,
+    OCCUPIED,
+    Raster,
+    boundary_segments,
+    likely_wall_segments,
+)
+from amr_common.world.world import World
 from amr_evaluation.localization_episode import run_localization_episode
 from amr_localization.localization_check import ScanMatcher
 from amr_localization.particle_filter import ParticleFilter
@@ -81,8 +87,8 @@ def test_a_map_world_simulated_from_its_own_map_has_its_walls_on_the_free_edges(
     lab02 converted at 2 cm and driven as the world (test_map_world_episodes); the episodes
     tell it (map_walls 'edges') when the simulated world is its own map.
     """
-    from amr_common.map_file import world_as_map, write_map
-    from amr_common.map_raster import boundary_segments
+    from amr_common.world.map_file import world_as_map, write_map
+    from amr_common.world.map_raster import boundary_segments
     from amr_evaluation.episode import filter_parameters
     from amr_localization.particle_filter import ParticleFilter
     from amr_sim.profiles import get_profile

@@ -1,4 +1,4 @@
-"""Nav2 map files (amr_common.map_file): map_server's reading, map_saver's writing, bad files.
+"""Nav2 map files (amr_common.world.map_file): map_server's reading, map_saver's writing, bad ones.
 
 The images here are written byte by byte (PGM) or with Pillow (PNG), not by map_file, so the
 reader is checked against the format, not against its own writer.
@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from amr_common.map_file import MapFileError, read_map, trinary_pixels, write_map
-from amr_common.map_raster import Raster
-from amr_common.world import WORLDS_DIR, World, WorldError
+from amr_common.world.map_file import MapFileError, read_map, trinary_pixels, write_map
+from amr_common.world.map_raster import Raster
+from amr_common.world.world import WORLDS_DIR, World, WorldError
 
 NAV2_YAML = ("image: {image}\nmode: {mode}\nresolution: {resolution}\norigin: {origin}\n"
              "negate: {negate}\noccupied_thresh: {occupied}\nfree_thresh: {free}\n")
@@ -187,7 +187,7 @@ def test_an_interrupted_save_keeps_the_previous_map(tmp_path, monkeypatch):
     old = Raster(np.zeros((4, 4), dtype=np.int8), 0.05, (0.0, 0.0))
     yaml_path, image_path = write_map(old, tmp_path / "m")
     before = (yaml_path.read_bytes(), image_path.read_bytes())
-    import amr_common.map_file as map_file
+    import amr_common.world.map_file as map_file
 
     def broken(stream, *args):
         stream.write(b"P5\n")

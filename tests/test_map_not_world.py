@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from amr_common.map_file import world_as_map, write_map
-from amr_common.map_vs_world import load_map, resolve_goal_on_map, start_warning
-from amr_common.world import World, WorldError
+from amr_common.world.map_file import world_as_map, write_map
+from amr_common.world.map_vs_world import load_map, resolve_goal_on_map, start_warning
+from amr_common.world.world import World, WorldError
 from amr_evaluation.localization_episode import (
     FALSE_HEADING_RAD,
     FALSE_POSITION_M,
@@ -43,7 +43,7 @@ import run_sim  # noqa: E402
 def lab02_copy(tmp_path_factory) -> str:
     """lab02's world file under another name: a map equal to the world, loaded on its own."""
     path = tmp_path_factory.mktemp("maps") / "lab02_copy.yaml"
-    shutil.copy(REPO / "amr_common" / "worlds" / "lab02.yaml", path)
+    shutil.copy(REPO / "amr_common" / "world" / "worlds" / "lab02.yaml", path)
     return str(path)
 
 
@@ -161,7 +161,8 @@ def test_a_moved_wall_the_filter_localizes_or_says_it_is_lost(tmp_path, world, m
                                                               goal_reached):
     if world is None:
         world = tmp_path / "moved_on_the_path.yaml"
-        world.write_text((REPO / "amr_common" / "worlds" / "lab02.yaml").read_text().replace(
+        lab02 = REPO / "amr_common" / "world" / "worlds" / "lab02.yaml"
+        world.write_text(lab02.read_text().replace(
             "[[-0.4, -0.4], [0.4, -0.4]]", "[[-0.4, -0.35], [0.4, -0.35]]"))
     honesty = HonestyCheck(World.load("lab02"), seed=1)
     result = run_navigation_episode(str(world), "outer", "inner_far", profile="turtlebot3_clean",
@@ -205,7 +206,7 @@ def test_run_sim_drives_the_box_world_on_the_old_map(tmp_path):
                               "--report", str(report_path), "--plot", str(plot_path)])
     report = json.loads(report_path.read_text())
     assert exit_code == 0 and report["world"] == "lab02_box" and report["map"] == "lab02"
-    assert report["map_source"] == str(REPO / "amr_common" / "worlds" / "lab02.yaml")
+    assert report["map_source"] == str(REPO / "amr_common" / "world" / "worlds" / "lab02.yaml")
     assert report["nodes"][0] == "map_publisher"  # /map is the map's, not the simulator's
     assert report["collisions"] == 0 and report["goal_reached_time_s"] is None
     assert report["localization"]["false_localizations"] == 0
@@ -279,7 +280,8 @@ def test_map_option_errors_are_one_line_before_anything_runs(tmp_path, capsys):
 
 def test_evaluate_reports_the_map_from_the_command_line_or_a_config(tmp_path, capsys):
     config = tmp_path / "box.yaml"
-    shutil.copy(REPO / "amr_common" / "worlds" / "lab02.yaml", tmp_path / "old_lab02.yaml")
+    shutil.copy(REPO / "amr_common" / "world" / "worlds" / "lab02.yaml",
+                tmp_path / "old_lab02.yaml")
     config.write_text(f"worlds: [{BOX}]\nmap: old_lab02.yaml\nstarts: inner\n"
                       f"goals: [inner_far]\npose_source: truth\nduration: 20\n")
     out = tmp_path / "out"

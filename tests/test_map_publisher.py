@@ -14,12 +14,12 @@ from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.parameter import Parameter
 from visualization_msgs.msg import Marker
 
-from amr_common import occupancy_grid
-from amr_common.map_file import world_as_map, write_map
-from amr_common.map_messages import grid_values, world_map_messages
-from amr_common.map_raster import OCCUPIED, Raster
-from amr_common.qos import LATCHED
-from amr_common.world import World
+from amr_common.ros.map_messages import grid_values, world_map_messages
+from amr_common.ros.qos import LATCHED
+from amr_common.world import occupancy_grid
+from amr_common.world.map_file import world_as_map, write_map
+from amr_common.world.map_raster import OCCUPIED, Raster
+from amr_common.world.world import World
 from amr_localization.expected_ranges import expected_range_table
 from amr_planning.planner import Planner
 from amr_tools.map_publisher import MapPublisherNode

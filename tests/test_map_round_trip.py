@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from amr_common.world import World
+from amr_common.world.world import World
 from amr_evaluation.map_round_trip import round_trip_summary, run_round_trip
 from amr_evaluation.mapping_metrics import occupied_centres
 

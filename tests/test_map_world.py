@@ -12,15 +12,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from amr_common.distance_transform import squared_edt, squared_edt_python
-from amr_common.map_file import read_map, world_as_map, write_map
-from amr_common.map_messages import grid_values, world_map_messages
-from amr_common.map_raster import Raster, boundary_segments
-from amr_common.occupancy_grid import OccupancyGrid
-from amr_common.raster_raycast import MarchGrid, march, march_python, scan_grid_kernel
-from amr_common.raycast import scan_kernel
 from amr_common.robot import ROBOT_RADIUS
-from amr_common.world import World, bundled_worlds
+from amr_common.ros.map_messages import grid_values, world_map_messages
+from amr_common.world.distance_transform import squared_edt, squared_edt_python
+from amr_common.world.map_file import read_map, world_as_map, write_map
+from amr_common.world.map_raster import Raster, boundary_segments
+from amr_common.world.occupancy_grid import OccupancyGrid
+from amr_common.world.raster_raycast import MarchGrid, march, march_python, scan_grid_kernel
+from amr_common.world.raycast import scan_kernel
+from amr_common.world.world import World, bundled_worlds
 
 SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
 sys.path.insert(0, str(SCRIPTS))

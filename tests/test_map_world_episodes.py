@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from amr_common.geometry import without_repeats
-from amr_common.map_file import world_as_map, write_map
-from amr_common.world import World
+from amr_common.world.map_file import world_as_map, write_map
+from amr_common.world.world import World
 from amr_evaluation.episode import run_episode
 from amr_evaluation.localization_episode import run_localization_episode
 from amr_evaluation.navigation_episode import distances_to_polyline, run_navigation_episode

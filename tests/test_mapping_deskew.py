@@ -13,9 +13,9 @@ import math
 import numpy as np
 import pytest
 
-from amr_common.lidar_models import revolution_ages
-from amr_common.map_raster import OCCUPIED
-from amr_common.scan_deskew import MotionHistory
+from amr_common.sensors.lidar_models import revolution_ages
+from amr_common.sensors.scan_deskew import MotionHistory
+from amr_common.world.map_raster import OCCUPIED
 from amr_mapping.mapper import Mapper
 from amr_mapping.scan_points import Scan
 

@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from amr_common.map_raster import Raster
-from amr_common.occupancy_grid import OccupancyGrid
-from amr_common.world import World
+from amr_common.world.map_raster import Raster
+from amr_common.world.occupancy_grid import OccupancyGrid
+from amr_common.world.world import World
 from amr_evaluation.episode import mapper_parameters
 from amr_evaluation.mapping_episode import (
     AUTO_DRIFT,
@@ -146,7 +146,7 @@ def test_the_loop_closure_benchmark_refuses_a_session_without_closures():
 
 
 def test_a_map_that_cannot_be_saved_is_said_and_counted(tmp_path, capsys):
-    from amr_common.map_file import world_as_map
+    from amr_common.world.map_file import world_as_map
     from amr_evaluation.mapping_evaluation import save_maps
     raster, _ = world_as_map(World.load("lab02"), 0.02)
     episode = {"world": "lab02", "start": [1.0, -1.0, 1.57], "profile": "turtlebot3_clean",

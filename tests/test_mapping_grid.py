@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from amr_common.map_raster import FREE, OCCUPIED, UNKNOWN
+from amr_common.world.map_raster import FREE, OCCUPIED, UNKNOWN
 from amr_mapping.log_odds_grid import GROWTH_CELLS, LogOddsGrid
 from amr_mapping.loop_closure import draw
 

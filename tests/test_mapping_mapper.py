@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from amr_common.geometry import compose, inverse
-from amr_common.map_raster import FREE, OCCUPIED, UNKNOWN
-from amr_common.world import World
+from amr_common.world.map_raster import FREE, OCCUPIED, UNKNOWN
+from amr_common.world.world import World
 from amr_mapping.mapper import Mapper
 from amr_mapping.scan_points import Scan
 from tests.scan_helpers import LDS01_360, LDS02_ODD, cast

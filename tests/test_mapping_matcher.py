@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from amr_common.world import World
+from amr_common.world.world import World
 from amr_mapping.log_odds_grid import UNITS, LogOddsGrid
 from amr_mapping.loop_closure import draw
 from amr_mapping.scan_matcher import CorrelativeMatcher

@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from amr_common.lidar_models import LDS01
-from amr_common.map_raster import OCCUPIED
+from amr_common.sensors.lidar_models import LDS01
+from amr_common.world.map_raster import OCCUPIED
 from amr_evaluation.episode import mapper_parameters
 from amr_evaluation.mapping_episode import run_mapping_episode
 from amr_mapping.log_odds_grid import LogOddsGrid

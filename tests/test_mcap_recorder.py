@@ -267,7 +267,7 @@ def test_graph_recording_takes_every_topic_with_the_qos_its_publishers_offer(ros
     """
     from rosbags.interfaces import QosDurability, QosReliability
 
-    from amr_common.qos import LATCHED, RELIABLE_10, scan_qos
+    from amr_common.ros.qos import LATCHED, RELIABLE_10, scan_qos
     path = tmp_path / "graph.mcap"
     talker = ros.node("graph_talker")
     scans = talker.create_publisher(LaserScan, "/scan", scan_qos(5))
@@ -317,7 +317,7 @@ def test_graph_recording_takes_every_topic_with_the_qos_its_publishers_offer(ros
 
 def test_a_best_effort_publisher_joining_a_reliable_topic_is_recorded_too(ros, tmp_path):
     """The subscription was reliable for the first publisher: it would never hear this one."""
-    from amr_common.qos import RELIABLE_10, scan_qos
+    from amr_common.ros.qos import RELIABLE_10, scan_qos
     path = tmp_path / "join.mcap"
     recorder = McapRecorder(path)
     reliable = ros.node("reliable_talker").create_publisher(LaserScan, "/scan", RELIABLE_10)

@@ -1,4 +1,4 @@
-"""amr_common.message_filters: the message_filters API, reference-identical output, ROS use."""
+"""amr_common.ros.message_filters: the message_filters API, reference-identical output, ROS use."""
 from __future__ import annotations
 
 import math
@@ -19,8 +19,8 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import LaserScan
 from std_msgs.msg import String
 
-from amr_common import message_filters
-from amr_common.message_filters import (
+from amr_common.ros import message_filters
+from amr_common.ros.message_filters import (
     ApproximateTimeSynchronizer,
     SimpleFilter,
     Subscriber,

@@ -14,10 +14,11 @@ import numpy as np
 import pytest
 import yaml
 
-from amr_common.map_vs_world import load_map, unmapped_walls
-from amr_common.movers import collisions_text, walked_time
-from amr_common.occupancy_grid import OccupancyGrid
-from amr_common.raycast import (
+from amr_common.robot import ROBOT_RADIUS
+from amr_common.world.map_vs_world import load_map, unmapped_walls
+from amr_common.world.movers import collisions_text, walked_time
+from amr_common.world.occupancy_grid import OccupancyGrid
+from amr_common.world.raycast import (
     cast_circles_kernel,
     cast_circles_numpy,
     cast_circles_python,
@@ -25,8 +26,7 @@ from amr_common.raycast import (
     scan_circles_numpy,
     scan_circles_python,
 )
-from amr_common.robot import ROBOT_RADIUS
-from amr_common.world import World, WorldError
+from amr_common.world.world import World, WorldError
 from amr_sim.contact import ALLOWED_PENETRATION
 from amr_sim.moving_obstacles import KEEP_OFF
 from amr_sim.simulator import Simulator
@@ -227,7 +227,7 @@ def test_the_robot_may_not_start_or_be_put_on_a_mover(tmp_path):
 
 
 def test_compiled_mover_kernels_equal_their_twins():
-    from amr_common.movers import path_position, path_position_python
+    from amr_common.world.movers import path_position, path_position_python
     from amr_sim.contact import constrain_velocity, constrain_velocity_python
     from amr_sim.moving_obstacles import (
         MovingObstacles,
@@ -419,7 +419,7 @@ def test_world_markers_show_the_movers_as_they_walk(ros):
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from visualization_msgs.msg import MarkerArray
 
-    from amr_common.ros_conversions import twist_stamped
+    from amr_common.ros.ros_conversions import twist_stamped
     from amr_sim.simulator_node import SimulatorNode
     world = str(WORLDS / "room_people.yaml")
     probe = ros.node("probe")

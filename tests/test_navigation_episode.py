@@ -5,7 +5,7 @@ import json
 
 import pytest
 
-from amr_common.world import World, bundled_worlds
+from amr_common.world.world import World, bundled_worlds
 from amr_evaluation.navigation_episode import run_navigation_episode
 from amr_evaluation.pose_sources import GroundTruthPose
 from amr_planning.planner import Planner

@@ -1,4 +1,4 @@
-"""amr_common.node_runner, the main of every lifecycle executable.
+"""amr_common.ros.node_runner, the main of every lifecycle executable.
 
 `-p autostart:=true` configures and activates, a failing transition gives exit code 1, and
 Ctrl-C / SIGTERM / SIGHUP end the spin and run the node's shutdown transition before the process
@@ -19,7 +19,7 @@ import pytest
 from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from rclpy.parameter import Parameter
 
-from amr_common.node_runner import (
+from amr_common.ros.node_runner import (
     StopFlag,
     autostart,
     declare_autostart,
@@ -77,7 +77,7 @@ class JournalNode(LifecycleNode):
 
 
 def main() -> int:
-    from amr_common.node_runner import run_lifecycle_node
+    from amr_common.ros.node_runner import run_lifecycle_node
     return run_lifecycle_node(JournalNode)
 
 

@@ -6,10 +6,10 @@ import math
 import numpy as np
 import pytest
 
-from amr_common import occupancy_grid
-from amr_common.map_raster import points_in_polygon
-from amr_common.occupancy_grid import OccupancyGrid
-from amr_common.world import World, bundled_worlds
+from amr_common.world import occupancy_grid
+from amr_common.world.map_raster import points_in_polygon
+from amr_common.world.occupancy_grid import OccupancyGrid
+from amr_common.world.world import World, bundled_worlds
 
 
 def test_cell_centres_lie_on_multiples_of_the_resolution_and_cover_the_world():
@@ -67,7 +67,7 @@ def test_bad_resolution_is_a_clear_error(resolution):
 
 
 def test_every_grid_indexes_its_cells_alike():
-    # One cell_of (amr_common.cell_grid) behind the occupancy grid, a raster and the coverage
+    # One cell_of (amr_common.world.cell_grid) behind the occupancy grid, a raster and the coverage
     # grid: the vector form agrees with it point for point, cell borders included.
     world = World.load("room_obstacles")
     grid = OccupancyGrid.from_world(world, 0.05)

@@ -1,4 +1,4 @@
-"""amr_common.parameter_table: defaults, overrides and the checks every table's rules give."""
+"""amr_common.plugins.parameter_table: defaults, overrides and the checks of each table's rules."""
 from __future__ import annotations
 
 import importlib
@@ -8,7 +8,7 @@ import pickle
 import numpy as np
 import pytest
 
-from amr_common.parameter_table import (
+from amr_common.plugins.parameter_table import (
     Param,
     above,
     at_least,

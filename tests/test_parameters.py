@@ -1,4 +1,4 @@
-"""amr_common.parameters: integers where a double is expected (`-p kp:=5`).
+"""amr_common.ros.parameters: integers where a double is expected (`-p kp:=5`).
 
 Accepted by every node, by -p, --ros-args and params files alike; other wrong types fail
 configure with a reason instead of a crash.
@@ -18,7 +18,7 @@ from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from amr_common.parameters import declare_parameters, read_parameters
+from amr_common.ros.parameters import declare_parameters, read_parameters
 from tests.processes import terminate
 
 REPO = Path(__file__).resolve().parent.parent

@@ -10,9 +10,9 @@ import math
 import numpy as np
 import pytest
 
-from amr_common.lidar_models import LDS01
 from amr_common.robot import ROBOT_RADIUS
-from amr_common.world import World
+from amr_common.sensors.lidar_models import LDS01
+from amr_common.world.world import World
 from amr_localization import beam_model, motion_model, pose_search, resampling
 from amr_localization.expected_ranges import build_expected_range_table, expected_range_table
 from amr_localization.localization_check import (

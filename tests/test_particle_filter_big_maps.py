@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 from rclpy.parameter import Parameter
 
-from amr_common.raycast import scan_kernel
-from amr_common.world import World
+from amr_common.world.raycast import scan_kernel
+from amr_common.world.world import World
 from amr_localization.expected_ranges import NO_RANGE_MM, build_expected_range_table
 from amr_localization.particle_filter import ParticleFilter
 from amr_localization.particle_filter_node import ParticleFilterNode
@@ -151,7 +151,7 @@ def test_the_pose_search_of_a_coarse_table_finds_the_exact_twin_in_corridor_loop
 
 def _map_world(tmp_path, name: str, resolution: float) -> World:
     """A bundled world as a Nav2 map (what scripts/world_to_map.py writes), loaded."""
-    from amr_common.map_file import world_as_map, write_map
+    from amr_common.world.map_file import world_as_map, write_map
     raster, extras = world_as_map(World.load(name), resolution)
     yaml_path, _ = write_map(raster, tmp_path / f"{name}_{100 * resolution:g}cm", "pgm", extras)
     return World.load(yaml_path)

@@ -11,7 +11,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
 
-from amr_common.ros_conversions import (
+from amr_common.ros.ros_conversions import (
     laser_scan_from_profile,
     odometry_message,
     seconds_to_time,
@@ -178,7 +178,7 @@ def test_missing_or_malformed_world_fails_configure_with_the_reason(ros, tmp_pat
 
 
 def test_initialpose_reinitializes_around_the_given_pose(ros):
-    from amr_common.ros_conversions import yaw_to_quaternion
+    from amr_common.ros.ros_conversions import yaw_to_quaternion
     node = make_node(ros, world="lab02")
     graph = FakeGraph(ros, profile="ideal")
     bring_up(ros, node, graph)
@@ -217,7 +217,7 @@ def test_initialpose_reinitializes_around_the_given_pose(ros):
 
 
 def _initialpose(x, y, yaw, variances, frame_id="map"):
-    from amr_common.ros_conversions import yaw_to_quaternion
+    from amr_common.ros.ros_conversions import yaw_to_quaternion
     message = PoseWithCovarianceStamped()
     message.header.frame_id = frame_id
     message.pose.pose.position.x, message.pose.pose.position.y = x, y
@@ -361,7 +361,7 @@ def test_map_to_odom_on_tf_and_the_lidar_position_from_tf_static(ros):
     """
     from tf2_msgs.msg import TFMessage
 
-    from amr_common.tf import TF_STATIC_QOS, compose, planar_transform
+    from amr_common.ros.tf import TF_STATIC_QOS, compose, planar_transform
     node = make_node(ros, world="lab02", lidar_offset_x_m=0.0)
     graph = FakeGraph(ros, profile="turtlebot3")  # its LiDAR is 32 mm behind the centre
     transforms = []
@@ -409,7 +409,7 @@ def test_lds02_scans_with_the_reality_gap_localize_through_the_node(ros):
     up to the scan's stamp: localized, within 3 cm. Before, the filter never localized on
     these scans (docs/reality-gap.md).
     """
-    from amr_common.ros_conversions import laser_scan
+    from amr_common.ros.ros_conversions import laser_scan
     node = make_node(ros, world="lab02", lidar_offset_x_m=-0.032)
     graph = FakeGraph(ros, profile="turtlebot3_lds02:randomized")
     bring_up(ros, node, graph)

@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from amr_common.world import GOAL_CLEARANCE, World, bundled_worlds
+from amr_common.world.world import GOAL_CLEARANCE, World, bundled_worlds
 from amr_planning import search
 from amr_planning.planner import Planner, PlanningError
 

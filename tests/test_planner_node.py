@@ -10,8 +10,8 @@ from geometry_msgs.msg import PoseStamped as GoalPose
 from nav_msgs.msg import Path
 from rclpy.parameter import Parameter
 
-from amr_common.qos import LATCHED
-from amr_common.ros_conversions import path_points, seconds_to_time, time_to_seconds
+from amr_common.ros.qos import LATCHED
+from amr_common.ros.ros_conversions import path_points, seconds_to_time, time_to_seconds
 from amr_planning.planner_node import PlannerNode
 
 

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
-from amr_common.map_file import world_as_map, write_map
-from amr_common.world import World
+from amr_common.world.map_file import world_as_map, write_map
+from amr_common.world.world import World
 from amr_evaluation.localization_plot import plot_localization
 from amr_evaluation.plot import plot_episode
 

@@ -12,8 +12,8 @@ from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Path
 from rclpy.parameter import Parameter
 
-from amr_common.qos import LATCHED
-from amr_common.ros_conversions import path_message, seconds_to_time, yaw_to_quaternion
+from amr_common.ros.qos import LATCHED
+from amr_common.ros.ros_conversions import path_message, seconds_to_time, yaw_to_quaternion
 from amr_control.pure_pursuit_node import PurePursuitNode
 
 L_PATH = [[0.0, 0.0], [1.2, 0.0], [1.2, 0.8]]
@@ -216,7 +216,7 @@ def scan_publisher(graph):
 
 def publish_scan(publisher, ranges) -> None:
     """A 360-ray scan from ray 0 straight ahead, counter-clockwise (the LDS-01's)."""
-    from amr_common.ros_conversions import laser_scan
+    from amr_common.ros.ros_conversions import laser_scan
     publisher.publish(laser_scan(ranges, stamp=seconds_to_time(0.0), frame_id="base_scan",
                                  angle_min=0.0, angle_increment=2 * math.pi / 360,
                                  range_min=0.12, range_max=3.5, scan_time=0.2))

@@ -1,4 +1,4 @@
-"""amr_common.range_calibration: a LiDAR unit's range correction from walls at tape distances."""
+"""amr_common.sensors.range_calibration: a LiDAR's range correction from walls at taped ranges."""
 from __future__ import annotations
 
 import math
@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from amr_common.range_calibration import (
+from amr_common.sensors.range_calibration import (
     MIN_WALL_RETURNS,
     RangeCorrection,
     fit_correction,

@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from amr_common.lidar_models import LDS01
 from amr_common.robot import TRACK, WHEEL_RADIUS
+from amr_common.sensors.lidar_models import LDS01
 from amr_sim.drivetrain import (
     FIRMWARE_MAX_ANGULAR,
     FIRMWARE_MAX_LINEAR,

@@ -109,7 +109,7 @@ def test_ctrl_c_at_any_moment_of_start_up_exits_130_with_a_final_zero(ros, tmp_p
 
     from geometry_msgs.msg import TwistStamped
 
-    from amr_common.qos import RELIABLE_10
+    from amr_common.ros.qos import RELIABLE_10
     commands = []
     ros.node("cmd_vel_listener").create_subscription(TwistStamped, "/cmd_vel", commands.append,
                                                      RELIABLE_10)

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 from geometry_msgs.msg import TwistStamped
 
-from amr_common.qos import RELIABLE_10
+from amr_common.ros.qos import RELIABLE_10
 from tests.processes import terminate, wait_for
 
 REPO = Path(__file__).resolve().parent.parent
@@ -413,7 +413,7 @@ def test_an_unreachable_goal_ends_the_run_at_once_with_exit_1_and_the_report(tmp
     # lab02 with inner_far walled in: the filter localizes in the ring, the planner finds no
     # path. The run once idled until --duration and exited 0.
     world = tmp_path / "lab02_walled_in.yaml"
-    world.write_text((REPO / "amr_common" / "worlds" / "lab02.yaml").read_text().replace(
+    world.write_text((REPO / "amr_common" / "world" / "worlds" / "lab02.yaml").read_text().replace(
         "walls:\n", "walls:\n  - [[0.4, -0.4], [0.8, -0.4]]\n", 1))
     report_path = tmp_path / "nav.json"
     exit_code = run_sim.main(["--world", str(world), "--goal", "inner_far", "--duration", "600",

@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from amr_common.map_file import read_map
-from amr_common.map_raster import OCCUPIED
-from amr_common.world import World
+from amr_common.world.map_file import read_map
+from amr_common.world.map_raster import OCCUPIED
+from amr_common.world.world import World
 from amr_evaluation.mapping_metrics import occupied_centres
 from tests.emulator_process import running_emulator
 from tests.processes import terminate, wait_for
@@ -94,7 +94,7 @@ def _sigint_when(tmp_path, ready, options=(), ros=None) -> tuple[int, str]:
 def test_ctrl_c_mid_mapping_keeps_the_map_so_far_and_the_report(ros, tmp_path):
     from rosgraph_msgs.msg import Clock
 
-    from amr_common.qos import scan_qos
+    from amr_common.ros.qos import scan_qos
     clock = []  # the simulated time, heard on /clock: interrupted after 10 s of mapping
     ros.node("clock_listener").create_subscription(
         Clock, "/clock", lambda msg: clock.append(msg.clock.sec + 1e-9 * msg.clock.nanosec),
@@ -133,7 +133,7 @@ def test_a_closed_terminal_ends_the_slam_run_as_ctrl_c_does_with_exit_code_129(r
     from geometry_msgs.msg import TwistStamped
     from rosgraph_msgs.msg import Clock
 
-    from amr_common.qos import RELIABLE_10, scan_qos
+    from amr_common.ros.qos import RELIABLE_10, scan_qos
     clock, commands = [], []
     listener = ros.node("listener")
     listener.create_subscription(
@@ -373,7 +373,7 @@ def test_the_report_leaves_out_counts_a_mapper_does_not_give():
     world = World.load("lab02")
     start = world.starts["inner"]
     trajectory = [[0.0, *start], [0.2, *start]]
-    from amr_common.map_file import world_as_map
+    from amr_common.world.map_file import world_as_map
     raster, _ = world_as_map(world, 0.02)
     report = sim_report.slam_fields(world, "turtlebot3", trajectory, [[0.2, *start]], raster,
                                     {}, 3.5, {})  # a mapper whose statistics() gives nothing

@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from amr_common.map_raster import Raster
-from amr_common.world import World, WorldError
+from amr_common.world.map_raster import Raster
+from amr_common.world.world import World, WorldError
 from amr_mapping.slam_map_files import write_slam_map
 
 SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"

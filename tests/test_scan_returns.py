@@ -1,4 +1,4 @@
-"""The one rule for which LaserScan readings are returns (amr_common.scan_returns)."""
+"""The one rule for which LaserScan readings are returns (amr_common.sensors.scan_returns)."""
 from __future__ import annotations
 
 import math
@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from amr_common import scan_returns
-from amr_common.scan_returns import is_return, return_mask
+from amr_common.sensors import scan_returns
+from amr_common.sensors.scan_returns import is_return, return_mask
 
 READINGS = [0.5, 0.12, 3.5, 0.119, 3.501, 0.0, -0.2, math.nan, math.inf, -math.inf, 1e300]
 EXPECTED = [True, True, True, False, False, False, False, False, False, False, False]

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from amr_common.geometry import wrap_angle
-from amr_common.world import World
+from amr_common.world.world import World
 from amr_evaluation.episode import EpisodeResult, explored_fraction, run_episode
 from amr_evaluation.plot import plot_episode, plot_episodes_sheet, plot_world
 from amr_sim.simulator import Simulator

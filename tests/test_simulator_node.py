@@ -18,7 +18,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import LaserScan
 
-from amr_common.ros_conversions import (
+from amr_common.ros.ros_conversions import (
     laser_scan,
     odometry_message,
     pose_from_message,

@@ -13,15 +13,15 @@ from sensor_msgs.msg import LaserScan
 from tf2_msgs.msg import TFMessage
 
 from amr_common.geometry import compose
-from amr_common.map_file import read_map
-from amr_common.map_messages import grid_values
-from amr_common.ros_conversions import (
+from amr_common.ros.map_messages import grid_values
+from amr_common.ros.ros_conversions import (
     laser_scan_from_profile,
     odometry_message,
     pose_from_message,
     seconds_to_time,
 )
-from amr_common.tf import TF_QOS, planar_transform
+from amr_common.ros.tf import TF_QOS, planar_transform
+from amr_common.world.map_file import read_map
 from amr_evaluation.episode import default_controller
 from amr_mapping.slam_node import SlamNode
 from amr_sim.simulator import Simulator
@@ -324,7 +324,7 @@ def test_a_scan_waits_for_the_odometry_of_its_stamp_and_is_placed_between_messag
 
 
 def test_lidar_position_from_tf_static(ros):
-    from amr_common.tf import StaticTransformBroadcaster
+    from amr_common.ros.tf import StaticTransformBroadcaster
     node = make_node(ros)
     broadcaster = StaticTransformBroadcaster(ros.node("robot_state_publisher"))
     broadcaster.send([planar_transform(seconds_to_time(0.0), "base_footprint", "base_scan",

@@ -20,9 +20,9 @@ import pytest
 from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
 
-from amr_common.qos import RELIABLE_10
 from amr_common.robot import MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED
-from amr_common.ros_conversions import command_from_twist
+from amr_common.ros.qos import RELIABLE_10
+from amr_common.ros.ros_conversions import command_from_twist
 from tests.processes import REPO, terminate
 
 sys.path.insert(0, str(REPO / "scripts"))
@@ -401,7 +401,7 @@ class FakeSimulator:
     """A process holding a domain lock as run_sim.py does (run_sim's own registration)."""
 
     def __init__(self, env: dict, domain_id: int | None = None) -> None:
-        code = ("import sys; from amr_common.ros_env import isolate_local_graph; "
+        code = ("import sys; from amr_common.ros.ros_env import isolate_local_graph; "
                 f"print(isolate_local_graph({domain_id}, program='run_sim'), flush=True); "
                 "sys.stdin.read()")
         self.process = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE,

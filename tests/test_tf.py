@@ -16,9 +16,9 @@ from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.parameter import Parameter
 from tf2_msgs.msg import TFMessage
 
-from amr_common import tf
 from amr_common.robot import LIDAR_HEIGHT, LIDAR_OFFSET_X
-from amr_common.ros_conversions import pose_from_message, time_to_nanoseconds
+from amr_common.ros import tf
+from amr_common.ros.ros_conversions import pose_from_message, time_to_nanoseconds
 from tests.tf_map_helpers import FrameProbe, by_child, planar, start_with_frames
 
 JAZZY_TFMESSAGE_HASH = "RIHS01_e369d0f05a23ae52508854b66f6aa0437f3449d652e8cbf22d5abe85d020f087"

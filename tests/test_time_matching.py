@@ -1,4 +1,4 @@
-"""amr_common.time_matching against an oracle: the reference algorithm written out literally.
+"""amr_common.ros.time_matching against an oracle: the reference algorithm written out literally.
 
 `ReferenceApproximateSync` (tests/sync_reference.py) is the Jazzy message_filters
 ApproximateTimeSynchronizer.add search as specified in shared/notes/message_filters.md
@@ -13,7 +13,7 @@ import random
 
 import pytest
 
-from amr_common import time_matching as tm
+from amr_common.ros import time_matching as tm
 from tests.sync_reference import ReferenceApproximateSync, random_scenario
 
 

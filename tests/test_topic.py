@@ -12,9 +12,9 @@ import pytest
 from nav_msgs.msg import OccupancyGrid, Odometry
 from sensor_msgs.msg import LaserScan
 
-from amr_common.map_messages import occupancy_grid
-from amr_common.qos import LATCHED, RELIABLE_10, scan_qos
-from amr_common.ros_conversions import laser_scan, odometry_message, seconds_to_time
+from amr_common.ros.map_messages import occupancy_grid
+from amr_common.ros.qos import LATCHED, RELIABLE_10, scan_qos
+from amr_common.ros.ros_conversions import laser_scan, odometry_message, seconds_to_time
 from tests.processes import REPO, run_script_while_spinning, terminate
 
 sys.path.insert(0, str(REPO / "scripts"))

@@ -84,7 +84,7 @@ def test_a_late_stopping_drive_still_turns_into_the_side_corridor(start, seed):
 # ---- physically impossible odometry and repeated bad input ----------------------------------
 def lab02_run(corrupt_at=None, bad=(0.0, 0.0), repeat=1, steps=800):
     """Drive lab02's outer corridor; odometry replaced by `bad` for `repeat` steps."""
-    from amr_common.world import World
+    from amr_common.world.world import World
     from amr_sim.simulator import Simulator
 
     world = World.load("lab02")
@@ -119,7 +119,7 @@ def test_kidnapped_into_a_junction_the_robot_drives_on_instead_of_turning_for_ev
     Before the fix, the turns aimed at the old heading memory faced two blocked diagonals at
     (1.19, 1.39) for ever.
     """
-    from amr_common.world import World
+    from amr_common.world.world import World
     from amr_evaluation.episode import default_controller
     from amr_sim.profiles import get_profile
     from amr_sim.simulator import Simulator
@@ -148,7 +148,7 @@ def test_a_robot_circling_an_empty_junction_leaves_it():
     (walls seen up to 0.6 m behind look like the end of a followed wall), a 0.3 m square for
     ever. Four outer turns in a row with no wall followed in between now end in the look-around.
     """
-    from amr_common.world import World
+    from amr_common.world.world import World
     from amr_sim.simulator import Simulator
 
     sim = Simulator(World.load("twin_maze"), start="north_east", dt=DT, profile="ideal", seed=0)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from amr_common.robot import ROBOT_RADIUS
-from amr_common.world import GOAL_CLEARANCE, SAFETY_MARGIN, World, WorldError, bundled_worlds
+from amr_common.world.world import GOAL_CLEARANCE, SAFETY_MARGIN, World, WorldError, bundled_worlds
 
 REQUIRED_WORLDS = {"lab02", "corridor_loop", "maze_deadends", "room_obstacles", "wide_maze"}
 

@@ -14,10 +14,10 @@ from rclpy.lifecycle import TransitionCallbackReturn
 from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
 
-from amr_common import tf
-from amr_common.map_raster import FREE, OCCUPIED, UNKNOWN, Raster, points_in_polygon
-from amr_common.qos import LATCHED
-from amr_common.world import World
+from amr_common.ros import tf
+from amr_common.ros.qos import LATCHED
+from amr_common.world.map_raster import FREE, OCCUPIED, UNKNOWN, Raster, points_in_polygon
+from amr_common.world.world import World
 from tests.test_simulator_node import Probe, start_simulator
 
 

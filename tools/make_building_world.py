@@ -58,7 +58,7 @@ def _boxes(rng: random.Random, x0: float, y0: float, x1: float, y1: float,
 
 
 def building(size: float, seed: int) -> dict:
-    """The world as a dict of world-file keys (see amr_common/world_file.py)."""
+    """The world as a dict of world-file keys (see amr_common/world/world_file.py)."""
     rng = random.Random(seed)
     size = _snap(size)
     middle = _snap(size / 2 - CORRIDOR / 2)

@@ -84,9 +84,9 @@ def speckled_map_world():
     """lab02 as a 2 cm Nav2 map with a SLAM map's speckles: a map world that is ray-marched."""
     import numpy as np
 
-    from amr_common.map_file import world_as_map
-    from amr_common.map_raster import FREE, OCCUPIED, Raster
-    from amr_common.world import MARCH_ABOVE_SEGMENTS, World
+    from amr_common.world.map_file import world_as_map
+    from amr_common.world.map_raster import FREE, OCCUPIED, Raster
+    from amr_common.world.world import MARCH_ABOVE_SEGMENTS, World
     lab02 = World.load("lab02")
     raster, extras = world_as_map(lab02)
     values = raster.values.copy()

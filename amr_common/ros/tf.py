@@ -25,7 +25,7 @@ from tf2_msgs.msg import TFMessage
 
 from amr_common import geometry
 from amr_common.geometry import compose, inverse, map_to_odom
-from amr_common.qos import LATCHED
+from amr_common.ros.qos import LATCHED
 
 TF_TOPIC = "/tf"
 TF_STATIC_TOPIC = "/tf_static"

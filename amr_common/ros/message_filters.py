@@ -1,7 +1,7 @@
 """Drop-in replacement for ROS 2 Jazzy ``message_filters`` (Python), which is not on PyPI.
 
-Write ``from amr_common import message_filters`` (instead of ``import message_filters``) or
-``from amr_common.message_filters import ApproximateTimeSynchronizer, Subscriber``; the rest of
+Write ``from amr_common.ros import message_filters`` (instead of ``import message_filters``) or
+``from amr_common.ros.message_filters import ApproximateTimeSynchronizer, Subscriber``; the rest of
 the code stays as in the course material::
 
     odom_sub = message_filters.Subscriber(node, Odometry, "odom")
@@ -10,8 +10,8 @@ the code stays as in the course material::
     sync.registerCallback(on_odom_and_scan)
 
 For any input sequence the synchronizers emit the same message sets, in the same order, as the
-Jazzy reference (semantics: shared/notes/message_filters.md; logic: `amr_common.time_matching`).
-Differences, all on the reference's weak spots:
+Jazzy reference (semantics: shared/notes/message_filters.md; logic:
+`amr_common.ros.time_matching`). Differences, all on the reference's weak spots:
 - the approximate search is polynomial instead of exponential in the number of inputs;
 - callbacks run after the queue lock is released (a callback may call back into the filter);
 - headerless messages (allow_headerless=True) are stamped with the node's clock, so
@@ -33,7 +33,7 @@ import rclpy.logging
 from rclpy.clock import ROSClock
 from rclpy.duration import Duration
 
-from amr_common import time_matching
+from amr_common.ros import time_matching
 
 __all__ = ["SimpleFilter", "Subscriber", "TimeSynchronizer", "ApproximateTimeSynchronizer"]
 

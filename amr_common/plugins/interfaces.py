@@ -3,7 +3,7 @@
 explore -> localize -> plan -> follow -> goal, plus mapping: each link is one typing.Protocol
 here, documented like a Nav2 plugin header. The nodes (amr_*_node.py), the headless episodes
 (amr_evaluation) and the run scripts use only these members, and load the class by
-"MODULE:CLASS" (amr_common.controller_loader.load_class; `--localizer`, `--planner`,
+"MODULE:CLASS" (amr_common.plugins.loader.load_class; `--localizer`, `--planner`,
 `--follower`, `--mapper`, `--controller`), so a student's class replaces the project's without
 editing anything else. The reference implementations: amr_control.wall_follower.WallFollower,
 amr_localization.particle_filter.ParticleFilter, amr_planning.planner.Planner,
@@ -13,12 +13,12 @@ examples/.
 Conventions for every link: SI units (m, rad, s, m/s, rad/s); poses (x, y, theta) in the map
 frame (REP 105; theta counter-clockwise from +x, any range); scans as sensor_msgs/LaserScan
 ranges (NaN, inf, 0.0 or outside [range_min, range_max] mean "no return": use
-amr_common.scan_returns). A class may offer `parameter_descriptions()` (a static method:
+amr_common.sensors.scan_returns). A class may offer `parameter_descriptions()` (a static method:
 name -> (default, description)): its node declares each as a ROS parameter and the run
 scripts' `-p` / `--*-param` options check names against it. Constructors are called with
 keywords only, as each interface says. A call that raises where its interface allows no
 exception, or returns what it forbids (None, NaN where numbers are due, a wrong shape), is the
-link's failure (amr_common.link_failure): its node stops using it and the run fails.
+link's failure (amr_common.plugins.link_failure): its node stops using it and the run fails.
 """
 from __future__ import annotations
 
@@ -54,14 +54,14 @@ class Controller(Protocol):
 class Localizer(Protocol):
     """Localization on a known map (link "localizer"): odometry and scans in, a pose out.
 
-    Built as `cls(map, seed=..., lidar_offset_x_m=..., **params)`: map an amr_common.world.World
-    (the walls as segments, `bounds`, `contains(x, y)`, a raster via amr_common.map_raster);
-    seed for its random numbers; lidar_offset_x_m where the LiDAR sits ahead of the robot centre
-    (m); params from `parameter_descriptions()` (ROS parameters of the particle_filter node;
-    list seed and lidar_offset_x_m there too: the run scripts set them as node parameters).
-    It starts with a global localization (not localized) unless its params give an initial pose.
-    Call order: set_scan_geometry() first; then for every odometry twist predict(), for every
-    scan correct(); the flag `localized` is read after every scan.
+    Built as `cls(map, seed=..., lidar_offset_x_m=..., **params)`: map an
+    amr_common.world.world.World (the walls as segments, `bounds`, `contains(x, y)`, a raster via
+    amr_common.world.map_raster); seed for its random numbers; lidar_offset_x_m where the LiDAR
+    sits ahead of the robot centre (m); params from `parameter_descriptions()` (ROS parameters of
+    the particle_filter node; list seed and lidar_offset_x_m there too: the run scripts set them as
+    node parameters). It starts with a global localization (not localized) unless its params give
+    an initial pose. Call order: set_scan_geometry() first; then for every odometry twist
+    predict(), for every scan correct(); the flag `localized` is read after every scan.
     """
 
     def set_scan_geometry(self, angle_min: float, angle_increment: float, rays: int,
@@ -170,10 +170,10 @@ class PlannedPath(Protocol):
 class Planner(Protocol):
     """A global planner on the map (link "planner"), as a Nav2 planner plugin.
 
-    Built as `cls(map, **params)`: map an amr_common.world.World (amr_common.occupancy_grid
-    gives a grid with each cell's distance to the nearest wall); params from
-    `parameter_descriptions()` (ROS parameters of the planner node). Called once on the first
-    localized pose, again on a new goal and after each relocalization.
+    Built as `cls(map, **params)`: map an amr_common.world.world.World
+    (amr_common.world.occupancy_grid gives a grid with each cell's distance to the nearest wall);
+    params from `parameter_descriptions()` (ROS parameters of the planner node). Called once on the
+    first localized pose, again on a new goal and after each relocalization.
     """
 
     def plan(self, start: Sequence[float], goal: Sequence[float]) -> PlannedPath:
@@ -288,7 +288,7 @@ class Mapper(Protocol):
         range_max; its geometry may change from scan to scan, as the LDS-02's), with the
         odometry pose (odom frame) at its stamp (s); the new estimate. A real LiDAR's scan also
         carries `scan_time` (s, LaserScan's): its rays were measured clockwise over that time
-        BEFORE the stamp, as the Burger's drivers stamp (amr_common.lidar_models
+        BEFORE the stamp, as the Burger's drivers stamp (amr_common.sensors.lidar_models
         .revolution_ages); a mapper may de-skew them with the odometry poses it gets (the
         project's does: its `deskew` parameter) or ignore it. Called for every new scan; bad
         input is skipped (status "rejected: ..."), never raised.
@@ -316,7 +316,7 @@ class Mapper(Protocol):
         ...
 
     def occupancy_raster(self) -> Any:
-        """The map now: an amr_common.map_raster.Raster (/map, Nav2 map files)."""
+        """The map now: an amr_common.world.map_raster.Raster (/map, Nav2 map files)."""
         ...
 
     def statistics(self) -> dict[str, Any]:

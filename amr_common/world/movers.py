@@ -1,6 +1,7 @@
 """Movers: round obstacles of a world that walk on their own (people, a cart).
 
-A world YAML lists them under `movers:` (amr_common.world_file)::
+A world YAML lists them under `movers:` (read and checked by amr_common.world.world_file; their
+paths against the boundary by amr_common.world.polygons)::
 
     movers:
       - radius: 0.2              # m, (0, MAX_RADIUS]
@@ -16,22 +17,20 @@ compiled `path_position` with its plain twin): the same in a headless episode an
 graph. The simulator (amr_sim) advances each mover's
 clock by dt every step except while its next position would touch the robot: then it waits, so
 every contact is the robot's doing. Movers pass through walls and through each other: keeping
-their paths clear is the world author's part; World checks that each path stays inside the
-boundary with the mover's radius.
+their paths clear is the world author's part; each path must stay inside the boundary with the
+mover's radius.
 
 Movers are the simulated world only: never walls, never in /map, the planner's or the particle
-filter's map (a world file given as a map has its movers dropped: amr_common.map_vs_world).
+filter's map (a world file given as a map has its movers dropped: amr_common.world.map_vs_world).
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-from .jit import jit
+from amr_common.jit import jit
 
 MAX_RADIUS = 1.0  # m: a person, a cart; not a room
 MAX_SPEED = 2.0  # m/s: a brisk walk (the Burger drives 0.22 m/s)
@@ -133,88 +132,5 @@ def collisions_text(collisions: int, with_movers: int | None) -> str:
     return f"{collisions} ({with_movers} with movers)" if with_movers else f"{collisions}"
 
 
-def mover_from_file(value: Any, path: Path | str, index: int) -> Mover:
-    """One entry of a world file's `movers`, checked on its own (WorldError naming it).
-
-    Checks: a mapping with known keys; radius in (0, MAX_RADIUS]; a path of >= 1 finite
-    [x, y] points; speed in [0, MAX_SPEED]; loop true/false; start_s finite and >= 0. Where it
-    walks (inside the boundary) is World's check.
-    """
-    from .world_file import WorldError, number_value, point_value
-
-    what = f"movers[{index}]"
-    if not isinstance(value, dict):
-        raise WorldError(f"{path}: {what} must be a mapping with keys radius, path, speed "
-                         f"(optional loop, start_s, name), got {value!r}")
-    if isinstance(value.get("name"), str) and value["name"].strip():
-        what = f"{what} ({value['name'].strip()})"
-    unknown = sorted(set(map(str, value)) - set(MOVER_KEYS))
-    if unknown:
-        raise WorldError(f"{path}: {what}: unknown key(s) {unknown}; allowed: "
-                         f"{list(MOVER_KEYS)}")
-    for key in ("radius", "path", "speed"):
-        if key not in value:
-            raise WorldError(f"{path}: {what}: missing key '{key}'")
-    radius = number_value(value["radius"], path, f"{what} radius")
-    if not 0.0 < radius <= MAX_RADIUS:
-        raise WorldError(f"{path}: {what}: radius must be in (0, {MAX_RADIUS:g}] m, got "
-                         f"{value['radius']!r}")
-    speed = number_value(value["speed"], path, f"{what} speed")
-    if not 0.0 <= speed <= MAX_SPEED:
-        raise WorldError(f"{path}: {what}: speed must be in [0, {MAX_SPEED:g}] m/s, got "
-                         f"{value['speed']!r}")
-    raw_path = value["path"]
-    if not isinstance(raw_path, list) or not raw_path:
-        raise WorldError(f"{path}: {what}: path must be a list of at least one [x, y] point, "
-                         f"got {raw_path!r}")
-    points = np.array([point_value(p, path, f"{what} path[{i}]") for i, p in
-                       enumerate(raw_path)], dtype=np.float64)
-    loop = value.get("loop", False)
-    if not isinstance(loop, bool):
-        raise WorldError(f"{path}: {what}: loop must be true or false, got {loop!r}")
-    start_s = number_value(value.get("start_s", 0.0), path, f"{what} start_s")
-    if start_s < 0.0:
-        raise WorldError(f"{path}: {what}: start_s must be >= 0 s, got {value['start_s']!r}")
-    name = str(value.get("name") or "").strip() or f"movers[{index}]"
-    return Mover(name=name, radius=radius, path=points, speed=speed, loop=loop,
-                 start_s=start_s, label=what)
-
-
-def movers_from_file(value: Any, path: Path | str) -> tuple[Mover, ...]:
-    """A world file's `movers` list (None: none), each entry checked (mover_from_file)."""
-    from .world_file import WorldError
-
-    if value is None:
-        return ()
-    if not isinstance(value, list):
-        raise WorldError(f"{path}: 'movers' must be a list of {{radius, path, speed}} mappings")
-    movers = tuple(mover_from_file(v, path, i) for i, v in enumerate(value))
-    names = [m.name for m in movers]
-    twice = sorted({n for n in names if names.count(n) > 1})
-    if twice:
-        raise WorldError(f"{path}: mover name(s) {twice} given twice: names must be unique")
-    return movers
-
-
-def mover_path_problem(mover: Mover, boundary: np.ndarray | None) -> str | None:
-    """Why a mover's path leaves the world's boundary (with its radius), or None."""
-    if boundary is None:
-        return None
-    from .coverage_grid import inside_polygon_points
-    from .polygons import closed_segments, segment_distances
-
-    points = np.asarray(mover.path, dtype=np.float64)
-    outside = ~inside_polygon_points(boundary, points)
-    if outside.any():
-        x, y = points[np.argmax(outside)]
-        return f"{mover.label or mover.name}: path point ({x:g}, {y:g}) is outside the boundary"
-    gap, (x, y) = segment_distances(mover.path_segments(), closed_segments(boundary))
-    if gap < mover.radius:
-        return (f"{mover.label or mover.name}: its path comes {gap:.3f} m from the boundary "
-                f"near ({x:g}, {y:g}), closer than its radius {mover.radius:g} m")
-    return None
-
-
-__all__ = ["MAX_RADIUS", "MAX_SPEED", "Mover", "collisions_text", "mover_from_file",
-           "mover_path_problem", "movers_from_file", "path_position", "path_position_python",
-           "walked_time"]
+__all__ = ["MAX_RADIUS", "MAX_SPEED", "MOVER_KEYS", "Mover", "collisions_text", "path_position",
+           "path_position_python", "walked_time"]

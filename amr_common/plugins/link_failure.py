@@ -1,6 +1,6 @@
 """A link of the chain that failed: one rule for the nodes, the headless episodes, the scripts.
 
-A link (a class of amr_common.interfaces: the controller, localizer, planner, follower or
+A link (a class of amr_common.plugins.interfaces: the controller, localizer, planner, follower or
 mapper) fails when a call raises where its interface allows no exception, or returns what its
 interface forbids: None, a wrong shape, NaN where finite numbers are due. Its output is then
 worth nothing, and neither is the run: it fails.
@@ -141,7 +141,7 @@ def checked_raster(raster: Any) -> Any:
     if not (isinstance(values, np.ndarray) and values.ndim == 2 and values.size
             and values.dtype.kind in "iu"):
         raise LinkFailure("mapper", f"occupancy_raster returned {shown(raster)}, not a Raster "
-                                    "(amr_common.map_raster) with 2-D integer values")
+                                    "(amr_common.world.map_raster) with 2-D integer values")
     if not (_real(resolution) and math.isfinite(resolution) and resolution > 0
             and _finite_numbers(getattr(raster, "origin", None), 2)):
         raise LinkFailure("mapper", f"occupancy_raster returned a resolution of "

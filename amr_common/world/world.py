@@ -1,19 +1,20 @@
 """Worlds for the simulator: walls as 2D line segments, named start poses and named goals.
 
 `World.load(name_or_path)` reads a bundled world by name ("lab02") or a world YAML / the
-course's map JSON / a Nav2 map YAML by path (the formats: amr_common/world_file.py), then checks
-it against its walls: no zero-length wall; a boundary and holes that do not cross themselves,
-holes inside the boundary (they may touch it); every start pose inside the boundary, outside
-every obstacle and at least the robot radius from the walls; every goal at least GOAL_CLEARANCE
-from them.
+course's map JSON / a Nav2 map YAML by path (the formats: amr_common/world/world_file.py), then
+checks it against its walls: no zero-length wall; a boundary and holes that do not cross
+themselves, holes inside the boundary (they may touch it); every start pose inside the boundary,
+outside every obstacle and at least the robot radius from the walls; every goal at least
+GOAL_CLEARANCE from them.
 
 A map world (a Nav2 map YAML, or `World.from_raster` on a map SLAM built) keeps its cells in
 `raster`: its free space is its free cells, its walls (`segments`) are the edges between free
-and non-free cells (amr_common.map_raster.boundary_segments), and the occupancy grid of the
+and non-free cells (amr_common.world.map_raster.boundary_segments), and the occupancy grid of the
 planner, the particle filter and /map is the map's own cells.
 
-A world file's movers (amr_common.movers: round obstacles that walk) are in `movers`, apart from
-the walls: the simulator moves them; the planner, the particle filter and /map never see them.
+A world file's movers (amr_common.world.movers: round obstacles that walk) are in `movers`,
+apart from the walls: the simulator moves them; the planner, the particle filter and /map never
+see them.
 
 A World answers the geometric questions of the simulator, the planner, the filter and the
 metrics: clearances, free space, start and goal poses, the coverage grid.
@@ -36,14 +37,20 @@ from pathlib import Path
 
 import numpy as np
 
-from .coverage_grid import CoverageGrid, build_coverage_grid, inside_polygon_points
-from .map_raster import Raster, boundary_segments
-from .movers import Mover, mover_path_problem
-from .polygons import check_polygons, closed_segments, point_in_polygon, squared_segment_distances
-from .raster_raycast import MarchGrid
-from .raycast import clearances_into
-from .robot import ROBOT_RADIUS
-from .world_file import (
+from amr_common.robot import ROBOT_RADIUS
+from amr_common.world.coverage_grid import CoverageGrid, build_coverage_grid, inside_polygon_points
+from amr_common.world.map_raster import Raster, boundary_segments
+from amr_common.world.movers import Mover
+from amr_common.world.polygons import (
+    check_movers,
+    check_polygons,
+    closed_segments,
+    point_in_polygon,
+    squared_segment_distances,
+)
+from amr_common.world.raster_raycast import MarchGrid
+from amr_common.world.raycast import clearances_into
+from amr_common.world.world_file import (
     WORLDS_DIR,
     WorldError,
     WorldFile,
@@ -125,10 +132,7 @@ class World:
             raise WorldError(f"{path}: zero-length wall at ({x1:g}, {y1:g}) (repeated point in "
                              f"a polyline)")
         check_polygons(spec)
-        for mover in spec.movers:
-            problem = mover_path_problem(mover, spec.boundary)
-            if problem is not None:
-                raise WorldError(f"{path}: {problem}")
+        check_movers(spec)
         world = cls(name=spec.name, source=str(path), segments=segments, starts=spec.starts,
                     goal=spec.goal, cell_size=spec.cell_size, description=spec.description,
                     boundary=spec.boundary, holes=spec.holes, goals=dict(spec.goals),
@@ -304,7 +308,7 @@ class World:
         return None
 
     def coverage_grid(self, margin: float = ROBOT_RADIUS) -> CoverageGrid:
-        """The cell_size grid behind the coverage metrics (amr_common.coverage_grid).
+        """The cell_size grid behind the coverage metrics (amr_common.world.coverage_grid).
 
         Computed once per margin. Raises GridTooLargeError if it would have too many cells.
         """

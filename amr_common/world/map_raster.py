@@ -2,13 +2,14 @@
 
 Values as nav_msgs/OccupancyGrid: FREE 0, OCCUPIED 100, UNKNOWN -1. Row r, column c is the cell
 [x0 + c*res, x0 + (c+1)*res) x [y0 + r*res, y0 + (r+1)*res): row 0 is the southmost (the
-message's data is this array flattened row by row), indexed as every grid (amr_common.cell_grid).
-A world's raster is its occupancy grid's (amr_common.occupancy_grid: OccupancyGrid.from_world(
-world, resolution).raster(), the cells the planner and the filter use): OCCUPIED where a wall
-passes through a cell or it lies inside an obstacle, UNKNOWN outside the boundary, else FREE.
+message's data is this array flattened row by row), indexed as every grid
+(amr_common.world.cell_grid). A world's raster is its occupancy grid's
+(amr_common.world.occupancy_grid: OccupancyGrid.from_world(world, resolution).raster(), the cells
+the planner and the filter use): OCCUPIED where a wall passes through a cell or it lies inside an
+obstacle, UNKNOWN outside the boundary, else FREE.
 
-The other way (a map read from a file, amr_common.map_file, or built by SLAM): only FREE cells
-(value 0, as AMCL counts free) are free space; occupied, unknown and in-between values and
+The other way (a map read from a file, amr_common.world.map_file, or built by SLAM): only FREE
+cells (value 0, as AMCL counts free) are free space; occupied, unknown and in-between values and
 everything beyond the raster are walls. `boundary_segments` gives the edges between free and
 non-free cells merged into maximal straight segments: the walls the simulator, the ray
 casting and the clearances of a map world use (a 2 cm lab02: 36 segments for its 16 polygon
@@ -20,8 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from amr_common.cell_grid import CellIndexing
-from amr_common.coverage_grid import inside_polygon_points
+from amr_common.world.cell_grid import CellIndexing
+from amr_common.world.coverage_grid import inside_polygon_points
 
 FREE, OCCUPIED, UNKNOWN = 0, 100, -1  # nav_msgs/OccupancyGrid values
 

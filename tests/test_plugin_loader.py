@@ -1,4 +1,4 @@
-"""amr_common.controller_loader: controller specs and parameter overrides.
+"""amr_common.plugins.loader: controller specs and parameter overrides.
 
 "MODULE:CLASS" specs with errors that name the problem, and `name:=value` overrides typed like
 ROS parameters.
@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import pytest
 
-from amr_common.controller_loader import (
+from amr_common.plugins.loader import (
     DEFAULT_CONTROLLER,
-    ControllerSpecError,
+    PluginSpecError,
     load_controller_class,
     parse_overrides,
     parse_value,
@@ -38,7 +38,7 @@ def test_a_spec_loads_the_class():
     (f"{__name__}:NotCallable", "has no compute_commands"),
 ])
 def test_a_bad_spec_names_the_problem(spec, message):
-    with pytest.raises(ControllerSpecError, match=message) as error:
+    with pytest.raises(PluginSpecError, match=message) as error:
         load_controller_class(spec)
     assert f"controller '{spec}'" in str(error.value)
     assert isinstance(error.value, ValueError)  # callers that catch ValueError see it too
@@ -55,7 +55,7 @@ def test_values_are_typed_like_ros_parameters():
 
 @pytest.mark.parametrize("text", ["nan", "NaN", "inf", "-inf", "Infinity", "1e999", "-1e999"])
 def test_non_finite_values_are_rejected(text):
-    with pytest.raises(ControllerSpecError, match=f"value '{text}' is not finite"):
+    with pytest.raises(PluginSpecError, match=f"value '{text}' is not finite"):
         parse_value(text)
 
 
@@ -94,5 +94,5 @@ def test_lists_are_typed_like_ros_parameters():
     ("kp:=nan", "not finite"),
 ])
 def test_bad_overrides_are_rejected(item, message):
-    with pytest.raises(ControllerSpecError, match=message):
+    with pytest.raises(PluginSpecError, match=message):
         parse_overrides([item])

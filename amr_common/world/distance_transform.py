@@ -1,8 +1,8 @@
 """Exact clearances of a map's free cells by a Euclidean distance transform.
 
 The distance from each free cell's centre to the nearest non-free cell, without a loop over the
-wall segments. A map world's walls are its non-free cells (amr_common.map_raster). The point of
-a non-free cell nearest to a free cell's centre is a corner of that cell or the middle of one of
+wall segments. A map world's walls are its non-free cells (amr_common.world.map_raster). The point
+of a non-free cell nearest to a free cell's centre is a corner of that cell or the middle of one of
 its edges (the foot of the perpendicular from the centre lies on the centre's own row or column
 line), and centres, corners and edge middles all lie on the lattice of half cells. So the
 squared distance transform of that lattice, with every lattice point inside a non-free cell as a

@@ -1,16 +1,16 @@
 """The occupancy grid of a World: free/occupied cells and each cell's distance to the walls.
 
 The one raster of a world: the planner's costs, the particle filter's expected-range table, the
-simulator's /map and map files (amr_common.map_file) are all on these cells.
+simulator's /map and map files (amr_common.world.map_file) are all on these cells.
 
     grid = OccupancyGrid.from_world(World.load("lab02"), resolution=0.02)
     row, col = grid.cell_of(1.0, -1.0)
     grid.clearance[row, col]          # 0.2: the centre of a 0.4 m corridor
     grid.occupancy_values()           # int8, row-major from the lower-left cell (nav_msgs order)
-    grid.raster()                     # the same as an amr_common.map_raster.Raster (/map)
+    grid.raster()                     # the same as an amr_common.world.map_raster.Raster (/map)
 
-Layout (as nav_msgs/OccupancyGrid, indexed by amr_common.cell_grid): cell (row, col) covers x in
-origin_x + [col, col + 1) * resolution and y in origin_y + [row, row + 1) * resolution; arrays
+Layout (as nav_msgs/OccupancyGrid, indexed by amr_common.world.cell_grid): cell (row, col) covers x
+in origin_x + [col, col + 1) * resolution and y in origin_y + [row, row + 1) * resolution; arrays
 are indexed [row, col], row 0 at the bottom (smallest y). Cell CENTRES lie on multiples of the
 resolution, so walls and corridor centre lines on a grid of multiples of it (lab02: 0.4 m) pass
 exactly through cell centres: a 0.4 m corridor has a row of cells on its centre line, 0.2 m
@@ -27,7 +27,7 @@ from both walls.
 
 A map world's grid is its map's cells (free: value 0; unknown: -1; any other value: a wall)
 with the same exact clearances to its walls (the edges of its free cells, World.segments), by a
-distance transform (amr_common.distance_transform).
+distance transform (amr_common.world.distance_transform).
 
 No planner specifics (inflation, costs) and no rclpy.
 """
@@ -40,13 +40,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from amr_common.cell_grid import CellIndexing, cell_index
-from amr_common.coverage_grid import box_slices, check_grid_size, inside_polygon_grid
-from amr_common.distance_transform import free_cell_clearances
-from amr_common.map_raster import FREE, OCCUPIED, UNKNOWN, Raster
+from amr_common.world.cell_grid import CellIndexing, cell_index
+from amr_common.world.coverage_grid import box_slices, check_grid_size, inside_polygon_grid
+from amr_common.world.distance_transform import free_cell_clearances
+from amr_common.world.map_raster import FREE, OCCUPIED, UNKNOWN, Raster
 
 if TYPE_CHECKING:  # world.py builds on the modules this one imports
-    from amr_common.world import World
+    from amr_common.world.world import World
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,7 @@ Plain Python (no rclpy). The default's type is the parameter's type (bool, int, 
 list of strings, or another list: a vector of numbers); the optional rule says which values are
 allowed (a range, the choices, a vector's lengths). From one table come the defaults, the
 constructor checks of the algorithms (`checked_values`), the run scripts' option checks, and
-the ROS parameters of the nodes with their ranges (amr_common.parameters: `ros2 param describe`
+the ROS parameters of the nodes with their ranges (amr_common.ros.parameters: `ros2 param describe`
 shows them).
 
     PARAMETERS = {

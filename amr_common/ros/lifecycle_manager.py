@@ -25,9 +25,9 @@ from rclpy.lifecycle import LifecycleNode
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
-from amr_common.lifecycle_node import first_link_failure
-from amr_common.link_failure import LINK_FAILED
-from amr_common.node_runner import StopFlag, make_executor, shutdown_node, spin_until_stopped
+from amr_common.plugins.link_failure import LINK_FAILED
+from amr_common.ros.lifecycle_node import first_link_failure
+from amr_common.ros.node_runner import StopFlag, make_executor, shutdown_node, spin_until_stopped
 
 _TRANSITION_LABELS = {Transition.TRANSITION_CONFIGURE: "configure",
                       Transition.TRANSITION_ACTIVATE: "activate"}
@@ -170,9 +170,9 @@ def run_managed(manager: LifecycleManager, stop: StopFlag,
     (controllers first: their final zero command goes out while DDS is still up), everything is
     destroyed and rclpy shut down. The caller has run rclpy.init(signal_handler_options=NO) and
     installed `stop` (Ctrl-C, SIGTERM, SIGHUP); a stop during start-up ends it there (no further
-    transition). A link of a node that failed (amr_common.link_failure) ends the run too. Returns
-    the process exit code (0 after a stop: the caller knows it from `stop`; LINK_FAILED after a
-    failed link).
+    transition). A link of a node that failed (amr_common.plugins.link_failure) ends the run too.
+    Returns the process exit code (0 after a stop: the caller knows it from `stop`; LINK_FAILED
+    after a failed link).
     """
     executor = make_executor()
     for node in [*nodes, manager]:

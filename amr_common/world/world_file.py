@@ -1,9 +1,10 @@
 """World files: the project's YAML worlds and the course's map JSON, read into a WorldFile.
 
 Three file formats load with `World.load(name_or_path)` (through `read_world_file`); the third,
-a Nav2 map_server map YAML (it has `image`, `resolution`, ...), is read by amr_common.map_file:
+a Nav2 map_server map YAML (it has `image`, `resolution`, ...), is read by
+amr_common.world.map_file:
 
-1. The project's own YAML world file (bundled ones live in amr_common/worlds/<name>.yaml and
+1. The project's own YAML world file (bundled ones live in amr_common/world/worlds/<name>.yaml and
    load by name, e.g. `World.load("lab02")`; any other file loads by path)::
 
        name: lab02               # optional, defaults to the file stem
@@ -19,11 +20,11 @@ a Nav2 map_server map YAML (it has `image`, `resolution`, ...), is read by amr_c
        starts:                   # optional named start poses [x, y, theta]
          outer: [1.0, -1.0, pi/2]  # theta in rad: a number or "pi", "pi/2", "3*pi/2", "-pi/4"
        goals:                    # optional named goals [x, y] (navigation targets, >= 0.135 m
-                                 # from every wall: amr_common.world.GOAL_CLEARANCE)
+                                 # from every wall: amr_common.world.world.GOAL_CLEARANCE)
          far_corner: [-1.0, 1.0]
        goal: far_corner          # optional default goal: [x, y] or a name of `goals`;
                                  # without it the first named goal is the default
-       movers:                   # optional round obstacles that walk (amr_common.movers):
+       movers:                   # optional round obstacles that walk (amr_common.world.movers):
          - {radius: 0.2, path: [[x, y], ...], speed: 0.4}  # back and forth along the path
          - {radius: 0.2, path: [[x, y], ...], speed: 0.3, loop: true, start_s: 5}
 
@@ -50,7 +51,7 @@ an obstacle or too close to a wall, a mover with a bad radius, path, speed, loop
 whose path leaves the boundary) raises WorldError naming the file (and the mover); the checks
 against the
 walls (polygons, starts within the robot radius, goals within the planner's inflation
-GOAL_CLEARANCE = 0.135 m, no zero-length wall, movers' paths) are World's (amr_common.world).
+GOAL_CLEARANCE = 0.135 m, no zero-length wall, movers' paths) are World's (amr_common.world.world).
 """
 from __future__ import annotations
 
@@ -64,10 +65,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import yaml
 
-from .movers import Mover, movers_from_file
+from amr_common.world.movers import MAX_RADIUS, MAX_SPEED, MOVER_KEYS, Mover
 
 if TYPE_CHECKING:
-    from amr_common.map_file import MapFile
+    from amr_common.world.map_file import MapFile
 
 WORLDS_DIR = Path(__file__).resolve().parent / "worlds"
 
@@ -86,10 +87,10 @@ _WorldYamlLoader.add_implicit_resolver(
     list("-+0123456789."))
 
 
-# The keys of a Nav2 map YAML (amr_common.map_file); a world YAML has none of them.
+# The keys of a Nav2 map YAML (amr_common.world.map_file); a world YAML has none of them.
 NAV2_MAP_KEYS = ("image", "mode", "resolution", "origin", "negate", "occupied_thresh",
                  "free_thresh")
-# Keys a world YAML shares with a map YAML (a map's extras: amr_common.map_file).
+# Keys a world YAML shares with a map YAML (a map's extras: amr_common.world.map_file).
 PROJECT_KEYS = frozenset({"name", "description", "cell_size", "grid_origin", "starts", "goals",
                           "goal"})
 
@@ -121,14 +122,14 @@ class WorldFile:
     cell_size: float = 0.4
     description: str = ""
     grid_origin: tuple[float, float] | None = None
-    movers: tuple[Mover, ...] = ()  # round obstacles that walk (amr_common.movers)
+    movers: tuple[Mover, ...] = ()  # round obstacles that walk (amr_common.world.movers)
 
 
 def read_world_file(name_or_path: str | Path) -> WorldFile | MapFile:
     """Read a bundled world by name ("lab02") or a .yaml/.yml/.json file by path.
 
     A YAML with Nav2 map keys (`image`, `resolution`, ...) is a map: its MapFile
-    (amr_common.map_file).
+    (amr_common.world.map_file).
     """
     text = str(name_or_path)
     path = Path(text).expanduser()
@@ -158,7 +159,7 @@ def _from_yaml(raw: str, path: Path) -> WorldFile | MapFile:
     except yaml.YAMLError as exc:
         raise WorldError(f"{path}: invalid YAML: {' '.join(str(exc).split())}") from exc
     if isinstance(data, dict) and set(data) & set(NAV2_MAP_KEYS):  # a Nav2 map_server map
-        from amr_common.map_file import map_from_yaml  # it imports WorldError from here
+        from amr_common.world.map_file import map_from_yaml  # it imports WorldError from here
         return map_from_yaml(data, path)
     if not isinstance(data, dict):
         raise WorldError(f"{path}: expected a mapping with keys boundary, holes, walls, "
@@ -175,7 +176,7 @@ def _from_yaml(raw: str, path: Path) -> WorldFile | MapFile:
     walls = [_polyline(w, path, f"walls[{i}]", closed=False)
              for i, w in enumerate(_as_list(data.get("walls", []), path, "walls"))]
     return WorldFile(path=path, boundary=boundary, holes=holes, walls=walls,
-                     movers=movers_from_file(data.get("movers"), path),
+                     movers=_movers(data.get("movers"), path),
                      **project_values(data, path))
 
 
@@ -226,6 +227,65 @@ def _from_course_json(raw: str, path: Path) -> WorldFile:
              for i, h in enumerate(_as_list(metric.get("holes", []), path, "metric.holes"))]
     return WorldFile(name=path.stem, path=path, boundary=boundary, holes=holes,
                      description="course map JSON")
+
+
+def _mover(value: Any, path: Path | str, index: int) -> Mover:
+    """One entry of a world file's `movers`, checked on its own (WorldError naming it).
+
+    Checks: a mapping with known keys; radius in (0, MAX_RADIUS]; a path of >= 1 finite
+    [x, y] points; speed in [0, MAX_SPEED]; loop true/false; start_s finite and >= 0. Where it
+    walks (inside the boundary): amr_common.world.polygons.check_movers.
+    """
+    what = f"movers[{index}]"
+    if not isinstance(value, dict):
+        raise WorldError(f"{path}: {what} must be a mapping with keys radius, path, speed "
+                         f"(optional loop, start_s, name), got {value!r}")
+    if isinstance(value.get("name"), str) and value["name"].strip():
+        what = f"{what} ({value['name'].strip()})"
+    unknown = sorted(set(map(str, value)) - set(MOVER_KEYS))
+    if unknown:
+        raise WorldError(f"{path}: {what}: unknown key(s) {unknown}; allowed: "
+                         f"{list(MOVER_KEYS)}")
+    for key in ("radius", "path", "speed"):
+        if key not in value:
+            raise WorldError(f"{path}: {what}: missing key '{key}'")
+    radius = number_value(value["radius"], path, f"{what} radius")
+    if not 0.0 < radius <= MAX_RADIUS:
+        raise WorldError(f"{path}: {what}: radius must be in (0, {MAX_RADIUS:g}] m, got "
+                         f"{value['radius']!r}")
+    speed = number_value(value["speed"], path, f"{what} speed")
+    if not 0.0 <= speed <= MAX_SPEED:
+        raise WorldError(f"{path}: {what}: speed must be in [0, {MAX_SPEED:g}] m/s, got "
+                         f"{value['speed']!r}")
+    raw_path = value["path"]
+    if not isinstance(raw_path, list) or not raw_path:
+        raise WorldError(f"{path}: {what}: path must be a list of at least one [x, y] point, "
+                         f"got {raw_path!r}")
+    points = np.array([point_value(p, path, f"{what} path[{i}]") for i, p in
+                       enumerate(raw_path)], dtype=np.float64)
+    loop = value.get("loop", False)
+    if not isinstance(loop, bool):
+        raise WorldError(f"{path}: {what}: loop must be true or false, got {loop!r}")
+    start_s = number_value(value.get("start_s", 0.0), path, f"{what} start_s")
+    if start_s < 0.0:
+        raise WorldError(f"{path}: {what}: start_s must be >= 0 s, got {value['start_s']!r}")
+    name = str(value.get("name") or "").strip() or f"movers[{index}]"
+    return Mover(name=name, radius=radius, path=points, speed=speed, loop=loop,
+                 start_s=start_s, label=what)
+
+
+def _movers(value: Any, path: Path | str) -> tuple[Mover, ...]:
+    """A world file's `movers` list (None: none), each entry checked (_mover)."""
+    if value is None:
+        return ()
+    if not isinstance(value, list):
+        raise WorldError(f"{path}: 'movers' must be a list of {{radius, path, speed}} mappings")
+    movers = tuple(_mover(v, path, i) for i, v in enumerate(value))
+    names = [m.name for m in movers]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise WorldError(f"{path}: mover name(s) {twice} given twice: names must be unique")
+    return movers
 
 
 def _as_list(value: Any, path, what: str) -> list:

@@ -1,11 +1,11 @@
 """Load a user's class for a link of the chain from "MODULE:CLASS"; parse `name:=value` overrides.
 
-One loader for every link (amr_common.interfaces): the controller (wall follower), the
+One loader for every link (amr_common.plugins.interfaces): the controller (wall follower), the
 localizer, the planner, the path follower and the mapper. The same spec works as a node
 parameter (`controller`, `localizer`, `planner`, `follower`, `mapper`) and in run_sim.py,
 evaluate.py and tune.py (`--controller`, `--localizer`, ...), so users can run their own class
 anywhere. A spec that cannot be loaded, or a class that lacks a member of its interface, is a
-ControllerSpecError naming what is missing.
+PluginSpecError naming what is missing.
 """
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ import math
 import re
 from typing import Any
 
-from amr_common import interfaces
+from amr_common.plugins import interfaces
 
 DEFAULT_CONTROLLER = "amr_control.wall_follower:WallFollower"
 DEFAULT_LOCALIZER = "amr_localization.particle_filter:ParticleFilter"
@@ -33,35 +33,35 @@ LINKS: dict[str, tuple[type, str]] = {
 _SIGNATURES = {"compute_commands": "compute_commands(z_scan, z_v, z_w)"}
 
 
-class ControllerSpecError(ValueError):
+class PluginSpecError(ValueError):
     """A class spec (any link) cannot be loaded; the message says why."""
 
 
 def load_class(spec: str, link: str = "controller") -> type:
     """Import "package.module:ClassName" for `link` and check it has its interface's members.
 
-    ControllerSpecError (one line, naming the link and the spec) for a malformed spec, a module
+    PluginSpecError (one line, naming the link and the spec) for a malformed spec, a module
     that does not import, a missing class, or a class that lacks members of the interface.
     """
     interface, default = LINKS[link]
     module_name, sep, class_name = str(spec).strip().partition(":")
     if not sep or not module_name or not class_name:
-        raise ControllerSpecError(f"{link} '{spec}' must look like MODULE:CLASS, "
+        raise PluginSpecError(f"{link} '{spec}' must look like MODULE:CLASS, "
                                   f"e.g. '{default}'")
     try:
         module = importlib.import_module(module_name)
     except Exception as exc:  # ImportError, or whatever the module raises (SyntaxError, ...)
-        raise ControllerSpecError(f"{link} '{spec}': cannot import module "
+        raise PluginSpecError(f"{link} '{spec}': cannot import module "
                                   f"'{module_name}': {_one_line(exc)}") from exc
     cls = getattr(module, class_name, None)
     if cls is None:
-        raise ControllerSpecError(f"{link} '{spec}': module '{module_name}' has no "
+        raise PluginSpecError(f"{link} '{spec}': module '{module_name}' has no "
                                   f"'{class_name}'")
     missing = interfaces.missing_members(cls, interface)
     if missing:
         names = ", ".join(_SIGNATURES.get(name, name) for name in missing)
-        raise ControllerSpecError(f"{link} '{spec}' has no {names} (the {interface.__name__} "
-                                  f"interface, amr_common.interfaces)")
+        raise PluginSpecError(f"{link} '{spec}' has no {names} (the {interface.__name__} "
+                                  f"interface, amr_common.plugins.interfaces)")
     return cls
 
 
@@ -107,7 +107,7 @@ def parse_value(text: str) -> Any:
         except ValueError:
             continue
         if isinstance(value, float) and not math.isfinite(value):
-            raise ControllerSpecError(f"value '{text}' is not finite")
+            raise PluginSpecError(f"value '{text}' is not finite")
         return value
     return text
 
@@ -119,15 +119,15 @@ def parse_overrides(items: list[str] | None) -> dict[str, Any]:
         name, sep, value = item.partition(":=")
         name = name.strip()
         if not sep or not name:
-            raise ControllerSpecError(f"override '{item}' must look like name:=value")
+            raise PluginSpecError(f"override '{item}' must look like name:=value")
         if not _PARAMETER_NAME.match(name):
-            raise ControllerSpecError(
+            raise PluginSpecError(
                 f"override '{item}': '{name}' is not a parameter name (letters, digits and '_', "
                 f"parts joined by '.'; names starting with '__' are rcl's own arguments)")
         try:
             overrides[name] = parse_value(value)
         except ValueError as exc:
-            raise ControllerSpecError(f"override '{item}': {exc}") from None
+            raise PluginSpecError(f"override '{item}': {exc}") from None
     return overrides
 
 

@@ -4,7 +4,7 @@ nav_msgs/OccupancyGrid (/map) and visualization_msgs/MarkerArray of its walls (/
 /world_markers: what the simulated world has beyond the map - walls the map lacks and the movers
 where they are now (the simulator's truth, as /ground_truth).
 Message building only (no node); the cells are the world's occupancy grid
-(amr_common.occupancy_grid: the planner's and the particle filter's cells; values in the
+(amr_common.world.occupancy_grid: the planner's and the particle filter's cells; values in the
 OccupancyGrid convention, row 0 southmost).
 """
 from __future__ import annotations
@@ -101,7 +101,7 @@ def world_markers(unmapped: np.ndarray, circles: np.ndarray, frame_id: str = "ma
                   stamp: Time | None = None, message: MarkerArray | None = None) -> MarkerArray:
     """/world_markers: the walls the map lacks and the movers where they are.
 
-    `unmapped`: (N, 4) segments (amr_common.map_vs_world.unmapped_walls), a TRIANGLE_LIST
+    `unmapped`: (N, 4) segments (amr_common.world.map_vs_world.unmapped_walls), a TRIANGLE_LIST
     (ns "unmapped", orange) when there are any; `circles`: rows [x, y, radius], one CYLINDER
     each (ns "movers", id = the mover's index). `message`: a MarkerArray this function built
     before, updated in place (the movers' positions and the stamps) instead of rebuilt.
@@ -131,13 +131,13 @@ def world_markers(unmapped: np.ndarray, circles: np.ndarray, frame_id: str = "ma
 
 def world_map_messages(world, resolution: float, frame_id: str = "map",
                        stamp: Time | None = None) -> tuple[OccupancyGrid, MarkerArray]:
-    """/map and /map_markers of an amr_common.world.World.
+    """/map and /map_markers of an amr_common.world.world.World.
 
     /map: OccupancyGrid.from_world(world, resolution), the cells the planner and the filter use
     at that resolution. A map world's /map is its map's cells and values exactly (`resolution`
     does not apply).
     """
-    from amr_common.occupancy_grid import OccupancyGrid
+    from amr_common.world.occupancy_grid import OccupancyGrid
     raster = world.raster if world.raster is not None else \
         OccupancyGrid.from_world(world, resolution).raster()
     return (occupancy_grid(raster.values, raster.resolution, raster.origin, frame_id, stamp),

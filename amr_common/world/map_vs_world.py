@@ -22,7 +22,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .world import World
+from amr_common.world.world import World
 
 UNMAPPED_SPACING = 0.02  # m between the points of a world wall tested against the map
 

@@ -11,8 +11,8 @@ checks every request against the transitions available in the current state firs
   then runs on_error), instead of rclpy's silent ERROR.
 It also forwards a plain-Python algorithm's logging to the node's logger on request
 (forward_python_logging), until the node is destroyed, and keeps the first failure of the
-node's link (fail_link, amr_common.link_failure): logged once, kept in `link_failure` for the
-run scripts, which end the run there (first_link_failure).
+node's link (fail_link, amr_common.plugins.link_failure): logged once, kept in `link_failure` for
+the run scripts, which end the run there (first_link_failure).
 
 The lifecycle shape every node of the project shares is here once:
 - `is_active` is True from activate to deactivate (or shutdown): the node's callbacks drop
@@ -33,7 +33,7 @@ from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
-from amr_common.link_failure import LinkFailure, link_call
+from amr_common.plugins.link_failure import LinkFailure, link_call
 from amr_common.python_logging import forward_to_ros_logger
 
 _SHUTDOWN_TRANSITIONS = (Transition.TRANSITION_UNCONFIGURED_SHUTDOWN,

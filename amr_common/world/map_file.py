@@ -30,8 +30,8 @@ before, 205 (p = 0.196) reads back as FREE, so unknown space came back free. Ima
 (binary P5, written here: no library needed) or PNG (Pillow, which also reads both).
 
 A map YAML may carry this project's keys (name, description, cell_size, grid_origin, starts,
-goals, goal: amr_common.world_file); map_server ignores keys it does not know, so the file stays a
-Nav2 map. Other unknown keys are ignored too, as map_server does.
+goals, goal: amr_common.world.world_file); map_server ignores keys it does not know, so the file
+stays a Nav2 map. Other unknown keys are ignored too, as map_server does.
 
 Every problem raises MapFileError (a WorldError, so each script's `--world` check reports it as
 one line): a missing or unreadable image, missing or non-numeric keys, a resolution <= 0,
@@ -52,10 +52,10 @@ import numpy as np
 import yaml
 from PIL import Image, UnidentifiedImageError
 
-from amr_common.coverage_grid import GridTooLargeError, check_grid_size
-from amr_common.map_raster import FREE, OCCUPIED, UNKNOWN, Raster
-from amr_common.occupancy_grid import OccupancyGrid
-from amr_common.world_file import (
+from amr_common.world.coverage_grid import GridTooLargeError, check_grid_size
+from amr_common.world.map_raster import FREE, OCCUPIED, UNKNOWN, Raster
+from amr_common.world.occupancy_grid import OccupancyGrid
+from amr_common.world.world_file import (
     NAV2_MAP_KEYS,
     PROJECT_KEYS,
     WorldError,
@@ -66,10 +66,10 @@ from amr_common.world_file import (
 )
 
 if TYPE_CHECKING:
-    from amr_common.world import World
+    from amr_common.world.world import World
 
 MODES = ("trinary", "scale", "raw")
-NAV2_KEYS = NAV2_MAP_KEYS  # what map_server reads (amr_common.world_file dispatches on them)
+NAV2_KEYS = NAV2_MAP_KEYS  # what map_server reads (amr_common.world.world_file dispatches on them)
 # map_saver's trinary pixels and the thresholds it writes with them.
 OCCUPIED_PIXEL, FREE_PIXEL, UNKNOWN_PIXEL = 0, 254, 205
 SAVED_OCCUPIED_THRESH, SAVED_FREE_THRESH = 0.65, 0.196
@@ -287,7 +287,8 @@ def write_map(raster: Raster, prefix: str | Path, image_format: str = "pgm",
             raise MapFileError(f"{yaml_path}: unknown extra key(s) {sorted(unknown)}")
         # One top-level key at a time: a mapping of scalars only would be dumped as one
         # flow line ({name: x}), which is no YAML after the block keys above.
-        text += "# This project's keys (amr_common.map_file); Nav2's map_server ignores them.\n"
+        text += ("# This project's keys (amr_common.world.map_file); Nav2's map_server ignores "
+                 "them.\n")
         for key, value in _plain(extras).items():
             text += yaml.safe_dump({key: value}, sort_keys=False, default_flow_style=(
                 None if isinstance(value, (dict, list)) else False))
@@ -303,7 +304,7 @@ def write_map(raster: Raster, prefix: str | Path, image_format: str = "pgm",
 
 def world_as_map(world: World, resolution: float = CONVERT_RESOLUTION
                  ) -> tuple[Raster, dict[str, Any]]:
-    """(cells, extras) of any amr_common.world.World as a map at `resolution` m per cell.
+    """(cells, extras) of any amr_common.world.world.World as a map at `resolution` m per cell.
 
     The cells are the world's occupancy grid (OccupancyGrid.from_world: cell centres on
     multiples of the resolution, so a wall on such a line is one cell thick around its true

@@ -1,7 +1,8 @@
 """Polygons of a world file: edges, distances to them, inside tests, and the file's checks.
 
 check_polygons refuses a world file whose boundary or holes cross themselves, or whose holes
-lie outside or across the boundary (WorldError naming the file and the point).
+lie outside or across the boundary (WorldError naming the file and the point); check_movers one
+whose movers' paths leave the boundary (with their radius).
 """
 from __future__ import annotations
 
@@ -9,8 +10,8 @@ import math
 
 import numpy as np
 
-from .coverage_grid import inside_polygon_points
-from .world_file import WorldError, WorldFile
+from amr_common.world.coverage_grid import inside_polygon_points
+from amr_common.world.world_file import WorldError, WorldFile
 
 
 def squared_segment_distances(seg: np.ndarray, px, py) -> np.ndarray:
@@ -88,6 +89,25 @@ def check_polygons(spec: WorldFile) -> None:
             if (gaps > 1e-9).any():  # on the boundary is touching, not outside
                 raise WorldError(f"{spec.path}: '{what}' lies outside the boundary: holes are "
                                  f"obstacles inside it")
+
+
+def check_movers(spec: WorldFile) -> None:
+    """WorldError for a mover whose path leaves the boundary or comes closer to it than its radius.
+
+    Naming the mover and the point.
+    """
+    boundary_edges = closed_segments(spec.boundary)
+    for mover in spec.movers:
+        what = mover.label or mover.name
+        outside = ~inside_polygon_points(spec.boundary, mover.path)
+        if outside.any():
+            x, y = mover.path[np.argmax(outside)]
+            raise WorldError(f"{spec.path}: {what}: path point ({x:g}, {y:g}) is outside the "
+                             f"boundary")
+        gap, (x, y) = segment_distances(mover.path_segments(), boundary_edges)
+        if gap < mover.radius:
+            raise WorldError(f"{spec.path}: {what}: its path comes {gap:.3f} m from the boundary "
+                             f"near ({x:g}, {y:g}), closer than its radius {mover.radius:g} m")
 
 
 def _first_crossing(a: np.ndarray, b: np.ndarray, pairs=None, chunk: int = 256):

@@ -15,8 +15,8 @@ from typing import Callable
 
 from tf2_msgs.msg import TFMessage
 
-from amr_common.ros_conversions import pose_from_message
-from amr_common.tf import (
+from amr_common.ros.ros_conversions import pose_from_message
+from amr_common.ros.tf import (
     TF_QOS,
     TF_TOPIC,
     StaticTransformListener,

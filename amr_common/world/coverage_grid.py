@@ -11,8 +11,8 @@ box (even-odd rule, the same arithmetic as a point-by-point test) and each wall 
 cells within the margin of its bounding box, so the cost grows with the cells plus the walls,
 not with their product (a 2,500-obstacle world: well under a second instead of minutes).
 A grid of more than MAX_GRID_CELLS cells is refused with GridTooLargeError (+-1e6 m coordinates
-at 0.4 m would need 2.5e13 cells). The /map raster (amr_common.map_raster) uses the same polygon
-fill, bounding boxes and limit.
+at 0.4 m would need 2.5e13 cells). The /map raster (amr_common.world.map_raster) uses the same
+polygon fill, bounding boxes and limit.
 """
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ from typing import Sequence
 
 import numpy as np
 
-from amr_common.cell_grid import CellIndexing
+from amr_common.world.cell_grid import CellIndexing
 
 MAX_GRID_CELLS = 4_000_000  # 800 m x 800 m at 0.4 m; about 30 MB of working arrays
 _CHUNK_CELLS = 262_144  # rows are processed in blocks of about this many cells
@@ -50,7 +50,7 @@ def check_grid_size(columns: float, rows: float, cell_size: float, what: str,
 class CoverageGrid(CellIndexing):
     """Square cells of `cell_size` m and which of them are free.
 
-    Indexed as every grid of a world (amr_common.cell_grid): cell (row i, column j) has its
+    Indexed as every grid of a world (amr_common.world.cell_grid): cell (row i, column j) has its
     centre at (origin_x + (j + 0.5) * cell_size, origin_y + (i + 0.5) * cell_size).
     """
 

@@ -1,8 +1,8 @@
 """Time matching behind our drop-in ``message_filters`` synchronizers (pure Python, no rclpy).
 
-`amr_common.message_filters` wraps this in the ROS 2 Jazzy ``message_filters`` API
-(``from amr_common import message_filters``); this module holds only the queue and search logic,
-so it also serves offline use (e.g. pairing messages read from a bag) and fast tests.
+`amr_common.ros.message_filters` wraps this in the ROS 2 Jazzy ``message_filters`` API
+(``from amr_common.ros import message_filters``); this module holds only the queue and search
+logic, so it also serves offline use (e.g. pairing messages read from a bag) and fast tests.
 
 Queues are dicts ``{stamp_ns: message}`` in insertion order, exactly like the reference, and
 stamps are integer nanoseconds, so slop edges are compared without float rounding.

@@ -2,7 +2,7 @@
 
 A map world's walls are the edges between free and non-free cells (map_raster.boundary_segments).
 A noisy map (what SLAM builds: speckles, ragged walls) has thousands of them, and the segment
-kernel (amr_common.raycast) costs rays x segments. Marching each ray cell by cell
+kernel (amr_common.world.raycast) costs rays x segments. Marching each ray cell by cell
 (Amanatides & Woo's traversal) costs rays x cells crossed instead, whatever the noise, and
 returns the same ranges: the first cell edge where the ray passes between a free and a non-free
 cell (cells beyond the map are non-free), at t > 0, as the segment kernel finds on those edges
@@ -42,7 +42,7 @@ class MarchGrid:
 
     @classmethod
     def from_raster(cls, raster) -> "MarchGrid":
-        """The march grid of an amr_common.map_raster.Raster (free: value 0)."""
+        """The march grid of an amr_common.world.map_raster.Raster (free: value 0)."""
         rows, cols = raster.values.shape
         padded = np.full((rows + 2, cols + 2), BORDER, dtype=np.uint8)
         padded[1:-1, 1:-1] = raster.free

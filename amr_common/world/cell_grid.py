@@ -6,9 +6,9 @@ are indexed [row, col], row 0 at the bottom (smallest y).
 
 `CellIndexing` is a mixin: a class with `resolution`, `origin` (x, y) and `shape` (rows, cols)
 gets cell_of, cells_of, contains_cell, cell_centre(s) and the row / column centres. The world's
-occupancy grid (amr_common.occupancy_grid: the planner, the particle filter, /map and map files),
-a map's raster (amr_common.map_raster) and the coarse coverage grid of the "explored" and "laps"
-metrics (amr_common.coverage_grid) all index their cells with it. No rclpy import.
+occupancy grid (amr_common.world.occupancy_grid: the planner, the particle filter, /map and map
+files), a map's raster (amr_common.world.map_raster) and the coarse coverage grid of the "explored"
+and "laps" metrics (amr_common.world.coverage_grid) all index their cells with it. No rclpy import.
 """
 from __future__ import annotations
 

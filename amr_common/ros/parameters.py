@@ -7,10 +7,10 @@ numeric parameters (int, double and double-array defaults) are declared with dyn
 descriptor still names the intended type), an integer given for a double is stored as a double,
 and `read_parameters` returns every value in its declared type or names each one that is not, so
 on_configure can fail with a reason instead of the constructor raising. The tables are
-amr_common.parameter_table's (plain Python, shared with the algorithms): an entry's rule becomes
-the descriptor's floating_point_range / integer_range (and its words additional_constraints),
-so `ros2 param describe` shows it and `ros2 param set` outside it is refused, and
-read_parameters names every value outside its rule.
+amr_common.plugins.parameter_table's (plain Python, shared with the algorithms): an entry's rule
+becomes the descriptor's floating_point_range / integer_range (and its words
+additional_constraints), so `ros2 param describe` shows it and `ros2 param set` outside it is
+refused, and read_parameters names every value outside its rule.
 
     PARAMETERS = {"kp": Param(10.0, "Proportional gain [rad/s/m]", at_least(0.0)), ...}
     declare_parameters(node, PARAMETERS)                     # in __init__
@@ -34,7 +34,7 @@ from rcl_interfaces.msg import (
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from amr_common.parameter_table import ParameterTable, Rule, check_value, finite, rule_of
+from amr_common.plugins.parameter_table import ParameterTable, Rule, check_value, finite, rule_of
 
 _INT64_MAX = 2 ** 63 - 1
 
@@ -160,17 +160,17 @@ __all__ = ["ParameterTable", "parameter_type", "declare_parameters", "ranged_des
 def declare_link(node: Node, link: str, own: ParameterTable) -> tuple[type | None, dict]:
     """Declare the node's `link` parameter and its class's tuning ones; (class, tuning table).
 
-    The `link` parameter is a MODULE:CLASS (amr_common.interfaces); the tuning parameters come
-    from the class's `parameter_descriptions()`.
+    The `link` parameter is a MODULE:CLASS (amr_common.plugins.interfaces); the tuning parameters
+    come from the class's `parameter_descriptions()`.
 
     Read at construction so the class's parameters can be declared (and set with -p). A class
     that cannot be loaded is logged, (None, {}) returned: configure then fails with the reason.
     """
-    from amr_common.controller_loader import ControllerSpecError, link_parameters, load_class
+    from amr_common.plugins.loader import PluginSpecError, link_parameters, load_class
     declare_parameters(node, {link: own[link]})
     try:
         cls = load_class(str(node.get_parameter(link).value), link)
-    except ControllerSpecError as exc:
+    except PluginSpecError as exc:
         node.get_logger().error(f"{exc} (configure will fail)")
         return None, {}
     tuning = link_parameters(cls, own)

@@ -1,7 +1,7 @@
 """A LiDAR unit's range calibration: measured against a tape measure, corrected by a table.
 
 A datasheet LiDAR's ranges carry a per-unit systematic error (LDS-01: up to 15 mm below
-0.5 m, up to 5 % of the range above; amr_common.lidar_models). A scan of such a unit is
+0.5 m, up to 5 % of the range above; amr_common.sensors.lidar_models). A scan of such a unit is
 self-consistent, and no odometry can reveal it (the wheels' radius is itself known only to
 ~2 %), so a map built from it is scaled. The cure is the one a surveyor uses: point the LiDAR
 at a flat wall at distances measured with a tape, compare.

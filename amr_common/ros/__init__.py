@@ -1,0 +1,1 @@
+"""ROS plumbing of amr_common."""

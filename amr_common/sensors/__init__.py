@@ -1,0 +1,1 @@
+"""Sensor models of amr_common."""

@@ -1,0 +1,1 @@
+"""Worlds and maps of amr_common."""
