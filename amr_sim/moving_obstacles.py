@@ -136,7 +136,7 @@ class MovingObstacles:
                     mover_waits.append([float(self._ended[i, 0]), float(now)])
 
     def new_contacts(self, robot_x: float, robot_y: float) -> int:
-        """How many contacts of the robot at (robot_x, robot_y) with movers began.
+        """How many contacts of the robot at (robot_x, robot_y) with movers began since last asked.
 
         Where each began: contact_points[:count].
         """

@@ -215,15 +215,23 @@ def test_driving_into_a_mover_is_the_robots_collision(tmp_path):
     assert collisions_text(sim.collisions, sim.collisions_with_movers) == "2 (1 with movers)"
 
 
-def test_the_robot_may_not_start_or_be_put_on_a_mover(tmp_path):
+def test_the_robot_may_not_start_on_a_mover_and_lands_on_one_without_a_collision(tmp_path):
+    """A start is checked before the run; a kidnap lands where a mover may walk by then."""
     world = World.load(write_world(tmp_path, [
         {"radius": 0.2, "path": [[0.7, 1.5], [0.7, 2.5]], "speed": 0.3, "name": "ann"}]))
     with pytest.raises(WorldError, match=r"start \(0.5, 1.5\) touches ann \(radius 0.2 m, now "
                                          r"at \(0.70, 1.50\)\)"):
         Simulator(world, start="west")
     sim = Simulator(world, start="east")
-    with pytest.raises(WorldError, match="pose .* touches ann"):
-        sim.teleport((0.75, 1.6, 0.0))
+    sim.teleport((0.75, 1.6, 0.0))  # onto ann: she waits, the robot drives off east
+    for _ in range(20):
+        sim.step(0.0, 0.0)
+    assert sim.movers.positions[0] == pytest.approx((0.7, 1.5))
+    for _ in range(60):
+        sim.step(0.2, 0.0)
+    assert sim.movers.positions[0][1] > 1.5  # walking again
+    assert sim.collisions == sim.collisions_with_movers == 0
+    assert sim.mover_waits[0][0][0] == pytest.approx(0.0)
 
 
 def test_compiled_mover_kernels_equal_their_twins():
