@@ -6,6 +6,8 @@ terminal closed, the SSH session dropped) is a stop like the others: the robot's
 command timeout, so a run must still send its zero command and write what it has.
 Scripts that answer a stop by unwinding (KeyboardInterrupt, as Ctrl-C does by default) install
 it with `raise_interrupt=True`; either way `exit_code` says which signal came.
+Long computations that cannot see the script's flag (the particle filter's table, built inside
+a node's configure) poll `stop_requested()`: true once an installed flag was set.
 """
 from __future__ import annotations
 
@@ -16,6 +18,7 @@ STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SI
                      if hasattr(signal, name))
 INTERRUPTED = 130  # exit code after Ctrl-C or SIGTERM (128 + SIGINT, as a shell reports Ctrl-C)
 HUNG_UP = 129  # exit code after SIGHUP (128 + SIGHUP)
+_INSTALLED: list["StopFlag"] = []  # flags between install() and uninstall()
 
 
 def exit_code_after(signum: int | None) -> int:
@@ -41,6 +44,7 @@ class StopFlag:
         """Make the stop signals set this flag; uninstall() restores their handlers."""
         for signum in STOP_SIGNALS:
             self._previous[signum] = signal.signal(signum, self._handle)
+        _INSTALLED.append(self)
         return self
 
     def uninstall(self) -> None:
@@ -48,6 +52,8 @@ class StopFlag:
         for signum, handler in self._previous.items():
             signal.signal(signum, handler)
         self._previous.clear()
+        if self in _INSTALLED:
+            _INSTALLED.remove(self)
 
     @property
     def exit_code(self) -> int:
@@ -62,4 +68,10 @@ class StopFlag:
             raise KeyboardInterrupt
 
 
-__all__ = ["HUNG_UP", "INTERRUPTED", "STOP_SIGNALS", "StopFlag", "exit_code_after"]
+def stop_requested() -> bool:
+    """True if a StopFlag installed in this process (and not uninstalled) has been set."""
+    return any(flag.requested for flag in _INSTALLED)
+
+
+__all__ = ["HUNG_UP", "INTERRUPTED", "STOP_SIGNALS", "StopFlag", "exit_code_after",
+           "stop_requested"]

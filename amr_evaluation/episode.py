@@ -40,6 +40,7 @@ from typing import Any, Callable, Iterator
 import numpy as np
 
 from amr_common.geometry import wrap_angles
+from amr_common.movers import collisions_text
 from amr_common.navigation_behaviour import (
     OdometryHold,
     as_sent_ranges,
@@ -49,7 +50,6 @@ from amr_common.navigation_behaviour import (
 from amr_common.plugins.link_failure import LinkFailure, checked_commands, class_spec, link_call
 from amr_common.plugins.loader import described_parameters
 from amr_common.world.coverage_grid import GridTooLargeError
-from amr_common.world.movers import collisions_text
 from amr_common.world.world import WORLDS_DIR, World
 from amr_evaluation.lidar_calibration import calibrate_in_simulation
 from amr_mapping.mapper_params import range_error_parameters

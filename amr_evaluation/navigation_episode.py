@@ -39,6 +39,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from amr_common.geometry import polyline_length
+from amr_common.movers import collisions_text
 from amr_common.navigation_behaviour import (
     GoalCheck,
     Handover,
@@ -56,7 +57,6 @@ from amr_common.plugins.loader import (
     link_class,
 )
 from amr_common.world.map_vs_world import load_map, resolve_goal_on_map
-from amr_common.world.movers import collisions_text
 from amr_common.world.world import World
 from amr_control.pure_pursuit import scan_clearance, scan_free_ahead
 from amr_evaluation.episode import (

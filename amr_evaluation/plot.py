@@ -16,9 +16,9 @@ from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 
 from amr_common.geometry import polyline_length
+from amr_common.movers import walked_time
 from amr_common.robot import ROBOT_RADIUS
 from amr_common.world.map_vs_world import unmapped_walls
-from amr_common.world.movers import walked_time
 from amr_common.world.world import World, map_label
 
 _WALL_COLOUR = "#222222"

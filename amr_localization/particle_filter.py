@@ -32,7 +32,6 @@ import numpy as np
 
 from amr_common.robot import arc_step
 from amr_common.sensors.scan_deskew import MotionHistory
-from amr_common.world.map_raster import likely_wall_segments
 from amr_common.world.world import World
 from amr_localization.ambiguity import AmbiguityGuard
 from amr_localization.beam_model import BeamModel
@@ -51,6 +50,7 @@ from amr_localization.particle_filter_params import (
     check_parameters,
     check_world,
     checked_initial_pose,
+    filter_walls,
 )
 from amr_localization.particle_sets import gaussian_poses, sample_free_poses
 from amr_localization.pose_search import PoseSearch, refine
@@ -88,9 +88,9 @@ class ParticleFilter(FilterSearches):
                      "%g", self.world.source, self.plan.describe(), p["max_memory_mb"])
         # Where the LiDAR sees walls: a map's walls inside its occupied cells (module docstring),
         # or on its free edges for a world the simulator built from this map (map_walls).
-        raster = None if p["map_walls"] == "edges" else self.world.raster
-        self.walls = self.world.segments if raster is None else likely_wall_segments(raster)
-        self._map_cell = None if raster is None else raster.resolution
+        self.walls = filter_walls(self.world, p)
+        likely = self.world.raster is not None and p["map_walls"] != "edges"
+        self._map_cell = self.world.raster.resolution if likely else None
         self.table = expected_range_table(self.world, self.plan.resolution, self.plan.angles,
                                           segments=self.walls)
         self._robot_ok = self.table.robot_cells(slack=WALL_SLACK_M)

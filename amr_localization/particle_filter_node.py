@@ -64,6 +64,7 @@ from amr_common.ros.ros_conversions import (
 )
 from amr_common.sensors.scan_returns import return_mask
 from amr_common.world.world import World
+from amr_localization.expected_ranges import TableBuildInterrupted
 from amr_localization.initial_pose_request import initial_pose_request
 from amr_localization.localization_tf import LocalizationTf
 from amr_localization.particle_filter_node_params import NODE_PARAMETERS as _NODE_PARAMETERS
@@ -112,7 +113,8 @@ class ParticleFilterNode(GuardedLifecycleNode):
 
         Load the world, build the filter, create the publishers, the synchronized
         /odometry + /scan inputs and the /initialpose subscription. FAILURE (with the reason
-        logged) for bad parameters or a missing/malformed world file.
+        logged) for bad parameters or a missing/malformed world file, and when a script's
+        Ctrl-C or SIGTERM stops the build of a big map's expected-range table.
         """
         node, problems = read_parameters(self, _NODE_PARAMETERS)
         filter_params, filter_problems = read_parameters(self, self._tuning)
@@ -123,14 +125,8 @@ class ParticleFilterNode(GuardedLifecycleNode):
         if problems:
             self.get_logger().error("configure failed: " + "; ".join(problems))
             return TransitionCallbackReturn.FAILURE
-        try:
-            world = World.load(node["world"])
-            self.filter = self._localizer_class(world, **{
-                name: list(value) if isinstance(value, (tuple, list)) or hasattr(value, "tolist")
-                else value for name, value in filter_params.items()})
-        except Exception as exc:  # WorldError, bad values; a user's class may raise anything
-            self.get_logger().error(f"configure failed: {exc}")
-            self._reset_runtime()
+        world = self._build_filter(node["world"], filter_params)
+        if world is None:
             return TransitionCallbackReturn.FAILURE
         from amr_msgs.msg import PoseStamped
         self.node_params = node
@@ -165,6 +161,21 @@ class ParticleFilterNode(GuardedLifecycleNode):
         self.get_logger().info(f"configured: world '{world.name}' ({world.source}), "
                                f"{node['localizer']}: {self.filter.describe()}")
         return TransitionCallbackReturn.SUCCESS
+
+    def _build_filter(self, source: str, filter_params: dict[str, Any]) -> World | None:
+        """Load the world and build `filter` on it; None (the reason logged) if that fails."""
+        try:
+            world = World.load(source)
+            self.filter = self._localizer_class(world, **{
+                name: list(value) if isinstance(value, (tuple, list)) or hasattr(value, "tolist")
+                else value for name, value in filter_params.items()})
+            return world
+        except TableBuildInterrupted as exc:  # Ctrl-C or SIGTERM while a big map's table built
+            self.get_logger().warning(f"configure stopped: {exc}")
+        except Exception as exc:  # WorldError, bad values; a user's class may raise anything
+            self.get_logger().error(f"configure failed: {exc}")
+        self._reset_runtime()
+        return None
 
     def release(self) -> None:
         """Destroy the subscriptions and publishers and drop the filter.

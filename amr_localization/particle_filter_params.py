@@ -5,13 +5,15 @@ checking. No rclpy import; the particle_filter node declares each as a ROS param
 
 Run scripts check `--pf-param` values before anything runs with the same two functions the
 filter uses: check_parameters(overrides) (the values alone) and check_world(world, values)
-(against the map: its size and memory, the initial pose); both raise ValueError naming every
-problem.
+(against the map: its size, memory and table build time, the initial pose); both raise
+ValueError naming every problem.
 """
 from __future__ import annotations
 
 import math
 from typing import Any
+
+import numpy as np
 
 from amr_common.plugins.parameter_table import (
     MAX_SEED,
@@ -26,7 +28,9 @@ from amr_common.plugins.parameter_table import (
     vector,
 )
 from amr_common.robot import ROBOT_RADIUS
+from amr_common.world.map_raster import likely_wall_segments
 from amr_common.world.world import World
+from amr_localization.expected_ranges import estimated_build_s, forget_started_builds
 from amr_localization.range_sensor import MODEL_NAMES
 from amr_localization.table_memory import MemoryPlan, choose_table
 
@@ -88,6 +92,10 @@ _TABLE: dict[str, tuple[Any, str]] = {
                              "grids): a bigger map gets half the table's directions, then "
                              "twice its cell size (up to 4 cm); a map too big even then is "
                              "refused, saying what it would need."),
+    "max_table_build_s": (60.0, "Longest the expected-range table of a map may take to build "
+                                "[s]: estimated from a sample of it before anything runs (on "
+                                "this machine, at its present load); a map whose table would "
+                                "take longer is refused, saying how long."),
     "noise_v_per_v": (0.1, "Linear-speed noise per unit of linear speed [(m/s)/(m/s)]."),
     "noise_v_per_w": (0.01, "Linear-speed noise per unit of turn rate [(m/s)/(rad/s)]."),
     "noise_w_per_w": (0.1, "Turn-rate noise per unit of turn rate [(rad/s)/(rad/s)]."),
@@ -145,6 +153,7 @@ PARAMETERS: dict[str, Param] = ruled(
     z_random=between(0.0, 1.0, low_open=True, high_open=True),
     sigma_hit_m=above(0.0), kld_epsilon=above(0.0), match_tolerance_m=above(0.0),
     table_resolution_m=between(0.005, 0.2), max_memory_mb=between(1.0, 1e6),
+    max_table_build_s=between(0.0, 1e6, low_open=True),
     kld_bin_xy_m=between(0.005, 10.0), kld_bin_theta_rad=between(0.005, 2 * math.pi),
     cluster_radius_m=between(0.001, 10.0), cluster_angle_rad=between(0.001, 2 * math.pi),
     **{name: between(1, MAX_PARTICLES) for name in ("max_particles", "min_particles",
@@ -173,18 +182,45 @@ def check_parameters(overrides: dict[str, Any] | None = None) -> dict[str, Any]:
     return values
 
 
+class TableTooSlowError(ValueError):
+    """The map's expected-range table would take longer to build than max_table_build_s."""
+
+
 def check_world(world: World, values: dict[str, Any]) -> MemoryPlan:
     """The expected-range table the filter will use on `world`, after checking the values there.
 
     `values`: check_parameters' result. ValueError if the initial pose is where the robot cannot
     be; table_memory.MapTooBigError (a ValueError) if the map needs more than max_memory_mb,
-    saying how much it would need. Costs milliseconds: nothing is built.
+    saying how much it would need; TableTooSlowError (a ValueError) if its table would take
+    longer than max_table_build_s to build, saying how long. Nothing is built but a sample of
+    the table (~0.3 s of CPU), which the filter goes on from.
     """
     pose = values["initial_pose"]
     problem = pose_problem(world, pose[0], pose[1]) if pose is not None else None
     if problem:
         raise ValueError(f"initial_pose {list(pose)}: {problem}")
-    return choose_table(world, values)
+    plan = choose_table(world, values)
+    seconds = estimated_build_s(world, plan.resolution, plan.angles, filter_walls(world, values))
+    if seconds > values["max_table_build_s"]:
+        forget_started_builds()
+        xmin, ymin, xmax, ymax = world.bounds
+        raise TableTooSlowError(
+            f"{world.source}: the particle filter's expected-range table of this "
+            f"{xmax - xmin:.1f} x {ymax - ymin:.1f} m map would take about {seconds:,.1f} s to "
+            f"build here ({plan.describe()}, {plan.free_cells:,} cells); max_table_build_s is "
+            f"{values['max_table_build_s']:g}")
+    return plan
+
+
+def filter_walls(world: World, values: dict[str, Any]) -> np.ndarray:
+    """The walls the filter's LiDAR sees on `world` (its expected ranges are cast on them).
+
+    A map's walls inside its occupied cells (map_walls 'likely'), else the world's own (a
+    polygon world, or map_walls 'edges').
+    """
+    if world.raster is None or values["map_walls"] == "edges":
+        return world.segments
+    return likely_wall_segments(world.raster)
 
 
 def pose_problem(world: World, x: float, y: float) -> str | None:

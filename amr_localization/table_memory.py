@@ -13,7 +13,8 @@ would need). 4 cm x 180 with beam_model's sub-cell correction, in the course's m
 episodes of scripts/evaluate.py --localize): no wrong pose, tracking error mean 0.24-0.34 cm
 (2 cm x 360: 0.29-0.34 cm). The free space is estimated on a lattice of at most
 _LATTICE_POINTS points, so a plan costs milliseconds and nothing is built: run scripts call it
-(particle_filter_params.check_world) to refuse a map before anything runs. No rclpy import.
+(particle_filter_params.check_world, which also estimates the table's build time from a sample
+of it) to refuse a map before anything runs. No rclpy import.
 
 A map world (a Nav2 map YAML, a SLAM map: World.raster) has its table on the map's own cells
 (OccupancyGrid of a raster), whatever table_resolution_m says: its plan takes the map's shape,

@@ -5,6 +5,14 @@ executes each command one step late, and setting the velocity blindly sinks ~42 
 limiting the velocity towards every wall within reach this step avoids both. Movers (discs,
 amr_sim.moving_obstacles) are walls that stand still during a step: the robot's velocity is
 limited towards them alike.
+
+A big map (World.wall_grid: thousands to millions of walls, a SLAM map's specks) keeps only the
+walls near the robot in the pymunk space (WallWindow): pymunk spent ~35 us and ~1.7 KB per wall
+(37 s and 1.7 GB for a 1,000 x 1,000-cell map at its noisiest), and the contact limit tested
+every wall every step. The walls within WINDOW_M of a centre are in the space; when the robot
+may reach beyond them this step, the window moves to it, adding the walls that came near and
+removing those left behind. A wall the robot touches is within its radius, so it stays: pymunk
+sees the same contacts (and calls the same begin/separate callbacks) as with every wall.
 """
 from __future__ import annotations
 
@@ -15,26 +23,31 @@ import pymunk
 
 from amr_common import robot
 from amr_common.jit import jit
-from amr_common.world.raycast import segment_offset
+from amr_common.world.raster_raycast import SegmentGrid
+from amr_common.world.raycast import nearest_wall, segment_offset
 
 ALLOWED_PENETRATION = 0.0005  # m: resting contact depth, below collision_slop so it is stable
 ROBOT_TYPE, WALL_TYPE = 1, 2  # pymunk collision types
+WINDOW_M = 0.8  # a big map's walls within this of the window's centre are in the space
+_MARGIN_M = 0.05  # the window moves before the robot's reach this step leaves it by less
 
 
-def wall_space(segments: np.ndarray, pose: tuple[float, float, float]
-               ) -> tuple[pymunk.Space, pymunk.Body, pymunk.Circle]:
+def wall_space(segments: np.ndarray, pose: tuple[float, float, float],
+               grid: SegmentGrid | None = None
+               ) -> tuple[pymunk.Space, pymunk.Body, pymunk.Circle, "EveryWall | WallWindow"]:
     """A pymunk space of the walls (frictionless segments) and the robot's disc at `pose`.
 
-    (space, body, shape): keep all three (pymunk's shapes hold weak references to bodies).
+    (space, body, shape, walls): keep all of them (pymunk's shapes hold weak references to
+    bodies). `grid`: the walls in buckets (World.wall_grid, a big map): only those near the
+    robot go into the space, `walls` (a WallWindow) keeps them there; else every wall does
+    (`walls`: EveryWall).
     """
     space = pymunk.Space()
     space.collision_slop = 1e-3  # the default 0.1 assumes pixels; units here are metres
     space.damping = 1.0
-    for x1, y1, x2, y2 in segments:
-        wall = pymunk.Segment(space.static_body, (x1, y1), (x2, y2), 0.0)
-        wall.collision_type = WALL_TYPE
-        wall.friction = 0.0
-        space.add(wall)
+    if grid is None:
+        for wall in segments:
+            space.add(_wall_shape(space, wall))
     body = pymunk.Body(robot.MASS, pymunk.moment_for_circle(robot.MASS, 0.0, robot.ROBOT_RADIUS))
     body.position = pose[:2]
     body.angle = pose[2]
@@ -43,7 +56,77 @@ def wall_space(segments: np.ndarray, pose: tuple[float, float, float]
     shape.friction = 0.0
     shape.elasticity = 0.0
     space.add(body, shape)
-    return space, body, shape
+    walls = EveryWall(segments) if grid is None else WallWindow(space, grid, *pose[:2])
+    return space, body, shape, walls
+
+
+def _wall_shape(space: pymunk.Space, wall) -> pymunk.Segment:
+    x1, y1, x2, y2 = (float(v) for v in wall)
+    shape = pymunk.Segment(space.static_body, (x1, y1), (x2, y2), 0.0)
+    shape.collision_type = WALL_TYPE
+    shape.friction = 0.0
+    return shape
+
+
+class EveryWall:
+    """Every wall in the space for good (a world with few walls): WallWindow's interface."""
+
+    def __init__(self, segments: np.ndarray) -> None:
+        self.segments = segments
+
+    def follow(self, x: float, y: float, reach: float) -> np.ndarray:
+        """Every wall (what constrain_velocity tests)."""
+        return self.segments
+
+    def move_to(self, x: float, y: float) -> None:
+        """Nothing to move."""
+
+    def clearance(self, x: float, y: float) -> float:
+        """Distance (m) from (x, y) to the nearest wall."""
+        return nearest_wall(self.segments, x, y)[0]
+
+
+class WallWindow:
+    """The walls of a big map near the robot, kept in its pymunk space (module docstring).
+
+    `segments`: the walls in the space now (what constrain_velocity tests).
+    """
+
+    def __init__(self, space: pymunk.Space, grid: SegmentGrid, x: float, y: float) -> None:
+        self.space, self.grid = space, grid
+        self._shapes: dict[int, pymunk.Segment] = {}
+        self.segments = np.zeros((0, 4))
+        self.centre = (math.nan, math.nan)
+        self.radius = WINDOW_M
+        self.move_to(x, y)
+
+    def follow(self, x: float, y: float, reach: float) -> np.ndarray:
+        """The walls within `reach` of (x, y) are in the space (the window moves if need be).
+
+        Returns `segments`. reach: the robot radius plus how far it may move this step.
+        """
+        if math.hypot(x - self.centre[0], y - self.centre[1]) + reach + _MARGIN_M > self.radius:
+            self.move_to(x, y, max(WINDOW_M, reach + _MARGIN_M))
+        return self.segments
+
+    def move_to(self, x: float, y: float, radius: float = WINDOW_M) -> None:
+        """The walls within `radius` of (x, y) in the space, and no others."""
+        wanted = self.grid.near(x, y, radius)
+        for index in set(self._shapes) - set(wanted.tolist()):
+            self.space.remove(self._shapes.pop(index))
+        for index in wanted.tolist():
+            if index not in self._shapes:
+                self._shapes[index] = _wall_shape(self.space, self.grid.segments[index])
+                self.space.add(self._shapes[index])
+        self.segments = np.ascontiguousarray(self.grid.segments[wanted])
+        self.centre, self.radius = (x, y), radius
+
+    def clearance(self, x: float, y: float) -> float:
+        """Distance (m) from (x, y) to the nearest wall of the map (not only the window's)."""
+        near = nearest_wall(self.segments, x, y)[0] if len(self.segments) else math.inf
+        if near <= self.radius - math.hypot(x - self.centre[0], y - self.centre[1]):
+            return near  # no wall outside the window is that close
+        return float(self.grid.clearances(np.array([[x, y]]))[0])
 
 
 def constrain_velocity_python(segments, circles, px, py, vx, vy, h, radius, allowed_penetration):

@@ -1,6 +1,6 @@
 """The world's movers inside the simulator: their clocks, waits, contacts and LiDAR circles.
 
-Each mover (amr_common.world.movers) has its own clock. Every step, before the robot moves, each
+Each mover (amr_common.movers) has its own clock. Every step, before the robot moves, each
 mover's clock advances by dt unless the position that gives would come within KEEP_OFF of the
 robot's body where it stands: then the mover waits this step (logged in `waits`). So a mover
 never walks into the robot, and every contact with one is the robot's doing.
@@ -21,8 +21,8 @@ from __future__ import annotations
 import numpy as np
 
 from amr_common.jit import jit
+from amr_common.movers import Mover, path_position
 from amr_common.robot import ROBOT_RADIUS
-from amr_common.world.movers import Mover, path_position
 
 KEEP_OFF = 0.001  # m: a mover keeps this gap to the robot's body, so it never starts a contact
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from amr_common.world.raster_raycast import SegmentGrid
 from amr_sim.drivetrain import Drivetrain
 from amr_sim.effects import Effects, draw_effects
 from amr_sim.lidar_effects import RealLidar
@@ -41,8 +42,11 @@ class RealRobot:
     """The effects of one run: its drivetrain (`drive`) and scanner (`lidar`)."""
 
     def __init__(self, profile: SensorProfile, segments: np.ndarray, seed: int,
-                 pose: tuple[float, float, float], dt: float) -> None:
+                 pose: tuple[float, float, float], dt: float,
+                 grid: SegmentGrid | None = None) -> None:
+        """`grid`: the walls in buckets (a big map's, World.wall_grid), for the scanner."""
         self.effects = effects_of(profile, seed)
         self.drive = Drivetrain(self.effects, stream(seed, _DRIVE), dt)
-        self.lidar = RealLidar(segments, profile, self.effects, stream(seed, _LIDAR), dt)
+        self.lidar = RealLidar(segments, profile, self.effects, stream(seed, _LIDAR), dt,
+                               grid=grid)
         self.lidar.reset(0.0, *pose)

@@ -11,11 +11,12 @@ executed twist becomes the velocity of a pymunk dynamic body (the chord of the e
 along the mid-step heading, so free motion equals the exact unicycle solution with no lag).
 Walls stop the robot through a speculative contact constraint (amr_sim.contact): the robot ends
 at most 0.5 mm inside a wall. Pymunk detects the contacts (begin/separate callbacks count
-collisions) and its solver pushes out any deeper overlap.
+collisions) and its solver pushes out any deeper overlap. On a big map (World.wall_grid) the
+space holds only the walls near the robot (contact.WallWindow): the same contacts.
 
-The world's movers (amr_common.world.movers; amr_sim.moving_obstacles) walk first in each step,
-each waiting while its next position would touch the robot; then they stand like walls for the
-robot's motion (its velocity is limited towards them too; their contacts are counted by
+The world's movers (amr_common.movers; amr_sim.moving_obstacles) walk first in each
+step, each waiting while its next position would touch the robot; then they stand like walls for
+the robot's motion (its velocity is limited towards them too; their contacts are counted by
 amr_sim.moving_obstacles, not pymunk) and are seen by the LiDAR. `collisions` counts every
 contact the robot starts, with walls and movers; `collisions_with_movers` the part with movers.
 
@@ -39,7 +40,6 @@ import pymunk
 from amr_common import robot
 from amr_common.geometry import wrap_angle
 from amr_common.robot import COMMAND_CLIP  # |v|, |w| beyond this are absurd
-from amr_common.world.raycast import nearest_wall
 from amr_common.world.world import World, WorldError
 from amr_sim.contact import (
     ALLOWED_PENETRATION,
@@ -75,7 +75,8 @@ class Simulator:
         self._start = (x, y, theta)
         self._segments = self._world.segments
 
-        space, body, shape = wall_space(self._segments, (x, y, theta))
+        grid = self._world.wall_grid  # a big map: only the walls near the robot in the space
+        space, body, shape, self._walls = wall_space(self._segments, (x, y, theta), grid)
         space.on_collision(ROBOT_TYPE, WALL_TYPE, begin=self._on_begin,
                            separate=self._on_separate)
         self._space, self._body, self._shape = space, body, shape  # shapes hold weak body refs
@@ -86,7 +87,7 @@ class Simulator:
         p = self._profile
         # The reality gap (profiles with effects): drivetrain, scanner and their random streams.
         self._real = None if p.effects is None else RealRobot(p, self._segments, seed,
-                                                              (x, y, theta), dt)
+                                                              (x, y, theta), dt, grid)
         self._lidar = self._real.lidar if self._real else Lidar(
             self._segments, p.scan_rays, p.angle_min, p.angle_increment, p.range_min,
             p.range_max, p.no_return, grid=self._world.march_grid)
@@ -101,7 +102,7 @@ class Simulator:
         self._first_collision_time: float | None = None
         self._collision_points: list[tuple[float, float]] = []
         self._active_contacts = 0
-        self._min_clearance = nearest_wall(self._segments, x, y)[0] - robot.ROBOT_RADIUS
+        self._min_clearance = self._walls.clearance(x, y) - robot.ROBOT_RADIUS
         # odom frame = the start pose, like a robot's /odom at boot (the drivetrain's, if real)
         self._odom = [0.0, 0.0, 0.0] if self._real is None else self._real.drive.odom
         self._wheel_angles = [0.0, 0.0]
@@ -131,11 +132,12 @@ class Simulator:
         p, dt = self._profile, self._dt
         x0, y0, th0 = self._x, self._y, self._theta
         chord_v = robot.arc_displacement(th0, v * robot.sinc_half(w * dt), w * dt)  # exact arc
+        walls = self._walls.follow(x0, y0, _ROBOT_RADIUS + math.hypot(*chord_v) * dt)
         movers = self._movers
         if self._has_movers:  # they walk first (or wait for the robot), then stand this step
             movers.advance(self._steps * dt, x0, y0, dt)
-        vx, vy = constrain_velocity(self._segments, movers.circles, x0, y0, *chord_v, dt,
-                                    _ROBOT_RADIUS, ALLOWED_PENETRATION)
+        vx, vy = constrain_velocity(walls, movers.circles, x0, y0, *chord_v, dt, _ROBOT_RADIUS,
+                                    ALLOWED_PENETRATION)
         body = self._body
         body.velocity = (vx, vy)
         body.angular_velocity = w
@@ -174,7 +176,7 @@ class Simulator:
             odom[0], odom[1], odom[2] = robot.arc_step(odom[0], odom[1], odom[2], chord, dth)
         self._distance += math.hypot(x1 - x0, y1 - y0)
 
-        clearance = nearest_wall(self._segments, x1, y1)[0] - _ROBOT_RADIUS
+        clearance = self._walls.clearance(x1, y1) - _ROBOT_RADIUS
         if clearance < self._min_clearance:
             self._min_clearance = clearance
 
@@ -224,6 +226,7 @@ class Simulator:
         body.angle = theta
         body.velocity = (0.0, 0.0)
         body.angular_velocity = 0.0
+        self._walls.move_to(x, y)
         self._space.reindex_shapes_for_body(body)
         self._x, self._y, self._theta = x, y, theta
         if self._real is not None:  # the scan's pose history starts again here
@@ -430,7 +433,7 @@ class Simulator:
     @property
     def clearance(self) -> float:
         """Current distance from the robot's edge to the nearest wall (m)."""
-        return float(nearest_wall(self._segments, self._x, self._y)[0] - robot.ROBOT_RADIUS)
+        return float(self._walls.clearance(self._x, self._y) - robot.ROBOT_RADIUS)
 
     @property
     def distance(self) -> float:

@@ -31,13 +31,13 @@ from rclpy.clock import Clock, ClockType
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 
 from amr_common.geometry import angle_difference
+from amr_common.movers import collisions_text
 from amr_common.navigation_behaviour import GoalCheck, KidnapSchedule
 from amr_common.ros.lifecycle_node import GuardedLifecycleNode
 from amr_common.ros.node_runner import run_lifecycle_node
 from amr_common.ros.parameters import declare_parameters, read_parameters
 from amr_common.ros.qos import RELIABLE_10
 from amr_common.ros.ros_conversions import command_from_twist, pose_from_message
-from amr_common.world.movers import collisions_text
 from amr_common.world.world import World
 from amr_sim.simulator import Simulator
 from amr_sim.simulator_outputs import SimulatorOutputs

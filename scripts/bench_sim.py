@@ -40,7 +40,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import pymunk  # noqa: E402
 
-from amr_common.world.movers import Mover  # noqa: E402
+from amr_common.movers import Mover  # noqa: E402
 from amr_common.world.world import World  # noqa: E402
 from amr_sim.lidar import Lidar  # noqa: E402
 from amr_sim.profiles import TURTLEBOT3, TURTLEBOT3_CLEAN, TURTLEBOT3_LDS02  # noqa: E402

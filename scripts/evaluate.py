@@ -278,8 +278,9 @@ def check_filter_maps(specs, overrides: dict, localize: bool = False) -> None:
     """The particle filter's checks against every map it will run on, before anything runs.
 
     Its episodes: all with `localize`, else the navigation ones on the filter's pose. A map too
-    big for its memory budget (saying what it would need), an initial pose where the robot
-    cannot be: EvaluationError (one line). Milliseconds per map: nothing is built.
+    big for its memory budget (saying what it would need) or whose table would take too long to
+    build (saying how long), an initial pose where the robot cannot be: EvaluationError (one
+    line). Up to ~0.5 s per map: only a sample of its table is built.
     """
     from amr_common.world.map_vs_world import load_map
     from amr_common.world.world import World

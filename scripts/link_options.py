@@ -170,8 +170,9 @@ def check_filter_map(world, pf_overrides: dict[str, Any], localizer: str | None 
 
     A map too big for its memory budget (saying what it would need), an initial pose where the
     robot cannot be; with the filter's own parameters (--pf-param may also set its node's).
-    Milliseconds: nothing is built. Only for the project's filter (`localizer` None or it):
-    another localizer checks its map when its node builds it.
+    A map whose table would take too long to build (saying how long). Up to ~0.5 s: only a
+    sample of the table is built (the filter goes on from it). Only for the project's filter
+    (`localizer` None or it): another localizer checks its map when its node builds it.
     """
     from amr_common.plugins.loader import DEFAULT_LOCALIZER
     if localizer not in (None, DEFAULT_LOCALIZER):

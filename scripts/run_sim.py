@@ -301,6 +301,7 @@ def _simulate(args, world, map_world, starts, outputs, stop) -> int:
     from sim_report import map_lost, report_before_start
     from sim_session import SimSession
 
+    from amr_common.ros.lifecycle_manager import StartupInterrupted
     from amr_common.world.world import start_label
     print(f"run_sim: {describe_graph_settings()}", flush=True)  # the graph starts now
     if args.no_controller:
@@ -319,6 +320,8 @@ def _simulate(args, world, map_world, starts, outputs, stop) -> int:
                              map_prefix=map_prefix(args.map_out, label) if args.slam else "")
         try:
             report = session.run()
+        except StartupInterrupted:  # before the graph ran (or while a node configured)
+            report = report_before_start(args, world, start, map_world)
         finally:
             session.close()
         reports.append(report)

@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from amr_common.geometry import polyline_length
-from amr_common.world.movers import collisions_text
+from amr_common.movers import collisions_text
 from amr_common.world.world import map_label, start_label
 from amr_evaluation.episode import trajectory_metrics
 

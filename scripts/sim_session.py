@@ -25,7 +25,6 @@ from sim_report import (
     localization_fields,
     navigation_fields,
     navigation_line,
-    report_before_start,
     run_line,
     run_report,
     slam_fields,
@@ -238,7 +237,10 @@ class SimSession:
         return self.stop_requested or (self.stop is not None and self.stop.requested)
 
     def run(self) -> dict:
-        """Bring the graph up, step until the duration, the goal or a stop; return the report."""
+        """Bring the graph up, step until the duration, the goal or a stop; return the report.
+
+        StartupInterrupted (lifecycle_manager) if stopped before the graph ran.
+        """
         args = self.args
         if args.gui:
             from amr_sim.live_view import LiveView
@@ -254,10 +256,9 @@ class SimSession:
             self._record_graph()
         self.simulator_node.on_step.append(self._on_step)
         self.stop_requested = False
-        if self._stop_requested():  # stopped while the nodes were being built: none started
-            return report_before_start(args, self.world, self.start, self.map_world)
         try:
-            self.manager.startup(self.executor, before_activation=self._before_activation)
+            self.manager.startup(self.executor, self.stop,
+                                 before_activation=self._before_activation)
         except LifecycleStartupError as exc:
             raise SystemExit(f"run_sim: {exc}")
         sim = self.simulator_node.simulator

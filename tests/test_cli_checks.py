@@ -240,6 +240,19 @@ def test_a_map_too_big_for_the_filter_is_refused_before_anything_runs(capsys, bi
     _robot_fails_with(capsys, ["--world", str(big_floor), *options], TOO_BIG)
 
 
+def test_a_map_whose_table_would_take_too_long_is_refused_before_anything_runs(capsys,
+                                                                              tmp_path):
+    """Issue 26 #2: such a map configured for minutes; now one line, exit 2, how long."""
+    from tools.make_speckled_map import write_speckled_map
+    path = write_speckled_map(tmp_path / "specks", 100, 0.02)
+    options = ["--localize", "--pf-param", "max_table_build_s:=0.0001"]
+    err = _fails_with(capsys, ["--world", str(path), *options], "m map would take about")
+    assert "max_table_build_s is 0.0001" in err and "MB" in err
+    # Another file (a table this process built is cached: it takes no time any more).
+    path = write_speckled_map(tmp_path / "specks_robot", 100, 0.02)
+    _robot_fails_with(capsys, ["--map", str(path), *options], "would take about")
+
+
 def test_a_big_map_is_the_filters_concern_only(capsys, big_floor):
     _fails_with(capsys, ["--world", str(big_floor), "--localize", "--pf-param",
                          "max_memory_mb:=2"], "max_memory_mb is 2")

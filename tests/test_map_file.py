@@ -251,7 +251,7 @@ def test_missing_unreadable_huge_and_all_wall_images_are_refused(tmp_path):
     _refused(map_yaml(tmp_path, image="cut.pgm"), "is not a readable PGM/PNG image")
     # 5000 x 4000 pixels declared (20 M cells): refused from the header, nothing allocated.
     (tmp_path / "huge.pgm").write_bytes(b"P5\n5000 4000\n255\n" + b"\xfe" * 100)
-    _refused(map_yaml(tmp_path, image="huge.pgm"), "5e+03 x 4e+03 = 2e+07 cells")
+    _refused(map_yaml(tmp_path, image="huge.pgm"), "5,000 x 4,000 = 20,000,000 cells")
     pgm(tmp_path / "walls.pgm", np.zeros((5, 5), dtype=np.uint8))
     _refused(map_yaml(tmp_path, image="walls.pgm"), "the map has no free cell")
 

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 import yaml
 
+from amr_common.movers import collisions_text, walked_time
 from amr_common.robot import ROBOT_RADIUS
 from amr_common.world.map_vs_world import load_map, unmapped_walls
-from amr_common.world.movers import collisions_text, walked_time
 from amr_common.world.occupancy_grid import OccupancyGrid
 from amr_common.world.raycast import (
     cast_circles_kernel,
@@ -235,7 +235,7 @@ def test_the_robot_may_not_start_on_a_mover_and_lands_on_one_without_a_collision
 
 
 def test_compiled_mover_kernels_equal_their_twins():
-    from amr_common.world.movers import path_position, path_position_python
+    from amr_common.movers import path_position, path_position_python
     from amr_sim.contact import constrain_velocity, constrain_velocity_python
     from amr_sim.moving_obstacles import (
         MovingObstacles,
@@ -373,14 +373,14 @@ def test_the_real_scanner_kernels_see_circles_alike():
     assert lidar.circles.shape == (3, 3)
     rng = np.random.default_rng(0)
     gauss, uniform = rng.standard_normal(360), rng.random(360, dtype=np.float32)
-    args = (lidar.segments, lidar.circles, lidar.history, lidar._head, lidar.angles,
+    args = (lidar.walls, lidar.circles, lidar.history, lidar._head, lidar.angles,
             lidar._cos, lidar._sin, lidar.bands, lidar.params, gauss, uniform)
     fast, slow = np.empty(360), np.empty(360)
     scan_rays_kernel(*args, fast)
     scan_rays_numpy(*args, slow)
     np.testing.assert_allclose(fast, slow, rtol=0, atol=1e-12)
     no_circles = np.empty(360)
-    scan_rays_kernel(lidar.segments, np.zeros((0, 3)), *args[2:], no_circles)
+    scan_rays_kernel(lidar.walls, np.zeros((0, 3)), *args[2:], no_circles)
     assert (fast < no_circles - 0.05).sum() >= 3  # the visitor, 0.3 m away, hides a wall
 
 

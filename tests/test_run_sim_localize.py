@@ -125,3 +125,46 @@ def test_evaluate_localize_writes_the_metrics_as_columns(tmp_path):
     for column in ("time_to_localized_s", "false_localizations", "tracking_error_mean_m",
                    "tracking_error_p95_m", "heading_error_p95_deg", "relocalization_times_s"):
         assert column in header
+
+
+def test_ctrl_c_while_the_filter_builds_a_big_maps_table_ends_the_run_with_its_report(tmp_path):
+    """Issue 26 #2: SIGINT, SIGINT, SIGTERM did nothing for minutes while the table was built.
+
+    A 10 x 10 m floor whose filter map is that floor at 2 cm with 1 % specks (the table: ~7 s
+    of CPU). The Ctrl-C comes as the filter starts configuring (right after the node before it):
+    the run stops there, writes its report (interrupted, nothing simulated), exits 130.
+    """
+    import signal
+    import subprocess
+    import threading
+
+    from tests.processes import REPO, terminate, wait_for
+    from tools.make_speckled_map import write_speckled_map
+    world = tmp_path / "floor.yaml"
+    world.write_text("boundary: [[0, 0], [10, 0], [10, 10], [0, 10]]\n"
+                     "starts:\n  centre: [5.0, 5.0, 0.0]\n")
+    map_path = write_speckled_map(tmp_path / "specks", 500, 0.01)
+    report = tmp_path / "report.json"
+    run = subprocess.Popen(
+        [sys.executable, str(SCRIPTS / "run_sim.py"), "--world", str(world), "--map",
+         str(map_path), "--localize", "--duration", "5", "--report", str(report)],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=REPO)
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(iter(run.stdout.readline, "")),
+                              daemon=True)
+    try:
+        reader.start()
+        wait_for(lambda: any("'wall_follower': configure OK" in line for line in lines), 60,
+                 "the node before the filter to configure")
+        run.send_signal(signal.SIGINT)
+        code = run.wait(timeout=60)
+    finally:
+        terminate(run, 2.0)
+    reader.join(5)
+    output = "".join(lines)
+    assert code == 130, output
+    assert "run_sim: interrupted" in output and "simulated in 0.0 s" in output
+    assert "configure stopped: building the expected-range table was stopped" in output
+    assert "[particle_filter]: configured" not in output and "Traceback" not in output
+    written = json.loads(report.read_text())
+    assert written["interrupted"] and written["steps"] == 0

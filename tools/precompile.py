@@ -81,23 +81,28 @@ def kernels(repo: Path = REPO) -> dict[str, object]:
 
 
 def speckled_map_world():
-    """lab02 as a 2 cm Nav2 map with a SLAM map's speckles: a map world that is ray-marched."""
+    """lab02 as a 2 cm Nav2 map with a SLAM map's speckles.
+
+    A map world with walls enough to be ray-marched and kept in buckets (World.march_grid,
+    World.wall_grid: the simulator's contacts and the clearances through the buckets).
+    """
     import numpy as np
 
     from amr_common.world.map_file import world_as_map
     from amr_common.world.map_raster import FREE, OCCUPIED, Raster
-    from amr_common.world.world import MARCH_ABOVE_SEGMENTS, World
+    from amr_common.world.world import BUCKETS_ABOVE_SEGMENTS, MARCH_ABOVE_SEGMENTS, World
     lab02 = World.load("lab02")
     raster, extras = world_as_map(lab02)
     values = raster.values.copy()
     xs, ys = raster.centres()
     start_x, start_y, _ = lab02.starts["outer"]
     far = np.hypot(xs - start_x, ys - start_y) > 0.3
-    speckles = (values == FREE) & far & (np.arange(values.size).reshape(values.shape) % 97 == 0)
+    speckles = (values == FREE) & far & (np.arange(values.size).reshape(values.shape) % 17 == 0)
     values[speckles] = OCCUPIED
     world = World.from_raster(Raster(values, raster.resolution, raster.origin), name="lab02",
                               starts={"outer": lab02.starts["outer"]})
-    assert len(world.segments) > MARCH_ABOVE_SEGMENTS and world.march_grid is not None
+    assert len(world.segments) > max(MARCH_ABOVE_SEGMENTS, BUCKETS_ABOVE_SEGMENTS)
+    assert world.march_grid is not None and world.wall_grid is not None
     return world
 
 

@@ -5,7 +5,9 @@ nav_msgs/OccupancyGrid (/map) and visualization_msgs/MarkerArray of its walls (/
 where they are now (the simulator's truth, as /ground_truth).
 Message building only (no node); the cells are the world's occupancy grid
 (amr_common.world.occupancy_grid: the planner's and the particle filter's cells; values in the
-OccupancyGrid convention, row 0 southmost).
+OccupancyGrid convention, row 0 southmost). A map with more than MAX_MARKER_WALLS walls (a SLAM
+map's specks: up to ~2 million, 12 million points that took ~30 s and GBs to build, more than a
+viewer draws) gets no wall markers: its /map shows the same walls.
 """
 from __future__ import annotations
 
@@ -27,6 +29,7 @@ WALL_COLOR = ColorRGBA(r=0.45, g=0.45, b=0.5, a=1.0)
 GOAL_COLOR = ColorRGBA(r=0.1, g=0.7, b=0.2, a=0.8)
 UNMAPPED_COLOR = ColorRGBA(r=1.0, g=0.55, b=0.0, a=0.9)  # walls the map lacks
 MOVER_COLOR = ColorRGBA(r=0.6, g=0.2, b=0.8, a=0.85)
+MAX_MARKER_WALLS = 20_000  # a map world with more walls: /map_markers without them
 
 
 def occupancy_grid(values: np.ndarray, resolution: float, origin: tuple[float, float],
@@ -135,14 +138,17 @@ def world_map_messages(world, resolution: float, frame_id: str = "map",
 
     /map: OccupancyGrid.from_world(world, resolution), the cells the planner and the filter use
     at that resolution. A map world's /map is its map's cells and values exactly (`resolution`
-    does not apply).
+    does not apply); with more than MAX_MARKER_WALLS walls, /map_markers holds no walls.
     """
     from amr_common.world.occupancy_grid import OccupancyGrid
     raster = world.raster if world.raster is not None else \
         OccupancyGrid.from_world(world, resolution).raster()
+    walls = world.segments
+    if world.raster is not None and len(walls) > MAX_MARKER_WALLS:
+        walls = walls[:0]  # its /map draws them (module docstring)
     return (occupancy_grid(raster.values, raster.resolution, raster.origin, frame_id, stamp),
-            wall_markers(world.segments, frame_id, stamp, world.goal))
+            wall_markers(walls, frame_id, stamp, world.goal))
 
 
-__all__ = ["MAP_TOPIC", "MAP_MARKERS_TOPIC", "WORLD_MARKERS_TOPIC", "occupancy_grid",
-           "grid_values", "wall_markers", "world_map_messages", "world_markers"]
+__all__ = ["MAP_TOPIC", "MAP_MARKERS_TOPIC", "MAX_MARKER_WALLS", "WORLD_MARKERS_TOPIC",
+           "occupancy_grid", "grid_values", "wall_markers", "world_map_messages", "world_markers"]

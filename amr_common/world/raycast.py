@@ -58,6 +58,23 @@ def scan_python(segments, ox, oy, theta, base_cos, base_sin, range_min, range_ma
         out[i] = r if (r >= range_min) & (r <= range_max) else no_return
 
 
+def segment_hit_python(segments, k, ox, oy, dx, dy):
+    """Range at which the ray from (ox, oy) along (dx, dy) hits segment k, inf if it misses.
+
+    scan_python's arithmetic for one ray and one wall, operation for operation, so a kernel that
+    tests only some walls with it finds the very range (to the bit) that scan_python finds.
+    """
+    qx = segments[k, 0] - ox
+    qy = segments[k, 1] - oy
+    ex = segments[k, 2] - segments[k, 0]
+    ey = segments[k, 3] - segments[k, 1]
+    q_cross_e = qx * ey - qy * ex
+    inv_den = 1.0 / (dx * ey - dy * ex)  # inf when parallel: then no hit
+    t = q_cross_e * inv_den
+    u = (qx * dy - qy * dx) * inv_den
+    return t if (t > 0.0) & (u >= 0.0) & (u <= 1.0) else np.inf
+
+
 def segment_offset_python(segments, k, px, py):
     """Vector (cx, cy) from (px, py) to the closest point of segment k, and its length."""
     x1 = segments[k, 0]
@@ -74,6 +91,7 @@ def segment_offset_python(segments, k, px, py):
 # Kernels below call `segment_offset`: the jitted version when numba is there (numba resolves
 # the global when it compiles them), the Python one otherwise.
 segment_offset = jit(segment_offset_python)
+segment_hit = jit(segment_hit_python)
 
 
 def nearest_wall_python(segments, px, py):

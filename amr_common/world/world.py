@@ -12,7 +12,7 @@ A map world (a Nav2 map YAML, or `World.from_raster` on a map SLAM built) keeps 
 and non-free cells (amr_common.world.map_raster.boundary_segments), and the occupancy grid of the
 planner, the particle filter and /map is the map's own cells.
 
-A world file's movers (amr_common.world.movers: round obstacles that walk) are in `movers`,
+A world file's movers (amr_common.movers: round obstacles that walk) are in `movers`,
 apart from the walls: the simulator moves them; the planner, the particle filter and /map never
 see them.
 
@@ -37,10 +37,10 @@ from pathlib import Path
 
 import numpy as np
 
+from amr_common.movers import Mover
 from amr_common.robot import ROBOT_RADIUS
 from amr_common.world.coverage_grid import CoverageGrid, build_coverage_grid, inside_polygon_points
-from amr_common.world.map_raster import Raster, boundary_segments
-from amr_common.world.movers import Mover
+from amr_common.world.map_raster import OCCUPIED, UNKNOWN, Raster, boundary_segments
 from amr_common.world.polygons import (
     check_movers,
     check_polygons,
@@ -48,7 +48,7 @@ from amr_common.world.polygons import (
     point_in_polygon,
     squared_segment_distances,
 )
-from amr_common.world.raster_raycast import MarchGrid
+from amr_common.world.raster_raycast import MarchGrid, SegmentGrid
 from amr_common.world.raycast import clearances_into
 from amr_common.world.world_file import (
     WORLDS_DIR,
@@ -61,6 +61,9 @@ from amr_common.world.world_file import (
 )
 
 MARCH_ABOVE_SEGMENTS = 300  # map worlds with more wall segments are ray-marched (march_grid)
+# Worlds with more wall segments answer clearances, and the simulator's contacts, from their
+# walls in buckets (wall_grid) instead of testing every wall.
+BUCKETS_ABOVE_SEGMENTS = 1000
 # Paths and goals keep the robot radius plus this margin from every wall: the planner's
 # inflated walls (its safety_margin_m default) and the goals the run scripts accept.
 SAFETY_MARGIN = 0.03  # m
@@ -170,6 +173,19 @@ class World:
             self._grids["march"] = MarchGrid.from_raster(self.raster)
         return self._grids["march"]
 
+    @property
+    def wall_grid(self) -> SegmentGrid | None:
+        """The walls listed by buckets (raster_raycast.SegmentGrid) when there are many, else None.
+
+        More than BUCKETS_ABOVE_SEGMENTS: a SLAM map's specks and ragged walls (a noisy 20 x 20 m
+        map at 2 cm: ~40,000, the largest map allowed up to ~2 million).
+        """
+        if len(self.segments) <= BUCKETS_ABOVE_SEGMENTS:
+            return None
+        if "buckets" not in self._grids:
+            self._grids["buckets"] = SegmentGrid.build(self.segments)
+        return self._grids["buckets"]
+
     def clearance(self, x: float, y: float) -> float:
         """Distance (m) from the point (x, y) to the nearest wall segment."""
         return float(np.sqrt(squared_segment_distances(self.segments, float(x), float(y)).min()))
@@ -177,6 +193,8 @@ class World:
     def clearances(self, points: np.ndarray) -> np.ndarray:
         """Distance from each point of a (K, 2) array to the nearest wall."""
         pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 2))
+        if self.wall_grid is not None:  # the same distances, from the walls near each point
+            return self.wall_grid.clearances(pts)
         out = np.empty(len(pts))
         clearances_into(self.segments, pts, out)
         return out
@@ -287,6 +305,8 @@ class World:
 
     def pose_problem(self, x: float, y: float, what: str = "pose") -> str | None:
         """Why the robot cannot stand at (x, y), or None."""
+        if self.raster is not None and not self.contains(x, y):
+            return f"{what} ({x:g}, {y:g}) is {self._cell_problem(x, y)}"
         xmin, ymin, xmax, ymax = self.bounds
         # Beyond every wall first: the polygon tests would overflow on huge coordinates.
         beyond = not (xmin <= x <= xmax and ymin <= y <= ymax)
@@ -294,9 +314,6 @@ class World:
             return f"{what} ({x:g}, {y:g}) is outside the boundary"
         if beyond:
             return f"{what} ({x:g}, {y:g}) is outside the map"
-        if self.raster is not None and not self.contains(x, y):
-            return (f"{what} ({x:g}, {y:g}) is not in a free cell of the map (occupied, unknown "
-                    f"or off the map)")
         if not self.contains(x, y):  # inside a hole: name it
             for i, hole in enumerate(self.holes):
                 if point_in_polygon(hole, x, y):
@@ -307,6 +324,18 @@ class World:
                     f"{ROBOT_RADIUS} m")
         return None
 
+    def _cell_problem(self, x: float, y: float) -> str:
+        """Where a point off a map world's free cells is: off the map, or in which wall cell."""
+        if not (math.isfinite(x) and math.isfinite(y)):
+            return "outside the map"
+        row, col = self.raster.cell_of(x, y)
+        if not self.raster.contains_cell(row, col):
+            return "outside the map"
+        value = int(self.raster.values[row, col])
+        kind = {OCCUPIED: "an occupied cell", UNKNOWN: "an unknown cell"}.get(
+            value, f"a cell of value {value}")
+        return f"inside a wall of the map ({kind}: every cell that is not free is a wall)"
+
     def coverage_grid(self, margin: float = ROBOT_RADIUS) -> CoverageGrid:
         """The cell_size grid behind the coverage metrics (amr_common.world.coverage_grid).
 
@@ -316,7 +345,8 @@ class World:
         if key not in self._grids:
             grid = build_coverage_grid(
                 self.segments, self.boundary, self.holes, self.cell_size, self.grid_origin,
-                float(margin), source=self.source)
+                float(margin), source=self.source,
+                clearances=None if self.wall_grid is None else self.wall_grid.clearances)
             if self.raster is not None:  # no boundary: the free cells say what is inside
                 gx, gy = np.meshgrid(grid.x_centres, grid.y_centres)
                 inside = self.raster.free_at(np.column_stack([gx.ravel(), gy.ravel()]))

@@ -24,7 +24,8 @@ amr_common.world.map_file:
          far_corner: [-1.0, 1.0]
        goal: far_corner          # optional default goal: [x, y] or a name of `goals`;
                                  # without it the first named goal is the default
-       movers:                   # optional round obstacles that walk (amr_common.world.movers):
+       movers:                   # optional round obstacles that walk
+       (amr_common.movers):
          - {radius: 0.2, path: [[x, y], ...], speed: 0.4}  # back and forth along the path
          - {radius: 0.2, path: [[x, y], ...], speed: 0.3, loop: true, start_s: 5}
 
@@ -65,7 +66,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import yaml
 
-from amr_common.world.movers import MAX_RADIUS, MAX_SPEED, MOVER_KEYS, Mover
+from amr_common.movers import MAX_RADIUS, MAX_SPEED, MOVER_KEYS, Mover
 
 if TYPE_CHECKING:
     from amr_common.world.map_file import MapFile
@@ -122,7 +123,7 @@ class WorldFile:
     cell_size: float = 0.4
     description: str = ""
     grid_origin: tuple[float, float] | None = None
-    movers: tuple[Mover, ...] = ()  # round obstacles that walk (amr_common.world.movers)
+    movers: tuple[Mover, ...] = ()  # round obstacles that walk (amr_common.movers)
 
 
 def read_world_file(name_or_path: str | Path) -> WorldFile | MapFile:
