@@ -242,7 +242,7 @@ def test_a_map_too_big_for_the_filter_is_refused_before_anything_runs(capsys, bi
 
 def test_a_map_whose_table_would_take_too_long_is_refused_before_anything_runs(capsys,
                                                                               tmp_path):
-    """Issue 26 #2: such a map configured for minutes; now one line, exit 2, how long."""
+    """A map whose table would take minutes to build: refused in one line, exit 2, how long."""
     from tools.make_speckled_map import write_speckled_map
     path = write_speckled_map(tmp_path / "specks", 100, 0.02)
     options = ["--localize", "--pf-param", "max_table_build_s:=0.0001"]

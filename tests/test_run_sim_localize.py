@@ -128,7 +128,7 @@ def test_evaluate_localize_writes_the_metrics_as_columns(tmp_path):
 
 
 def test_ctrl_c_while_the_filter_builds_a_big_maps_table_ends_the_run_with_its_report(tmp_path):
-    """Issue 26 #2: SIGINT, SIGINT, SIGTERM did nothing for minutes while the table was built.
+    """SIGINT, SIGINT, SIGTERM once did nothing for minutes while the table was built.
 
     A 10 x 10 m floor whose filter map is that floor at 2 cm with 1 % specks (the table: ~7 s
     of CPU). The Ctrl-C comes as the filter starts configuring (right after the node before it):

@@ -1,11 +1,11 @@
 """Maps as noisy as SLAM leaves them, at the sizes allowed: the filter's table, the simulator.
 
-Issue 26 #2: a 20 x 20 m map at 2 cm with 1 % specks as the filter's map configured for
+A 20 x 20 m map at 2 cm with 1 % specks as the filter's map once configured for
 minutes (the expected-range table cast every ray against every one of its ~39,000 walls) and
 ignored Ctrl-C and SIGTERM until done. Now the table is built exactly the same (the segment
 kernel's arithmetic, tested here against it) from the walls each ray can reach, in slices that
 a stop ends, and a map whose table would still take too long is refused before anything runs.
-Issue 26 #3: the simulator put every wall of such a map in its pymunk space (2,000 x 2,000
+The simulator once put every wall of such a map in its pymunk space (2,000 x 2,000
 cells with 50 % specks: 189 s, 3.4 GB); now only those near the robot, with the same contacts.
 Speed is measured by scripts/bench_map_world.py --big-maps; here small maps, behaviour only.
 """
