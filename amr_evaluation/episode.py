@@ -49,6 +49,7 @@ from amr_common.navigation_behaviour import (
 from amr_common.plugins.link_failure import LinkFailure, checked_commands, class_spec, link_call
 from amr_common.plugins.loader import described_parameters
 from amr_common.world.coverage_grid import GridTooLargeError
+from amr_common.world.movers import collisions_text
 from amr_common.world.world import WORLDS_DIR, World
 from amr_evaluation.lidar_calibration import calibrate_in_simulation
 from amr_mapping.mapper_params import range_error_parameters
@@ -82,6 +83,8 @@ class EpisodeResult:
     invalid_commands: int = 0  # commands that were not finite numbers (the robot stopped)
     metric_errors: dict[str, str] = field(default_factory=dict)  # metric -> why it is None
     effects: dict[str, float] | None = None  # the reality-gap effects in use (drawn if randomized)
+    collisions_with_movers: int = 0  # the part of `collisions` with the world's movers
+    mover_waits: list[list[list[float]]] = field(default_factory=list)  # per mover [t0, t1]s
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-serialisable dict (floats, ints, strings, lists, None)."""
@@ -100,7 +103,8 @@ class EpisodeResult:
         laps = "n/a" if self.laps is None else self.laps
         invalid = f", INVALID COMMANDS {self.invalid_commands}" if self.invalid_commands else ""
         return (f"{self.world} / {self.start} / {self.profile}: {self.sim_time_s:.1f} s simulated "
-                f"in {self.wall_time_s:.2f} s ({self.steps} steps), collisions {self.collisions}, "
+                f"in {self.wall_time_s:.2f} s ({self.steps} steps), collisions "
+                f"{collisions_text(self.collisions, self.collisions_with_movers)}, "
                 f"min clearance {self.min_clearance_m:.3f} m, distance {self.distance_m:.2f} m, "
                 f"explored {explored}, laps {laps}, wall error RMS {rms}{invalid}")
 
@@ -313,7 +317,8 @@ def run_episode(world: World | str, start=None, profile: str | SensorProfile = "
         start_pose=[float(c) for c in sim.start], trajectory=trajectory,
         collision_points=[[float(px), float(py)] for px, py in sim.collision_points],
         invalid_commands=sim.bad_commands, metric_errors=metrics["metric_errors"],
-        effects=sim.effects.as_dict() if sim.effects else None)
+        effects=sim.effects.as_dict() if sim.effects else None,
+        collisions_with_movers=sim.collisions_with_movers, mover_waits=sim.mover_waits)
 
 
 def explored_fraction(world: World, positions: np.ndarray) -> float:

@@ -100,6 +100,7 @@ class LocalizationResult:
     estimate: list[list[float]] = field(default_factory=list)  # [t, x, y, theta, localized]
     particles_snapshot: list[list[float]] = field(default_factory=list)  # [x, y, theta]
     effects: dict[str, float] | None = None  # the reality-gap effects in use (drawn if randomized)
+    collisions_with_movers: int = 0  # the part of `collisions` with the world's movers
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-serialisable dict."""
@@ -238,7 +239,8 @@ def _result(sim: Simulator, pf: Any, seed: int, world_name: str, map_name: str,
         trajectory=truth.tolist() if record else [],
         estimate=estimate.tolist() if record else [],
         particles_snapshot=snapshot if record else [],
-        effects=sim.effects.as_dict() if sim.effects else None, **metrics)
+        effects=sim.effects.as_dict() if sim.effects else None,
+        collisions_with_movers=sim.collisions_with_movers, **metrics)
 
 
 def metrics_from_rows(trajectory, estimate, kidnap=None) -> dict[str, Any]:

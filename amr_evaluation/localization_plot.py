@@ -15,7 +15,7 @@ from matplotlib.figure import Figure
 
 from amr_common.world.world import World
 from amr_evaluation.localization_episode import FALSE_POSITION_M, pose_errors
-from amr_evaluation.plot import draw_navigation, draw_world, fitted_title
+from amr_evaluation.plot import draw_navigation, draw_world, fitted_title, snapshot_times
 
 
 def plot_localization(world: World | str, report: dict[str, Any], path: str | Path,
@@ -31,7 +31,8 @@ def plot_localization(world: World | str, report: dict[str, Any], path: str | Pa
     fig = Figure(figsize=(12, 5.6), dpi=110)
     FigureCanvasAgg(fig)
     ax = fig.add_subplot(1, 2, 1)
-    draw_world(ax, world, show_starts=False, map_world=map_world)
+    draw_world(ax, world, show_starts=False, map_world=map_world,
+               mover_times=snapshot_times(truth), mover_waits=report.get("mover_waits"))
     ax.plot(truth[:, 1], truth[:, 2], color="0.55", linewidth=2.2, label="truth", zorder=4)
     draw_navigation(ax, report.get("path"), report.get("goal"))  # navigation runs have them
     localized = estimate[:, 4] > 0.5

@@ -56,6 +56,7 @@ from amr_common.plugins.loader import (
     link_class,
 )
 from amr_common.world.map_vs_world import load_map, resolve_goal_on_map
+from amr_common.world.movers import collisions_text
 from amr_common.world.world import World
 from amr_control.pure_pursuit import scan_clearance, scan_free_ahead
 from amr_evaluation.episode import (
@@ -135,6 +136,8 @@ class NavigationResult:
     path: list[list[float]] = field(default_factory=list)  # the last planned path [[x, y], ...]
     collision_points: list[list[float]] = field(default_factory=list)  # [[x, y], ...]
     effects: dict[str, float] | None = None  # the reality-gap effects in use (drawn if randomized)
+    collisions_with_movers: int = 0  # the part of `collisions` with the world's movers
+    mover_waits: list[list[list[float]]] = field(default_factory=list)  # per mover [t0, t1]s
 
     @property
     def goal_reached(self) -> bool:
@@ -155,7 +158,8 @@ class NavigationResult:
                 f"{when(self.goal_reached_time_s)}, stopped {when(self.stopped_time_s)}, path "
                 f"{self.path_length_m or 0:.2f} m, final error "
                 f"{100 * self.final_position_error_m:.1f} cm, min clearance "
-                f"{100 * self.min_clearance_m:.1f} cm, collisions {self.collisions}, "
+                f"{100 * self.min_clearance_m:.1f} cm, collisions "
+                f"{collisions_text(self.collisions, self.collisions_with_movers)}, "
                 f"{self.real_time_factor or 0:.0f}x real time ({self.finish_reason})")
 
 
@@ -349,7 +353,8 @@ class _Navigation:
             stalled=self.stalled, dt=sim.dt, map=map_obj.name, goal_warning=goal_warning,
             trajectory=self.trajectory, path=path.tolist() if path is not None else [],
             collision_points=[[float(px), float(py)] for px, py in sim.collision_points],
-            effects=sim.effects.as_dict() if sim.effects else None)
+            effects=sim.effects.as_dict() if sim.effects else None,
+            collisions_with_movers=sim.collisions_with_movers, mover_waits=sim.mover_waits)
 
 
 __all__ = ["run_navigation_episode", "NavigationResult", "distances_to_polyline",

@@ -17,20 +17,29 @@ from matplotlib.figure import Figure
 
 from amr_common.geometry import polyline_length
 from amr_common.robot import ROBOT_RADIUS
+from amr_common.world.map_vs_world import unmapped_walls
+from amr_common.world.movers import walked_time
 from amr_common.world.world import World, map_label
 
 _WALL_COLOUR = "#222222"
 _MAP_COLOUR = "#66c2a5"  # the map's walls when it is not the world (teal: not an estimate colour)
+_MOVER_COLOUR = "#9933cc"  # the world's movers (as their /world_markers)
+_UNMAPPED_COLOUR = "#ff8c00"  # the world's walls the map lacks (as their /world_markers)
+MOVER_SNAPSHOTS = 4  # a run's movers are drawn where they were at this many times
 
 
 def draw_world(ax, world: World, show_starts: bool = True, show_grid: bool = False,
-               show_goals: bool | None = None, map_world: World | None = None) -> None:
+               show_goals: bool | None = None, map_world: World | None = None,
+               mover_times: Sequence[float] = (0.0,), mover_waits: Sequence | None = None
+               ) -> None:
     """Walls and optionally named starts, named goals and the corridor grid on an Axes.
 
     A map world also shows its cells (free white, unknown light grey, occupied dark grey).
     With `map_world` (the map the filter and the planner used, when it is not the world), the
-    map's cells (or its walls, orange) lie under the world's true walls, so their differences
-    show; the world's own cells are then not drawn.
+    map's cells (or its walls, teal) lie under the world's true walls, so their differences
+    show, and the world's walls the map lacks are orange; the world's own cells are then not
+    drawn. The world's movers: their paths and where
+    they were at `mover_times` (draw_movers).
 
     Goals are shown with the starts unless show_goals says otherwise.
     """
@@ -45,6 +54,13 @@ def draw_world(ax, world: World, show_starts: bool = True, show_grid: bool = Fal
                                      label="world (true walls)" if own_map else None))
     for hole in world.holes:
         ax.fill(hole[:, 0], hole[:, 1], color="#bbbbbb", zorder=2)
+    if own_map:  # what the map lacks, as /world_markers shows it
+        lacked = unmapped_walls(world, map_world)
+        if len(lacked):
+            ax.add_collection(LineCollection(lacked.reshape(-1, 2, 2), colors=_UNMAPPED_COLOUR,
+                                             linewidths=2.5, zorder=3.1,
+                                             label="walls the map lacks"))
+    draw_movers(ax, world, mover_times, mover_waits)
     xmin, ymin, xmax, ymax = world.bounds
     if own_map:  # the map's walls may lie beyond the world's
         mxmin, mymin, mxmax, mymax = map_world.bounds
@@ -73,6 +89,46 @@ def draw_world(ax, world: World, show_starts: bool = True, show_grid: bool = Fal
                         color="darkred", zorder=6)
         if world.goal is not None and world.goal not in world.goals.values():
             _draw_goal(ax, *world.goal)
+
+
+def draw_movers(ax, world: World, times: Sequence[float] = (0.0,),
+                waits: Sequence | None = None) -> None:
+    """Each mover's path (dotted) and its disc where it was at each of `times` (s).
+
+    `waits`: per mover the intervals [t_from, t_to] it waited for the robot (the simulator's
+    mover_waits; a run's report keeps them), so the discs are where it really was; without
+    them, where it would have been had it never waited. Later times are drawn darker.
+    """
+    times = sorted(float(t) for t in times)
+    for i, mover in enumerate(world.movers):
+        path = mover.path_segments()
+        ax.add_collection(LineCollection(path.reshape(-1, 2, 2), colors=_MOVER_COLOUR,
+                                         linestyles=":", linewidths=1.2, zorder=2.5,
+                                         label="movers (path, where at t)" if i == 0 else None))
+        mover_waits = waits[i] if waits is not None and i < len(waits) else None
+        labels: list[tuple[float, float, list[str]]] = []  # one per place (a mover may return)
+        for k, t in enumerate(times):
+            x, y = mover.position_at(walked_time(t, mover_waits))
+            disc = _circle(x, y, mover.radius)
+            alpha = 0.15 + 0.45 * (k + 1) / len(times)
+            ax.fill(disc[:, 0], disc[:, 1], color=_MOVER_COLOUR, alpha=alpha, zorder=2.6,
+                    linewidth=0)
+            near = [label for label in labels if math.dist(label[:2], (x, y)) < 0.5 * mover.radius]
+            if near:
+                near[0][2].append(f"{t:.0f}")
+            else:
+                labels.append((x, y, [f"{t:.0f}"]))
+        if len(times) > 1:
+            for x, y, texts in labels:
+                ax.annotate(", ".join(texts) + " s", (x, y), ha="center", va="center",
+                            fontsize=6, color="black", zorder=2.7)
+
+
+def snapshot_times(trajectory: np.ndarray, count: int = MOVER_SNAPSHOTS) -> list[float]:
+    """`count` times spread over a run's trajectory [[t, ...], ...] (its first and last)."""
+    if len(trajectory) == 0:
+        return [0.0]
+    return list(np.linspace(float(trajectory[0, 0]), float(trajectory[-1, 0]), count))
 
 
 def draw_raster(ax, raster, zorder: float = 1) -> None:
@@ -180,15 +236,20 @@ def _episode_parts(trajectory: Any, collision_points: Iterable) -> tuple[np.ndar
 def draw_episode(ax, world: World, trajectory: Any, collision_points: Iterable = (),
                  colourbar: bool = True, small: bool = False, planned_path: Any = None,
                  goal: Sequence[float] | None = None,
-                 map_world: World | None = None) -> dict[str, float]:
+                 map_world: World | None = None,
+                 mover_waits: Sequence | None = None) -> dict[str, float]:
     """Walls, the trajectory coloured by time, start/end markers and collisions on an Axes.
 
     With navigation also the planned path (dashed) and the goal (a star); with `map_world`
-    the map under the world's walls (draw_world). Returns the figures shown (collisions, min
-    clearance, distance).
+    the map under the world's walls (draw_world); the movers where they were at a few times of
+    the run (`mover_waits`, else the result's: draw_movers). Returns the figures shown
+    (collisions, min clearance, distance).
     """
     traj, points, result = _episode_parts(trajectory, collision_points)
-    draw_world(ax, world, show_starts=False, map_world=map_world)
+    if mover_waits is None and result is not None:
+        mover_waits = getattr(result, "mover_waits", None)
+    draw_world(ax, world, show_starts=False, map_world=map_world,
+               mover_times=snapshot_times(traj), mover_waits=mover_waits)
     figures = _figures(world, traj, points, result)
     draw_navigation(ax, planned_path, goal)
     if len(traj) >= 2:
@@ -241,11 +302,12 @@ def _title(world: World, result, figures: dict[str, float], title: str | None) -
 def plot_episode(world: World | str, trajectory: Any, collision_points: Iterable = (),
                  path: str | Path = "x.png", title: str | None = None,
                  planned_path: Any = None, goal: Sequence[float] | None = None,
-                 map_world: World | None = None) -> Path:
+                 map_world: World | None = None, mover_waits: Sequence | None = None) -> Path:
     """Draw one episode to a PNG: walls, trajectory coloured by time, start, end, collisions.
 
     For navigation also the planned path and the goal; with `map_world` (the map of the filter
-    and the planner) its cells or walls under the world's true walls.
+    and the planner) its cells or walls under the world's true walls; the world's movers
+    (`mover_waits`: a report's, see draw_movers).
     `trajectory` is [[t, x, y, theta], ...] or an EpisodeResult (or its to_dict()), whose start,
     profile and figures then go into the title.
     """
@@ -255,7 +317,7 @@ def plot_episode(world: World | str, trajectory: Any, collision_points: Iterable
     ax = fig.add_subplot(1, 1, 1)
     traj, points, result = _episode_parts(trajectory, collision_points)
     figures = draw_episode(ax, world, traj, points, planned_path=planned_path, goal=goal,
-                           map_world=map_world)
+                           map_world=map_world, mover_waits=mover_waits)
     ax.set_title(fitted_title(_title(world, result, figures, title), 6.0, 10), fontsize=10)
     return _save(fig, path)
 

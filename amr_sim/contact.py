@@ -2,7 +2,9 @@
 
 Why (amr_sim.simulator): pymunk integrates positions before velocities, so a force-driven body
 executes each command one step late, and setting the velocity blindly sinks ~42 mm into walls;
-limiting the velocity towards every wall within reach this step avoids both.
+limiting the velocity towards every wall within reach this step avoids both. Movers (discs,
+amr_sim.moving_obstacles) are walls that stand still during a step: the robot's velocity is
+limited towards them alike.
 
 A big map (World.wall_grid: thousands to millions of walls, a SLAM map's specks) keeps only the
 walls near the robot in the pymunk space (WallWindow): pymunk spent ~35 us and ~1.7 KB per wall
@@ -127,18 +129,27 @@ class WallWindow:
         return float(self.grid.clearances(np.array([[x, y]]))[0])
 
 
-def constrain_velocity_python(segments, px, py, vx, vy, h, radius, allowed_penetration):
+def constrain_velocity_python(segments, circles, px, py, vx, vy, h, radius, allowed_penetration):
     """Limit (vx, vy) so that after moving h seconds no wall is closer than radius - allowed.
 
-    The distance to a segment along a straight motion is convex in time, so the linear bound
-    d(t) >= d0 - (v . n) t is safe: v . n <= (d0 - radius + allowed) / h for the unit vector n
-    towards each wall within reach. Several walls (corners): alternating projections.
+    The distance to a segment (or a disc: circles rows [x, y, r]) along a straight motion is
+    convex in time, so the linear bound d(t) >= d0 - (v . n) t is safe: v . n <= (d0 - radius +
+    allowed) / h for the unit vector n towards each wall within reach. Several walls (corners):
+    alternating projections.
     """
     reach = radius + math.sqrt(vx * vx + vy * vy) * h + 1e-3
     normals = np.empty((8, 3))
     count = 0
-    for k in range(segments.shape[0]):
-        cx, cy, d = segment_offset(segments, k, px, py)
+    for k in range(segments.shape[0] + circles.shape[0]):
+        if k < segments.shape[0]:
+            cx, cy, d = segment_offset(segments, k, px, py)
+        else:  # to the disc's edge: along the line between the centres
+            cx = circles[k - segments.shape[0], 0] - px
+            cy = circles[k - segments.shape[0], 1] - py
+            centre = math.sqrt(cx * cx + cy * cy)
+            d = centre - circles[k - segments.shape[0], 2]
+            cx = cx * (d / centre) if centre > 0.0 else 0.0
+            cy = cy * (d / centre) if centre > 0.0 else 0.0
         if d < reach and d > 0.0 and count < 8:
             normals[count, 0] = cx / d
             normals[count, 1] = cy / d

@@ -4,6 +4,8 @@ The ray-casting kernels live in amr_common.world.raycast (shared with the partic
 planner); this module adds the sensor: ray angles, range limits and the no-return value. A map
 world with many wall segments is scanned through its cells instead
 (amr_common.world.raster_raycast: the same ranges, at a cost that does not grow with the segments).
+Circles (`circles`, rows [x, y, radius]: the world's movers where they are now, kept up to date by
+the simulator) are seen on top of the walls.
 """
 from __future__ import annotations
 
@@ -11,7 +13,12 @@ import numpy as np
 
 from amr_common.jit import HAVE_NUMBA
 from amr_common.world.raster_raycast import MarchGrid, scan_grid_kernel
-from amr_common.world.raycast import scan_kernel, scan_numpy
+from amr_common.world.raycast import (
+    scan_circles_kernel,
+    scan_circles_numpy,
+    scan_kernel,
+    scan_numpy,
+)
 
 
 class Lidar:
@@ -34,7 +41,11 @@ class Lidar:
         self.range_max = float(range_max)
         self.no_return = float(no_return)
         self._zeros = np.zeros(rays)
-        self._kernel = scan_kernel if (use_numba and HAVE_NUMBA) else scan_numpy
+        numba = use_numba and HAVE_NUMBA
+        self._kernel = scan_kernel if numba else scan_numpy
+        self._circles_kernel = scan_circles_kernel if numba else scan_circles_numpy
+        # Rows [x, y, radius] of round obstacles (the simulator's movers), updated in place.
+        self.circles = np.zeros((0, 3))
 
     @property
     def rays(self) -> int:
@@ -45,14 +56,26 @@ class Lidar:
              noise: np.ndarray | None = None) -> np.ndarray:
         """Ranges from the pose (x, y, theta), plus `noise` (one value per ray) if given."""
         out = np.empty(self.rays)
+        x, y, theta = float(x), float(y), float(theta)
+        noise = self._zeros if noise is None else noise
+        circles = self.circles
+        if circles.shape[0] == 0:
+            self._walls(x, y, theta, self.range_min, self.range_max, self.no_return, noise, out)
+            return out
+        # The walls' true ranges first (no noise, no limits), then the circles, the noise and
+        # the limits (scan_circles).
+        self._walls(x, y, theta, 0.0, np.inf, np.inf, self._zeros, out)
+        self._circles_kernel(circles, x, y, theta, self.base_cos, self.base_sin, self.range_min,
+                             self.range_max, self.no_return, noise, out)
+        return out
+
+    def _walls(self, x: float, y: float, theta: float, range_min: float, range_max: float,
+               no_return: float, noise: np.ndarray, out: np.ndarray) -> None:
         if self.grid is not None:
             g = self.grid
-            scan_grid_kernel(g.cells, g.width, g.x0, g.y0, g.resolution, float(x), float(y),
-                             float(theta), self.base_cos, self.base_sin, self.range_min,
-                             self.range_max, self.no_return,
-                             self._zeros if noise is None else noise, out)
-            return out
-        self._kernel(self.segments, float(x), float(y), float(theta), self.base_cos, self.base_sin,
-                     self.range_min, self.range_max, self.no_return,
-                     self._zeros if noise is None else noise, out)
-        return out
+            scan_grid_kernel(g.cells, g.width, g.x0, g.y0, g.resolution, x, y, theta,
+                             self.base_cos, self.base_sin, range_min, range_max, no_return,
+                             noise, out)
+        else:
+            self._kernel(self.segments, x, y, theta, self.base_cos, self.base_sin, range_min,
+                         range_max, no_return, noise, out)

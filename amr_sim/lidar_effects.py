@@ -23,7 +23,12 @@ from amr_common.world.raster_raycast import (
     cast_rays_through_buckets,
     cast_rays_through_buckets_python,
 )
-from amr_common.world.raycast import cast_rays_kernel, cast_rays_numpy
+from amr_common.world.raycast import (
+    cast_circles_kernel,
+    cast_circles_numpy,
+    cast_rays_kernel,
+    cast_rays_numpy,
+)
 from amr_sim.effects import Effects
 from amr_sim.profiles import SensorProfile
 
@@ -137,9 +142,12 @@ def _cast_walls_python(walls, ox, oy, dx, dy, true_range, cos_incidence):
 _cast_walls = jit(_cast_walls_python)
 
 
-def scan_rays_python(walls, history, head, angles, base_cos, base_sin, bands, params, gauss,
-                     uniform, out):
-    """One skewed scan with the sensor's effects: poses, ray cast, range effects (fused)."""
+def scan_rays_python(walls, circles, history, head, angles, base_cos, base_sin, bands, params,
+                     gauss, uniform, out):
+    """One skewed scan with the sensor's effects: poses, ray cast, range effects (fused).
+
+    circles: rows [x, y, radius] seen on top of the walls (may be empty).
+    """
     n = angles.shape[0]
     ox = np.empty(n)
     oy = np.empty(n)
@@ -149,14 +157,15 @@ def scan_rays_python(walls, history, head, angles, base_cos, base_sin, bands, pa
     cos_incidence = np.empty(n)
     _ray_poses(history, head, angles, base_cos, base_sin, params, ox, oy, dx, dy)
     _cast_walls(walls, ox, oy, dx, dy, true_range, cos_incidence)
+    cast_circles_kernel(circles, ox, oy, dx, dy, true_range, cos_incidence)
     _range_effects(true_range, cos_incidence, bands, params, gauss, uniform, out)
 
 
 scan_rays_kernel = jit(scan_rays_python)
 
 
-def scan_rays_numpy(walls, history, head, angles, base_cos, base_sin, bands, params, gauss,
-                    uniform, out):
+def scan_rays_numpy(walls, circles, history, head, angles, base_cos, base_sin, bands, params,
+                    gauss, uniform, out):
     """scan_rays_python with numpy arrays (the fallback without numba, and its tested twin)."""
     order = (head + 1 + np.arange(history.shape[0])) % history.shape[0]  # oldest first
     rows = history[order]
@@ -177,6 +186,7 @@ def scan_rays_numpy(walls, history, head, angles, base_cos, base_sin, bands, par
         cast_rays_numpy(walls[0], ox, oy, dx, dy, true_range, cos_incidence)
     else:
         cast_rays_through_buckets_python(*walls, ox, oy, dx, dy, true_range, cos_incidence)
+    cast_circles_numpy(circles, ox, oy, dx, dy, true_range, cos_incidence)
     band = np.searchsorted(bands[:-1, 0], true_range, side="right")
     row = bands[np.minimum(band, len(bands) - 1)]
     with np.errstate(invalid="ignore"):  # inf ranges (no hit) stay invalid
@@ -190,8 +200,8 @@ def scan_rays_numpy(walls, history, head, angles, base_cos, base_sin, bands, par
     out[:] = np.where(valid, measured, params[NO_RETURN])
 
 
-def ld08_scan_python(walls, history, head, phase, spacing, count, increment, bands, params,
-                     gauss, uniform):
+def ld08_scan_python(walls, circles, history, head, phase, spacing, count, increment, bands,
+                     params, gauss, uniform):
     """An LD08 revolution binned as ld08_driver bins it: (ranges, angle_min, rays).
 
     Samples at (phase + k) spacing (k < count, below 2 pi), each measured with the scanner's
@@ -217,8 +227,8 @@ def ld08_scan_python(walls, history, head, phase, spacing, count, increment, ban
         cos[k] = cos[k - 8] * c8 - sin[k - 8] * s8
         sin[k] = sin[k - 8] * c8 + cos[k - 8] * s8
     samples = np.empty(n)
-    _scan_rays(walls, history, head, angles[:n], cos[:n], sin[:n], bands, params, gauss[:n],
-               uniform[:n], samples)
+    _scan_rays(walls, circles, history, head, angles[:n], cos[:n], sin[:n], bands, params,
+               gauss[:n], uniform[:n], samples)
     first, last = -1, -1
     for k in range(n):
         if samples[k] > 0.0:  # NaN (no return) compares False
@@ -247,15 +257,15 @@ _scan_rays = scan_rays_kernel
 ld08_scan_kernel = jit(ld08_scan_python)
 
 
-def ld08_scan_numpy(walls, history, head, phase, spacing, count, increment, bands, params,
-                    gauss, uniform):
+def ld08_scan_numpy(walls, circles, history, head, phase, spacing, count, increment, bands,
+                    params, gauss, uniform):
     """ld08_scan_python with numpy arrays (the fallback without numba, and its tested twin)."""
     angles = (phase + np.arange(count)) * spacing
     n = int(np.count_nonzero(angles < 2.0 * math.pi))
     angles = angles[:n]
     samples = np.empty(n)
-    scan_rays_numpy(walls, history, head, angles, np.cos(angles), np.sin(angles), bands,
-                    params, gauss[:n], uniform[:n], samples)
+    scan_rays_numpy(walls, circles, history, head, angles, np.cos(angles), np.sin(angles),
+                    bands, params, gauss[:n], uniform[:n], samples)
     valid = samples > 0.0
     if not valid.any():
         return np.full(1, params[NO_RETURN]), 0.0, 1
@@ -294,6 +304,8 @@ class RealLidar:
         self.model = model
         self.segments = np.ascontiguousarray(segments, dtype=np.float64)
         self.walls = walls_of(self.segments, grid)
+        # Rows [x, y, radius] of round obstacles (the simulator's movers), updated in place.
+        self.circles = np.zeros((0, 3))
         self.bands = band_table(model, effects)
         params = np.zeros(N_PARAMS)
         params[SKEW_S] = model.revolution_s if effects.scan_skew else 0.0
@@ -345,7 +357,7 @@ class RealLidar:
         params[T_END] = t_end
         n = len(angles)
         out = np.empty(n)
-        self._kernel(self.walls, self.history, self._head, angles,
+        self._kernel(self.walls, self.circles, self.history, self._head, angles,
                      np.cos(angles) if cos is None else cos,
                      np.sin(angles) if sin is None else sin, self.bands, params,
                      self._rng.standard_normal(n), self._rng.random(n, dtype=np.float32), out)
@@ -385,7 +397,7 @@ class RealLidar:
         count = min(int(TWO_PI / spacing) + 1, most)
         params[T_END] = t_end
         out, angle_min, rays = self._ld08_kernel(
-            self.walls, self.history, self._head, float(uniform[-1]), spacing, count,
-            increment, self.bands, params, gauss, uniform)
+            self.walls, self.circles, self.history, self._head, float(uniform[-1]), spacing,
+            count, increment, self.bands, params, gauss, uniform)
         self.geometry = (float(angle_min), increment, int(rays))
         return out

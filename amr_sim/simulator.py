@@ -14,6 +14,12 @@ at most 0.5 mm inside a wall. Pymunk detects the contacts (begin/separate callba
 collisions) and its solver pushes out any deeper overlap. On a big map (World.wall_grid) the
 space holds only the walls near the robot (contact.WallWindow): the same contacts.
 
+The world's movers (amr_common.world.movers; amr_sim.moving_obstacles) walk first in each
+step, each waiting while its next position would touch the robot; then they stand like walls for
+the robot's motion (its velocity is limited towards them too; their contacts are counted by
+amr_sim.moving_obstacles, not pymunk) and are seen by the LiDAR. `collisions` counts every
+contact the robot starts, with walls and movers; `collisions_with_movers` the part with movers.
+
 Sensors come from the body's actual motion: encoder increments (so z_v/z_w reflect collisions and
 saturation), a dead-reckoned odometry pose, and the LiDAR at the robot centre (lidar.py).
 
@@ -34,7 +40,7 @@ import pymunk
 from amr_common import robot
 from amr_common.geometry import wrap_angle
 from amr_common.robot import COMMAND_CLIP  # |v|, |w| beyond this are absurd
-from amr_common.world.world import World
+from amr_common.world.world import World, WorldError
 from amr_sim.contact import (
     ALLOWED_PENETRATION,
     ROBOT_TYPE,
@@ -43,6 +49,7 @@ from amr_sim.contact import (
     wall_space,
 )
 from amr_sim.lidar import Lidar
+from amr_sim.moving_obstacles import MovingObstacles
 from amr_sim.profiles import SensorProfile, get_profile
 from amr_sim.reality import RealRobot
 
@@ -73,6 +80,9 @@ class Simulator:
         space.on_collision(ROBOT_TYPE, WALL_TYPE, begin=self._on_begin,
                            separate=self._on_separate)
         self._space, self._body, self._shape = space, body, shape  # shapes hold weak body refs
+        self._movers = MovingObstacles(self._world.movers)
+        self._has_movers = len(self._movers) > 0
+        self._check_clear_of_movers(x, y, "start")
 
         p = self._profile
         # The reality gap (profiles with effects): drivetrain, scanner and their random streams.
@@ -81,12 +91,14 @@ class Simulator:
         self._lidar = self._real.lidar if self._real else Lidar(
             self._segments, p.scan_rays, p.angle_min, p.angle_increment, p.range_min,
             p.range_max, p.no_return, grid=self._world.march_grid)
+        self._lidar.circles = self._movers.circles  # the same array: the movers update it
         self._scan_geometry = (p.angle_min, p.angle_increment, p.scan_rays, p.range_min,
                                p.range_max)
         self._x, self._y, self._theta = x, y, theta  # theta continuous (not wrapped)
         self._steps = 0
         self._distance = 0.0
         self._collisions = 0
+        self._mover_collisions = 0
         self._first_collision_time: float | None = None
         self._collision_points: list[tuple[float, float]] = []
         self._active_contacts = 0
@@ -121,7 +133,10 @@ class Simulator:
         x0, y0, th0 = self._x, self._y, self._theta
         chord_v = robot.arc_displacement(th0, v * robot.sinc_half(w * dt), w * dt)  # exact arc
         walls = self._walls.follow(x0, y0, _ROBOT_RADIUS + math.hypot(*chord_v) * dt)
-        vx, vy = constrain_velocity(walls, x0, y0, *chord_v, dt, _ROBOT_RADIUS,
+        movers = self._movers
+        if self._has_movers:  # they walk first (or wait for the robot), then stand this step
+            movers.advance(self._steps * dt, x0, y0, dt)
+        vx, vy = constrain_velocity(walls, movers.circles, x0, y0, *chord_v, dt, _ROBOT_RADIUS,
                                     ALLOWED_PENETRATION)
         body = self._body
         body.velocity = (vx, vy)
@@ -132,6 +147,11 @@ class Simulator:
         self._x, self._y, self._theta = x1, y1, th1
         self._steps += 1
         now = self._steps * dt
+        if self._has_movers and (count := movers.new_contacts(x1, y1)):
+            self._collisions += count  # the robot's: movers never start one
+            self._mover_collisions += count
+            self._collision_points += [(float(cx), float(cy))
+                                       for cx, cy in movers.contact_points[:count]]
         if self._first_collision_time is None and self._collisions:
             self._first_collision_time = now
 
@@ -194,9 +214,13 @@ class Simulator:
         encoders and the dead-reckoned odometry see no motion, the distance does not grow, and
         the LiDAR reads the new place from its next scan on (every step with `ideal`, the next
         0.2 s slot with the turtlebot3 profiles). Raises WorldError for a pose inside or touching
-        a wall.
+        a wall. A mover where the robot lands (they walk, so a kidnap pose cannot be checked
+        against them before the run) is no collision: it waits until the robot has left, and the
+        robot may only drive out of it.
         """
         x, y, theta = self._world.resolve_start(tuple(float(v) for v in pose))
+        if self._has_movers:
+            self._movers.new_contacts(x, y)  # what it touches now is no contact it started
         body = self._body
         body.position = (x, y)
         body.angle = theta
@@ -207,6 +231,13 @@ class Simulator:
         self._x, self._y, self._theta = x, y, theta
         if self._real is not None:  # the scan's pose history starts again here
             self._lidar.reset(self.time, x, y, theta)
+
+    def _check_clear_of_movers(self, x: float, y: float, what: str) -> None:
+        mover = self._movers.touching(x, y)
+        if mover is not None:
+            mx, my = self._movers.positions[self._movers.movers.index(mover)]
+            raise WorldError(f"{self._world.source}: {what} ({x:g}, {y:g}) touches {mover.name} "
+                             f"(radius {mover.radius:g} m, now at ({mx:.2f}, {my:.2f}))")
 
     def _new_scan(self) -> np.ndarray:
         if self._real is not None:  # the revolution ends now (the driver's stamp)
@@ -308,6 +339,8 @@ class Simulator:
     @lidar.setter
     def lidar(self, scanner) -> None:
         self._lidar = scanner
+        if hasattr(scanner, "circles"):  # it sees the movers too
+            scanner.circles = self._movers.circles
 
     @property
     def space(self) -> pymunk.Space:
@@ -356,8 +389,23 @@ class Simulator:
 
     @property
     def collisions(self) -> int:
-        """Number of contact starts with the walls."""
+        """Number of contacts the robot started, with walls and movers."""
         return self._collisions
+
+    @property
+    def collisions_with_movers(self) -> int:
+        """The part of `collisions` with movers."""
+        return self._mover_collisions
+
+    @property
+    def movers(self) -> MovingObstacles:
+        """The world's movers as simulated: positions, clocks, waits (amr_sim.moving_obstacles)."""
+        return self._movers
+
+    @property
+    def mover_waits(self) -> list[list[list[float]]]:
+        """Per mover, the intervals [t_from, t_to] (s) it waited for the robot."""
+        return self._movers.waits
 
     @property
     def first_collision_time(self) -> float | None:
@@ -366,17 +414,20 @@ class Simulator:
 
     @property
     def collision_points(self) -> list[tuple[float, float]]:
-        """The wall point where each contact started."""
+        """The wall's (or mover's) point where each contact started."""
         return list(self._collision_points)
 
     @property
     def in_contact(self) -> bool:
-        """True while the robot touches a wall."""
-        return self._active_contacts > 0
+        """True while the robot touches a wall or a mover."""
+        return self._active_contacts > 0 or self._movers.in_contact
 
     @property
     def min_clearance(self) -> float:
-        """Smallest distance from the robot's edge to a wall so far (m; <= 0 in contact)."""
+        """Smallest distance from the robot's edge to a wall so far (m; <= 0 in contact).
+
+        Walls only: a mover may come within KEEP_OFF of a robot that stands still.
+        """
         return float(self._min_clearance)
 
     @property

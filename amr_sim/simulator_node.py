@@ -11,7 +11,8 @@ Thin: commands become `Simulator.step(v, w)` calls and results become messages
 TF (REP 105) as the robot's bringup: /tf_static base_footprint -> base_scan at the profile's LiDAR
 position; /tf with each odometry message (while anyone subscribes): odom -> base_footprint, map
 -> base_footprint_truth (the true pose) and, with `map_to_odom_from_truth`, map -> odom. /map and
-/map_markers: the world, latched, published on activation.
+/map_markers: the world, latched, published on activation; /world_markers: the walls
+`navigation_map` lacks and the world's movers, where they walk.
 With `enable_localization`, /pose (amr_msgs/PoseStamped) is compared with the true pose; the goal
 counts as reached when the true position is within goal_tolerance while localized (logged), and
 the run finishes once the robot has then been commanded to rest for goal_rest_time (at once for
@@ -36,6 +37,7 @@ from amr_common.ros.node_runner import run_lifecycle_node
 from amr_common.ros.parameters import declare_parameters, read_parameters
 from amr_common.ros.qos import RELIABLE_10
 from amr_common.ros.ros_conversions import command_from_twist, pose_from_message
+from amr_common.world.movers import collisions_text
 from amr_common.world.world import World
 from amr_sim.simulator import Simulator
 from amr_sim.simulator_outputs import SimulatorOutputs
@@ -342,7 +344,8 @@ class SimulatorNode(GuardedLifecycleNode):
         self.get_logger().warning(
             f"Finished ({reason}). Execution time: {s['wall_time_s']:.3f} s ({per_step:.4f} "
             f"s/step) | Simulated time: {s['sim_time_s']:.3f} s ({s['steps']} steps) | "
-            f"collisions {s['collisions']}, min clearance {s['min_clearance_m']:.3f} m")
+            f"collisions {collisions_text(s['collisions'], s['collisions_with_movers'])}, min "
+            f"clearance {s['min_clearance_m']:.3f} m")
 
     def summary(self) -> dict[str, Any]:
         """Statistics of the run so far (JSON-serializable)."""
@@ -369,7 +372,8 @@ class SimulatorNode(GuardedLifecycleNode):
             "localized": self.localized,
             "localization_error": list(self.localization_error)
             if self.localization_error else None,
-            "collisions": int(simulator.collisions),
+            "collisions": int(simulator.collisions),  # every one, movers' included
+            "collisions_with_movers": int(simulator.collisions_with_movers),
             "min_clearance_m": float(simulator.min_clearance),
             "distance_m": float(simulator.distance),
             "effects": simulator.effects.as_dict() if simulator.effects else None,

@@ -6,8 +6,10 @@ reused message per step, on the profile's rates in real time; SimulatorTf: /tf, 
 base_footprint -> base_scan, turtlebot3_node's odom -> base_footprint with each /odom) plus what
 only a simulator knows: the true pose on /ground_truth and as map -> base_footprint_truth and,
 for viewers when no localization node runs, the perfect map -> odom (`map_to_odom_from_truth`).
-The world is published as /map and /map_markers, latched. Publishers are lifecycle publishers
-of the simulator node, created in its on_configure and destroyed by `destroy()`.
+The world is published as /map and /map_markers, latched; /world_markers (latched) shows what
+the world has beyond the navigation map: the walls it lacks and the movers, updated as they
+walk. Publishers are lifecycle publishers of the simulator node, created in its on_configure
+and destroyed by `destroy()`.
 With a reality-gap profile each /scan carries its own geometry (the LDS-02's changes every scan)
 and, in real time, ScanDelivery loses some and delays the others as a Wi-Fi link does.
 """
@@ -24,7 +26,13 @@ from tf2_msgs.msg import TFMessage
 
 from amr_common.geometry import angle_difference
 from amr_common.robot import LIDAR_HEIGHT, step_chord
-from amr_common.ros.map_messages import MAP_MARKERS_TOPIC, MAP_TOPIC, world_map_messages
+from amr_common.ros.map_messages import (
+    MAP_MARKERS_TOPIC,
+    MAP_TOPIC,
+    WORLD_MARKERS_TOPIC,
+    world_map_messages,
+    world_markers,
+)
 from amr_common.ros.qos import LATCHED, RELIABLE_10, scan_qos
 from amr_common.ros.ros_conversions import (
     float32_array,
@@ -41,7 +49,10 @@ from amr_common.ros.tf import (
     planar_transform,
 )
 from amr_common.world.coverage_grid import GridTooLargeError
+from amr_common.world.map_vs_world import load_map, unmapped_walls
 from amr_sim.reality import delivery_stream
+
+WORLD_MARKERS_PERIOD_S = 0.1  # simulated time between /world_markers updates while movers walk
 
 
 def true_velocity(before: tuple, after: tuple, dt: float) -> tuple[float, float]:
@@ -82,8 +93,11 @@ class SimulatorOutputs:
         if p["publish_ground_truth"]:
             self.publishers["truth"] = create(Odometry, "/ground_truth", RELIABLE_10)
         self.tf: SimulatorTf | None = None
+        self._world_markers = None
         try:
             self.tf = SimulatorTf(node, simulator, p)
+            if p["publish_world_markers"]:
+                self._world_markers = WorldMarkers(node, simulator, p)
         except Exception:  # a map that cannot be built: release what exists, then report
             self.destroy()
             raise
@@ -110,6 +124,8 @@ class SimulatorOutputs:
         """
         simulator = self._simulator
         self.tf.publish_static(seconds_to_time(simulator.time))  # before the measurement
+        if self._world_markers is not None:
+            self._world_markers.publish(seconds_to_time(simulator.time))
         self.publish(z_scan, z_v, z_w, simulator.pose, simulator.pose, True, True)
         if self._realtime:
             profile = simulator.profile
@@ -148,6 +164,8 @@ class SimulatorOutputs:
             velocity = true_velocity(pose_before, pose, simulator.dt)
             publishers["truth"].publish(odometry_message(
                 stamp, p["world_frame"], p["base_frame"], pose, velocity, messages["truth"]))
+        if self._world_markers is not None:
+            self._world_markers.update(stamp)
         if publish_odom:
             self.tf.publish(stamp, pose)
             # The real robot's /odom carries a pose only; /odometry also the twist.
@@ -188,6 +206,9 @@ class SimulatorOutputs:
         if self.tf is not None:
             self.tf.destroy()
             self.tf = None
+        if self._world_markers is not None:
+            self._node.destroy_lifecycle_publisher(self._world_markers.publisher)
+            self._world_markers = None
 
 
 class SimulatorTf:
@@ -249,6 +270,36 @@ class SimulatorTf:
         for publisher in [self._tf, self._static.publisher, *self._map_publishers]:
             self._node.destroy_lifecycle_publisher(publisher)
         self._map_publishers = []
+
+
+class WorldMarkers:
+    """/world_markers: the walls the navigation map lacks and the movers where they are.
+
+    Creates its latched publisher on construction; loading `navigation_map` may raise
+    (WorldError), then nothing was created.
+    """
+
+    def __init__(self, node, simulator, p: dict[str, Any]) -> None:
+        world = simulator.world
+        unmapped = unmapped_walls(world, load_map(p["navigation_map"] or None, world))
+        self._simulator = simulator
+        self._message = world_markers(unmapped, simulator.movers.circles, p["world_frame"])
+        self._next = 0.0
+        self.publisher = node.create_lifecycle_publisher(type(self._message),
+                                                         WORLD_MARKERS_TOPIC, LATCHED)
+
+    def publish(self, stamp) -> None:
+        """The markers as they are now (on activation: latched for late subscribers)."""
+        world_markers((), self._simulator.movers.circles, stamp=stamp, message=self._message)
+        self.publisher.publish(self._message)
+        self._next = self._simulator.time + WORLD_MARKERS_PERIOD_S
+
+    def update(self, stamp) -> None:
+        """The movers' new positions, every WORLD_MARKERS_PERIOD_S while anyone listens."""
+        simulator = self._simulator
+        if (len(simulator.movers) and simulator.time >= self._next - 1e-9
+                and self.publisher.get_subscription_count() > 0):
+            self.publish(stamp)
 
 
 class ScanDelivery:

@@ -67,6 +67,13 @@ _TABLE: dict[str, tuple[Any, str]] = {
     "publish_map": (True, "Publish the world as /map (nav_msgs/OccupancyGrid) and "
                           "/map_markers (walls) once, latched"),
     "map_resolution": (0.05, "Cell size of /map in metres (0.005 to 1)"),
+    "publish_world_markers": (True, "Publish /world_markers (visualization_msgs/MarkerArray, "
+                                    "latched): the walls navigation_map lacks and the "
+                                    "movers where they are (updated at up to 10 Hz of "
+                                    "simulated time while anyone subscribes)"),
+    "navigation_map": ("", "The map the robot navigates on, as `world` takes it (run_sim's "
+                           "--map): /world_markers shows the world's walls it lacks; '' = "
+                           "the world itself (none lacked)"),
 }
 PARAMETERS: dict[str, Param] = ruled(
     _TABLE, dt=between(1e-4, 1.0), seed=between(0, MAX_SEED), mode=one_of("lockstep", "realtime"),

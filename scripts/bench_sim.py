@@ -9,8 +9,12 @@ in the same run, with the same commands:
 - the same step with the scan as a numpy rays x segments matrix,
 - the turtlebot3_clean profile as configured (a new scan only every 0.2 s, i.e. every 4th step),
 - the reality gap: turtlebot3 (every effect on) against turtlebot3_clean, both scanning every
-  step and both as configured, and turtlebot3_lds02 as configured, interleaved run by run.
-Targets: >= 10,000 core steps/s; a step with every effect on costs at most 1.5x a clean step.
+  step and both as configured, and turtlebot3_lds02 as configured, interleaved run by run;
+- movers: lab02 with 3 movers walking its ring against lab02 without any (they walk, wait for
+  the robot, stand in its way and in every ray), the clean and the effects profile, scanning
+  every step, interleaved run by run.
+Targets: >= 10,000 core steps/s; a step with every effect on costs at most 1.5x a clean step;
+a step with 3 movers at most 1.25x one without.
 `main()` returns the figures as a dict (scripts/bench.py uses it).
 
 Rates are given per CPU second of this process (time.process_time) and per wall-clock second.
@@ -36,12 +40,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import pymunk  # noqa: E402
 
+from amr_common.world.movers import Mover  # noqa: E402
+from amr_common.world.world import World  # noqa: E402
 from amr_sim.lidar import Lidar  # noqa: E402
 from amr_sim.profiles import TURTLEBOT3, TURTLEBOT3_CLEAN, TURTLEBOT3_LDS02  # noqa: E402
 from amr_sim.simulator import Simulator  # noqa: E402
 
 TARGET_STEPS_PER_S = 10_000
 TARGET_EFFECTS_COST = 1.5  # a step with every effect on, per clean step
+TARGET_MOVERS_COST = 1.25  # a step with 3 movers, per step without
 WORLD, START = "lab02", "outer"
 
 
@@ -134,6 +141,45 @@ def effects_costs(steps: int, chunks: int = 40) -> dict:
     return out
 
 
+def lab02_with_movers() -> World:
+    """lab02 with three movers (0.1 m radius, 0.3-0.4 m/s) walking its outer ring."""
+    ring = [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]]
+    movers = (Mover("clockwise", 0.1, np.array(ring[::-1]), 0.4, loop=True),
+              Mover("anticlockwise", 0.1, np.array(ring[2:] + ring[:2]), 0.3, loop=True),
+              Mover("north", 0.1, np.array([[-1.0, 1.0], [1.0, 1.0]]), 0.35, start_s=2.0))
+    return dataclasses.replace(World.load(WORLD), movers=movers)
+
+
+def movers_costs(steps: int, chunks: int = 40) -> dict:
+    """CPU time per step with 3 movers over the same step without (as effects_costs)."""
+    worlds = (World.load(WORLD), lab02_with_movers())
+    size = max(1, steps // chunks)
+    cmds = [(float(v), float(w)) for v, w in commands(size * chunks)]
+    out = {}
+    for profile in (dataclasses.replace(TURTLEBOT3_CLEAN, scan_period=None),
+                    dataclasses.replace(TURTLEBOT3, scan_period=None)):
+        sims = [Simulator(world, start=START, profile=profile, seed=0) for world in worlds]
+        cpu = np.zeros((chunks, 2))
+        for k in range(chunks):
+            part = cmds[k * size:(k + 1) * size]
+            for i, sim in enumerate(sims):
+                step = sim.step
+                c0 = time.process_time()
+                for v, w in part:
+                    step(v, w)
+                cpu[k, i] = time.process_time() - c0
+        halves = [cpu[: chunks // 2].sum(axis=0), cpu[chunks // 2:].sum(axis=0)]
+        total = cpu.sum(axis=0)
+        out[profile.name] = {
+            "us_per_step_0_movers": 1e6 * total[0] / (size * chunks),
+            "us_per_step_3_movers": 1e6 * total[1] / (size * chunks),
+            "cost_ratio": float(total[1] / total[0]),
+            "cost_ratio_range": sorted(float(h[1] / h[0]) for h in halves),
+            "mover_waits": sum(len(w) for w in sims[1].mover_waits),
+            "collisions_with_movers": sims[1].collisions_with_movers}
+    return out
+
+
 def scan_us(scanner, repeats: int = 200) -> float:
     """CPU microseconds per scan."""
     c0 = time.process_time()
@@ -156,6 +202,7 @@ def main(steps: int = 20_000, repeats: int = 3, verbose: bool = True) -> dict:
     pymunk_ref, pymunk_wall = time_steps(every_step, max(100, steps // 100), repeats,
                                          scanner="pymunk")
     effects = effects_costs(steps * repeats)
+    movers = movers_costs(steps * repeats)
 
     sim = Simulator(WORLD, start=START, profile=every_step)
     p = sim.profile
@@ -194,6 +241,10 @@ def main(steps: int = 20_000, repeats: int = 3, verbose: bool = True) -> dict:
         "target_effects_cost": TARGET_EFFECTS_COST,
         "meets_effects_target": all(e["cost_ratio"] <= TARGET_EFFECTS_COST
                                     for e in effects.values()),
+        "movers": movers,
+        "target_movers_cost": TARGET_MOVERS_COST,
+        "meets_movers_target": all(m["cost_ratio"] <= TARGET_MOVERS_COST
+                                   for m in movers.values()),
     }
     if verbose:
         _print(result)
@@ -234,6 +285,16 @@ def _print(r: dict) -> None:
               f"(halves {low:.2f}, {high:.2f})")
     verdict = "meets" if r["meets_effects_target"] else "MISSES"
     print(f"  target <= {r['target_effects_cost']}x: {verdict}")
+    print("movers (lab02 with 3 movers walking its ring against lab02 without, scan every step, "
+          "same run, CPU time per step):")
+    for name, m in r["movers"].items():
+        low, high = m["cost_ratio_range"]
+        print(f"  {name:<28} 0 movers {m['us_per_step_0_movers']:.1f} us, 3 movers "
+              f"{m['us_per_step_3_movers']:.1f} us: {m['cost_ratio']:.2f}x (halves {low:.2f}, "
+              f"{high:.2f}; {m['mover_waits']} waits for the robot, "
+              f"{m['collisions_with_movers']} collisions with movers)")
+    verdict = "meets" if r["meets_movers_target"] else "MISSES"
+    print(f"  target <= {r['target_movers_cost']}x: {verdict}")
 
 
 if __name__ == "__main__":

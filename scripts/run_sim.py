@@ -408,7 +408,8 @@ def _write_outputs(world, map_world, reports, outputs, several_starts: bool,
             else:
                 written = plot_episode(world, report["trajectory"], report["collision_points"],
                                        path=str(outputs["plot"][report["start"]]), title=title,
-                                       map_world=map_world)
+                                       map_world=map_world,
+                                       mover_waits=report.get("mover_waits"))
             print(f"run_sim: plot written to {written}")
 
 

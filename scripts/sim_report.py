@@ -13,6 +13,7 @@ import math
 import numpy as np
 
 from amr_common.geometry import polyline_length
+from amr_common.world.movers import collisions_text
 from amr_common.world.world import map_label, start_label
 from amr_evaluation.episode import trajectory_metrics
 
@@ -36,13 +37,15 @@ def run_report(args, world, start, sim, trajectory, wall_errors, wall_time: floa
         "steps": sim.steps, "sim_time_s": round(sim.time, 6),
         "wall_time_s": round(wall_time, 3),
         "real_time_factor": round(sim.time / wall_time, 2) if wall_time > 0 else None,
-        "collisions": sim.collisions,
+        "collisions": sim.collisions,  # every one the robot started, with movers too
+        "collisions_with_movers": sim.collisions_with_movers,
         "first_collision_time_s": sim.first_collision_time,
         "min_clearance_m": sim.min_clearance, "distance_m": sim.distance,
         **trajectory_metrics(world, positions),  # None + metric_errors if not computable
         "rms_wall_error_m": rms,
         "trajectory": trajectory,
         "collision_points": [list(p) for p in sim.collision_points],
+        "mover_waits": sim.mover_waits,  # per mover [[t_from, t_to], ...]: it let the robot by
         "effects": sim.effects.as_dict() if getattr(sim, "effects", None) else None,
         **link_failure_fields(None),
     }
@@ -64,7 +67,8 @@ def report_before_start(args, world, start, map_world=None) -> dict:
     x, y, theta = world.resolve_start(start)
     sim = SimpleNamespace(steps=0, time=0.0, collisions=0, first_collision_time=None,
                           min_clearance=world.clearance(x, y) - ROBOT_RADIUS, distance=0.0,
-                          collision_points=[])
+                          collision_points=[], collisions_with_movers=0,
+                          mover_waits=[[] for _ in world.movers])
     trajectory = [[0.0, x, y, theta]]
     report = run_report(args, world, start, sim, trajectory, [], 0.0, True, graph={
         "controller": args.controller_spec, "nodes": [], "controller_mode": None},
@@ -213,7 +217,8 @@ def navigation_line(report: dict) -> str:
             f"({report['mode']}): localized {when('localized_time_s')}, goal reached "
             f"{when('goal_reached_time_s')}, stopped {when('stopped_time_s')}, {path}, "
             f"final error {report['final_position_error_m'] * 100:.1f} cm, collisions "
-            f"{report['collisions']}, min clearance {report['min_clearance_m'] * 100:.1f} "
+            f"{collisions_text(report['collisions'], report.get('collisions_with_movers'))}, "
+            f"min clearance {report['min_clearance_m'] * 100:.1f} "
             f"cm; {report['sim_time_s']:.1f} s simulated in {report['wall_time_s']:.1f} s "
             f"({f'{factor}x' if factor else 'n/a'} real time)" + failed_line(report))
 
@@ -225,7 +230,9 @@ def run_line(report: dict) -> str:
     return (f"run_sim: {world_label(report)} / {report['start']} / {report['profile']} "
             f"({report['mode']}): {report['sim_time_s']:.1f} s simulated in "
             f"{report['wall_time_s']:.1f} s ({f'{factor}x' if factor else 'n/a'} real time), "
-            f"{report['steps']} steps, collisions {report['collisions']}, min clearance "
+            f"{report['steps']} steps, collisions "
+            f"{collisions_text(report['collisions'], report.get('collisions_with_movers'))}, "
+            f"min clearance "
             f"{report['min_clearance_m'] * 100:.1f} cm, distance {report['distance_m']:.1f} m,"
             + (" explored n/a" if report["explored_fraction"] is None else
                f" explored {report['explored_fraction'] * 100:.0f}%")

@@ -65,7 +65,9 @@ def _simulator_values(args, start: str, own_map: bool, localize: bool, slam: boo
                   "map_to_odom_from_truth": not (args.enable_localization or localize
                                                  or slam),
                   # The map publisher sends --map; the slam node the map being built.
-                  "publish_map": not (own_map or slam)}
+                  "publish_map": not (own_map or slam),
+                  # /world_markers: the world's walls --map lacks
+                  "navigation_map": args.map if own_map else ""}
     if args.goal:
         sim_values["goal"] = list(args.goal)
     if getattr(args, "kidnap", None):

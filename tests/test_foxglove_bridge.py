@@ -586,8 +586,10 @@ def test_every_topic_of_the_shipped_layout_is_one_foxglove_draws():
     drawn = {topic: graph.get(topic) for topic in panel["topics"]}
     assert {t: types for t, types in drawn.items()
             if types is None or len(types) != 1 or types[0] not in FOXGLOVE_3D_TYPES} == {}
-    # The filter's estimate (as AMCL's), the path, the map, the scan and the particles.
-    assert {"/amcl_pose", "/path", "/map", "/map_markers", "/scan", "/particles"} <= set(drawn)
+    # The filter's estimate (as AMCL's), the path, the map, the scan and the particles; what
+    # the world has beyond the map (walls it lacks, movers).
+    assert {"/amcl_pose", "/path", "/map", "/map_markers", "/scan", "/particles",
+            "/world_markers"} <= set(drawn)
     for panel_id, config in layout["configById"].items():  # the other panels' topics
         if "topicPath" in config:
             assert config["topicPath"] in graph, panel_id

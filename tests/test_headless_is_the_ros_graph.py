@@ -88,3 +88,21 @@ def test_navigation_to_the_goal(tmp_path, profile, kidnap):
     assert headless.final_position_error_m == ros["final_position_error_m"] < 0.05
     assert headless.path == ros["path"]  # the last plan: replanned alike after a kidnapping
     assert headless.plans == (2 if kidnap else 1)
+
+
+def test_navigation_among_people(tmp_path):
+    """A world with movers: they walk, wait for the robot and are seen alike in both."""
+    from amr_evaluation.navigation_episode import run_navigation_episode
+    people = str(Path(__file__).resolve().parent.parent / "evaluations" / "worlds" /
+                 "room_people.yaml")
+    ros = _over_ros(tmp_path, "--world", people, "--map", "room_obstacles", "--start", "middle",
+                    "--profile", "ideal", "--goal", "south_west", "--duration", "60")
+    headless = run_navigation_episode(people, "middle", goal="south_west", profile="ideal",
+                                      seed=0, duration=60.0, pose_source="filter",
+                                      map="room_obstacles")
+    _assert_same_trajectory(ros["trajectory"], headless.trajectory)
+    assert headless.mover_waits == ros["mover_waits"]
+    assert any(headless.mover_waits)  # somebody waited for the robot
+    assert headless.collisions == ros["collisions"]
+    assert headless.collisions_with_movers == ros["collisions_with_movers"]
+    assert headless.goal_reached_time_s == pytest.approx(ros["goal_reached_time_s"], abs=1e-9)

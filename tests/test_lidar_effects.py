@@ -149,8 +149,8 @@ def test_compiled_scan_equals_its_numpy_twin(room):
     lidar = sim.lidar
     rng = np.random.default_rng(0)
     gauss, uniform = rng.standard_normal(360), rng.random(360, dtype=np.float32)
-    args = (lidar.walls, lidar.history, lidar._head, lidar.angles, lidar._cos, lidar._sin,
-            lidar.bands, lidar.params, gauss, uniform)
+    args = (lidar.walls, lidar.circles, lidar.history, lidar._head, lidar.angles, lidar._cos,
+            lidar._sin, lidar.bands, lidar.params, gauss, uniform)
     fast, slow = np.empty(360), np.empty(360)
     scan_rays_kernel(*args, fast)
     scan_rays_numpy(*args, slow)

@@ -166,8 +166,10 @@ def test_velocity_constraint_kernel_matches_python_version():
     segments = np.array([[0.0, 0.0, 2.0, 0.0], [0.0, 0.0, 0.0, 2.0]])  # a corner at the origin
     for px, py, vx, vy in [(1.0, 0.106, 0.0, -0.3), (0.106, 0.106, -0.2, -0.2),
                            (1.0, 1.0, 0.2, 0.1), (0.5, 0.104, 0.3, -0.3)]:
-        fast = constrain_velocity(segments, px, py, vx, vy, 0.05, 0.105, 0.0005)
-        slow = constrain_velocity_python(segments, px, py, vx, vy, 0.05, 0.105, 0.0005)
+        no_circles = np.zeros((0, 3))
+        fast = constrain_velocity(segments, no_circles, px, py, vx, vy, 0.05, 0.105, 0.0005)
+        slow = constrain_velocity_python(segments, no_circles, px, py, vx, vy, 0.05, 0.105,
+                                         0.0005)
         assert fast == pytest.approx(slow, abs=1e-12)
         # never ends deeper than the allowed 0.5 mm in either wall
         assert py + fast[1] * 0.05 >= 0.105 - 0.0005 - 1e-12 or py < 0.105

@@ -234,8 +234,8 @@ def test_the_real_scanners_kernel_through_buckets_and_its_twins_agree():
         sim.step(0.2, 2.0 * math.sin(k))
     lidar = sim.lidar
     gauss, uniform = rng.standard_normal(360), rng.random(360, dtype=np.float32)
-    args = (lidar.walls, lidar.history, lidar._head, lidar.angles, lidar._cos, lidar._sin,
-            lidar.bands, lidar.params, gauss, uniform)
+    args = (lidar.walls, lidar.circles, lidar.history, lidar._head, lidar.angles, lidar._cos,
+            lidar._sin, lidar.bands, lidar.params, gauss, uniform)
     fast, slow = np.empty(360), np.empty(360)
     scan_rays_kernel(*args, fast)
     scan_rays_numpy(*args, slow)

@@ -7,8 +7,8 @@ newcomer's first `make run` spent ~15 s compiling. The kernels are compiled by w
 with the argument types they get there: short headless episodes of every kind (wall following
 on both sensor profiles, the particle filter's global localization, navigation with both
 planner algorithms and the pure pursuit, mapping, the reality-gap profiles, and wall following
-in a Nav2 map world with a SLAM map's speckles, which is ray-marched through its cells) run the
-same kernels as the ROS nodes.
+in a Nav2 map world with a SLAM map's speckles, which is ray-marched through its cells, and in a
+world with movers) run the same kernels as the ROS nodes.
 
 The project's old cache files are removed first: numba checks only the source file of the
 kernel it loads, not the files of the kernels that one calls, so after an edit an outdated one
@@ -128,6 +128,9 @@ def warm_up() -> None:
     map_world = speckled_map_world()
     run_episode(map_world, "outer", profile="ideal", duration=1.0, record_trajectory=False)
     run_localization_episode(map_world, "outer", profile="ideal", duration=1.0, record=False)
+    people = REPO / "evaluations" / "worlds" / "room_people.yaml"  # movers: walked, scanned
+    for profile in ("ideal", "turtlebot3"):
+        run_episode(str(people), "middle", profile=profile, duration=1.0, record_trajectory=False)
 
 
 def main(argv: list[str] | None = None) -> int:

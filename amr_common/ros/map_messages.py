@@ -1,6 +1,8 @@
-"""A world as ROS map messages: /map and /map_markers.
+"""A world as ROS map messages: /map, /map_markers and /world_markers.
 
-nav_msgs/OccupancyGrid (/map) and visualization_msgs/MarkerArray of its walls (/map_markers).
+nav_msgs/OccupancyGrid (/map) and visualization_msgs/MarkerArray of its walls (/map_markers);
+/world_markers: what the simulated world has beyond the map - walls the map lacks and the movers
+where they are now (the simulator's truth, as /ground_truth).
 Message building only (no node); the cells are the world's occupancy grid
 (amr_common.world.occupancy_grid: the planner's and the particle filter's cells; values in the
 OccupancyGrid convention, row 0 southmost). A map with more than MAX_MARKER_WALLS walls (a SLAM
@@ -20,9 +22,13 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 MAP_TOPIC = "/map"
 MAP_MARKERS_TOPIC = "/map_markers"
+WORLD_MARKERS_TOPIC = "/world_markers"
 WALL_HEIGHT_M = 0.2  # drawn height of the walls: the LDS scans at 0.18 m
+MOVER_HEIGHT_M = 0.5  # drawn height of a mover: tall enough to tell from a wall
 WALL_COLOR = ColorRGBA(r=0.45, g=0.45, b=0.5, a=1.0)
 GOAL_COLOR = ColorRGBA(r=0.1, g=0.7, b=0.2, a=0.8)
+UNMAPPED_COLOR = ColorRGBA(r=1.0, g=0.55, b=0.0, a=0.9)  # walls the map lacks
+MOVER_COLOR = ColorRGBA(r=0.6, g=0.2, b=0.8, a=0.85)
 MAX_MARKER_WALLS = 20_000  # a map world with more walls: /map_markers without them
 
 
@@ -55,6 +61,25 @@ def grid_values(message: OccupancyGrid) -> np.ndarray:
                                                            message.info.width)
 
 
+def _upright_quads(segments: np.ndarray, ns: str, color: ColorRGBA, frame_id: str,
+                   stamp: Time | None) -> Marker:
+    """A TRIANGLE_LIST of the segments (N, 4) as upright quads WALL_HEIGHT_M high."""
+    walls = Marker(ns=ns, id=0, type=Marker.TRIANGLE_LIST, action=Marker.ADD)
+    walls.header.frame_id = frame_id
+    if stamp is not None:
+        walls.header.stamp = stamp
+    walls.pose.orientation.w = 1.0
+    walls.scale.x = walls.scale.y = walls.scale.z = 1.0
+    walls.color = color
+    points = []
+    for x1, y1, x2, y2 in np.asarray(segments, dtype=float).reshape(-1, 4):
+        a0, b0 = Point(x=x1, y=y1, z=0.0), Point(x=x2, y=y2, z=0.0)
+        a1, b1 = Point(x=x1, y=y1, z=WALL_HEIGHT_M), Point(x=x2, y=y2, z=WALL_HEIGHT_M)
+        points += [a0, b0, b1, a0, b1, a1]
+    walls.points = points
+    return walls
+
+
 def wall_markers(segments: np.ndarray, frame_id: str = "map", stamp: Time | None = None,
                  goal: tuple[float, float] | None = None) -> MarkerArray:
     """MarkerArray of the walls (upright quads) and of the goal.
@@ -62,19 +87,7 @@ def wall_markers(segments: np.ndarray, frame_id: str = "map", stamp: Time | None
     The walls are a TRIANGLE_LIST (ns "walls"), the goal a sphere (ns "goal") when given.
     `segments`: (N, 4) rows x1, y1, x2, y2 in metres.
     """
-    walls = Marker(ns="walls", id=0, type=Marker.TRIANGLE_LIST, action=Marker.ADD)
-    walls.header.frame_id = frame_id
-    if stamp is not None:
-        walls.header.stamp = stamp
-    walls.pose.orientation.w = 1.0
-    walls.scale.x = walls.scale.y = walls.scale.z = 1.0
-    walls.color = WALL_COLOR
-    points = []
-    for x1, y1, x2, y2 in np.asarray(segments, dtype=float).reshape(-1, 4):
-        a0, b0 = Point(x=x1, y=y1, z=0.0), Point(x=x2, y=y2, z=0.0)
-        a1, b1 = Point(x=x1, y=y1, z=WALL_HEIGHT_M), Point(x=x2, y=y2, z=WALL_HEIGHT_M)
-        points += [a0, b0, b1, a0, b1, a1]
-    walls.points = points
+    walls = _upright_quads(segments, "walls", WALL_COLOR, frame_id, stamp)
     markers = [walls]
     if goal is not None:
         sphere = Marker(ns="goal", id=0, type=Marker.SPHERE, action=Marker.ADD)
@@ -85,6 +98,38 @@ def wall_markers(segments: np.ndarray, frame_id: str = "map", stamp: Time | None
         sphere.color = GOAL_COLOR
         markers.append(sphere)
     return MarkerArray(markers=markers)
+
+
+def world_markers(unmapped: np.ndarray, circles: np.ndarray, frame_id: str = "map",
+                  stamp: Time | None = None, message: MarkerArray | None = None) -> MarkerArray:
+    """/world_markers: the walls the map lacks and the movers where they are.
+
+    `unmapped`: (N, 4) segments (amr_common.world.map_vs_world.unmapped_walls), a TRIANGLE_LIST
+    (ns "unmapped", orange) when there are any; `circles`: rows [x, y, radius], one CYLINDER
+    each (ns "movers", id = the mover's index). `message`: a MarkerArray this function built
+    before, updated in place (the movers' positions and the stamps) instead of rebuilt.
+    """
+    if message is None:
+        markers = []
+        if len(unmapped):
+            markers.append(_upright_quads(unmapped, "unmapped", UNMAPPED_COLOR, frame_id, stamp))
+        for i, (x, y, radius) in enumerate(np.asarray(circles, dtype=float).reshape(-1, 3)):
+            mover = Marker(ns="movers", id=i, type=Marker.CYLINDER, action=Marker.ADD)
+            mover.header.frame_id = frame_id
+            mover.pose.position.z = 0.5 * MOVER_HEIGHT_M
+            mover.pose.orientation.w = 1.0
+            mover.scale.x = mover.scale.y = 2.0 * float(radius)
+            mover.scale.z = MOVER_HEIGHT_M
+            mover.color = MOVER_COLOR
+            markers.append(mover)
+        message = MarkerArray(markers=markers)
+    movers = [m for m in message.markers if m.ns == "movers"]
+    for mover, (x, y, _) in zip(movers, np.asarray(circles, dtype=float).reshape(-1, 3)):
+        mover.pose.position.x, mover.pose.position.y = float(x), float(y)
+    if stamp is not None:
+        for marker in message.markers:
+            marker.header.stamp = stamp
+    return message
 
 
 def world_map_messages(world, resolution: float, frame_id: str = "map",
@@ -105,5 +150,5 @@ def world_map_messages(world, resolution: float, frame_id: str = "map",
             wall_markers(walls, frame_id, stamp, world.goal))
 
 
-__all__ = ["MAP_TOPIC", "MAP_MARKERS_TOPIC", "MAX_MARKER_WALLS", "occupancy_grid", "grid_values",
-           "wall_markers", "world_map_messages"]
+__all__ = ["MAP_TOPIC", "MAP_MARKERS_TOPIC", "MAX_MARKER_WALLS", "WORLD_MARKERS_TOPIC",
+           "occupancy_grid", "grid_values", "wall_markers", "world_map_messages", "world_markers"]

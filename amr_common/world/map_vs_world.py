@@ -15,22 +15,31 @@ The rules the run scripts and the headless episodes share:
 """
 from __future__ import annotations
 
+import math
+from dataclasses import replace
 from pathlib import Path
 from typing import Sequence
 
+import numpy as np
+
 from amr_common.world.world import World
+
+UNMAPPED_SPACING = 0.02  # m between the points of a world wall tested against the map
 
 
 def load_map(source: str | Path | World | None, world: World) -> World:
     """The map the filter and the planner use: `source` loaded, or `world` when None.
 
     A source naming the world's own file is the world itself (one object, nothing differs).
+    A map has no movers: a world file's are dropped (they walk in the world, never on a map).
     Raises WorldError (naming the file) for a map that does not load.
     """
     if source is None:
         return world
     map_world = source if isinstance(source, World) else World.load(source)
-    return world if same_source(map_world, world) else map_world
+    if same_source(map_world, world):
+        return world
+    return replace(map_world, movers=()) if map_world.movers else map_world
 
 
 def same_source(a: World, b: World) -> bool:
@@ -78,4 +87,26 @@ def start_warning(pose: Sequence[float], map_world: World, world: World,
             f"will not find the robot there")
 
 
-__all__ = ["load_map", "same_source", "resolve_goal_on_map", "start_warning"]
+def unmapped_walls(world: World, map_world: World, tolerance: float = 0.05) -> np.ndarray:
+    """The pieces of the world's walls the map lacks, as (N, 4) segments [x1, y1, x2, y2].
+
+    Each wall is tested at points UNMAPPED_SPACING apart: a run of points farther than
+    `tolerance` from every wall of the map is a piece the map lacks (an unmapped box, a moved
+    wall). None for the world itself.
+    """
+    if map_world is world or len(world.segments) == 0:
+        return np.zeros((0, 4))
+    pieces = []
+    for x1, y1, x2, y2 in world.segments:
+        n = max(2, math.ceil(math.hypot(x2 - x1, y2 - y1) / UNMAPPED_SPACING) + 1)
+        u = np.linspace(0.0, 1.0, n)
+        points = np.column_stack([x1 + u * (x2 - x1), y1 + u * (y2 - y1)])
+        lacked = np.concatenate([[False], map_world.clearances(points) > tolerance, [False]])
+        edges = np.flatnonzero(np.diff(lacked.astype(np.int8)))  # run starts and ends
+        for first, end in zip(edges[::2], edges[1::2]):
+            if end - first >= 2:  # a run of >= 2 points: a piece with a length
+                pieces.append([*points[first], *points[end - 1]])
+    return np.array(pieces, dtype=np.float64).reshape(-1, 4)
+
+
+__all__ = ["load_map", "same_source", "resolve_goal_on_map", "start_warning", "unmapped_walls"]

@@ -1,9 +1,12 @@
 """Polygons of a world file: edges, distances to them, inside tests, and the file's checks.
 
 check_polygons refuses a world file whose boundary or holes cross themselves, or whose holes
-lie outside or across the boundary (WorldError naming the file and the point).
+lie outside or across the boundary (WorldError naming the file and the point); check_movers one
+whose movers' paths leave the boundary (with their radius).
 """
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -18,6 +21,33 @@ def squared_segment_distances(seg: np.ndarray, px, py) -> np.ndarray:
     t = np.clip(((px - x1) * ex + (py - y1) * ey) / (ex * ex + ey * ey), 0.0, 1.0)
     dx, dy = x1 + t * ex - px, y1 + t * ey - py
     return dx * dx + dy * dy
+
+
+def segment_distances(a: np.ndarray, b: np.ndarray) -> tuple[float, tuple[float, float]]:
+    """Smallest distance between the segments `a` (N, 4) and `b` (M, 4, none of zero length).
+
+    Also a point of `a` where it is reached (where they cross, if they do). `a` may hold
+    zero-length segments (points).
+    """
+    crossing = _first_crossing(a, b)
+    if crossing is not None:
+        return 0.0, (float(crossing[0]), float(crossing[1]))
+    ends = np.vstack([a[:, 0:2], a[:, 2:4]])  # a's ends to b's segments
+    to_b = squared_segment_distances(b, ends[:, 0:1], ends[:, 1:2]).min(axis=1)
+    i = int(np.argmin(to_b))
+    best, point = float(to_b[i]), (float(ends[i, 0]), float(ends[i, 1]))
+    a = a[(a[:, 2] - a[:, 0]) ** 2 + (a[:, 3] - a[:, 1]) ** 2 > 0.0]
+    for px, py in np.vstack([b[:, 0:2], b[:, 2:4]]):  # b's ends to a's segments
+        if len(a) == 0:
+            break
+        squared = squared_segment_distances(a, px, py)
+        k = int(np.argmin(squared))
+        if squared[k] < best:
+            x1, y1, x2, y2 = a[k]
+            ex, ey = x2 - x1, y2 - y1
+            t = min(max(((px - x1) * ex + (py - y1) * ey) / (ex * ex + ey * ey), 0.0), 1.0)
+            best, point = float(squared[k]), (float(x1 + t * ex), float(y1 + t * ey))
+    return math.sqrt(best), point
 
 
 def point_in_polygon(poly: np.ndarray, x: float, y: float) -> bool:
@@ -59,6 +89,25 @@ def check_polygons(spec: WorldFile) -> None:
             if (gaps > 1e-9).any():  # on the boundary is touching, not outside
                 raise WorldError(f"{spec.path}: '{what}' lies outside the boundary: holes are "
                                  f"obstacles inside it")
+
+
+def check_movers(spec: WorldFile) -> None:
+    """WorldError for a mover whose path leaves the boundary or comes closer to it than its radius.
+
+    Naming the mover and the point.
+    """
+    boundary_edges = closed_segments(spec.boundary)
+    for mover in spec.movers:
+        what = mover.label or mover.name
+        outside = ~inside_polygon_points(spec.boundary, mover.path)
+        if outside.any():
+            x, y = mover.path[np.argmax(outside)]
+            raise WorldError(f"{spec.path}: {what}: path point ({x:g}, {y:g}) is outside the "
+                             f"boundary")
+        gap, (x, y) = segment_distances(mover.path_segments(), boundary_edges)
+        if gap < mover.radius:
+            raise WorldError(f"{spec.path}: {what}: its path comes {gap:.3f} m from the boundary "
+                             f"near ({x:g}, {y:g}), closer than its radius {mover.radius:g} m")
 
 
 def _first_crossing(a: np.ndarray, b: np.ndarray, pairs=None, chunk: int = 256):

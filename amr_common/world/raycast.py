@@ -9,6 +9,12 @@ segments, against ~1,700 us for pymunk's per-ray segment_query_first. Without nu
 maths runs as a numpy rays x segments matrix (about 15x slower).
 
 A ray from origin o with direction d hits segment p1 + u * (p2 - p1), u in [0, 1], at range t > 0.
+
+Circles (rows [x, y, radius]: the simulator's movers) come on top of the walls: a ray hits circle
+c, r where it enters it, at t = -b - sqrt(b^2 - |o - c|^2 + r^2) > 0 with b = (o - c) . d; a ray
+from inside a circle does not see it. cast_circles lowers ranges already cast against the walls
+(rays with their own origins, as cast_rays); scan_circles does it for one origin and then adds
+the noise and the range limits as scan_python does.
 """
 from __future__ import annotations
 
@@ -174,7 +180,94 @@ def cast_rays_numpy(segments, ox, oy, dx, dy, out_range, out_cos):
     out_cos[:] = np.where(np.isfinite(out_range), cos, 0.0)
 
 
+def cast_circles_python(circles, ox, oy, dx, dy, out_range, out_cos):
+    """Lower out_range[i] to the nearest circle ray i enters, and out_cos[i] to its incidence.
+
+    Ray i from (ox[i], oy[i]) along the unit vector (dx[i], dy[i]); out_range / out_cos hold the
+    walls' (cast_rays) on entry. |cos| of the incidence at a circle: sqrt(disc) / r. Circles
+    outside, rays inside, branch-free (numba vectorises the inner loop).
+    """
+    n = ox.shape[0]
+    for k in range(circles.shape[0]):
+        cx = circles[k, 0]
+        cy = circles[k, 1]
+        radius = circles[k, 2]
+        inv_radius = 1.0 / radius
+        for i in range(n):
+            qx = ox[i] - cx
+            qy = oy[i] - cy
+            b = qx * dx[i] + qy * dy[i]
+            disc = b * b - (qx * qx + qy * qy - radius * radius)
+            root = math.sqrt(max(disc, 0.0))
+            t = -b - root
+            hit = (disc >= 0.0) & (t > 0.0) & (t < out_range[i])
+            out_range[i] = t if hit else out_range[i]
+            out_cos[i] = root * inv_radius if hit else out_cos[i]
+
+
+def scan_circles_python(circles, ox, oy, theta, base_cos, base_sin, range_min, range_max,
+                        no_return, noise, out):
+    """Lower the walls' true ranges in out (inf: no hit) to the circles', then noise and limits.
+
+    The rays are scan_python's (angles theta + a_i from (ox, oy)); out holds what scan_python
+    returned with no noise, range_min 0, range_max and no_return inf. Then, as scan_python's
+    last pass: noise added, readings outside [range_min, range_max] become no_return.
+    """
+    n = base_cos.shape[0]
+    cos_t = math.cos(theta)
+    sin_t = math.sin(theta)
+    dx = np.empty(n)
+    dy = np.empty(n)
+    for i in range(n):
+        dx[i] = cos_t * base_cos[i] - sin_t * base_sin[i]
+        dy[i] = sin_t * base_cos[i] + cos_t * base_sin[i]
+    for k in range(circles.shape[0]):
+        qx = ox - circles[k, 0]
+        qy = oy - circles[k, 1]
+        c = qx * qx + qy * qy - circles[k, 2] * circles[k, 2]
+        for i in range(n):
+            b = qx * dx[i] + qy * dy[i]
+            disc = b * b - c
+            t = -b - math.sqrt(max(disc, 0.0))
+            hit = (disc >= 0.0) & (t > 0.0) & (t < out[i])
+            out[i] = t if hit else out[i]
+    for i in range(n):
+        r = out[i] + noise[i]
+        out[i] = r if (r >= range_min) & (r <= range_max) else no_return
+
+
+def cast_circles_numpy(circles, ox, oy, dx, dy, out_range, out_cos):
+    """cast_circles_python as a rays x circles matrix (fallback without numba, and its twin)."""
+    if circles.shape[0] == 0:
+        return
+    qx = ox[:, None] - circles[:, 0]
+    qy = oy[:, None] - circles[:, 1]
+    b = qx * dx[:, None] + qy * dy[:, None]
+    disc = b * b - (qx * qx + qy * qy - circles[:, 2] ** 2)
+    root = np.sqrt(np.maximum(disc, 0.0))
+    t = np.where((disc >= 0.0) & (-b - root > 0.0), -b - root, np.inf)
+    k = np.argmin(t, axis=1)
+    rows = np.arange(len(k))
+    nearer = t[rows, k] < out_range
+    out_range[:] = np.where(nearer, t[rows, k], out_range)
+    out_cos[:] = np.where(nearer, root[rows, k] / circles[k, 2], out_cos)
+
+
+def scan_circles_numpy(circles, ox, oy, theta, base_cos, base_sin, range_min, range_max,
+                       no_return, noise, out):
+    """scan_circles_python with numpy arrays (fallback without numba, and its twin)."""
+    n = base_cos.shape[0]
+    cos_t, sin_t = math.cos(theta), math.sin(theta)
+    cast_circles_numpy(circles, np.full(n, float(ox)), np.full(n, float(oy)),
+                       cos_t * base_cos - sin_t * base_sin, sin_t * base_cos + cos_t * base_sin,
+                       out, np.zeros(n))
+    r = out + noise
+    out[:] = np.where((r >= range_min) & (r <= range_max), r, no_return)
+
+
 scan_kernel = jit(scan_python)
+cast_circles_kernel = jit(cast_circles_python)
+scan_circles_kernel = jit(scan_circles_python)
 nearest_wall_kernel = jit(nearest_wall_python)
 clearances_kernel = jit(clearances_python)
 cast_rays_kernel = jit(cast_rays_python)

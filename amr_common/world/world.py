@@ -12,6 +12,10 @@ A map world (a Nav2 map YAML, or `World.from_raster` on a map SLAM built) keeps 
 and non-free cells (amr_common.world.map_raster.boundary_segments), and the occupancy grid of the
 planner, the particle filter and /map is the map's own cells.
 
+A world file's movers (amr_common.world.movers: round obstacles that walk) are in `movers`,
+apart from the walls: the simulator moves them; the planner, the particle filter and /map never
+see them.
+
 A World answers the geometric questions of the simulator, the planner, the filter and the
 metrics: clearances, free space, start and goal poses, the coverage grid.
 
@@ -22,7 +26,8 @@ so a path to it never leaves the planner's free space. A start only needs the ro
 Every problem (missing file, unknown name, bad YAML/JSON, missing keys, non-numeric or non-finite
 coordinates, polylines with too few points, zero-length walls, self-crossing polygons, holes
 outside or across the boundary, start poses or goals outside the boundary, inside an obstacle
-or too close to a wall) raises WorldError naming the file.
+or too close to a wall, a mover's bad values or a path leaving the boundary) raises WorldError
+naming the file.
 """
 from __future__ import annotations
 
@@ -36,7 +41,9 @@ from amr_common.robot import ROBOT_RADIUS
 from amr_common.world.coverage_grid import CoverageGrid, build_coverage_grid, inside_polygon_points
 from amr_common.world.map_file import map_from_yaml
 from amr_common.world.map_raster import OCCUPIED, UNKNOWN, Raster, boundary_segments
+from amr_common.world.movers import Mover
 from amr_common.world.polygons import (
+    check_movers,
     check_polygons,
     closed_segments,
     point_in_polygon,
@@ -81,6 +88,7 @@ class World:
     _grids: dict = field(default_factory=dict, init=False, repr=False, compare=False)
     goals: dict[str, tuple[float, float]] = field(default_factory=dict)  # named goals
     raster: Raster | None = None  # a map world's cells (free: value 0), else None
+    movers: tuple[Mover, ...] = ()  # round obstacles that walk: the simulated world only
 
     # ------------------------------------------------------------------ loading
     @classmethod
@@ -129,10 +137,11 @@ class World:
             raise WorldError(f"{path}: zero-length wall at ({x1:g}, {y1:g}) (repeated point in "
                              f"a polyline)")
         check_polygons(spec)
+        check_movers(spec)
         world = cls(name=spec.name, source=str(path), segments=segments, starts=spec.starts,
                     goal=spec.goal, cell_size=spec.cell_size, description=spec.description,
                     boundary=spec.boundary, holes=spec.holes, goals=dict(spec.goals),
-                    grid_origin=spec.grid_origin)
+                    grid_origin=spec.grid_origin, movers=spec.movers)
         world._check_named_poses()
         return world
 

@@ -24,10 +24,16 @@ as parsed YAML (a MapYaml): its keys and image are read by amr_common.world.map_
          far_corner: [-1.0, 1.0]
        goal: far_corner          # optional default goal: [x, y] or a name of `goals`;
                                  # without it the first named goal is the default
+       movers:                   # optional round obstacles that walk
+       (amr_common.world.movers):
+         - {radius: 0.2, path: [[x, y], ...], speed: 0.4}  # back and forth along the path
+         - {radius: 0.2, path: [[x, y], ...], speed: 0.3, loop: true, start_s: 5}
 
    Coordinates are metres in the world frame (REP 103: x east, y north, theta CCW from x).
    A closed polyline may repeat its first point at the end; it is closed either way.
    Numbers may be written 1e-6 (YAML 1.1 alone would read that as a string).
+   Movers are the simulated world only: walls, /map, the planner and the filter never see
+   them, and a world file given as a map (--map) has them dropped.
 
 2. The course's map JSON, by path: `{"metric": {"boundary": [[x, y], ...], "holes": [[[x, y],
    ...], ...]}}` (boundary = outer closed polyline, each hole = a closed obstacle polyline).
@@ -42,9 +48,11 @@ as parsed YAML (a MapYaml): its keys and image are read by amr_common.world.map_
 Every problem (missing file, unknown name, bad YAML/JSON, missing keys, non-numeric or non-finite
 coordinates, polylines with too few points, zero-length walls, a boundary or hole that crosses
 itself, a hole outside or across the boundary, start poses or goals outside the boundary, inside
-an obstacle or too close to a wall) raises WorldError naming the file; the checks against the
+an obstacle or too close to a wall, a mover with a bad radius, path, speed, loop or start_s, or
+whose path leaves the boundary) raises WorldError naming the file (and the mover); the checks
+against the
 walls (polygons, starts within the robot radius, goals within the planner's inflation
-GOAL_CLEARANCE = 0.135 m, no zero-length wall) are World's (amr_common.world.world).
+GOAL_CLEARANCE = 0.135 m, no zero-length wall, movers' paths) are World's (amr_common.world.world).
 """
 from __future__ import annotations
 
@@ -57,6 +65,8 @@ from typing import Any
 
 import numpy as np
 import yaml
+
+from amr_common.world.movers import MAX_RADIUS, MAX_SPEED, MOVER_KEYS, Mover
 
 WORLDS_DIR = Path(__file__).resolve().parent / "worlds"
 
@@ -110,6 +120,7 @@ class WorldFile:
     cell_size: float = 0.4
     description: str = ""
     grid_origin: tuple[float, float] | None = None
+    movers: tuple[Mover, ...] = ()  # round obstacles that walk (amr_common.world.movers)
 
 
 @dataclass(frozen=True)
@@ -158,7 +169,7 @@ def _from_yaml(raw: str, path: Path) -> WorldFile | MapYaml:
     if not isinstance(data, dict):
         raise WorldError(f"{path}: expected a mapping with keys boundary, holes, walls, "
                          f"starts, ... (or a Nav2 map YAML with 'image')")
-    known = {"boundary", "holes", "walls"} | PROJECT_KEYS
+    known = {"boundary", "holes", "walls", "movers"} | PROJECT_KEYS
     unknown = set(data) - known
     if unknown:
         raise WorldError(f"{path}: unknown key(s) {sorted(unknown)}; allowed: {sorted(known)}")
@@ -170,6 +181,7 @@ def _from_yaml(raw: str, path: Path) -> WorldFile | MapYaml:
     walls = [_polyline(w, path, f"walls[{i}]", closed=False)
              for i, w in enumerate(_as_list(data.get("walls", []), path, "walls"))]
     return WorldFile(path=path, boundary=boundary, holes=holes, walls=walls,
+                     movers=_movers(data.get("movers"), path),
                      **project_values(data, path))
 
 
@@ -220,6 +232,65 @@ def _from_course_json(raw: str, path: Path) -> WorldFile:
              for i, h in enumerate(_as_list(metric.get("holes", []), path, "metric.holes"))]
     return WorldFile(name=path.stem, path=path, boundary=boundary, holes=holes,
                      description="course map JSON")
+
+
+def _mover(value: Any, path: Path | str, index: int) -> Mover:
+    """One entry of a world file's `movers`, checked on its own (WorldError naming it).
+
+    Checks: a mapping with known keys; radius in (0, MAX_RADIUS]; a path of >= 1 finite
+    [x, y] points; speed in [0, MAX_SPEED]; loop true/false; start_s finite and >= 0. Where it
+    walks (inside the boundary): amr_common.world.polygons.check_movers.
+    """
+    what = f"movers[{index}]"
+    if not isinstance(value, dict):
+        raise WorldError(f"{path}: {what} must be a mapping with keys radius, path, speed "
+                         f"(optional loop, start_s, name), got {value!r}")
+    if isinstance(value.get("name"), str) and value["name"].strip():
+        what = f"{what} ({value['name'].strip()})"
+    unknown = sorted(set(map(str, value)) - set(MOVER_KEYS))
+    if unknown:
+        raise WorldError(f"{path}: {what}: unknown key(s) {unknown}; allowed: "
+                         f"{list(MOVER_KEYS)}")
+    for key in ("radius", "path", "speed"):
+        if key not in value:
+            raise WorldError(f"{path}: {what}: missing key '{key}'")
+    radius = number_value(value["radius"], path, f"{what} radius")
+    if not 0.0 < radius <= MAX_RADIUS:
+        raise WorldError(f"{path}: {what}: radius must be in (0, {MAX_RADIUS:g}] m, got "
+                         f"{value['radius']!r}")
+    speed = number_value(value["speed"], path, f"{what} speed")
+    if not 0.0 <= speed <= MAX_SPEED:
+        raise WorldError(f"{path}: {what}: speed must be in [0, {MAX_SPEED:g}] m/s, got "
+                         f"{value['speed']!r}")
+    raw_path = value["path"]
+    if not isinstance(raw_path, list) or not raw_path:
+        raise WorldError(f"{path}: {what}: path must be a list of at least one [x, y] point, "
+                         f"got {raw_path!r}")
+    points = np.array([point_value(p, path, f"{what} path[{i}]") for i, p in
+                       enumerate(raw_path)], dtype=np.float64)
+    loop = value.get("loop", False)
+    if not isinstance(loop, bool):
+        raise WorldError(f"{path}: {what}: loop must be true or false, got {loop!r}")
+    start_s = number_value(value.get("start_s", 0.0), path, f"{what} start_s")
+    if start_s < 0.0:
+        raise WorldError(f"{path}: {what}: start_s must be >= 0 s, got {value['start_s']!r}")
+    name = str(value.get("name") or "").strip() or f"movers[{index}]"
+    return Mover(name=name, radius=radius, path=points, speed=speed, loop=loop,
+                 start_s=start_s, label=what)
+
+
+def _movers(value: Any, path: Path | str) -> tuple[Mover, ...]:
+    """A world file's `movers` list (None: none), each entry checked (_mover)."""
+    if value is None:
+        return ()
+    if not isinstance(value, list):
+        raise WorldError(f"{path}: 'movers' must be a list of {{radius, path, speed}} mappings")
+    movers = tuple(_mover(v, path, i) for i, v in enumerate(value))
+    names = [m.name for m in movers]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise WorldError(f"{path}: mover name(s) {twice} given twice: names must be unique")
+    return movers
 
 
 def _as_list(value: Any, path, what: str) -> list:
