@@ -78,9 +78,22 @@ _TABLE: dict[str, tuple[Any, str]] = {
     "keyframe_angle_rad": (0.1, "... or turned this much [rad] since the last keyframe."),
     "local_map_keyframes": (40, "Scans are matched against a map of this many latest "
                                 "keyframes (older ones are joined through loop closures)."),
-    "search_linear_m": (0.1, "Half-width of the correlative search in x and y around the "
-                              "odometry prediction [m]."),
-    "search_angular_rad": (0.08, "Half-width of the correlative search in heading [rad]."),
+    "search_linear_m": (0.1, "Least half-width of the correlative search in x and y around "
+                             "the odometry prediction [m] ..."),
+    "search_angular_rad": (0.08, "... and in heading [rad]."),
+    "search_sigmas": (3.0, "The search covers this many standard deviations of the "
+                           "odometry's error over the motion since the last scan "
+                           "(odometry_sigma_*): a fast turn searches wider."),
+    "max_search_linear_m": (0.4, "A match that scores below min_match_score or lies on the "
+                                 "window's edge is searched again over twice the window, up "
+                                 "to this half-width [m] ..."),
+    "max_search_angular_rad": (0.4, "... and this one in heading [rad]; an odometry jump is "
+                                    "searched over these around the last pose."),
+    "max_linear_speed_mps": (3.0, "Odometry moving faster than this between two scans is a "
+                                  "jump (a reset, a glitch), not believed [m/s] (the run "
+                                  "scripts set the robot's: the Burger 0.66) ..."),
+    "max_angular_speed_rps": (10.0, "... or turning faster than this [rad/s] (the Burger "
+                                    "8.5)."),
     "smear_sigma_m": (0.03, "Standard deviation of the Gaussian that smooths the map for "
                             "scoring [m]."),
     "prior_sigma_m": (0.1, "The search's score is weighted by exp(-d^2 / 2 sigma^2) for a "

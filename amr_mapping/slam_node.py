@@ -20,9 +20,9 @@ amr_common.interfaces.Mapper, default the Mapper), results become messages.
   the particle filter's); ~/save_map (amr_msgs/srv/SaveMap: Nav2 map files); with
   output_prefix, the map saved on deactivate and shutdown (Ctrl-C included).
 - The map frame is the odometry frame at the first scan moved by `map_start_pose`.
-Bad input (NaN/inf/0 ranges, a changing ray count, odometry jumps, stamps going backwards): the
-Mapper and the odometry history skip or distrust it and log (throttled per kind); nothing NaN is
-published, no callback raises.
+Bad input (NaN/inf/0 ranges, a changing ray count, odometry jumps): the Mapper and the odometry
+history skip or distrust it and log (throttled per kind); a scan stamped before the last one is
+mapped at the odometry of its stamp (counted); nothing NaN is published, no callback raises.
 """
 from __future__ import annotations
 

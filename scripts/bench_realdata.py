@@ -1,0 +1,180 @@
+#!/usr/bin/env python3
+r"""SLAM on a real log: every scan and its odometry pose into the Mapper, the field's measures out.
+
+    DATA=../shared/data/realdata
+    .venv/bin/python scripts/bench_realdata.py $DATA/intel-prefix.clf \
+        --relations $DATA/intel.relations --map-out out/intel --plot out/intel.png
+
+Reads a CARMEN log (amr_tools.carmen_log: FLASER, ROBOTLASER1), feeds each scan in file order
+with the odometry pose of its line and its own stamp to amr_mapping.mapper.Mapper with only the
+sensor's facts set (`--resolution` 0.05 m, `--max-range` 50 m: the LiDAR's; the laser's place
+from the log's PARAM robot_frontlaser_offset) and every other parameter at its default
+(`--param NAME:=VALUE` to change one), then prints:
+- the relation error (Kuemmerle et al. 2009, with --relations; amr_evaluation.relation_error)
+  of the final, optimized trajectory (a pose for every scan, at the scan's stamp), and of the
+  raw odometry for comparison;
+- the map's self-consistency: share of the returns within 20 m that, drawn from the
+  trajectory, end within 10 cm of an OCCUPIED cell of the map;
+- how many scans got a pose (every scan should), the Mapper's counts (matched, odometry only,
+  out of order, loop closures);
+- speed: CPU seconds of the mapping (this process: the Mapper's updates and the final map) and
+  the log's duration per CPU second ("x real time"), median and p99 of one update (CPU ms).
+`--map-out DIR` writes DIR/map.yaml + map.pgm (Nav2 map files); `--plot F.png` the map with the
+trajectory and the odometry's path beside it; `--report F.json` the figures and the trajectory.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import numpy as np  # noqa: E402
+
+SENSOR_FACTS = {"resolution_m": 0.05, "max_range_m": 50.0}
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """The command line (see the module docstring)."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("log", type=Path, help="CARMEN log (.clf / .log)")
+    parser.add_argument("--relations", type=Path, help="Kuemmerle relations file "
+                        "(t1 t2 x y z roll pitch yaw)")
+    parser.add_argument("--resolution", type=float, default=SENSOR_FACTS["resolution_m"],
+                        help="map cell size [m] (default 0.05)")
+    parser.add_argument("--max-range", type=float, default=SENSOR_FACTS["max_range_m"],
+                        help="returns used up to this range [m] (default 50)")
+    parser.add_argument("--param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="a Mapper parameter (repeatable; default: every other at its "
+                        "default)")
+    parser.add_argument("--scans", type=int, default=None, help="only the first N scans")
+    parser.add_argument("--map-out", type=Path, help="write DIR/map.yaml + map.pgm")
+    parser.add_argument("--plot", type=Path, help="PNG of the map with the trajectory")
+    parser.add_argument("--report", type=Path, help="JSON of the figures and the trajectory")
+    parser.add_argument("--quiet", action="store_true", help="no progress line")
+    return parser.parse_args(argv)
+
+
+def mapper_params(args: argparse.Namespace, lidar_offset_x_m: float) -> dict:
+    """The sensor's facts, the laser's place from the log, then --param."""
+    from link_options import check_mapper_params
+    params = {"resolution_m": args.resolution, "max_range_m": args.max_range,
+              "lidar_offset_x_m": lidar_offset_x_m}
+    params.update(check_mapper_params(args.param, None))
+    return params
+
+
+def run(args: argparse.Namespace) -> dict:
+    """Map the log; the figures (also printed)."""
+    from amr_evaluation.relation_error import read_relations, relation_errors, self_consistency
+    from amr_mapping.mapper import Mapper
+    from amr_tools.carmen_log import read_carmen_log
+
+    log = read_carmen_log(args.log)
+    scans = log.scans[:args.scans] if args.scans else log.scans
+    if not scans:
+        raise SystemExit(f"{args.log}: no FLASER or ROBOTLASER1 scan in the log")
+    for problem in log.problems[:5]:
+        print(f"left out: {problem}")
+    if len(log.problems) > 5:
+        print(f"... {len(log.problems)} malformed lines left out in all")
+    duration = max(s.stamp for s in scans) - min(s.stamp for s in scans)
+    stamps = np.array([s.stamp for s in scans])
+    print(f"{args.log.name}: {len(scans)} scans over {duration:.1f} s, "
+          f"{int(np.count_nonzero(np.diff(stamps) <= 0))} stamped at or before the one before")
+    mapper = Mapper(mapper_params(args, scans[0].lidar_offset_x_m))
+    update_cpu = np.empty(len(scans))
+    started = time.process_time()
+    for k, scan in enumerate(scans):
+        before = time.process_time()
+        mapper.update(scan, scan.odometry, scan.stamp)
+        update_cpu[k] = time.process_time() - before
+        if not args.quiet and (k % 500 == 0 or k == len(scans) - 1):
+            print(f"\r{k + 1}/{len(scans)} scans, {time.process_time() - started:.1f} s CPU",
+                  end="", file=sys.stderr, flush=True)
+    map_started = time.process_time()
+    raster = mapper.occupancy_raster()
+    finished = time.process_time()
+    if not args.quiet:
+        print(file=sys.stderr)
+    cpu = finished - started
+    trajectory = mapper.trajectory()
+    stats = mapper.statistics()
+    figures: dict = {
+        "log": str(args.log), "scans": len(scans), "duration_s": duration,
+        "scans_with_pose": len(trajectory), "cpu_s": cpu, "map_cpu_s": finished - map_started,
+        "x_real_time": duration / cpu if cpu > 0 else math.inf,
+        "update_cpu_ms": {"median": 1e3 * float(np.median(update_cpu)),
+                          "p99": 1e3 * float(np.percentile(update_cpu, 99)),
+                          "max": 1e3 * float(update_cpu.max())},
+        "mapper": {key: stats[key] for key in ("updates", "matched", "odometry_only",
+                                               "keyframes", "loop_closures", "loop_attempts",
+                                               "rejected", "odometry_jumps")
+                   if key in stats},
+    }
+    for key in ("out_of_order", "retries", "retry_matched"):
+        if key in stats:
+            figures["mapper"][key] = stats[key]
+    print(f"scans with a pose: {len(trajectory)} of {len(scans)}; "
+          f"mapper: {json.dumps(figures['mapper'])}")
+    by_stamp = trajectory[:, 1:4] if len(trajectory) == len(scans) else None
+    if args.relations:
+        relations = read_relations(args.relations)
+        odometry = np.array([s.odometry for s in scans])
+        raw = relation_errors(stamps, odometry, relations)
+        slam = relation_errors(trajectory[:, 0], trajectory[:, 1:4], relations)
+        figures["relation_error"] = slam.as_dict()
+        figures["odometry_relation_error"] = raw.as_dict()
+        t2, r2 = slam.translation_squared, slam.rotation_squared
+        print(f"relation error (SLAM):     {slam.summary()}; squared {t2[0]:.5f} +- "
+              f"{t2[1]:.5f} m^2, {r2[0]:.3f} +- {r2[1]:.3f} deg^2")
+        print(f"relation error (odometry): {raw.summary()}")
+    if by_stamp is not None:
+        consistency = self_consistency(raster, by_stamp, scans, scans[0].lidar_offset_x_m)
+        figures["self_consistency"] = consistency
+        print(f"self-consistency: {100 * consistency:.1f} % of the returns within 20 m end "
+              "within 10 cm of an occupied cell")
+    print(f"CPU {cpu:.1f} s for {duration:.1f} s of log: {figures['x_real_time']:.1f}x real "
+          f"time per CPU second (map {figures['map_cpu_s']:.2f} s); update median "
+          f"{figures['update_cpu_ms']['median']:.2f} ms, p99 "
+          f"{figures['update_cpu_ms']['p99']:.1f} ms, max {figures['update_cpu_ms']['max']:.0f}"
+          " ms")
+    if args.map_out:
+        from amr_common.map_file import write_map
+        yaml_path, _ = write_map(raster, args.map_out / "map")
+        print(f"map: {yaml_path}")
+    if args.plot:
+        from amr_evaluation.mapping_plot import plot_map_trajectory
+        title = f"{args.log.name}: {len(scans)} scans"
+        if "relation_error" in figures:
+            title += f"; relation error {slam.summary()}"
+        path = plot_map_trajectory(raster, trajectory, args.plot,
+                                   np.array([s.odometry for s in scans]), title)
+        print(f"plot: {path}")
+    if args.report:
+        args.report.parent.mkdir(parents=True, exist_ok=True)
+        args.report.write_text(json.dumps({**figures, "trajectory": trajectory.tolist()}))
+    return figures
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point."""
+    args = parse_args(argv)
+    from amr_tools.carmen_log import CarmenLogError
+    try:
+        run(args)
+    except (CarmenLogError, ValueError) as exc:
+        print(f"bench_realdata: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("\nbench_realdata: interrupted", file=sys.stderr)
+        return 130
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
