@@ -96,6 +96,7 @@ class Mapper:
         self._pose = (0.0, 0.0, 0.0)
         self._motion = OdometryMotion(p)
         self._distance = 0.0
+        self._closure_travelled = 0.0  # travel at the last loop closure (or the start)
         self._since_loop_try = 0
         self._stats: dict[str, Any] = dict.fromkeys((
             "updates", "matched", "odometry_only", "loop_closures", "loop_attempts",
@@ -283,13 +284,16 @@ class Mapper:
         started = clocks()
         self._stats["loop_attempts"] += 1
         poses = self._graph.poses
-        closure = self._closer.close(poses, np.asarray(self._travelled), self._points, index)
+        travelled = np.asarray(self._travelled)
+        closure = self._closer.close(poses, travelled, self._points, index,
+                                     travelled[index] - self._closure_travelled)
         if closure is None:
             closure = self._closer.anchor(poses, self._points, index)
             self._stats["anchor_closures"] += closure is not None
         if closure is not None:
             self._graph.add_loop(closure.earlier, closure.later, closure.relative)
             self._stats["loop_closures"] += 1
+            self._closure_travelled = travelled[index]
             poses = self._graph.poses
             for member, drawn in list(self._local_members.items()):
                 new = tuple(poses[member])

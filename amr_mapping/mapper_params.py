@@ -5,6 +5,7 @@ worlds with the `turtlebot3_clean` profile (LDS-01: 360 rays, 3.5 m, 1 cm noise,
 """
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from amr_common.lidar_models import LIDAR_MODELS
@@ -116,16 +117,31 @@ _TABLE: dict[str, tuple[Any, str]] = {
     # --- back end: pose graph and loop closure
     "loop_closure": (True, "Search for loop closures (off: the pose graph is a chain)."),
     "loop_search_radius_m": (1.0, "Earlier keyframes within this distance of the current "
-                                  "estimate are loop-closure candidates [m] ..."),
+                                  "estimate, plus how far the search window grew "
+                                  "(loop_drift_*), are loop-closure candidates [m] ..."),
     "loop_min_travel_m": (5.0, "... if the robot travelled at least this far since [m]."),
     "loop_chain_keyframes": (8, "The candidate's map: this many keyframes on each side of it."),
-    "loop_window_m": (0.3, "Half-width of the loop-closure search in x and y [m]."),
-    "loop_window_rad": (0.25, "Half-width of the loop-closure search in heading [rad]."),
+    "loop_window_m": (0.3, "Half-width of the loop-closure search in x and y right after a "
+                           "closure [m] ..."),
+    "loop_window_rad": (0.25, "... and in heading [rad]; both grow with the travel since the "
+                              "last closure (or since the earlier keyframe, if less):"),
+    "loop_drift_per_m": (0.02, "... by this much per metre [m/m] (the estimate's drift "
+                               "between closures) ..."),
+    "loop_drift_rad_per_m": (0.005, "... and this much per metre in heading [rad/m] ..."),
+    "loop_max_window_m": (4.0, "... up to this half-width [m] ..."),
+    "loop_max_window_rad": (math.pi, "... and this one in heading [rad] (pi: every heading)."),
+    "loop_map_keyframes": (50, "A window wider than loop_window_m matches against the "
+                               "candidate's chain and the earlier keyframes within the window: "
+                               "at most this many, evenly spaced."),
     "loop_min_score": (0.55, "A loop-closure match must score at least this ..."),
     "loop_ambiguity_ratio": (0.92, "... and the best match farther than "
                                    "loop_ambiguity_distance_m away must score below this share "
                                    "of it (no closure along a featureless corridor)."),
     "loop_ambiguity_distance_m": (0.1, "See loop_ambiguity_ratio [m]."),
+    "loop_max_free_share": (0.05, "... and at most this share of the scan's points may land "
+                                  "deep in space the candidate's map saw free (a scan placed "
+                                  "one corridor over). A match on the window's edge is "
+                                  "refused too."),
     "anchor_keyframes": (3, "A loop-closure attempt that finds nothing within "
                             "loop_search_radius_m of the first keyframe matches the scan against "
                             "the map of this many first keyframes (the heading anchor) ..."),
@@ -153,12 +169,15 @@ PARAMETERS: dict[str, Param] = ruled(
     range_correction=vector(*range(0, 17, 2)),
     **{name: at_least(1) for name in ("min_points", "max_map_cells", "local_map_keyframes",
                                       "loop_chain_keyframes", "loop_interval_keyframes",
-                                      "anchor_keyframes", "occupied_min_hits")},
+                                      "loop_map_keyframes", "anchor_keyframes",
+                                      "occupied_min_hits")},
     **{name: at_least(0.0) for name in (
         "miss_stop_m", "keyframe_distance_m", "keyframe_angle_rad", "odometry_sigma_per_m",
         "odometry_sigma_per_rad", "loop_min_travel_m", "rerender_tolerance_m",
+        "loop_drift_per_m", "loop_drift_rad_per_m",
         "rerender_tolerance_rad", "occupied_log_odds")},
-    **{name: between(0.0, 1.0) for name in ("min_match_score", "occupied_min_hit_share")},
+    **{name: between(0.0, 1.0) for name in ("min_match_score", "occupied_min_hit_share",
+                                            "loop_max_free_share")},
     **{name: between(0.0, 1.0, low_open=True) for name in ("loop_min_score",
                                                            "loop_ambiguity_ratio")})
 

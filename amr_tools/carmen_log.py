@@ -28,6 +28,7 @@ CarmenLogError with that message); the rest of the log is read.
 """
 from __future__ import annotations
 
+import gzip
 import math
 from collections import Counter
 from dataclasses import dataclass, field
@@ -220,11 +221,15 @@ def parse_carmen_lines(lines: Iterable[str], strict: bool = False) -> CarmenLog:
 
 
 def read_carmen_log(path: str | Path, strict: bool = False) -> CarmenLog:
-    """Read a CARMEN log file; CarmenLogError if it cannot be opened or is not text."""
+    """Read a CARMEN log file (gzip-compressed if it ends in .gz, as logs are often shipped).
+
+    CarmenLogError if it cannot be opened or is not text.
+    """
+    opener = gzip.open if str(path).endswith(".gz") else open
     try:
-        with open(path, encoding="utf-8", errors="strict") as stream:
+        with opener(path, "rt", encoding="utf-8", errors="strict") as stream:
             return parse_carmen_lines(stream, strict)
-    except (OSError, UnicodeDecodeError) as exc:
+    except (OSError, EOFError, UnicodeDecodeError) as exc:
         raise CarmenLogError(f"cannot read CARMEN log {path}: {exc}") from None
 
 

@@ -68,12 +68,9 @@ def mapper_params(args: argparse.Namespace, lidar_offset_x_m: float) -> dict:
     return params
 
 
-def run(args: argparse.Namespace) -> dict:
-    """Map the log; the figures (also printed)."""
-    from amr_evaluation.relation_error import read_relations, relation_errors, self_consistency
-    from amr_mapping.mapper import Mapper
+def read_scans(args: argparse.Namespace) -> list:
+    """The log's scans (the first --scans), its malformed lines printed; SystemExit if none."""
     from amr_tools.carmen_log import read_carmen_log
-
     log = read_carmen_log(args.log)
     scans = log.scans[:args.scans] if args.scans else log.scans
     if not scans:
@@ -82,50 +79,64 @@ def run(args: argparse.Namespace) -> dict:
         print(f"left out: {problem}")
     if len(log.problems) > 5:
         print(f"... {len(log.problems)} malformed lines left out in all")
-    duration = max(s.stamp for s in scans) - min(s.stamp for s in scans)
     stamps = np.array([s.stamp for s in scans])
-    print(f"{args.log.name}: {len(scans)} scans over {duration:.1f} s, "
+    print(f"{args.log.name}: {len(scans)} scans over {np.ptp(stamps):.1f} s, "
           f"{int(np.count_nonzero(np.diff(stamps) <= 0))} stamped at or before the one before")
+    return scans
+
+
+def map_scans(args: argparse.Namespace, scans: list):
+    """(mapper, map raster, CPU s of each update, CPU s in all, CPU s of the map, scans mapped).
+
+    Ctrl-C stops the mapping: the figures are then of the scans mapped so far.
+    """
+    from amr_mapping.mapper import Mapper
     mapper = Mapper(mapper_params(args, scans[0].lidar_offset_x_m))
-    update_cpu = np.empty(len(scans))
+    update_cpu = []
     started = time.process_time()
-    for k, scan in enumerate(scans):
-        before = time.process_time()
-        mapper.update(scan, scan.odometry, scan.stamp)
-        update_cpu[k] = time.process_time() - before
-        if not args.quiet and (k % 500 == 0 or k == len(scans) - 1):
-            print(f"\r{k + 1}/{len(scans)} scans, {time.process_time() - started:.1f} s CPU",
-                  end="", file=sys.stderr, flush=True)
+    try:
+        for k, scan in enumerate(scans):
+            before = time.process_time()
+            mapper.update(scan, scan.odometry, scan.stamp)
+            update_cpu.append(time.process_time() - before)
+            if not args.quiet and (k % 500 == 0 or k == len(scans) - 1):
+                print(f"\r{k + 1}/{len(scans)} scans, {time.process_time() - started:.1f} s CPU",
+                      end="", file=sys.stderr, flush=True)
+    except KeyboardInterrupt:
+        print(f"\ninterrupted: the figures of the first {len(update_cpu)} scans",
+              file=sys.stderr)
     map_started = time.process_time()
     raster = mapper.occupancy_raster()
     finished = time.process_time()
     if not args.quiet:
         print(file=sys.stderr)
-    cpu = finished - started
-    trajectory = mapper.trajectory()
-    stats = mapper.statistics()
+    return (mapper, raster, np.array(update_cpu), finished - started, finished - map_started,
+            len(update_cpu))
+
+
+def measure(args: argparse.Namespace, scans: list, mapper, raster, update_cpu: np.ndarray,
+            cpu: float, map_cpu: float) -> dict:
+    """The figures of the run (printed too)."""
+    from amr_evaluation.relation_error import read_relations, relation_errors, self_consistency
+    trajectory, stats = mapper.trajectory(), mapper.statistics()
+    stamps = np.array([s.stamp for s in scans])
+    duration = float(np.ptp(stamps))
     figures: dict = {
         "log": str(args.log), "scans": len(scans), "duration_s": duration,
-        "scans_with_pose": len(trajectory), "cpu_s": cpu, "map_cpu_s": finished - map_started,
+        "scans_with_pose": len(trajectory), "cpu_s": cpu, "map_cpu_s": map_cpu,
         "x_real_time": duration / cpu if cpu > 0 else math.inf,
         "update_cpu_ms": {"median": 1e3 * float(np.median(update_cpu)),
                           "p99": 1e3 * float(np.percentile(update_cpu, 99)),
                           "max": 1e3 * float(update_cpu.max())},
-        "mapper": {key: stats[key] for key in ("updates", "matched", "odometry_only",
-                                               "keyframes", "loop_closures", "loop_attempts",
-                                               "rejected", "odometry_jumps")
-                   if key in stats},
-    }
-    for key in ("out_of_order", "retries", "retry_matched"):
-        if key in stats:
-            figures["mapper"][key] = stats[key]
+        "mapper": {key: stats[key] for key in (
+            "updates", "matched", "odometry_only", "out_of_order", "odometry_jumps",
+            "search_retries", "keyframes", "loop_attempts", "loop_closures", "rejected")
+            if key in stats}}
     print(f"scans with a pose: {len(trajectory)} of {len(scans)}; "
           f"mapper: {json.dumps(figures['mapper'])}")
-    by_stamp = trajectory[:, 1:4] if len(trajectory) == len(scans) else None
     if args.relations:
         relations = read_relations(args.relations)
-        odometry = np.array([s.odometry for s in scans])
-        raw = relation_errors(stamps, odometry, relations)
+        raw = relation_errors(stamps, np.array([s.odometry for s in scans]), relations)
         slam = relation_errors(trajectory[:, 0], trajectory[:, 1:4], relations)
         figures["relation_error"] = slam.as_dict()
         figures["odometry_relation_error"] = raw.as_dict()
@@ -133,16 +144,21 @@ def run(args: argparse.Namespace) -> dict:
         print(f"relation error (SLAM):     {slam.summary()}; squared {t2[0]:.5f} +- "
               f"{t2[1]:.5f} m^2, {r2[0]:.3f} +- {r2[1]:.3f} deg^2")
         print(f"relation error (odometry): {raw.summary()}")
-    if by_stamp is not None:
-        consistency = self_consistency(raster, by_stamp, scans, scans[0].lidar_offset_x_m)
-        figures["self_consistency"] = consistency
-        print(f"self-consistency: {100 * consistency:.1f} % of the returns within 20 m end "
-              "within 10 cm of an occupied cell")
+    if len(trajectory) == len(scans):
+        figures["self_consistency"] = share = self_consistency(
+            raster, trajectory[:, 1:4], scans, scans[0].lidar_offset_x_m)
+        print(f"self-consistency: {100 * share:.1f} % of the returns within 20 m end within "
+              "10 cm of an occupied cell")
+    timing = figures["update_cpu_ms"]
     print(f"CPU {cpu:.1f} s for {duration:.1f} s of log: {figures['x_real_time']:.1f}x real "
-          f"time per CPU second (map {figures['map_cpu_s']:.2f} s); update median "
-          f"{figures['update_cpu_ms']['median']:.2f} ms, p99 "
-          f"{figures['update_cpu_ms']['p99']:.1f} ms, max {figures['update_cpu_ms']['max']:.0f}"
-          " ms")
+          f"time per CPU second (map {map_cpu:.2f} s); update median {timing['median']:.2f} "
+          f"ms, p99 {timing['p99']:.1f} ms, max {timing['max']:.0f} ms")
+    return figures
+
+
+def write_outputs(args: argparse.Namespace, scans: list, raster, trajectory: np.ndarray,
+                  figures: dict) -> None:
+    """--map-out, --plot and --report."""
     if args.map_out:
         from amr_common.map_file import write_map
         yaml_path, _ = write_map(raster, args.map_out / "map")
@@ -151,13 +167,25 @@ def run(args: argparse.Namespace) -> dict:
         from amr_evaluation.mapping_plot import plot_map_trajectory
         title = f"{args.log.name}: {len(scans)} scans"
         if "relation_error" in figures:
-            title += f"; relation error {slam.summary()}"
+            error = figures["relation_error"]
+            title += (f"; relation error {error['translation_m'][0]:.4f} m, "
+                      f"{error['rotation_deg'][0]:.3f} deg")
         path = plot_map_trajectory(raster, trajectory, args.plot,
                                    np.array([s.odometry for s in scans]), title)
         print(f"plot: {path}")
     if args.report:
         args.report.parent.mkdir(parents=True, exist_ok=True)
         args.report.write_text(json.dumps({**figures, "trajectory": trajectory.tolist()}))
+        print(f"report: {args.report}")
+
+
+def run(args: argparse.Namespace) -> dict:
+    """Map the log; the figures (also printed)."""
+    scans = read_scans(args)
+    mapper, raster, update_cpu, cpu, map_cpu, mapped = map_scans(args, scans)
+    scans = scans[:mapped]
+    figures = measure(args, scans, mapper, raster, update_cpu, cpu, map_cpu)
+    write_outputs(args, scans, raster, mapper.trajectory(), figures)
     return figures
 
 
