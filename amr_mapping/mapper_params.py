@@ -77,8 +77,10 @@ _TABLE: dict[str, tuple[Any, str]] = {
     "keyframe_distance_m": (0.1, "A scan becomes a keyframe (inserted into the map and the "
                                  "pose graph) after the robot moved this far [m] ..."),
     "keyframe_angle_rad": (0.1, "... or turned this much [rad] since the last keyframe."),
-    "local_map_keyframes": (40, "Scans are matched against a map of this many latest "
-                                "keyframes (older ones are joined through loop closures)."),
+    "local_map_keyframes": (160, "Scans are matched against a map of this many latest "
+                                 "keyframes (older ones are joined through loop closures); "
+                                 "the more, the less the heading random-walks from keyframe "
+                                 "to keyframe (Cartographer's submaps: 90-180 scans)."),
     "search_linear_m": (0.1, "Least half-width of the correlative search in x and y around "
                              "the odometry prediction [m] ..."),
     "search_angular_rad": (0.08, "... and in heading [rad]."),
