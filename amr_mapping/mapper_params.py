@@ -114,8 +114,11 @@ _TABLE: dict[str, tuple[Any, str]] = {
                                                "'branch_and_bound' (compiled), or "
                                                "'exhaustive' (every pose scored with numpy: the "
                                                "same optimum, for benchmarks)."),
-    "min_match_score": (0.35, "Matches scoring below this (mean smoothed-map value under the "
-                              "points, 0..1) are rejected: the pose follows the odometry."),
+    "min_match_score": (0.25, "Matches scoring below this (mean smoothed-map value under the "
+                              "points, 0..1) are rejected: the pose follows the odometry. A "
+                              "quarter of the points on the map's walls still fixes a pose; "
+                              "walls seen at grazing angles from many poses weigh little, so a "
+                              "good match on a big real map can score 0.3."),
     # --- back end: pose graph and loop closure
     "loop_closure": (True, "Search for loop closures (off: the pose graph is a chain)."),
     "loop_search_radius_m": (1.0, "Earlier keyframes within this distance of the current "

@@ -36,7 +36,7 @@ def _random_rays(rng, count=300):
 def _trace(kernel, ends, sx, sy, sign=1, state=None, moments=True):
     counts, hits, sums = state or (np.zeros((40, 35), np.int32), np.zeros((40, 35), np.int32),
                                    np.zeros((5, 40, 35) if moments else (5, 0, 0)))
-    changed = kernel(counts, sx, sy, ends, 90 * sign, -40 * sign, 0.7, sign, hits, sums)
+    changed = kernel(counts, 0, 0, sx, sy, ends, 90 * sign, -40 * sign, 0.7, sign, hits, sums)
     return changed, (counts, hits, sums)
 
 
@@ -72,8 +72,8 @@ def _grid_with_walls(rng):
     radius = 20.0
     ends = np.column_stack([sx + radius * np.cos(angles) * 1.3, sy + radius * np.sin(angles)])
     for _ in range(3):
-        gk.trace_rays(counts, sx, sy, ends + rng.normal(0, 0.15, ends.shape), 90, -40, 0.0, 1,
-                      hits, sums)
+        gk.trace_rays(counts, 0, 0, sx, sy, ends + rng.normal(0, 0.15, ends.shape), 90, -40,
+                      0.0, 1, hits, sums)
     return counts, hits, sums
 
 
