@@ -1,7 +1,10 @@
 """The Mapper's parameters: name -> (default, description with units), and their checking.
 
 No rclpy import; the slam node declares each as a ROS parameter. The defaults map the bundled
-worlds with the `turtlebot3_clean` profile (LDS-01: 360 rays, 3.5 m, 1 cm noise, 5 Hz).
+worlds with the `turtlebot3_clean` and `turtlebot3` profiles (LDS-01: 360 rays, 3.5 m, 2 cm
+cells) and a real robot's log with only the sensor's facts changed (the Intel Research Lab:
+SICK LMS, 50 m, 5 cm cells; docs/realdata.md). What is the robot's (its speed limits) the run
+scripts set for the Burger; the defaults suit faster robots too.
 """
 from __future__ import annotations
 
@@ -105,7 +108,8 @@ _TABLE: dict[str, tuple[Any, str]] = {
     "odometry_sigma_m": (0.005, "Standard deviation of the odometry's motion between two "
                                 "scans, translation [m], plus ..."),
     "odometry_sigma_per_m": (0.05, "... this share of the distance moved [m/m]; weighs the "
-                                   "odometry against the scan in the sub-cell refinement."),
+                                   "odometry against the scan in the sub-cell refinement and "
+                                   "sizes the search (search_sigmas)."),
     "odometry_sigma_rad": (0.005, "The same for rotation [rad], plus ..."),
     "odometry_sigma_per_rad": (0.05, "... this share of the angle turned [rad/rad]."),
     "point_sigma_m": (0.015, "Standard deviation of a scan point about the wall line of its "
