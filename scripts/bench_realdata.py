@@ -69,12 +69,12 @@ def mapper_params(args: argparse.Namespace, lidar_offset_x_m: float) -> dict:
 
 
 def read_scans(args: argparse.Namespace) -> list:
-    """The log's scans (the first --scans), its malformed lines printed; SystemExit if none."""
+    """The log's scans (the first --scans), its malformed lines printed; ValueError if none."""
     from amr_tools.carmen_log import read_carmen_log
     log = read_carmen_log(args.log)
     scans = log.scans[:args.scans] if args.scans else log.scans
     if not scans:
-        raise SystemExit(f"{args.log}: no FLASER or ROBOTLASER1 scan in the log")
+        raise ValueError(f"{args.log}: no FLASER or ROBOTLASER1 scan in the log")
     for problem in log.problems[:5]:
         print(f"left out: {problem}")
     if len(log.problems) > 5:
@@ -115,9 +115,9 @@ def map_scans(args: argparse.Namespace, scans: list):
 
 
 def measure(args: argparse.Namespace, scans: list, mapper, raster, update_cpu: np.ndarray,
-            cpu: float, map_cpu: float) -> dict:
-    """The figures of the run (printed too)."""
-    from amr_evaluation.relation_error import read_relations, relation_errors, self_consistency
+            cpu: float, map_cpu: float, relations: np.ndarray | None) -> dict:
+    """The figures of the run (printed too); relations: read_relations' rows, or None."""
+    from amr_evaluation.relation_error import relation_errors, self_consistency
     trajectory, stats = mapper.trajectory(), mapper.statistics()
     stamps = np.array([s.stamp for s in scans])
     duration = float(np.ptp(stamps))
@@ -134,8 +134,7 @@ def measure(args: argparse.Namespace, scans: list, mapper, raster, update_cpu: n
             if key in stats}}
     print(f"scans with a pose: {len(trajectory)} of {len(scans)}; "
           f"mapper: {json.dumps(figures['mapper'])}")
-    if args.relations:
-        relations = read_relations(args.relations)
+    if relations is not None:
         raw = relation_errors(stamps, np.array([s.odometry for s in scans]), relations)
         slam = relation_errors(trajectory[:, 0], trajectory[:, 1:4], relations)
         figures["relation_error"] = slam.as_dict()
@@ -181,10 +180,12 @@ def write_outputs(args: argparse.Namespace, scans: list, raster, trajectory: np.
 
 def run(args: argparse.Namespace) -> dict:
     """Map the log; the figures (also printed)."""
+    from amr_evaluation.relation_error import read_relations
+    relations = read_relations(args.relations) if args.relations else None  # before the work
     scans = read_scans(args)
     mapper, raster, update_cpu, cpu, map_cpu, mapped = map_scans(args, scans)
     scans = scans[:mapped]
-    figures = measure(args, scans, mapper, raster, update_cpu, cpu, map_cpu)
+    figures = measure(args, scans, mapper, raster, update_cpu, cpu, map_cpu, relations)
     write_outputs(args, scans, raster, mapper.trajectory(), figures)
     return figures
 

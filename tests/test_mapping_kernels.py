@@ -56,6 +56,25 @@ def test_trace_rays_twin_equal_and_exactly_removable():
     assert np.abs(sums).max() < 1e-12
 
 
+def test_trace_rays_in_global_cells_any_array_offset_twin_equal():
+    """The same rays into an array that starts elsewhere: the same cells, shifted."""
+    rng = np.random.default_rng(6)
+    sx, sy, ends = _random_rays(rng)
+    results = []
+    for kernel in (gk.trace_rays, gk.trace_rays_python):
+        counts, hits = np.zeros((40, 35), np.int32), np.zeros((40, 35), np.int32)
+        sums = np.zeros((5, 40, 35))
+        # global cell (r, c) is counts[r + 7, c - 12]: the array starts 7 rows lower and 12
+        # columns further right than _trace's
+        kernel(counts, -7, 12, sx, sy, ends, 90, -40, 0.7, 1, hits, sums)
+        results.append((counts, hits, sums))
+    for a, b in zip(*results):
+        assert np.array_equal(a, b)
+    _, (counts, hits, _) = _trace(gk.trace_rays, ends, sx, sy)
+    assert np.array_equal(results[0][0][7:, :23], counts[:33, 12:])
+    assert np.array_equal(results[0][1][7:, :23], hits[:33, 12:]) and hits.sum() > 0
+
+
 def test_trace_rays_without_moments_counts_hits_only():
     rng = np.random.default_rng(4)
     sx, sy, ends = _random_rays(rng, 50)
