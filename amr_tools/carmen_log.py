@@ -14,7 +14,8 @@ What is read (the CARMEN readlog conventions, written down here; one line per me
   reports no return as 81.83 / 81.91 m, beyond that).
 - `ROBOTLASER1 type start_angle fov resolution max_range accuracy remission_mode n r1..rn
   m e1..em laser_x laser_y laser_theta x y theta tv rv forward_safety side_safety turn_axis
-  ipc_stamp host logger_stamp`: a scan with its own geometry.
+  ipc_stamp host logger_stamp`: a scan with its own geometry (a reading at max_range is no
+  return: range_max is set 1 mm below it).
 - `ODOM x y theta tv rv accel ipc_stamp host logger_stamp`: an odometry pose.
 - `PARAM robot_frontlaser_offset VALUE`: the laser's place ahead of the robot centre (m),
   for the scans after it (0 without).
@@ -40,6 +41,7 @@ import numpy as np
 FLASER_START_ANGLE = -math.pi / 2.0
 FLASER_RANGE_MAX_M = 80.0  # a SICK LMS's reach; its "no return" codes (81.83, 81.91 m) lie beyond
 MAX_READINGS = 100_000  # more than any 2D LiDAR gives: a malformed count
+NO_RETURN_MARGIN_M = 0.001  # ROBOTLASER1: readings this close to the maximum range are none
 
 
 class CarmenLogError(ValueError):
@@ -178,8 +180,10 @@ def _robotlaser(fields: list[str], line: int, offset: float) -> CarmenScan:
     poses = _numbers(fields, rest, 6, "poses")
     _numbers(fields, rest + 6, 5, "velocities and safety distances")
     stamp = _stamp(fields, rest + 11, rest + 14, "ROBOTLASER1")
-    return CarmenScan(np.array(ranges), start, increment, 0.0, range_max, stamp,
-                      tuple(poses[3:6]), tuple(poses[0:3]), offset, line, "ROBOTLASER1")
+    # A reading at the maximum range is the laser's "no return" (CARMEN, SICK): the
+    # LaserScan's range_max is set just below it, so that reading is left out as no return.
+    return CarmenScan(np.array(ranges), start, increment, 0.0, range_max - NO_RETURN_MARGIN_M,
+                      stamp, tuple(poses[3:6]), tuple(poses[0:3]), offset, line, "ROBOTLASER1")
 
 
 def _odom(fields: list[str], line: int) -> CarmenOdometry:

@@ -76,7 +76,9 @@ def test_robotlaser_odom_and_param_lines():
     assert odom.pose == (1.5, -2.0, 0.25) and odom.velocity == (0.3, 0.1) and odom.stamp == 50.5
     robot, front = log.scans
     assert robot.kind == "ROBOTLASER1" and robot.ranges.tolist() == [1.0, 2.0, 81.9]
-    assert (robot.angle_min, robot.angle_increment, robot.range_max) == (-1.5708, 0.0175, 81.9)
+    assert (robot.angle_min, robot.angle_increment) == (-1.5708, 0.0175)
+    # 81.9 m, the maximum range, is the laser's "no return": just beyond range_max
+    assert 81.8 < robot.range_max < 81.9
     assert robot.odometry == (1.5, -2.0, 0.25) and robot.laser_pose == (1.62, -2.0, 0.25)
     assert robot.stamp == 50.6 and robot.lidar_offset_x_m == 0.12 and robot.line == 4
     assert front.kind == "FLASER" and front.odometry == (1.0, 2.0, 0.5)
