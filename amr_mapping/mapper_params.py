@@ -134,8 +134,9 @@ _TABLE: dict[str, tuple[Any, str]] = {
                            "closure [m] ..."),
     "loop_window_rad": (0.25, "... and in heading [rad]; both grow with the travel since the "
                               "last closure (or since the earlier keyframe, if less):"),
-    "loop_drift_per_m": (0.02, "... by this much per metre [m/m] (the estimate's drift "
-                               "between closures) ..."),
+    "loop_drift_per_m": (0.04, "... by this much per metre [m/m] (search_sigmas standard "
+                               "deviations of the estimate's drift between closures; the "
+                               "Intel log's: 0.3-0.6 % of the travel) ..."),
     "loop_drift_rad_per_m": (0.005, "... and this much per metre in heading [rad/m] ..."),
     "loop_max_window_m": (4.0, "... up to this half-width [m] ..."),
     "loop_max_window_rad": (math.pi, "... and this one in heading [rad] (pi: every heading)."),

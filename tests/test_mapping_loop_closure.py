@@ -119,6 +119,7 @@ def test_a_closure_found_on_the_windows_edge_is_refused(window, closes):
 
     The best pose lies on the window's edge: it scores well (the true pose is just beyond),
     but an edge is no verified optimum (in a maze the true one may be a corridor further).
+    Without the drift prior (the heading anchor's search), so the edge alone decides.
     """
     closer = LoopCloser(check_parameters({"resolution_m": 0.02}))
     chain = [(x, 1.0, 0.0) for x in np.arange(1.0, 4.0, 0.25)]
@@ -127,7 +128,8 @@ def test_a_closure_found_on_the_windows_edge_is_refused(window, closes):
     poses = np.array(chain + [estimate])
     points = [scan_points_at(pose) for pose in chain] + [scan_points_at(truth)]
     current = len(chain)
-    closure = closer.verify(poses, points, list(range(current)), 2, current, window, window)
+    closure = closer.verify(poses, points, list(range(current)), 2, current, window, window,
+                            prior=False)
     assert (closure is not None) == closes
     if closes:  # the closure puts the keyframe back where it was
         x, y, _ = compose(tuple(poses[2]), closure.relative)
@@ -137,5 +139,20 @@ def test_a_closure_found_on_the_windows_edge_is_refused(window, closes):
         for k in range(current):
             draw(grid, poses[k], points[k], 0.0)
         match = closer.matcher.match(grid, 0.6 * UNITS, points[current], estimate, window,
-                                     window, prior_sigma=(window, window))
+                                     window)
         assert match.score > 0.8 and match.on_edge(estimate, window, window)
+
+
+def test_of_look_alike_places_in_the_window_the_nearer_one_closes_the_loop():
+    """lab02 from its inner start, 100 s: a look-alike place 0.56 m off does not close the loop.
+
+    After 11 m without a closure the search spans +-0.75 m, and a corridor 0.56 m from where
+    the robot is scores better on the candidate's map (0.71) than anything near it. Weighted by
+    the drift the window stands for (3 sigmas), the look-alike keeps 8 % of its score and
+    loses; taken as one sigma it won, and the map broke (RMSE 7.6 cm, max 55 cm, precision
+    16 %).
+    """
+    from amr_evaluation.mapping_episode import run_mapping_episode
+    result = run_mapping_episode("lab02", "inner", profile="turtlebot3_clean", seed=0,
+                                 duration=100.0)
+    assert result.trajectory_max_m < 0.02 and result.precision > 0.95
