@@ -48,6 +48,7 @@ from amr_common.navigation_behaviour import (
 )
 from amr_common.plugins.link_failure import LinkFailure, checked_commands, class_spec, link_call
 from amr_common.plugins.loader import described_parameters
+from amr_common.robot import MAX_PLAUSIBLE_ANGULAR_SPEED, MAX_PLAUSIBLE_LINEAR_SPEED
 from amr_common.world.coverage_grid import GridTooLargeError
 from amr_common.world.movers import collisions_text
 from amr_common.world.world import WORLDS_DIR, World
@@ -150,20 +151,32 @@ def scans_skewed(profile: SensorProfile) -> bool:
             and bool(profile.effects.scan_skew))
 
 
+def burger_mapper_limits() -> dict[str, Any]:
+    """The Mapper's robot facts for a TurtleBot3 Burger: the fastest its odometry can move.
+
+    Beyond these (3x the Burger's top speeds, amr_common.robot) the odometry is corrupt (the
+    Mapper's defaults suit faster robots too). The simulated robot of every profile is a
+    Burger, and so is run_robot.py's.
+    """
+    return {"max_linear_speed_mps": MAX_PLAUSIBLE_LINEAR_SPEED,
+            "max_angular_speed_rps": MAX_PLAUSIBLE_ANGULAR_SPEED}
+
+
 def mapper_parameters(profile: SensorProfile, mapper_class: Any = None,
                       seed: int | None = None) -> dict[str, Any]:
-    """What the simulated robot fixes for a mapper: its LiDAR's position, `deskew`, range error.
+    """What the simulated robot fixes for a mapper: its LiDAR, `deskew`, range error, speeds.
 
     De-skew only what the simulator skews (the clean profiles' scans are instantaneous,
     though they carry a scan_time); where the simulator adds the datasheet's range error (the
     profiles with the reality gap), the LiDAR model's parameters (mapper_params.
     range_error_parameters) and, with a `seed`, the unit's `range_correction`, calibrated
     against a wall as its owner would (lidar_calibration); 'none' for ideal and the clean ones.
+    The Burger's speed limits (burger_mapper_limits).
     `mapper_class`: only the parameters it takes, the LiDAR's position always
     (amr_common.plugins.interfaces.Mapper names it).
     """
     values = {"lidar_offset_x_m": profile.lidar_offset_x, "deskew": scans_skewed(profile),
-              "lidar_model": "none"}
+              "lidar_model": "none", **burger_mapper_limits()}
     if ranges_in_error(profile):
         values.update(range_error_parameters(profile.lidar_model.name))
         if seed is not None:  # the unit calibrated against a wall, as an owner would

@@ -116,4 +116,44 @@ def _save(fig: Figure, path: str | Path) -> Path:
     return path
 
 
-__all__ = ["draw_mapping", "figures_line", "plot_mapping", "plot_mapping_sheet"]
+def plot_map_trajectory(raster: Raster | None, trajectory: np.ndarray, path: str | Path,
+                        odometry: np.ndarray | None = None, title: str = "") -> Path:
+    """A map with the path that built it and, beside it, the odometry's own path.
+
+    No truth needed (a recording, a benchmark log): trajectory and odometry rows
+    [..., x, y, theta] (the last three columns are used), map frame and odometry frame.
+    """
+    trajectory = np.asarray(trajectory, dtype=np.float64)
+    panels = 1 if odometry is None or len(odometry) == 0 else 2
+    fig = Figure(figsize=(7.5 * panels, 7.5), dpi=150)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot(1, panels, 1)
+    if raster is not None:
+        draw_raster(ax, raster)
+    if len(trajectory):
+        ax.plot(trajectory[:, -3], trajectory[:, -2], color="tab:blue", linewidth=0.5,
+                alpha=0.8, label="SLAM path", zorder=3)
+        ax.plot(trajectory[0, -3], trajectory[0, -2], "o", color="tab:green", markersize=6,
+                zorder=4, label="start")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(title, fontsize=9)
+    ax.legend(loc="upper right", fontsize=8)
+    if panels == 2:
+        odometry = np.asarray(odometry, dtype=np.float64)
+        side = fig.add_subplot(1, 2, 2)
+        side.plot(odometry[:, -3], odometry[:, -2], color="tab:orange", linewidth=0.5)
+        side.plot(odometry[0, -3], odometry[0, -2], "o", color="tab:green", markersize=6)
+        side.set_aspect("equal")
+        side.set_xlabel("x [m]")
+        side.set_title("odometry path (odometry frame)", fontsize=9)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    return path
+
+
+__all__ = ["draw_mapping", "figures_line", "plot_map_trajectory", "plot_mapping",
+           "plot_mapping_sheet"]

@@ -2,12 +2,14 @@
 
 Each kernel is written once in plain Python (`*_python`, the twin the tests compare against)
 and compiled through amr_common.jit (numba when installed). Grid coordinates are in cells:
-x / resolution - origin column, so cell (row, col) covers [col, col + 1) x [row, row + 1).
+x / resolution (trace_rays: global) or x / resolution - origin column (the others), so cell
+(row, col) covers [col, col + 1) x [row, row + 1).
 
-- `trace_rays`: exact grid traversal (Amanatides & Woo) from the sensor to each end point. The
-  cells a ray crosses completely before `miss_stop` cells short of its end get `miss`, the end
-  cell gets `hit` (int32 log-odds units, so a scan added with +hit/+miss and later with
-  -hit/-miss leaves the counts exactly as before: how keyframes move after a loop closure).
+- `trace_rays`: exact grid traversal (Amanatides & Woo) from the sensor to each end point, in
+  global cell units (the same cells whatever the array's offset). The cells a ray crosses
+  completely before `miss_stop` cells short of its end get `miss`, the end cell gets `hit`
+  (int32 log-odds units, so a scan added with +hit/+miss and later with -hit/-miss leaves the
+  counts exactly as before: how keyframes move after a loop closure).
   Stopping the misses short of the end keeps grazing rays from eroding the wall they end on.
 - `smear_window`: L[c] = max over occupied cells o of w_o times a Gaussian of the distance from
   c's centre to o's mean hit position: the smoothed field the scan matcher scores points on
@@ -39,15 +41,20 @@ def _crossings_python(start, cell, d):
 _crossings = jit(_crossings_python)
 
 
-def trace_rays_python(counts, sx, sy, ends, hit, miss, miss_stop, sign, hits, sums):
+def trace_rays_python(counts, row_off, col_off, sx, sy, ends, hit, miss, miss_stop, sign, hits,
+                      sums):
     """Add `miss` along each ray from (sx, sy) to ends[k] and `hit` at its end cell.
 
-    counts: (rows, cols) int32, changed in place; sx, sy and ends (K, 2) in cell units (x, y);
-    cells outside the array are skipped. Each end cell also counts `sign` hits in `hits`
-    (same shape as counts) and, if sums (5, rows, cols) float64 is not empty, adds sign * the
-    moments of the end point's position (fx, fy) within the cell (cell units, 0..1): fx, fy,
-    fx^2, fx fy, fy^2 - the mean and spread of a cell's hits, which place walls inside their
-    cells. Returns the number of cells changed.
+    sx, sy and ends (K, 2) in GLOBAL cell units (x / resolution, y / resolution); global cell
+    (r, c) is counts[r - row_off, c - col_off] (counts: (rows, cols) int32, changed in place);
+    cells outside the array are skipped. The traversal is computed in global units, so a ray
+    crosses exactly the same cells whatever the array's offset: a scan added before the grid
+    grew is taken out exactly after. Each end cell also counts `sign` hits in `hits` (same
+    shape as counts) and, if sums (5, rows, cols) float64 is not empty, adds sign * the moments
+    of the end point's position (fx, fy) within the cell (cell units, 0..1): fx, fy, fx^2,
+    fx fy, fy^2 - the mean and spread of a cell's hits, which place walls inside their cells.
+    Returns the number of cells changed.
+    Long: one compiled loop on purpose (~65 lines): the traversal's state stays in locals.
     """
     rows, cols = counts.shape
     changed = 0
@@ -75,8 +82,10 @@ def trace_rays_python(counts, sx, sy, ends, hit, miss, miss_stop, sign, hits, su
                 t_exit = t_x if t_x < t_y else t_y
                 if t_exit > t_free:
                     break
-                if 0 <= row < rows and 0 <= col < cols:
-                    counts[row, col] += miss
+                r = row - row_off
+                c = col - col_off
+                if 0 <= r < rows and 0 <= c < cols:
+                    counts[r, c] += miss
                     changed += 1
                 if t_x < t_y:
                     col += step_col
@@ -84,18 +93,20 @@ def trace_rays_python(counts, sx, sy, ends, hit, miss, miss_stop, sign, hits, su
                 else:
                     row += step_row
                     t_y += delta_y
-        if 0 <= end_row < rows and 0 <= end_col < cols:
-            counts[end_row, end_col] += hit
+        r = end_row - row_off
+        c = end_col - col_off
+        if 0 <= r < rows and 0 <= c < cols:
+            counts[r, c] += hit
             changed += 1
-            hits[end_row, end_col] += sign
+            hits[r, c] += sign
             if sums.shape[1]:
                 fx = ex - end_col
                 fy = ey - end_row
-                sums[0, end_row, end_col] += sign * fx
-                sums[1, end_row, end_col] += sign * fy
-                sums[2, end_row, end_col] += sign * fx * fx
-                sums[3, end_row, end_col] += sign * fx * fy
-                sums[4, end_row, end_col] += sign * fy * fy
+                sums[0, r, c] += sign * fx
+                sums[1, r, c] += sign * fy
+                sums[2, r, c] += sign * fx * fx
+                sums[3, r, c] += sign * fx * fy
+                sums[4, r, c] += sign * fy * fy
     return changed
 
 
@@ -125,7 +136,7 @@ def smear_window_python(counts, hits, sums, row_off, col_off, occupied_units, hi
             if counts[gi, gj] <= occupied_units or h <= 0:
                 continue
             misses = (hit_units * h - counts[gi, gj]) / miss_units
-            w = h / (h + misses)
+            w = h / (h + misses) if misses > 0.0 else 1.0
             bx = min(max(int(math.floor(sums[0, gi, gj] / h * bins)), 0), bins - 1)
             by = min(max(int(math.floor(sums[1, gi, gj] / h * bins)), 0), bins - 1)
             kernel = kernels[by, bx]

@@ -105,13 +105,13 @@ class LogOddsGrid:
         xs = np.append(points[:, 0], sensor_xy[0])
         ys = np.append(points[:, 1], sensor_xy[1])
         fits = self.ensure(float(xs.min()), float(ys.min()), float(xs.max()), float(ys.max()))
+        # In global cell units: the cells a ray crosses do not depend on where the array
+        # starts, so a scan drawn before the grid grew is taken out exactly after.
         inv = 1.0 / self.resolution
-        ends = np.empty((len(points), 2))
-        ends[:, 0] = points[:, 0] * inv - self.col0
-        ends[:, 1] = points[:, 1] * inv - self.row0
-        sx, sy = sensor_xy[0] * inv - self.col0, sensor_xy[1] * inv - self.row0
-        trace_rays(self.counts, sx, sy, ends, sign * self.hit_units, sign * self.miss_units,
-                   self.miss_stop_cells, sign, self.hits, self.sums)
+        ends = np.ascontiguousarray(points, dtype=np.float64) * inv
+        trace_rays(self.counts, self.row0, self.col0, sensor_xy[0] * inv, sensor_xy[1] * inv,
+                   ends, sign * self.hit_units, sign * self.miss_units, self.miss_stop_cells,
+                   sign, self.hits, self.sums)
         self.version += 1
         return fits
 

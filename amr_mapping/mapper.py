@@ -6,25 +6,25 @@
     mapper.occupancy_raster()                          # amr_common.world.map_raster.Raster (/map)
     mapper.statistics()                                # keyframes, loop closures, timings
 
-Each update predicts the pose from the odometry since the last one (the motion prior), moves
-each ray to the robot's pose at the stamp with that odometry (`deskew`: a real LiDAR measures
-its rays over the scan's scan_time before the stamp; amr_common.sensors.scan_deskew, as the
-particle filter) and matches the scan against the local map, a log-odds grid of the latest
-keyframes (scan_matcher.CorrelativeMatcher). A scan becomes a keyframe after the robot moved
-`keyframe_distance_m` or turned `keyframe_angle_rad`: it joins the local map (the oldest leaves
-it, exactly: counts are integers), the global map, and the pose graph with a link to the keyframe
-before. Every few keyframes the loop closer looks for an earlier keyframe near the current one
-(loop_closure.LoopCloser), and failing that, near the start, matches the keyframe against the
-map of the first keyframes (its heading anchor); a verified closure goes into the graph, iSAM2
-re-solves it, and every keyframe that moved is redrawn: at once in the local map, on the next
-occupancy_raster() call in the global map (taken out at its old pose and drawn at its new one,
-or all redrawn if most moved). The map frame is the odometry frame at the first scan.
+Each update predicts the pose from the odometry since the last scan (odometry_motion: scans
+stamped out of order are mapped too, counted), de-skews the rays with that motion (`deskew`,
+amr_common.sensors.scan_deskew) and matches the scan against the local map, a log-odds grid of the
+latest keyframes (scan_matcher), over a window the odometry's error model sizes; a match that
+is poor or on the window's edge is searched again wider before the pose follows the odometry.
+A scan becomes a keyframe after `keyframe_distance_m` or `keyframe_angle_rad`: it joins the
+local map (the oldest leaves it, exactly: counts are integers), the global map and the pose
+graph. Every few keyframes the loop closer (loop_closure) looks for an earlier keyframe near the
+current one, and failing that, near the start, matches against the first keyframes (the heading
+anchor); a verified closure goes into the graph, iSAM2 re-solves it, and every keyframe that
+moved is redrawn (the local map at once, the global map on the next occupancy_raster()). Every
+scan's pose follows its keyframe (trajectory()). The map frame is the odometry frame at the
+first scan.
 
-Bad input never raises and never puts a NaN into the pose or the map: a scan that is not a scan,
-a non-finite odometry pose or stamp, and a stamp not after the last one are skipped (counted in
-`statistics()["rejected"]`, logged at most every 5 s); a scan with too few usable returns or a
-poor match moves the pose by the odometry only; an odometry jump (faster than the Burger can
-move) is not trusted: the scan is matched around the last pose over the loop-closure window.
+Bad input never raises and never puts a NaN into the pose or the map: a scan that is not a scan
+and a non-finite odometry pose or stamp are skipped (counted in `statistics()["rejected"]`,
+logged at most every 5 s); a scan with too few usable returns or no trustworthy match moves the
+pose by the odometry only; an odometry jump (faster than max_linear_speed_mps or
+max_angular_speed_rps) is not trusted: the scan is searched for around the last pose.
 """
 from __future__ import annotations
 
@@ -37,21 +37,19 @@ import numpy as np
 
 from amr_common.geometry import compose, inverse, wrap_angle
 from amr_common.python_logging import ThrottledLogger
-from amr_common.robot import MAX_PLAUSIBLE_ANGULAR_SPEED, MAX_PLAUSIBLE_LINEAR_SPEED
-from amr_common.sensors.lidar_models import revolution_ages
-from amr_common.sensors.scan_deskew import MotionHistory, points_now
 from amr_common.world.map_raster import Raster
 from amr_mapping.log_odds_grid import UNITS, LogOddsGrid
 from amr_mapping.loop_closure import LoopCloser, draw
 from amr_mapping.mapper_params import check_parameters, parameter_descriptions
+from amr_mapping.odometry_motion import OdometryMotion, OdometryStep
 from amr_mapping.pose_graph import PoseGraph
 from amr_mapping.scan_matcher import CorrelativeMatcher
-from amr_mapping.scan_points import ScanError, scan_points, scan_revolution_s
+from amr_mapping.scan_points import ScanError, scan_points
 from amr_mapping.scan_smoothing import ranges_filter
+from amr_mapping.scan_trajectory import ScanTrajectory
 from amr_mapping.timings import clocks, elapsed_ms, timing_summary
 
 _LOG = ThrottledLogger(logging.getLogger(__name__))
-_JUMP_SLACK = (0.05, 0.1)  # m, rad beyond the plausible motion before odometry counts as a jump
 _WEAK_LINK = (0.05, 0.05)  # m, rad: sigmas of a keyframe link that no match confirmed
 _STALE_FIELD_VERSIONS = 3
 _RECENTRE_MARGIN_M = 1.0
@@ -91,20 +89,19 @@ class Mapper:
         self._graph = PoseGraph((p["sequential_sigma_m"], p["sequential_sigma_rad"]),
                                 (p["loop_sigma_m"], p["loop_sigma_rad"]))
         self._points: list[np.ndarray] = []  # per keyframe, robot frame
-        self._odom: list[tuple[float, float, float]] = []  # per keyframe
         self._travelled: list[float] = []
         self._drawn_global: list[tuple[float, float, float] | None] = []
         self._local_members: dict[int, tuple[float, float, float]] = {}  # keyframe -> drawn pose
-        self._history = MotionHistory()  # the odometry's motion over the last scans (de-skew)
+        self._trajectory = ScanTrajectory()  # every mapped scan, following the keyframes
         self._pose = (0.0, 0.0, 0.0)
-        self._last_odom: tuple[float, float, float] | None = None
-        self._last_stamp = -math.inf
+        self._motion = OdometryMotion(p)
         self._distance = 0.0
+        self._closure_travelled = 0.0  # travel at the last loop closure (or the start)
         self._since_loop_try = 0
-        self._stats: dict[str, Any] = {"updates": 0, "matched": 0, "odometry_only": 0,
-                                       "loop_closures": 0, "loop_attempts": 0, "bad_scan_time": 0,
-                                       "anchor_closures": 0,
-                                       "odometry_jumps": 0, "map_full": 0, "rejected": {}}
+        self._stats: dict[str, Any] = dict.fromkeys((
+            "updates", "matched", "odometry_only", "loop_closures", "loop_attempts",
+            "bad_scan_time", "anchor_closures", "odometry_jumps", "out_of_order",
+            "search_retries", "map_full"), 0) | {"rejected": {}}
         # (wall ms, this thread's CPU ms) of every update, loop-closure attempt and closure
         self._times: dict[str, list[tuple[float, float]]] = {"update": [], "loop": [],
                                                              "loop_closed": []}
@@ -142,34 +139,31 @@ class Mapper:
                 not math.isfinite(stamp):
             return self._reject("non_finite", f"stamp {stamp} or odometry pose {odom} is not "
                                 "finite", stamp)
-        if stamp <= self._last_stamp:
-            return self._reject("out_of_order", f"stamp {stamp:.3f} s is not after the last "
-                                f"one ({self._last_stamp:.3f} s)", stamp)
         try:
             points, angles = scan_points(scan, self.p["lidar_offset_x_m"], self.p["max_range_m"],
                                          self._ranges_filter)
         except ScanError as exc:
             return self._reject("bad_scan", str(exc), stamp)
         self._stats["updates"] += 1
-        dt = stamp - self._last_stamp
-        self._last_stamp = stamp
-        if self._last_odom is None:  # the first scan: the map frame is the odom frame
-            self._last_odom = odom
+        step = self._motion.step(odom, stamp)
+        if step is None:  # the first scan: the map frame is the odom frame
             self._pose = odom
             self._add_keyframe(points, odom, None, True)
+            self._record_scan(stamp)
             return MappingEstimate(odom, stamp, "first", 0.0, True, False)
-        motion = compose(inverse(self._last_odom), odom)
-        self._last_odom = odom
-        jump = (math.hypot(motion[0], motion[1]) > MAX_PLAUSIBLE_LINEAR_SPEED * dt + _JUMP_SLACK[0]
-                or abs(motion[2]) > MAX_PLAUSIBLE_ANGULAR_SPEED * dt + _JUMP_SLACK[1])
-        if jump:
+        if step.out_of_order:
+            self._stats["out_of_order"] += 1
+            _LOG.warning("out_of_order", "slam: scan stamped %.3f s, at or before the one "
+                         "before: mapped with the odometry pose it came with", stamp)
+        if step.motion is None:
             self._stats["odometry_jumps"] += 1
             _LOG.warning("jump", "slam: odometry moved %.2f m / %.2f rad in %.2f s: not trusted, "
-                         "matching around the last pose", math.hypot(motion[0], motion[1]),
-                         motion[2], dt)
-        points = self._deskewed(scan, points, angles, None if jump else motion, dt)
-        predicted = self._pose if jump else compose(self._pose, motion)
-        pose, score = self._match(points, predicted, None if jump else motion)
+                         "matching around the last pose",
+                         math.hypot(step.measured[0], step.measured[1]), step.measured[2],
+                         step.dt)
+        points = self._deskewed(scan, points, angles, step)
+        predicted = self._pose if step.motion is None else compose(self._pose, step.motion)
+        pose, score = self._match(points, predicted, step.motion)
         status = "matched" if score > 0.0 else "odometry"
         self._stats["matched" if score > 0.0 else "odometry_only"] += 1
         self._distance += math.hypot(pose[0] - self._pose[0], pose[1] - self._pose[1])
@@ -178,56 +172,55 @@ class Mapper:
         if self._is_keyframe(pose):
             keyframe = True
             loop_closed = self._add_keyframe(points, odom, pose, score > 0.0)
+        self._record_scan(stamp)
         return MappingEstimate(self._pose, stamp, status, score, keyframe, loop_closed)
 
-    def _deskewed(self, scan: Any, points: np.ndarray, angles: np.ndarray, motion,
-                  dt: float) -> np.ndarray:
-        """The points moved to the robot's frame at the stamp (`deskew`), or as measured.
+    def _record_scan(self, stamp: float) -> None:
+        self._trajectory.add(stamp, len(self._graph) - 1, self._graph.pose(-1), self._pose)
 
-        The rays were measured over the scan's scan_time before the stamp, clockwise
-        (lidar_models.revolution_ages); the motion then is the odometry's since the last scan
-        (None after a jump: not trusted, the history restarts at rest). A scan_time that is
-        not a number, negative or over 1 s: as measured (counted in bad_scan_time, logged).
-        """
+    def _deskewed(self, scan: Any, points: np.ndarray, angles: np.ndarray,
+                  step: OdometryStep) -> np.ndarray:
+        """The points moved to the robot's frame at the stamp (`deskew`), or as measured."""
         if not self.p["deskew"]:
             return points
-        if motion is None:
-            self._history.clear()
-        else:
-            self._history.add_motion(motion, dt)
-        revolution = scan_revolution_s(scan)
-        if revolution is None:
+        points, scan_time_ok = self._motion.deskew(scan, points, angles, step)
+        if not scan_time_ok:
             self._stats["bad_scan_time"] += 1
             _LOG.warning("bad_scan_time", "slam: scan_time %r is not 0-1 s: scan not "
                          "de-skewed", getattr(scan, "scan_time", None))
-        if not revolution or len(points) == 0:
-            return points
-        return points_now(points, revolution_ages(angles, revolution), self._history)
+        return points
 
     def _match(self, points: np.ndarray, predicted, motion) -> tuple[tuple, float]:
         """The matched pose and its score, or (predicted, 0.0) without a trustworthy match.
 
-        motion: the odometry's since the last scan (None after a jump: a wide search without
-        a prior).
+        motion: the odometry's since the last scan (None after a jump: no prior, the widest
+        search). The search covers the odometry's error over the motion (OdometryMotion.
+        windows); a match that scores too low or lies on the window's edge (the best pose may
+        lie beyond) is searched again over twice the window, up to the widest.
         """
         p = self.p
         if len(points) < p["min_points"]:
             return predicted, 0.0
+        linear, angular = self._motion.windows(motion)
         if motion is None:
-            result = self._tracker.match(self._local, self._occupied_units, points, predicted,
-                                         p["loop_window_m"], p["loop_window_rad"])
+            prior_sigma = refine_sigmas = None
         else:
-            sigmas = (p["odometry_sigma_m"] + p["odometry_sigma_per_m"] *
-                      math.hypot(motion[0], motion[1]),
-                      p["odometry_sigma_rad"] + p["odometry_sigma_per_rad"] * abs(motion[2]),
-                      p["point_sigma_m"])
-            result = self._tracker.match(
-                self._local, self._occupied_units, points, predicted, p["search_linear_m"],
-                p["search_angular_rad"], prior_sigma=(p["prior_sigma_m"], p["prior_sigma_rad"]),
-                refine_sigmas=sigmas)
-        if result is None or result.score < p["min_match_score"]:
-            return predicted, 0.0
-        return result.pose, result.score
+            sigma_m, sigma_rad = self._motion.sigmas(motion)
+            prior_sigma = (max(p["prior_sigma_m"], sigma_m), max(p["prior_sigma_rad"], sigma_rad))
+            refine_sigmas = (sigma_m, sigma_rad, p["point_sigma_m"])
+        while True:
+            result = self._tracker.match(self._local, self._occupied_units, points, predicted,
+                                         linear, angular, prior_sigma=prior_sigma,
+                                         refine_sigmas=refine_sigmas)
+            widest = linear >= p["max_search_linear_m"] and angular >= p["max_search_angular_rad"]
+            if result is not None and result.score >= p["min_match_score"] and \
+                    (widest or not result.on_edge(predicted, linear, angular)):
+                return result.pose, result.score
+            if widest:
+                return predicted, 0.0
+            self._stats["search_retries"] += 1
+            linear = min(2.0 * linear, p["max_search_linear_m"])
+            angular = min(2.0 * angular, p["max_search_angular_rad"])
 
     def _is_keyframe(self, pose) -> bool:
         last = self._graph.pose(-1)
@@ -255,7 +248,6 @@ class Mapper:
             link = compose(inverse(graph.pose(-1)), pose)
             index = graph.add_keyframe(pose, link, None if matched else _WEAK_LINK)
         self._points.append(points)
-        self._odom.append(odom)
         self._travelled.append(self._distance)
         self._drawn_global.append(None)
         pose = graph.pose(index)
@@ -292,13 +284,16 @@ class Mapper:
         started = clocks()
         self._stats["loop_attempts"] += 1
         poses = self._graph.poses
-        closure = self._closer.close(poses, np.asarray(self._travelled), self._points, index)
+        travelled = np.asarray(self._travelled)
+        closure = self._closer.close(poses, travelled, self._points, index,
+                                     travelled[index] - self._closure_travelled)
         if closure is None:
             closure = self._closer.anchor(poses, self._points, index)
             self._stats["anchor_closures"] += closure is not None
         if closure is not None:
             self._graph.add_loop(closure.earlier, closure.later, closure.relative)
             self._stats["loop_closures"] += 1
+            self._closure_travelled = travelled[index]
             poses = self._graph.poses
             for member, drawn in list(self._local_members.items()):
                 new = tuple(poses[member])
@@ -353,13 +348,21 @@ class Mapper:
     @property
     def map_to_odom(self) -> tuple[float, float, float]:
         """The map -> odom transform (x, y, yaw) that puts the odometry pose on the estimate."""
-        if self._last_odom is None:
+        if self._motion.last_odom is None:
             return (0.0, 0.0, 0.0)
-        return compose(self._pose, inverse(self._last_odom))
+        return compose(self._pose, inverse(self._motion.last_odom))
 
     def keyframe_poses(self) -> np.ndarray:
         """(K, 3) the keyframes' optimized poses [x, y, theta] (map frame)."""
         return self._graph.poses
+
+    def trajectory(self) -> np.ndarray:
+        """(N, 4) rows [stamp, x, y, theta] of every mapped scan, in the order given.
+
+        Each scan's pose relative to the keyframe it was placed from, on that keyframe's
+        optimized pose (scan_trajectory): the trajectory as the pose graph now has it.
+        """
+        return self._trajectory.rows(self._graph.poses)
 
     def occupancy_raster(self) -> Raster:
         """The map so far (FREE 0 / OCCUPIED 100 / UNKNOWN -1) at the optimized poses."""

@@ -1,10 +1,14 @@
 """The Mapper's parameters: name -> (default, description with units), and their checking.
 
 No rclpy import; the slam node declares each as a ROS parameter. The defaults map the bundled
-worlds with the `turtlebot3_clean` profile (LDS-01: 360 rays, 3.5 m, 1 cm noise, 5 Hz).
+worlds with the `turtlebot3_clean` and `turtlebot3` profiles (LDS-01: 360 rays, 3.5 m, 2 cm
+cells) and a real robot's log with only the sensor's facts changed (the Intel Research Lab:
+SICK LMS, 50 m, 5 cm cells; docs/realdata.md). What is the robot's (its speed limits) the run
+scripts set for the Burger; the defaults suit faster robots too.
 """
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from amr_common.plugins.parameter_table import (
@@ -76,11 +80,26 @@ _TABLE: dict[str, tuple[Any, str]] = {
     "keyframe_distance_m": (0.1, "A scan becomes a keyframe (inserted into the map and the "
                                  "pose graph) after the robot moved this far [m] ..."),
     "keyframe_angle_rad": (0.1, "... or turned this much [rad] since the last keyframe."),
-    "local_map_keyframes": (40, "Scans are matched against a map of this many latest "
-                                "keyframes (older ones are joined through loop closures)."),
-    "search_linear_m": (0.1, "Half-width of the correlative search in x and y around the "
-                              "odometry prediction [m]."),
-    "search_angular_rad": (0.08, "Half-width of the correlative search in heading [rad]."),
+    "local_map_keyframes": (160, "Scans are matched against a map of this many latest "
+                                 "keyframes (older ones are joined through loop closures); "
+                                 "the more, the less the heading random-walks from keyframe "
+                                 "to keyframe (Cartographer's submaps: 90-180 scans)."),
+    "search_linear_m": (0.1, "Least half-width of the correlative search in x and y around "
+                             "the odometry prediction [m] ..."),
+    "search_angular_rad": (0.08, "... and in heading [rad]."),
+    "search_sigmas": (3.0, "The search covers this many standard deviations of the "
+                           "odometry's error over the motion since the last scan "
+                           "(odometry_sigma_*): a fast turn searches wider."),
+    "max_search_linear_m": (0.4, "A match that scores below min_match_score or lies on the "
+                                 "window's edge is searched again over twice the window, up "
+                                 "to this half-width [m] ..."),
+    "max_search_angular_rad": (0.4, "... and this one in heading [rad]; an odometry jump is "
+                                    "searched over these around the last pose."),
+    "max_linear_speed_mps": (3.0, "Odometry moving faster than this between two scans is a "
+                                  "jump (a reset, a glitch), not believed [m/s] (the run "
+                                  "scripts set the robot's: the Burger 0.66) ..."),
+    "max_angular_speed_rps": (10.0, "... or turning faster than this [rad/s] (the Burger "
+                                    "8.5)."),
     "smear_sigma_m": (0.03, "Standard deviation of the Gaussian that smooths the map for "
                             "scoring [m]."),
     "prior_sigma_m": (0.1, "The search's score is weighted by exp(-d^2 / 2 sigma^2) for a "
@@ -89,7 +108,8 @@ _TABLE: dict[str, tuple[Any, str]] = {
     "odometry_sigma_m": (0.005, "Standard deviation of the odometry's motion between two "
                                 "scans, translation [m], plus ..."),
     "odometry_sigma_per_m": (0.05, "... this share of the distance moved [m/m]; weighs the "
-                                   "odometry against the scan in the sub-cell refinement."),
+                                   "odometry against the scan in the sub-cell refinement and "
+                                   "sizes the search (search_sigmas)."),
     "odometry_sigma_rad": (0.005, "The same for rotation [rad], plus ..."),
     "odometry_sigma_per_rad": (0.05, "... this share of the angle turned [rad/rad]."),
     "point_sigma_m": (0.015, "Standard deviation of a scan point about the wall line of its "
@@ -98,21 +118,40 @@ _TABLE: dict[str, tuple[Any, str]] = {
                                                "'branch_and_bound' (compiled), or "
                                                "'exhaustive' (every pose scored with numpy: the "
                                                "same optimum, for benchmarks)."),
-    "min_match_score": (0.35, "Matches scoring below this (mean smoothed-map value under the "
-                              "points, 0..1) are rejected: the pose follows the odometry."),
+    "min_match_score": (0.25, "Matches scoring below this (mean smoothed-map value under the "
+                              "points, 0..1) are rejected: the pose follows the odometry. A "
+                              "quarter of the points on the map's walls still fixes a pose; "
+                              "walls seen at grazing angles from many poses weigh little, so a "
+                              "good match on a big real map can score 0.3."),
     # --- back end: pose graph and loop closure
     "loop_closure": (True, "Search for loop closures (off: the pose graph is a chain)."),
     "loop_search_radius_m": (1.0, "Earlier keyframes within this distance of the current "
-                                  "estimate are loop-closure candidates [m] ..."),
+                                  "estimate, plus how far the search window grew "
+                                  "(loop_drift_*), are loop-closure candidates [m] ..."),
     "loop_min_travel_m": (5.0, "... if the robot travelled at least this far since [m]."),
     "loop_chain_keyframes": (8, "The candidate's map: this many keyframes on each side of it."),
-    "loop_window_m": (0.3, "Half-width of the loop-closure search in x and y [m]."),
-    "loop_window_rad": (0.25, "Half-width of the loop-closure search in heading [rad]."),
+    "loop_window_m": (0.3, "Half-width of the loop-closure search in x and y right after a "
+                           "closure [m] ..."),
+    "loop_window_rad": (0.25, "... and in heading [rad]; both grow with the travel since the "
+                              "last closure (or since the earlier keyframe, if less):"),
+    "loop_drift_per_m": (0.04, "... by this much per metre [m/m] (search_sigmas standard "
+                               "deviations of the estimate's drift between closures; the "
+                               "Intel log's: 0.3-0.6 % of the travel) ..."),
+    "loop_drift_rad_per_m": (0.005, "... and this much per metre in heading [rad/m] ..."),
+    "loop_max_window_m": (4.0, "... up to this half-width [m] ..."),
+    "loop_max_window_rad": (math.pi, "... and this one in heading [rad] (pi: every heading)."),
+    "loop_map_keyframes": (50, "A window wider than loop_window_m matches against the "
+                               "candidate's chain and the earlier keyframes within the window: "
+                               "at most this many, evenly spaced."),
     "loop_min_score": (0.55, "A loop-closure match must score at least this ..."),
     "loop_ambiguity_ratio": (0.92, "... and the best match farther than "
                                    "loop_ambiguity_distance_m away must score below this share "
                                    "of it (no closure along a featureless corridor)."),
     "loop_ambiguity_distance_m": (0.1, "See loop_ambiguity_ratio [m]."),
+    "loop_max_free_share": (0.05, "... and at most this share of the scan's points may land "
+                                  "deep in space the candidate's map saw free (a scan placed "
+                                  "one corridor over). A match on the window's edge is "
+                                  "refused too."),
     "anchor_keyframes": (3, "A loop-closure attempt that finds nothing within "
                             "loop_search_radius_m of the first keyframe matches the scan against "
                             "the map of this many first keyframes (the heading anchor) ..."),
@@ -140,12 +179,15 @@ PARAMETERS: dict[str, Param] = ruled(
     range_correction=vector(*range(0, 17, 2)),
     **{name: at_least(1) for name in ("min_points", "max_map_cells", "local_map_keyframes",
                                       "loop_chain_keyframes", "loop_interval_keyframes",
-                                      "anchor_keyframes", "occupied_min_hits")},
+                                      "loop_map_keyframes", "anchor_keyframes",
+                                      "occupied_min_hits")},
     **{name: at_least(0.0) for name in (
         "miss_stop_m", "keyframe_distance_m", "keyframe_angle_rad", "odometry_sigma_per_m",
         "odometry_sigma_per_rad", "loop_min_travel_m", "rerender_tolerance_m",
+        "loop_drift_per_m", "loop_drift_rad_per_m",
         "rerender_tolerance_rad", "occupied_log_odds")},
-    **{name: between(0.0, 1.0) for name in ("min_match_score", "occupied_min_hit_share")},
+    **{name: between(0.0, 1.0) for name in ("min_match_score", "occupied_min_hit_share",
+                                            "loop_max_free_share")},
     **{name: between(0.0, 1.0, low_open=True) for name in ("loop_min_score",
                                                            "loop_ambiguity_ratio")})
 

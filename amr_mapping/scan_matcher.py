@@ -46,9 +46,23 @@ class MatchResult:
 
     pose: tuple[float, float, float]
     score: float  # mean field value under the points at the lattice optimum, no penalty
+    weighted: float  # ... times the prior's penalties: what the search maximised
     lattice_pose: tuple[float, float, float]
     candidates: int  # poses scored (at any pyramid level)
     angular_step: float
+    resolution: float
+
+    def on_edge(self, prior: tuple[float, float, float], linear_window: float,
+                angular_window: float) -> bool:
+        """Whether the lattice optimum lies on the border of the window searched around prior.
+
+        The best pose may then lie beyond: a wider search is needed to know.
+        """
+        x, y, th = self.lattice_pose
+        return (abs(x - prior[0]) > linear_window - self.resolution
+                or abs(y - prior[1]) > linear_window - self.resolution
+                or abs(math.remainder(th - prior[2], math.tau))
+                > angular_window - self.angular_step)
 
 
 @dataclass
@@ -164,7 +178,8 @@ class CorrelativeMatcher:
         score = result[3] / (angle_penalty[a] * math.exp(-(result[1] ** 2 + result[2] ** 2)
                                                           * inv_two_sigma2))
         pose = self._refine(field, points, lattice, prior, refine_sigmas, step)
-        return MatchResult(pose, float(score), lattice, int(result[4]), step)
+        return MatchResult(pose, float(score), float(result[3]), lattice, int(result[4]), step,
+                           res)
 
     def _refine(self, field: _Field, points: np.ndarray, lattice: tuple[float, float, float],
                 prior: tuple[float, float, float],

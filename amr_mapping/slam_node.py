@@ -20,10 +20,11 @@ amr_common.plugins.interfaces.Mapper, default the Mapper), results become messag
   the particle filter's); ~/save_map (amr_msgs/srv/SaveMap: Nav2 map files); with
   output_prefix, the map saved on deactivate and shutdown (Ctrl-C included).
 - The map frame is the odometry frame at the first scan moved by `map_start_pose`.
-Bad input (NaN/inf/0 ranges, a changing ray count, odometry jumps, stamps going backwards): the
-Mapper and the odometry history skip or distrust it and log (throttled per kind); nothing NaN is
-published, no callback raises. A mapper that raises or returns what its interface forbids has
-failed (amr_mapping.slam_node_mapper): mapping stops, and the run scripts end the run.
+Bad input (NaN/inf/0 ranges, a changing ray count, odometry jumps): the Mapper and the odometry
+history skip or distrust it and log (throttled per kind); a scan stamped before the last one is
+mapped at the odometry of its stamp (counted); nothing NaN is published, no callback raises. A
+mapper that raises or returns what its interface forbids has failed
+(amr_mapping.slam_node_mapper): mapping stops, and the run scripts end the run.
 """
 from __future__ import annotations
 

@@ -150,12 +150,13 @@ def slam_overrides(items: list[str], set_by_script: dict[str, str],
 
 
 def lidar_parameters(args: Any, profile: Any = None) -> dict[str, Any]:
-    """The slam node's LiDAR parameters, --slam-param's on top; only those its mapper takes.
+    """The slam node's LiDAR and robot parameters, --slam-param's on top; only those it takes.
 
     profile: a simulated run's (amr_evaluation.episode.mapper_parameters: the LiDAR's place,
-    de-skew, range error and the unit calibrated with --seed); None: the Burger's LDS-01
-    (LDS-02 owners: --slam-param lidar_model:=LDS-02), its place, and the calibration the user
-    gives (--slam-param range_correction:=[...], scripts/calibrate_lidar.py).
+    de-skew, range error and the unit calibrated with --seed, the Burger's speeds); None: the
+    Burger's LDS-01 (LDS-02 owners: --slam-param lidar_model:=LDS-02), its place, the
+    calibration the user gives (--slam-param range_correction:=[...],
+    scripts/calibrate_lidar.py) and the Burger's speeds (episode.burger_mapper_limits).
     """
     from amr_common.plugins.loader import DEFAULT_MAPPER, described_parameters, link_class
     from amr_mapping.mapper_params import range_error_parameters
@@ -167,9 +168,11 @@ def lidar_parameters(args: Any, profile: Any = None) -> dict[str, Any]:
         values = mapper_parameters(get_profile(profile), mapper, seed=args.seed)
     else:
         from amr_common.robot import LIDAR_OFFSET_X
+        from amr_evaluation.episode import burger_mapper_limits
         takes = described_parameters(mapper)
-        values = {name: value for name, value in range_error_parameters(
-            str(given.get("lidar_model", "LDS-01"))).items() if takes is None or name in takes}
+        values = {name: value for name, value in {
+            **range_error_parameters(str(given.get("lidar_model", "LDS-01"))),
+            **burger_mapper_limits()}.items() if takes is None or name in takes}
         values["lidar_offset_x_m"] = LIDAR_OFFSET_X
     return {**values, **given}
 

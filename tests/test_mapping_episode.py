@@ -115,7 +115,9 @@ def test_the_mapper_deskews_what_the_profile_skews_and_odometry_drifts_once(prof
                                                                             drift):
     from amr_sim.profiles import get_profile
     prof = get_profile(profile)
-    assert mapper_parameters(prof, Mapper)["deskew"] is deskew
+    values = mapper_parameters(prof, Mapper)
+    assert values["deskew"] is deskew
+    assert values["max_linear_speed_mps"] == pytest.approx(0.66)  # every profile's a Burger
     # A profile with the reality gap drifts its own odometry (wheels, slip, IMU): nothing added.
     assert episode_drift(AUTO_DRIFT, prof) == drift
     assert episode_drift(None, prof) is None

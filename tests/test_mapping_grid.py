@@ -121,3 +121,31 @@ def test_raster_hit_share_drops_lone_noise_hits_beside_a_wall(share):
     behind = raster.values[raster.cell_of(1.011, 0.011)]
     assert raster.values[raster.cell_of(0.991, 0.011)] == OCCUPIED
     assert behind == (OCCUPIED if share == 0.0 else UNKNOWN)
+
+
+def test_a_scan_drawn_before_the_grid_grew_is_taken_out_exactly():
+    """Rays traced at one array offset and removed at another cross the same cells.
+
+    45-degree rays whose start and end share their position within a cell meet cell corners
+    exactly: computed from the array's corner, rounding broke those ties one way when drawn
+    and another once the grid had grown (the Intel log's local map, keyframes drawn and taken
+    out for minutes: a cell left with +0.4 log-odds and one hit, whose field weight was
+    infinite and the matcher's score with it).
+    """
+    rng = np.random.default_rng(0)
+    res = 0.05
+    sensors = np.floor(rng.uniform(-3, 3, (400, 2)) / res) * res + rng.uniform(0, res, (400, 1))
+    ends = sensors + rng.integers(5, 80, (400, 1)) * res * np.sign(rng.uniform(-1, 1, (400, 2)))
+    grid = LogOddsGrid(res, 10_000_000, 0.9, 0.4, hit_moments=True)
+    for sensor, end in zip(sensors, ends):
+        grid.add_scan(tuple(sensor), end[None, :])
+    far = ((0.0, 0.0), np.array([[-40.0, -37.0]]))
+    grid.add_scan(*far)  # the grid grows: its array starts elsewhere
+    for sensor, end in zip(sensors, ends):
+        grid.add_scan(tuple(sensor), end[None, :], -1)
+    alone = LogOddsGrid(res, 10_000_000, 0.9, 0.4, hit_moments=True)
+    alone.add_scan(*far)
+    rows, cols = alone.counts.shape
+    box = (alone.row0, alone.col0, alone.row0 + rows, alone.col0 + cols)
+    assert np.array_equal(grid.window(*box), alone.counts)
+    assert grid.counts.sum() == alone.counts.sum() and grid.hits.sum() == 1

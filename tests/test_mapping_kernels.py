@@ -36,7 +36,7 @@ def _random_rays(rng, count=300):
 def _trace(kernel, ends, sx, sy, sign=1, state=None, moments=True):
     counts, hits, sums = state or (np.zeros((40, 35), np.int32), np.zeros((40, 35), np.int32),
                                    np.zeros((5, 40, 35) if moments else (5, 0, 0)))
-    changed = kernel(counts, sx, sy, ends, 90 * sign, -40 * sign, 0.7, sign, hits, sums)
+    changed = kernel(counts, 0, 0, sx, sy, ends, 90 * sign, -40 * sign, 0.7, sign, hits, sums)
     return changed, (counts, hits, sums)
 
 
@@ -56,6 +56,25 @@ def test_trace_rays_twin_equal_and_exactly_removable():
     assert np.abs(sums).max() < 1e-12
 
 
+def test_trace_rays_in_global_cells_any_array_offset_twin_equal():
+    """The same rays into an array that starts elsewhere: the same cells, shifted."""
+    rng = np.random.default_rng(6)
+    sx, sy, ends = _random_rays(rng)
+    results = []
+    for kernel in (gk.trace_rays, gk.trace_rays_python):
+        counts, hits = np.zeros((40, 35), np.int32), np.zeros((40, 35), np.int32)
+        sums = np.zeros((5, 40, 35))
+        # global cell (r, c) is counts[r + 7, c - 12]: the array starts 7 rows lower and 12
+        # columns further right than _trace's
+        kernel(counts, -7, 12, sx, sy, ends, 90, -40, 0.7, 1, hits, sums)
+        results.append((counts, hits, sums))
+    for a, b in zip(*results):
+        assert np.array_equal(a, b)
+    _, (counts, hits, _) = _trace(gk.trace_rays, ends, sx, sy)
+    assert np.array_equal(results[0][0][7:, :23], counts[:33, 12:])
+    assert np.array_equal(results[0][1][7:, :23], hits[:33, 12:]) and hits.sum() > 0
+
+
 def test_trace_rays_without_moments_counts_hits_only():
     rng = np.random.default_rng(4)
     sx, sy, ends = _random_rays(rng, 50)
@@ -72,8 +91,8 @@ def _grid_with_walls(rng):
     radius = 20.0
     ends = np.column_stack([sx + radius * np.cos(angles) * 1.3, sy + radius * np.sin(angles)])
     for _ in range(3):
-        gk.trace_rays(counts, sx, sy, ends + rng.normal(0, 0.15, ends.shape), 90, -40, 0.0, 1,
-                      hits, sums)
+        gk.trace_rays(counts, 0, 0, sx, sy, ends + rng.normal(0, 0.15, ends.shape), 90, -40,
+                      0.0, 1, hits, sums)
     return counts, hits, sums
 
 

@@ -145,8 +145,8 @@ def test_bad_input_never_raises_and_never_puts_nan_into_pose_or_map():
         (lds01(good[:100]), (0.0, 0.0, 0.0), 1.0, "matched"),  # fewer rays
         (lds01(good), (math.nan, 0.0, 0.0), 1.2, "rejected: non_finite"),
         (lds01(good), (0.0, 0.0, 0.0), math.inf, "rejected: non_finite"),
-        (lds01(good), (0.0, 0.0, 0.0), 0.5, "rejected: out_of_order"),
-        (lds01(good), (0.0, 0.0, 0.0), 1.0, "rejected: out_of_order"),  # the same stamp
+        (lds01(good), (0.0, 0.0, 0.0), 0.5, "matched"),  # out of order: mapped, counted
+        (lds01(good), (0.0, 0.0, 0.0), 1.0, "matched"),  # the same stamp: mapped, counted
         (lds01(good), (0.0, 0.0), 1.4, "rejected: non_finite"),
         (lds01(good), "home", 1.4, "rejected: bad_input"),
         (lds01(["a"] * 360), (0.0, 0.0, 0.0), 1.4, "rejected: bad_scan"),
@@ -162,9 +162,11 @@ def test_bad_input_never_raises_and_never_puts_nan_into_pose_or_map():
         _values_ok(mapper)
         assert math.hypot(*mapper.pose[:2]) < 0.01  # the robot never moved
     stats = mapper.statistics()
-    assert stats["rejected"] == {"non_finite": 3, "out_of_order": 2, "bad_input": 1,
-                                 "bad_scan": 5}
-    assert stats["odometry_only"] == 2
+    assert stats["rejected"] == {"non_finite": 3, "bad_input": 1, "bad_scan": 5}
+    assert stats["out_of_order"] == 2 and stats["odometry_only"] == 2
+    # Every scan not rejected has a pose in the trajectory, at its own stamp, in feed order.
+    stamps = [stamp for _, _, stamp, status in feeds if not status.startswith("rejected")]
+    assert mapper.trajectory()[:, 0].tolist() == [0.0] + stamps
 
 
 def test_an_odometry_jump_is_not_believed():

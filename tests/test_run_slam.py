@@ -398,6 +398,12 @@ def test_the_slam_node_gets_the_lidars_parameters_and_only_those_its_mapper_take
     simulated = lidar_parameters(args(), "turtlebot3:randomized")  # the unit of --seed 3
     assert simulated["range_correction"][3] == pytest.approx(-0.031, abs=0.002)
     assert lidar_parameters(args(), "turtlebot3_clean")["lidar_model"] == "none"
+    # The Burger's speed limits (3x its top speeds), on the robot and in simulation; the
+    # Mapper's own defaults suit faster robots.
+    for values in (robot, simulated):
+        assert values["max_linear_speed_mps"] == pytest.approx(0.66)
+        assert values["max_angular_speed_rps"] == pytest.approx(8.52)
     own = lidar_parameters(args("examples.odometry_mapper:OdometryMapper"), "turtlebot3")
     assert "smooth_half_window" not in own and "lidar_offset_x_m" in own
+    assert "max_linear_speed_mps" not in own
     assert "lidar_model" not in lidar_parameters(args("examples.odometry_mapper:OdometryMapper"))
