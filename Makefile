@@ -38,11 +38,11 @@ run: $(MSGS_STAMP) $(NUMBA_STAMP)
 	$(LOCAL_ROS) $(PY) scripts/run_sim.py $(ARGS)
 
 # The manual is built after the linter and before pytest: a broken link or anchor fails the run
-# within seconds (mkdocs --strict), and the site lands in site/ (not tracked). The variable
-# silences Material for MkDocs' notice of its end of life (May 2027; docs/dependencies.md).
+# within seconds (mkdocs --strict; not with --quiet, which hides the warnings --strict counts),
+# and the site lands in site/ (not tracked). The variable silences Material for MkDocs' notice of its end of life (May 2027; docs/dependencies.md).
 test: $(MSGS_STAMP) $(CLUSTER_STAMP) $(DOCS_STAMP) $(NUMBA_STAMP)
 	$(PY) -m ruff check .
-	NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict --quiet
+	NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict
 	$(LOCAL_ROS) $(PY) -m pytest $(PYTEST_ARGS)
 
 bench: $(MSGS_STAMP) $(NUMBA_STAMP)
